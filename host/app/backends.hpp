@@ -1,0 +1,111 @@
+#pragma once
+// Runs one kind of volume through the CPU reference and/or the GPU and compares them.
+#include <chrono>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <ostream>
+#include <span>
+#include <vector>
+
+#include "app/commands.hpp"
+#include "cull/compare.hpp"
+#include "cull/reference.hpp"
+#include "gpu/gpu_culler.hpp"
+#include "vk/check.hpp"
+#include "vk/context.hpp"
+
+namespace cullpipe::app {
+
+struct BackendResults {
+  std::vector<std::vector<Classification>> cpu;  ///< [view][object], empty when the CPU did not run
+  std::vector<std::vector<Classification>> gpu;  ///< [view][object], empty when the GPU did not run
+  std::vector<reference::CullCounts> cpu_counts, gpu_counts;
+  std::vector<std::vector<std::uint32_t>> gpu_visible_ids;
+  bool gpu_overflow = false;
+  double cpu_ns = 0.0;       ///< all views, scalar reference
+  double gpu_ns = 0.0;       ///< all views, GPU timestamps
+  double gpu_wall_ns = 0.0;  ///< all views, including submission and readback
+  std::size_t mismatches = 0;
+  std::vector<std::string> mismatch_reports;  ///< the first few, described in full
+};
+
+/// Lazily created Vulkan context + culler, shared by the calls of one command.
+struct GpuSession {
+  DeviceOptions options;
+  std::unique_ptr<vk::Context> context;
+  std::unique_ptr<gpu::GpuCuller> culler;
+
+  gpu::GpuCuller& get() {
+    if (!culler) {
+      vk::ContextOptions o;
+      o.validation = options.validation;
+      o.device_filter = options.device;
+      context = std::make_unique<vk::Context>(o);
+      culler = std::make_unique<gpu::GpuCuller>(*context);
+    }
+    return *culler;
+  }
+  /// Throws vk::Error when validation reported anything.
+  void check_validation() const {
+    if (context && context->validation_message_count() > 0)
+      throw vk::Error(std::to_string(context->validation_message_count()) + " Vulkan validation message(s) reported");
+  }
+};
+
+template <class Volume>
+BackendResults cull_on_backends(std::span<const Volume> volumes, std::span<const Frustum> frusta, Backend backend,
+                                GpuSession& session, std::size_t max_reports = 10) {
+  BackendResults r;
+  if (backend != Backend::Gpu) {
+    r.cpu.assign(frusta.size(), std::vector<Classification>(volumes.size()));
+    const auto start = std::chrono::steady_clock::now();
+    for (std::size_t v = 0; v < frusta.size(); ++v) r.cpu_counts.push_back(reference::classify_all(volumes, frusta[v], r.cpu[v]));
+    r.cpu_ns = double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());
+  }
+  if (backend != Backend::Cpu) {
+    gpu::GpuCuller& culler = session.get();
+    culler.upload(volumes);
+    culler.cull(frusta);  // warm-up: the first dispatch of a pipeline compiles it (lavapipe)
+    gpu::CullResult g = culler.cull(frusta);
+    session.check_validation();
+    r.gpu_ns = g.timings.gpu_ns;
+    r.gpu_wall_ns = g.timings.wall_ns;
+    for (gpu::ViewResult& view : g.views) {
+      r.gpu.push_back(std::move(view.classes));
+      r.gpu_counts.push_back(view.counts);
+      r.gpu_visible_ids.push_back(std::move(view.visible_ids));
+      r.gpu_overflow |= view.overflow;
+    }
+  }
+  if (backend == Backend::Both) {
+    for (std::size_t v = 0; v < frusta.size(); ++v) {
+      r.mismatches += count_mismatches(r.cpu[v], r.gpu[v]);
+      for (std::size_t i = 0; i < volumes.size() && r.mismatch_reports.size() < max_reports; ++i)
+        if (r.cpu[v][i] != r.gpu[v][i])
+          r.mismatch_reports.push_back("view " + std::to_string(v) + ", " +
+                                       describe_mismatch(i, volumes[i], frusta[v], r.cpu[v][i], r.gpu[v][i]));
+      if (r.cpu_counts[v] != r.gpu_counts[v]) {
+        ++r.mismatches;
+        r.mismatch_reports.push_back("view " + std::to_string(v) + ": GPU counters (visible " +
+                                     std::to_string(r.gpu_counts[v].visible) + ") differ from the CPU's (" +
+                                     std::to_string(r.cpu_counts[v].visible) + ")");
+      }
+      // The compacted list must hold exactly the visible objects, each once.
+      std::vector<std::uint32_t> ids = r.gpu_visible_ids[v];
+      std::sort(ids.begin(), ids.end());
+      std::vector<std::uint32_t> expected;
+      for (std::size_t i = 0; i < volumes.size(); ++i)
+        if (is_visible(r.cpu[v][i])) expected.push_back(std::uint32_t(i));
+      if (ids != expected) {
+        ++r.mismatches;
+        r.mismatch_reports.push_back("view " + std::to_string(v) + ": the GPU's visible-id list (" +
+                                     std::to_string(ids.size()) + " ids) is not the CPU's visible set (" +
+                                     std::to_string(expected.size()) + " objects)");
+      }
+    }
+  }
+  return r;
+}
+
+}  // namespace cullpipe::app

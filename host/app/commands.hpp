@@ -1,0 +1,58 @@
+#pragma once
+#include <cstdint>
+#include <iosfwd>
+#include <string>
+
+namespace cullpipe::app {
+
+/// Which implementation classifies: the GPU, the scalar CPU reference, or both (compared).
+enum class Backend { Gpu, Cpu, Both };
+
+/// Exit codes of the tool.
+inline constexpr int kExitOk = 0;
+inline constexpr int kExitMismatch = 1;   ///< GPU and CPU disagreed
+inline constexpr int kExitBadInput = 2;   ///< bad arguments or input files
+inline constexpr int kExitNoDevice = 3;   ///< Vulkan failed or no usable device
+
+/// Options shared by commands that use a Vulkan device.
+struct DeviceOptions {
+  std::string device;      ///< device name substring; empty: CULLPIPE_DEVICE or the default
+  bool validation = false; ///< Vulkan validation layers on; any message fails the command
+};
+
+struct RunOptions {
+  std::string scene_path;   ///< a cullpipe scene JSON; empty with no `generate`: the default scene
+  std::string generate;     ///< "KIND:N" procedural scene instead of a file
+  std::uint64_t seed = 1;
+  std::string bv = "aabb";  ///< aabb | obb | sphere
+  Backend backend = Backend::Both;
+  std::size_t views = 1;    ///< views along the camera path around the scene
+  std::string json_path;    ///< summary as JSON
+  std::string dump_path;    ///< planes, volumes and classes (classify schema)
+  DeviceOptions device;
+};
+
+struct ClassifyOptions {
+  std::string input_path;  ///< JSON file, or "-" for standard input
+  Backend backend = Backend::Both;
+  DeviceOptions device;
+};
+
+struct GenerateOptions {
+  std::string spec;  ///< KIND:N
+  std::uint64_t seed = 1;
+  std::string out_path;
+};
+
+/// Each command writes its report to `out`, errors to `err`, and returns an exit code.
+/// Exceptions do not escape: they are reported on `err` with the matching exit code.
+int run_command(const RunOptions& options, std::ostream& out, std::ostream& err);
+int classify_command(const ClassifyOptions& options, std::ostream& out, std::ostream& err);
+int generate_command(const GenerateOptions& options, std::ostream& out, std::ostream& err);
+int devices_command(std::ostream& out, std::ostream& err);
+
+/// The default scene shipped in scenes/: found next to the source tree the tool was built
+/// from, or under <prefix>/share/cullpipe/scenes relative to the executable.
+std::string default_scene_path();
+
+}  // namespace cullpipe::app

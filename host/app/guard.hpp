@@ -1,0 +1,36 @@
+#pragma once
+#include <exception>
+#include <new>
+#include <ostream>
+#include <stdexcept>
+
+#include "app/commands.hpp"
+#include "scene/scene.hpp"
+#include "vk/check.hpp"
+
+namespace cullpipe::app {
+
+/// Runs a command body, turning exceptions into an "error: ..." line and an exit code.
+template <class F>
+int guarded(std::ostream& err, F&& body) {
+  try {
+    return body();
+  } catch (const InputError& e) {
+    err << "error: " << e.what() << "\n";
+    return kExitBadInput;
+  } catch (const vk::Error& e) {
+    err << "error: Vulkan: " << e.what() << "\n";
+    return kExitNoDevice;
+  } catch (const std::length_error& e) {
+    err << "error: too large: " << e.what() << "\n";
+    return kExitBadInput;
+  } catch (const std::bad_alloc&) {
+    err << "error: out of host memory\n";
+    return kExitBadInput;
+  } catch (const std::exception& e) {
+    err << "error: " << e.what() << "\n";
+    return kExitBadInput;
+  }
+}
+
+}  // namespace cullpipe::app

@@ -1,0 +1,63 @@
+// cullpipe: frustum culling on Vulkan compute, checked against a scalar CPU reference.
+#include <CLI/CLI.hpp>
+#include <iostream>
+#include <map>
+
+#include "app/commands.hpp"
+
+using namespace cullpipe::app;
+
+namespace {
+
+const std::map<std::string, Backend> kBackends{{"gpu", Backend::Gpu}, {"cpu", Backend::Cpu}, {"both", Backend::Both}};
+
+void add_device_options(CLI::App* cmd, DeviceOptions& d) {
+  cmd->add_option("--device", d.device, "Vulkan device name substring (default: $CULLPIPE_DEVICE, else first GPU, else lavapipe)");
+  cmd->add_flag("--validate", d.validation, "Enable Vulkan validation layers; any message fails the command");
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"cullpipe: culls scene objects against view frusta with Vulkan compute shaders and checks every GPU answer "
+               "against a scalar CPU reference.\nWith no subcommand, runs the default scene (same as `cullpipe run`)."};
+  app.require_subcommand(0, 1);
+
+  RunOptions run;
+  CLI::App* run_cmd = app.add_subcommand("run", "Cull a scene on the GPU and/or the CPU and compare, view by view");
+  auto* scene_opt = run_cmd->add_option("--scene", run.scene_path, "Scene file (cullpipe-scene JSON); default: scenes/default.json");
+  run_cmd->add_option("--generate", run.generate, "Procedural scene KIND:N, KIND = uniform | clustered | city")->excludes(scene_opt);
+  run_cmd->add_option("--seed", run.seed, "Seed for --generate")->capture_default_str();
+  run_cmd->add_option("--bv", run.bv, "Bounding volume: aabb | obb | sphere")->capture_default_str()->check(CLI::IsMember({"aabb", "obb", "sphere"}));
+  run_cmd->add_option("--backend", run.backend, "gpu | cpu | both (both compares them)")->transform(CLI::CheckedTransformer(kBackends))->default_str("both");
+  run_cmd->add_option("--views", run.views, "Number of views on a camera path around the scene")->capture_default_str()->check(CLI::PositiveNumber);
+  run_cmd->add_option("--json", run.json_path, "Write a summary as JSON");
+  run_cmd->add_option("--dump", run.dump_path, "Write planes, volumes and classes (the classify schema)");
+  add_device_options(run_cmd, run.device);
+
+  ClassifyOptions classify;
+  CLI::App* classify_cmd = app.add_subcommand("classify", "Classify volumes against frusta given in a JSON file (- for stdin)");
+  classify_cmd->add_option("file", classify.input_path, "JSON: {\"frustum\": ..., \"volumes\": [...]}")->required();
+  classify_cmd->add_option("--backend", classify.backend, "gpu | cpu | both")->transform(CLI::CheckedTransformer(kBackends))->default_str("both");
+  add_device_options(classify_cmd, classify.device);
+
+  GenerateOptions generate;
+  CLI::App* generate_cmd = app.add_subcommand("generate", "Write a procedural scene to a file");
+  generate_cmd->add_option("spec", generate.spec, "KIND:N, KIND = uniform | clustered | city")->required();
+  generate_cmd->add_option("--seed", generate.seed, "Seed")->capture_default_str();
+  generate_cmd->add_option("--out", generate.out_path, "Output scene file")->required();
+
+  CLI::App* devices_cmd = app.add_subcommand("devices", "List Vulkan devices");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int code = app.exit(e);
+    return code == 0 ? 0 : kExitBadInput;
+  }
+
+  if (*classify_cmd) return classify_command(classify, std::cout, std::cerr);
+  if (*generate_cmd) return generate_command(generate, std::cout, std::cerr);
+  if (*devices_cmd) return devices_command(std::cout, std::cerr);
+  return run_command(run, std::cout, std::cerr);
+}

@@ -1,0 +1,176 @@
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <ostream>
+#include <unistd.h>
+
+#include "app/backends.hpp"
+#include "app/commands.hpp"
+#include "app/guard.hpp"
+#include "geom/bv_kind.hpp"
+#include "scene/cull_case_io.hpp"
+#include "scene/generators.hpp"
+#include "scene/json_util.hpp"
+#include "scene/scene_io.hpp"
+
+#ifndef CULLPIPE_SOURCE_SCENES_DIR
+#define CULLPIPE_SOURCE_SCENES_DIR ""
+#endif
+
+namespace cullpipe::app {
+namespace {
+
+std::string format_ms(double ns) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.3f", ns / 1e6);
+  return buf;
+}
+
+std::string pad(const std::string& s, std::size_t width) {
+  return s.size() >= width ? s : std::string(width - s.size(), ' ') + s;
+}
+
+template <class Volume>
+void append_volumes(std::vector<Volume> src, std::vector<Volume>& dst_typed, std::vector<cullpipe::Volume>& dst_any) {
+  dst_any.assign(src.begin(), src.end());
+  dst_typed = std::move(src);
+}
+
+}  // namespace
+
+std::string default_scene_path() {
+  namespace fs = std::filesystem;
+  std::vector<fs::path> candidates;
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  if (!ec) candidates.push_back(exe.parent_path().parent_path() / "share" / "cullpipe" / "scenes" / "default.json");
+  if (*CULLPIPE_SOURCE_SCENES_DIR) candidates.push_back(fs::path(CULLPIPE_SOURCE_SCENES_DIR) / "default.json");
+  for (const fs::path& p : candidates)
+    if (fs::exists(p, ec)) return p.string();
+  throw InputError("the default scene (scenes/default.json) was not found; looked in: " +
+                   (candidates.empty() ? std::string("(nowhere)") : candidates.back().string()) +
+                   "; pass --scene FILE or --generate KIND:N");
+}
+
+int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
+  return guarded(err, [&]() -> int {
+    const auto bv = parse_bv_kind(o.bv);
+    if (!bv) throw InputError("--bv " + o.bv + ": expected aabb, obb or sphere");
+    if (o.views == 0) throw InputError("--views must be at least 1");
+    if (!o.scene_path.empty() && !o.generate.empty()) throw InputError("give --scene or --generate, not both");
+
+    Scene scene;
+    std::string source;
+    if (!o.generate.empty()) {
+      const auto [kind, n] = parse_generate_spec(o.generate);
+      scene = generate_scene(kind, n, o.seed);
+      source = "generated";
+    } else {
+      source = o.scene_path.empty() ? default_scene_path() : o.scene_path;
+      scene = load_scene(source);
+    }
+
+    const std::vector<Camera> cameras = camera_path(scene.camera, scene.bounds(), o.views);
+    std::vector<Frustum> frusta;
+    for (std::size_t v = 0; v < cameras.size(); ++v) {
+      try {
+        frusta.push_back(Frustum::from_view_proj(cameras[v].view_proj()));
+      } catch (const std::invalid_argument& e) {
+        throw InputError(source + ": camera of view " + std::to_string(v) + ": " + e.what());
+      }
+    }
+
+    GpuSession session{o.device, nullptr, nullptr};
+    BackendResults r;
+    std::vector<Aabb> aabbs;
+    std::vector<Obb> obbs;
+    std::vector<Sphere> spheres;
+    std::vector<cullpipe::Volume> any;  // for --dump
+    switch (*bv) {
+      case BvKind::Aabb:
+        append_volumes(world_aabbs(scene), aabbs, any);
+        r = cull_on_backends<Aabb>(aabbs, frusta, o.backend, session);
+        break;
+      case BvKind::Obb:
+        append_volumes(world_obbs(scene), obbs, any);
+        r = cull_on_backends<Obb>(obbs, frusta, o.backend, session);
+        break;
+      case BvKind::Sphere:
+        append_volumes(world_spheres(scene), spheres, any);
+        r = cull_on_backends<Sphere>(spheres, frusta, o.backend, session);
+        break;
+    }
+
+    const std::size_t n = scene.objects.size();
+    const bool have_cpu = !r.cpu.empty(), have_gpu = !r.gpu.empty();
+    const auto& counts = have_cpu ? r.cpu_counts : r.gpu_counts;
+    out << "cullpipe run: " << (scene.name.empty() ? source : scene.name) << " (" << source << "), " << n << " objects, bv "
+        << o.bv << ", " << frusta.size() << (frusta.size() == 1 ? " view" : " views");
+    if (session.context) out << ", device " << session.context->info().name;
+    out << "\n\n";
+    out << "  view  objects  visible   inside  intersecting  outside\n";
+    const std::size_t shown = std::min<std::size_t>(frusta.size(), 16);
+    for (std::size_t v = 0; v < shown; ++v) {
+      const auto& c = counts[v];
+      out << pad(std::to_string(v), 6) << pad(std::to_string(n), 9) << pad(std::to_string(c.visible), 9)
+          << pad(std::to_string(c.inside), 9) << pad(std::to_string(c.intersecting), 14)
+          << pad(std::to_string(n - c.visible), 9) << "\n";
+    }
+    if (shown < frusta.size()) out << "  ... " << frusta.size() - shown << " more views\n";
+    out << "\n";
+    const double object_views = double(std::max<std::size_t>(n * frusta.size(), 1));
+    if (have_cpu)
+      out << "  cpu reference: " << format_ms(r.cpu_ns) << " ms (" << format_ms(r.cpu_ns / object_views * 1e6)
+          << " ns per object-view)\n";
+    if (have_gpu)
+      out << "  gpu:           " << format_ms(r.gpu_ns) << " ms on the GPU (timestamps), " << format_ms(r.gpu_wall_ns)
+          << " ms wall with submit and readback\n";
+    if (have_cpu && have_gpu) {
+      if (r.mismatches == 0)
+        out << "  agreement:     all " << n * frusta.size() << " object-view classifications identical (gpu == cpu)\n";
+      else
+        out << "  agreement:     " << r.mismatches << " MISMATCHES\n";
+    }
+    if (r.gpu_overflow) out << "  warning: the GPU visible-id list overflowed\n";
+
+    if (!o.json_path.empty()) {
+      nlohmann::json j;
+      j["scene"] = scene.name;
+      j["source"] = source;
+      j["objects"] = n;
+      j["bv"] = o.bv;
+      j["views"] = frusta.size();
+      j["backend"] = o.backend == Backend::Both ? "both" : o.backend == Backend::Gpu ? "gpu" : "cpu";
+      if (session.context) {
+        j["device"] = session.context->info().name;
+        j["driver"] = session.context->info().driver;
+      }
+      if (have_cpu) j["cpu_ns"] = r.cpu_ns;
+      if (have_gpu) {
+        j["gpu_ns"] = r.gpu_ns;
+        j["gpu_wall_ns"] = r.gpu_wall_ns;
+      }
+      j["mismatches"] = r.mismatches;
+      j["agree"] = have_cpu && have_gpu ? nlohmann::json(r.mismatches == 0) : nlohmann::json(nullptr);
+      nlohmann::json per_view = nlohmann::json::array();
+      for (const auto& c : counts)
+        per_view.push_back({{"visible", c.visible}, {"inside", c.inside}, {"intersecting", c.intersecting}});
+      j["per_view"] = per_view;
+      json_util::write_file_atomic(o.json_path, j.dump(2) + "\n");
+    }
+    if (!o.dump_path.empty()) {
+      CullCase c{frusta, frusta.size() > 1, std::move(any)};
+      json_util::write_file_atomic(o.dump_path, cull_case_to_json(c, have_cpu ? &r.cpu : &r.gpu));
+    }
+
+    if (r.mismatches) {
+      err << "error: GPU and CPU disagree (" << r.mismatches << " differences); first ones:\n";
+      for (const std::string& m : r.mismatch_reports) err << "  " << m << "\n";
+      return kExitMismatch;
+    }
+    return kExitOk;
+  });
+}
+
+}  // namespace cullpipe::app

@@ -1,0 +1,89 @@
+#include "cull/reference.hpp"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace cullpipe::reference {
+
+Classification classify_pn(const Aabb& box, const Frustum& frustum) {
+  bool intersecting = false;
+  for (const Plane& plane : frustum.active()) {
+    const glm::vec3& n = plane.normal;
+    const glm::vec3 p_vertex(n.x >= 0.0f ? box.max.x : box.min.x, n.y >= 0.0f ? box.max.y : box.min.y,
+                             n.z >= 0.0f ? box.max.z : box.min.z);
+    const glm::vec3 n_vertex(n.x >= 0.0f ? box.min.x : box.max.x, n.y >= 0.0f ? box.min.y : box.max.y,
+                             n.z >= 0.0f ? box.min.z : box.max.z);
+    if (plane.distance(p_vertex) < 0.0f) return Classification::Outside;
+    if (plane.distance(n_vertex) < 0.0f) intersecting = true;
+  }
+  return intersecting ? Classification::Intersecting : Classification::Inside;
+}
+
+Classification classify_corners(const Aabb& box, const Frustum& frustum) {
+  bool all_inside = true;
+  for (const Plane& plane : frustum.active()) {
+    int behind = 0;
+    for (const glm::vec3& corner : box.corners())
+      if (plane.distance(corner) < 0.0f) ++behind;
+    if (behind == 8) return Classification::Outside;
+    if (behind > 0) all_inside = false;
+  }
+  return all_inside ? Classification::Inside : Classification::Intersecting;
+}
+
+Classification classify(const Obb& box, const Frustum& frustum) {
+  bool intersecting = false;
+  for (const Plane& plane : frustum.active()) {
+    const glm::vec3& n = plane.normal;
+    const float s = plane.distance(box.center);
+    const glm::vec3 &u0 = box.basis[0], &u1 = box.basis[1], &u2 = box.basis[2];
+    const float n_dot_u0 = n.x * u0.x + n.y * u0.y + n.z * u0.z;
+    const float n_dot_u1 = n.x * u1.x + n.y * u1.y + n.z * u1.z;
+    const float n_dot_u2 = n.x * u2.x + n.y * u2.y + n.z * u2.z;
+    const float r = std::abs(n_dot_u0) * box.half_extents.x + std::abs(n_dot_u1) * box.half_extents.y +
+                    std::abs(n_dot_u2) * box.half_extents.z;
+    if (s < -r) return Classification::Outside;
+    if (s < r) intersecting = true;
+  }
+  return intersecting ? Classification::Intersecting : Classification::Inside;
+}
+
+Classification classify(const Sphere& sphere, const Frustum& frustum) {
+  bool intersecting = false;
+  for (const Plane& plane : frustum.active()) {
+    const float s = plane.distance(sphere.center);
+    if (s < -sphere.radius) return Classification::Outside;
+    if (s < sphere.radius) intersecting = true;
+  }
+  return intersecting ? Classification::Intersecting : Classification::Inside;
+}
+
+namespace {
+
+template <class Volume>
+CullCounts classify_all_impl(std::span<const Volume> volumes, const Frustum& frustum, std::span<Classification> out) {
+  if (out.size() != volumes.size()) throw std::invalid_argument("classify_all: output size differs from input size");
+  CullCounts counts;
+  for (std::size_t i = 0; i < volumes.size(); ++i) {
+    const Classification c = classify(volumes[i], frustum);
+    out[i] = c;
+    counts.inside += c == Classification::Inside;
+    counts.intersecting += c == Classification::Intersecting;
+  }
+  counts.visible = counts.inside + counts.intersecting;
+  return counts;
+}
+
+}  // namespace
+
+CullCounts classify_all(std::span<const Aabb> v, const Frustum& f, std::span<Classification> out) {
+  return classify_all_impl(v, f, out);
+}
+CullCounts classify_all(std::span<const Obb> v, const Frustum& f, std::span<Classification> out) {
+  return classify_all_impl(v, f, out);
+}
+CullCounts classify_all(std::span<const Sphere> v, const Frustum& f, std::span<Classification> out) {
+  return classify_all_impl(v, f, out);
+}
+
+}  // namespace cullpipe::reference

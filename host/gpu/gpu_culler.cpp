@@ -1,0 +1,236 @@
+#include "gpu/gpu_culler.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+#include <stdexcept>
+#include <string>
+
+#include "gpu/layout.hpp"
+#include "vk/check.hpp"
+
+// SPIR-V compiled from shaders/cull_flat.comp at build time (glslangValidator --vn).
+#include "cull_flat.spv.h"
+
+namespace cullpipe::gpu {
+namespace {
+
+constexpr std::uint32_t kBindingCount = 5;  // bounds, classes, visible ids, counters, views
+constexpr VkDeviceSize kMinBufferSize = 16;
+
+std::uint32_t kind_index(BvKind k) { return static_cast<std::uint32_t>(k); }
+
+std::string mib(VkDeviceSize bytes) { return std::to_string(bytes / (1024 * 1024)) + " MiB"; }
+
+void check_storage_range(const vk::Context& ctx, VkDeviceSize bytes, const std::string& what) {
+  const VkDeviceSize limit = ctx.properties().limits.maxStorageBufferRange;
+  if (bytes > limit)
+    throw std::length_error(what + " needs " + std::to_string(bytes) + " bytes (" + mib(bytes) +
+                            "), more than one storage buffer can hold on " + ctx.info().name + " (maxStorageBufferRange " +
+                            std::to_string(limit) + " bytes, " + mib(limit) + ")");
+}
+
+// Grows `buffer` to at least `bytes` (never shrinks). Returns true when it was reallocated.
+bool ensure_buffer(const vk::Context& ctx, vk::Buffer& buffer, VkDeviceSize bytes, VkBufferUsageFlags usage,
+                   const char* what) {
+  bytes = std::max(bytes, kMinBufferSize);
+  if (buffer && buffer.size() >= bytes) return false;
+  buffer = vk::Buffer();  // free first, so peak memory is not old + new
+  buffer = vk::Buffer(ctx, bytes, usage, what);
+  return true;
+}
+
+}  // namespace
+
+GpuCuller::GpuCuller(const vk::Context& ctx) : ctx_(ctx) {
+  const std::span<const std::uint32_t> spirv(cullpipe_cull_flat_spv, sizeof(cullpipe_cull_flat_spv) / sizeof(std::uint32_t));
+  static const char* names[3] = {"flat cull (aabb)", "flat cull (obb)", "flat cull (sphere)"};
+  for (std::uint32_t k = 0; k < 3; ++k) {
+    const std::uint32_t spec[2] = {k, FLAT_CULL_GROUP_SIZE};
+    pipelines_[k] = std::make_unique<vk::ComputePipeline>(
+        ctx_, vk::ComputePipelineDesc{spirv, kBindingCount, sizeof(FlatCullParams), spec, names[k]});
+  }
+  static_assert(BV_KIND_AABB == 0 && BV_KIND_OBB == 1 && BV_KIND_SPHERE == 2, "BvKind order must match the shader");
+
+  VkDevice dev = ctx_.device();
+  VkDescriptorPoolSize pool_size{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, kBindingCount};
+  VkDescriptorPoolCreateInfo pool_info{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
+  pool_info.maxSets = 1;
+  pool_info.poolSizeCount = 1;
+  pool_info.pPoolSizes = &pool_size;
+  CULLPIPE_VK_CHECK(vkCreateDescriptorPool(dev, &pool_info, nullptr, &descriptor_pool_));
+  VkDescriptorSetLayout set_layout = pipelines_[0]->set_layout();  // identical in all three
+  VkDescriptorSetAllocateInfo set_info{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO};
+  set_info.descriptorPool = descriptor_pool_;
+  set_info.descriptorSetCount = 1;
+  set_info.pSetLayouts = &set_layout;
+  CULLPIPE_VK_CHECK(vkAllocateDescriptorSets(dev, &set_info, &descriptor_set_));
+
+  VkCommandBufferAllocateInfo cmd_info{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
+  cmd_info.commandPool = ctx_.command_pool();
+  cmd_info.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+  cmd_info.commandBufferCount = 1;
+  CULLPIPE_VK_CHECK(vkAllocateCommandBuffers(dev, &cmd_info, &cmd_));
+
+  if (ctx_.timestamp_period_ns() > 0.0) {
+    VkQueryPoolCreateInfo query_info{VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO};
+    query_info.queryType = VK_QUERY_TYPE_TIMESTAMP;
+    query_info.queryCount = 2;
+    CULLPIPE_VK_CHECK(vkCreateQueryPool(dev, &query_info, nullptr, &query_pool_));
+  }
+}
+
+GpuCuller::~GpuCuller() {
+  VkDevice dev = ctx_.device();
+  vkDeviceWaitIdle(dev);
+  if (query_pool_) vkDestroyQueryPool(dev, query_pool_, nullptr);
+  if (cmd_) vkFreeCommandBuffers(dev, ctx_.command_pool(), 1, &cmd_);
+  if (descriptor_pool_) vkDestroyDescriptorPool(dev, descriptor_pool_, nullptr);
+}
+
+void GpuCuller::upload(std::span<const Aabb> volumes) {
+  std::vector<GpuAabb> packed(volumes.size());
+  for (std::size_t i = 0; i < volumes.size(); ++i) packed[i] = pack(volumes[i]);
+  upload_words(BvKind::Aabb, packed.data(), packed.size(), sizeof(GpuAabb));
+}
+
+void GpuCuller::upload(std::span<const Obb> volumes) {
+  std::vector<GpuObb> packed(volumes.size());
+  for (std::size_t i = 0; i < volumes.size(); ++i) packed[i] = pack(volumes[i]);
+  upload_words(BvKind::Obb, packed.data(), packed.size(), sizeof(GpuObb));
+}
+
+void GpuCuller::upload(std::span<const Sphere> volumes) {
+  std::vector<GpuSphere> packed(volumes.size());
+  for (std::size_t i = 0; i < volumes.size(); ++i) packed[i] = pack(volumes[i]);
+  upload_words(BvKind::Sphere, packed.data(), packed.size(), sizeof(GpuSphere));
+}
+
+void GpuCuller::upload_words(BvKind kind, const void* data, std::size_t count, std::size_t bytes_per_object) {
+  if (count > UINT32_MAX / 2) throw std::length_error("too many objects for 32-bit object ids: " + std::to_string(count));
+  const VkDeviceSize bytes = VkDeviceSize(count) * bytes_per_object;
+  check_storage_range(ctx_, bytes, std::to_string(count) + " " + std::string(to_string(kind)) + " volumes");
+  if (ensure_buffer(ctx_, bounds_, bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "bounds buffer")) descriptors_dirty_ = true;
+  if (bytes) std::memcpy(bounds_.data(), data, bytes);
+  kind_ = kind;
+  object_count_ = count;
+}
+
+void GpuCuller::ensure_outputs(std::size_t view_count) {
+  const VkDeviceSize per_view = VkDeviceSize(object_count_) * sizeof(std::uint32_t);
+  const VkDeviceSize outputs = per_view * view_count;
+  check_storage_range(ctx_, outputs, std::to_string(view_count) + " views x " + std::to_string(object_count_) + " objects of output");
+  constexpr VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
+  bool changed = false;
+  changed |= ensure_buffer(ctx_, classes_, outputs, storage, "classification buffer");
+  changed |= ensure_buffer(ctx_, visible_, outputs, storage, "visible-id buffer");
+  changed |= ensure_buffer(ctx_, counters_, view_count * sizeof(ViewCounters), storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                           "counter buffer");
+  changed |= ensure_buffer(ctx_, views_, view_count * sizeof(GpuFrustum), storage, "view buffer");
+  if (changed) descriptors_dirty_ = true;
+}
+
+void GpuCuller::update_descriptors() {
+  if (!descriptors_dirty_) return;
+  const vk::Buffer* buffers[kBindingCount] = {&bounds_, &classes_, &visible_, &counters_, &views_};
+  VkDescriptorBufferInfo infos[kBindingCount];
+  VkWriteDescriptorSet writes[kBindingCount];
+  for (std::uint32_t b = 0; b < kBindingCount; ++b) {
+    infos[b] = {buffers[b]->handle(), 0, VK_WHOLE_SIZE};
+    writes[b] = {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
+    writes[b].dstSet = descriptor_set_;
+    writes[b].dstBinding = b;
+    writes[b].descriptorCount = 1;
+    writes[b].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+    writes[b].pBufferInfo = &infos[b];
+  }
+  vkUpdateDescriptorSets(ctx_.device(), kBindingCount, writes, 0, nullptr);
+  descriptors_dirty_ = false;
+}
+
+CullResult GpuCuller::cull(std::span<const Frustum> views, const ReadbackOptions& readback) {
+  const auto start = std::chrono::steady_clock::now();
+  CullResult result;
+  result.views.resize(views.size());
+  if (views.empty()) return result;
+  if (!bounds_) ensure_buffer(ctx_, bounds_, 0, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "bounds buffer");
+  ensure_outputs(views.size());
+  update_descriptors();
+
+  auto gpu_views = views_.as<GpuFrustum>();
+  for (std::size_t v = 0; v < views.size(); ++v) gpu_views[v] = pack(views[v]);
+
+  const VkDeviceSize counters_bytes = views.size() * sizeof(ViewCounters);
+  const std::uint32_t max_groups = ctx_.properties().limits.maxComputeWorkGroupCount[0];
+  const std::uint64_t objects_per_dispatch = std::uint64_t(max_groups) * FLAT_CULL_GROUP_SIZE;
+  if (views.size() > ctx_.properties().limits.maxComputeWorkGroupCount[1])
+    throw std::length_error(std::to_string(views.size()) + " views exceed the device's dispatch limit of " +
+                            std::to_string(ctx_.properties().limits.maxComputeWorkGroupCount[1]));
+
+  CULLPIPE_VK_CHECK(vkResetCommandBuffer(cmd_, 0));
+  VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+  begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+  CULLPIPE_VK_CHECK(vkBeginCommandBuffer(cmd_, &begin));
+  if (query_pool_) vkCmdResetQueryPool(cmd_, query_pool_, 0, 2);
+
+  vkCmdFillBuffer(cmd_, counters_.handle(), 0, counters_bytes, 0);
+  VkMemoryBarrier clear_barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, VK_ACCESS_TRANSFER_WRITE_BIT,
+                                VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT};
+  vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &clear_barrier, 0,
+                       nullptr, 0, nullptr);
+  if (query_pool_) vkCmdWriteTimestamp(cmd_, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, query_pool_, 0);
+
+  const vk::ComputePipeline& pipe = *pipelines_[kind_index(kind_)];
+  vkCmdBindPipeline(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.pipeline());
+  vkCmdBindDescriptorSets(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.layout(), 0, 1, &descriptor_set_, 0, nullptr);
+  for (std::uint64_t first = 0; first < object_count_; first += objects_per_dispatch) {
+    if (first > 0) {  // successive chunks update the same counters
+      VkMemoryBarrier chunk_barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr,
+                                    VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT,
+                                    VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT};
+      vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1,
+                           &chunk_barrier, 0, nullptr, 0, nullptr);
+    }
+    const std::uint64_t count = std::min<std::uint64_t>(objects_per_dispatch, object_count_ - first);
+    const FlatCullParams params{std::uint32_t(object_count_), std::uint32_t(first), std::uint32_t(views.size()),
+                                std::uint32_t(object_count_)};
+    vkCmdPushConstants(cmd_, pipe.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
+    vkCmdDispatch(cmd_, vk::group_count(count, FLAT_CULL_GROUP_SIZE), std::uint32_t(views.size()), 1);
+  }
+  if (query_pool_) vkCmdWriteTimestamp(cmd_, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, query_pool_, 1);
+  VkMemoryBarrier host_barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, VK_ACCESS_SHADER_WRITE_BIT, VK_ACCESS_HOST_READ_BIT};
+  vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &host_barrier, 0, nullptr,
+                       0, nullptr);
+  CULLPIPE_VK_CHECK(vkEndCommandBuffer(cmd_));
+  ctx_.submit_and_wait(cmd_);
+
+  if (query_pool_) {
+    std::uint64_t stamps[2] = {0, 0};
+    CULLPIPE_VK_CHECK(vkGetQueryPoolResults(ctx_.device(), query_pool_, 0, 2, sizeof(stamps), stamps, sizeof(std::uint64_t),
+                                            VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT));
+    result.timings.gpu_ns = double(stamps[1] - stamps[0]) * ctx_.timestamp_period_ns();
+  }
+
+  const auto counters = counters_.as<const ViewCounters>();
+  const auto classes = classes_.as<const std::uint32_t>();
+  const auto visible = visible_.as<const std::uint32_t>();
+  for (std::size_t v = 0; v < views.size(); ++v) {
+    ViewResult& out = result.views[v];
+    const ViewCounters& c = counters[v];
+    out.counts = {c.visible_count, c.inside_count, c.intersecting_count};
+    out.overflow = c.visible_count > object_count_;
+    if (readback.classes) {
+      out.classes.resize(object_count_);
+      const std::uint32_t* src = classes.data() + v * object_count_;
+      for (std::size_t i = 0; i < object_count_; ++i) out.classes[i] = static_cast<Classification>(src[i]);
+    }
+    if (readback.visible_ids) {
+      const std::uint32_t* src = visible.data() + v * object_count_;
+      out.visible_ids.assign(src, src + std::min<std::size_t>(c.visible_count, object_count_));
+    }
+  }
+  result.timings.wall_ns = double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());
+  return result;
+}
+
+}  // namespace cullpipe::gpu

@@ -1,0 +1,25 @@
+#pragma once
+// Conversions between the host volume types and the GPU structs of shaders/shared/cull_types.h.
+// Every conversion copies floats unchanged, so CPU and GPU see bit-identical inputs.
+#include "../../shaders/shared/cull_types.h"
+#include "geom/aabb.hpp"
+#include "geom/frustum.hpp"
+#include "geom/obb.hpp"
+#include "geom/sphere.hpp"
+
+namespace cullpipe::gpu {
+
+inline GpuAabb pack(const Aabb& b) { return {vec4(b.min, 0.0f), vec4(b.max, 0.0f)}; }
+inline GpuObb pack(const Obb& b) {
+  return {vec4(b.center, 0.0f), vec4(b.basis[0], b.half_extents.x), vec4(b.basis[1], b.half_extents.y),
+          vec4(b.basis[2], b.half_extents.z)};
+}
+inline GpuSphere pack(const Sphere& s) { return {vec4(s.center, s.radius)}; }
+inline GpuFrustum pack(const Frustum& f) {
+  GpuFrustum g{};
+  for (std::size_t i = 0; i < f.plane_count; ++i) g.planes[i] = f.planes[i].as_vec4();
+  g.plane_count = static_cast<uint>(f.plane_count);
+  return g;
+}
+
+}  // namespace cullpipe::gpu

@@ -1,0 +1,43 @@
+// Compile-time checks that the C++ view of shaders/shared/cull_types.h matches std430, so the
+// structs written once there mean the same bytes to the host and to the shaders.
+#include <cstddef>
+
+#include "gpu/layout.hpp"
+
+namespace cullpipe::gpu {
+
+static_assert(sizeof(vec4) == 16 && alignof(vec4) <= 16);
+
+static_assert(sizeof(GpuAabb) == AABB_VEC4S * 16);
+static_assert(offsetof(GpuAabb, min_corner) == 0);
+static_assert(offsetof(GpuAabb, max_corner) == 16);
+
+static_assert(sizeof(GpuObb) == OBB_VEC4S * 16);
+static_assert(offsetof(GpuObb, center) == 0);
+static_assert(offsetof(GpuObb, axis_x) == 16);
+static_assert(offsetof(GpuObb, axis_y) == 32);
+static_assert(offsetof(GpuObb, axis_z) == 48);
+
+static_assert(sizeof(GpuSphere) == SPHERE_VEC4S * 16);
+static_assert(offsetof(GpuSphere, center_radius) == 0);
+
+static_assert(sizeof(GpuFrustum) == 112);
+static_assert(offsetof(GpuFrustum, planes) == 0);
+static_assert(offsetof(GpuFrustum, plane_count) == 96);
+static_assert(offsetof(GpuFrustum, reserved2) == 108);
+
+static_assert(sizeof(FlatCullParams) == 16);
+static_assert(offsetof(FlatCullParams, object_count) == 0);
+static_assert(offsetof(FlatCullParams, first_object) == 4);
+static_assert(offsetof(FlatCullParams, view_count) == 8);
+static_assert(offsetof(FlatCullParams, visible_capacity) == 12);
+
+static_assert(sizeof(ViewCounters) == 16);
+static_assert(offsetof(ViewCounters, visible_count) == 0);
+static_assert(offsetof(ViewCounters, inside_count) == 4);
+static_assert(offsetof(ViewCounters, intersecting_count) == 8);
+
+static_assert(CLASS_OUTSIDE == 0 && CLASS_INTERSECTING == 1 && CLASS_INSIDE == 2,
+              "must match cullpipe::Classification");
+
+}  // namespace cullpipe::gpu

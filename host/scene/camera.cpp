@@ -1,0 +1,54 @@
+#include "scene/camera.hpp"
+
+#include <cmath>
+#include <glm/ext/matrix_clip_space.hpp>
+#include <glm/ext/matrix_transform.hpp>
+#include <glm/geometric.hpp>
+#include <glm/trigonometric.hpp>
+
+namespace cullpipe {
+
+glm::mat4 Camera::view() const { return glm::lookAtRH(eye, target, up); }
+
+glm::mat4 Camera::projection() const {
+  const float f = 1.0f / std::tan(glm::radians(fov_y_degrees) * 0.5f);
+  // Right-handed view space (looking down -z) to Vulkan clip space, written out so every
+  // variant is explicit: x' = f/aspect x, y' = -f y (Vulkan's y points down), w' = -z.
+  glm::mat4 p(0.0f);
+  p[0][0] = f / aspect;
+  p[1][1] = -f;
+  p[2][3] = -1.0f;
+  const float n = near_plane, fa = far_plane;
+  if (!reversed_z && !infinite_far) {  // z' = 0 at near, w' at far
+    p[2][2] = fa / (n - fa);
+    p[3][2] = fa * n / (n - fa);
+  } else if (!reversed_z) {  // far -> infinity
+    p[2][2] = -1.0f;
+    p[3][2] = -n;
+  } else if (!infinite_far) {  // reversed: z' = w' at near, 0 at far
+    p[2][2] = n / (fa - n);
+    p[3][2] = fa * n / (fa - n);
+  } else {  // reversed and infinite: depth = n / -z
+    p[2][2] = 0.0f;
+    p[3][2] = n;
+  }
+  return p;
+}
+
+std::vector<Camera> camera_path(const Camera& base, const Aabb& bounds, std::size_t count) {
+  if (count <= 1) return std::vector<Camera>(count, base);
+  const glm::vec3 center = bounds.center();
+  const glm::vec3 offset = base.eye - base.target;
+  const float height = offset.y;
+  const float radius = std::max(std::sqrt(offset.x * offset.x + offset.z * offset.z), 1e-3f);
+  const float start = std::atan2(offset.z, offset.x);
+  std::vector<Camera> path(count, base);
+  for (std::size_t i = 0; i < count; ++i) {
+    const float angle = start + 2.0f * 3.14159265358979f * float(i) / float(count);
+    path[i].target = center;
+    path[i].eye = center + glm::vec3(radius * std::cos(angle), height, radius * std::sin(angle));
+  }
+  return path;
+}
+
+}  // namespace cullpipe

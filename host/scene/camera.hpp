@@ -1,0 +1,34 @@
+#pragma once
+#include <glm/mat4x4.hpp>
+#include <glm/vec3.hpp>
+#include <vector>
+
+#include "geom/aabb.hpp"
+
+namespace cullpipe {
+
+/// A perspective camera producing Vulkan clip space (y down, depth 0..1).
+struct Camera {
+  glm::vec3 eye{0.0f, 10.0f, 30.0f};
+  glm::vec3 target{0.0f};
+  glm::vec3 up{0.0f, 1.0f, 0.0f};
+  float fov_y_degrees = 60.0f;
+  float aspect = 16.0f / 9.0f;
+  float near_plane = 0.1f;
+  float far_plane = 1000.0f;  ///< ignored when infinite_far
+  bool reversed_z = false;    ///< depth 1 at the near plane, 0 at the far plane
+  bool infinite_far = false;  ///< far plane at infinity
+
+  glm::mat4 view() const;
+  glm::mat4 projection() const;
+  glm::mat4 view_proj() const { return projection() * view(); }
+
+  bool operator==(const Camera&) const = default;
+};
+
+/// `count` cameras on a circle around `bounds`, looking at its centre from above at
+/// `base`'s height angle, evenly spaced in angle; each keeps `base`'s lens settings.
+/// For count == 1 the result is `base` itself.
+std::vector<Camera> camera_path(const Camera& base, const Aabb& bounds, std::size_t count);
+
+}  // namespace cullpipe

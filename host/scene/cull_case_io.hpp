@@ -1,0 +1,44 @@
+#pragma once
+#include <optional>
+#include <string>
+#include <variant>
+#include <vector>
+
+#include "geom/aabb.hpp"
+#include "geom/classification.hpp"
+#include "geom/frustum.hpp"
+#include "geom/obb.hpp"
+#include "geom/sphere.hpp"
+
+namespace cullpipe {
+
+using Volume = std::variant<Aabb, Obb, Sphere>;
+
+/// A self-contained culling problem: frusta and volumes, as read by `cullpipe classify` and
+/// written by `cullpipe run --dump`. JSON schema:
+///   {"frustum": F} or {"frusta": [F, ...]}, where F is {"planes": [[nx,ny,nz,d], ...]} (1..6
+///   planes, inward: p is inside when n.p + d >= 0) or {"view_proj": [16 numbers, column-major]};
+///   "volumes": [V, ...], where V is one of
+///     {"aabb": {"min": [x,y,z], "max": [x,y,z]}}
+///     {"aabb": {"center": [..], "half_extents": [..]}}
+///     {"sphere": {"center": [..], "radius": r}}
+///     {"obb": {"center": [..], "half_extents": [..], "axes": [[..],[..],[..]]}}  (unit, orthogonal)
+///   A volume may carry "class" (one frustum) or "classes" (one per frustum) and an "id";
+///   they are written by --dump and ignored on reading.
+struct CullCase {
+  std::vector<Frustum> frusta;
+  bool multi_view = false;  ///< written as "frusta" rather than "frustum"
+  std::vector<Volume> volumes;
+};
+
+/// Parses a cull case; throws InputError naming `source` and the JSON path of what is wrong
+/// (syntax, missing or mistyped fields, NaN/Inf, negative extents or radii, a singular or
+/// degenerate view-projection matrix, non-orthonormal OBB axes).
+CullCase parse_cull_case(const std::string& text, const std::string& source);
+
+/// Serialises a cull case, with each volume's classes per frustum when `classes` is given
+/// (classes[view][volume]) and optional object ids.
+std::string cull_case_to_json(const CullCase& c, const std::vector<std::vector<Classification>>* classes = nullptr,
+                              const std::vector<std::uint32_t>* ids = nullptr);
+
+}  // namespace cullpipe

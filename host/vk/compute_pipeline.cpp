@@ -1,0 +1,75 @@
+#include "vk/compute_pipeline.hpp"
+
+#include <string>
+#include <vector>
+
+#include "vk/check.hpp"
+
+namespace cullpipe::vk {
+
+ComputePipeline::ComputePipeline(const Context& ctx, const ComputePipelineDesc& desc)
+    : device_(ctx.device()), push_constant_size_(desc.push_constant_size) {
+  const std::string name = desc.name;
+  if (desc.spirv.empty() || desc.spirv[0] != 0x07230203u)
+    throw Error(name + ": SPIR-V is empty or corrupt (bad magic number)");
+  if (desc.push_constant_size > ctx.properties().limits.maxPushConstantsSize)
+    throw Error(name + ": needs " + std::to_string(desc.push_constant_size) + " bytes of push constants, device allows " +
+                std::to_string(ctx.properties().limits.maxPushConstantsSize));
+
+  VkShaderModule module = VK_NULL_HANDLE;
+  try {
+    std::vector<VkDescriptorSetLayoutBinding> bindings(desc.storage_buffer_count);
+    for (std::uint32_t i = 0; i < desc.storage_buffer_count; ++i)
+      bindings[i] = {i, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr};
+    VkDescriptorSetLayoutCreateInfo set_info{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO};
+    set_info.bindingCount = std::uint32_t(bindings.size());
+    set_info.pBindings = bindings.data();
+    CULLPIPE_VK_CHECK(vkCreateDescriptorSetLayout(device_, &set_info, nullptr, &set_layout_));
+
+    VkPushConstantRange range{VK_SHADER_STAGE_COMPUTE_BIT, 0, desc.push_constant_size};
+    VkPipelineLayoutCreateInfo layout_info{VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO};
+    layout_info.setLayoutCount = 1;
+    layout_info.pSetLayouts = &set_layout_;
+    layout_info.pushConstantRangeCount = desc.push_constant_size ? 1 : 0;
+    layout_info.pPushConstantRanges = &range;
+    CULLPIPE_VK_CHECK(vkCreatePipelineLayout(device_, &layout_info, nullptr, &layout_));
+
+    VkShaderModuleCreateInfo module_info{VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO};
+    module_info.codeSize = desc.spirv.size_bytes();
+    module_info.pCode = desc.spirv.data();
+    CULLPIPE_VK_CHECK(vkCreateShaderModule(device_, &module_info, nullptr, &module));
+
+    std::vector<VkSpecializationMapEntry> entries(desc.specialization.size());
+    for (std::uint32_t i = 0; i < entries.size(); ++i)
+      entries[i] = {i, std::uint32_t(i * sizeof(std::uint32_t)), sizeof(std::uint32_t)};
+    VkSpecializationInfo spec{std::uint32_t(entries.size()), entries.data(), desc.specialization.size_bytes(),
+                              desc.specialization.data()};
+    VkComputePipelineCreateInfo info{VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO};
+    info.stage = {VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO};
+    info.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
+    info.stage.module = module;
+    info.stage.pName = "main";
+    info.stage.pSpecializationInfo = entries.empty() ? nullptr : &spec;
+    info.layout = layout_;
+    const VkResult r = vkCreateComputePipelines(device_, VK_NULL_HANDLE, 1, &info, nullptr, &pipeline_);
+    if (r != VK_SUCCESS) throw Error(name + ": vkCreateComputePipelines failed: " + result_name(r), r);
+    vkDestroyShaderModule(device_, module, nullptr);
+  } catch (...) {
+    if (module) vkDestroyShaderModule(device_, module, nullptr);
+    release();
+    throw;
+  }
+}
+
+ComputePipeline::~ComputePipeline() { release(); }
+
+void ComputePipeline::release() {
+  if (pipeline_) vkDestroyPipeline(device_, pipeline_, nullptr);
+  if (layout_) vkDestroyPipelineLayout(device_, layout_, nullptr);
+  if (set_layout_) vkDestroyDescriptorSetLayout(device_, set_layout_, nullptr);
+  pipeline_ = VK_NULL_HANDLE;
+  layout_ = VK_NULL_HANDLE;
+  set_layout_ = VK_NULL_HANDLE;
+}
+
+}  // namespace cullpipe::vk

@@ -1,0 +1,99 @@
+#pragma once
+#include <vulkan/vulkan.h>
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <mutex>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace cullpipe::vk {
+
+/// How to create a Context.
+struct ContextOptions {
+  /// Enable VK_LAYER_KHRONOS_validation with synchronization validation. Every message it
+  /// reports is counted and passed to `on_message`.
+  bool validation = false;
+  /// Pick the first device whose name contains this substring (case-insensitive). Empty: use
+  /// the CULLPIPE_DEVICE environment variable, else the first discrete or integrated GPU,
+  /// else the first CPU device (lavapipe).
+  std::string device_filter;
+  /// Receives every validation message; default prints it to stderr.
+  std::function<void(std::string_view)> on_message;
+};
+
+/// A physical device as listed by list_devices().
+struct DeviceInfo {
+  std::string name;
+  std::string type;    ///< "discrete", "integrated", "virtual", "cpu" or "other"
+  std::string driver;  ///< driver name and info, e.g. "llvmpipe Mesa 22.3.6"
+  std::uint32_t api_version = 0;
+};
+
+/// The Vulkan devices this machine offers. Throws vk::Error when Vulkan cannot be loaded.
+std::vector<DeviceInfo> list_devices();
+
+/// Owns a VkInstance, the chosen VkPhysicalDevice, a VkDevice and one compute queue, plus a
+/// command pool for one-shot submissions. Move-free and copy-free: create it once, pass by
+/// reference. Throws vk::Error with a clear message when there is no usable device.
+class Context {
+ public:
+  explicit Context(const ContextOptions& options = {});
+  ~Context();
+  Context(const Context&) = delete;
+  Context& operator=(const Context&) = delete;
+
+  VkInstance instance() const { return instance_; }
+  VkPhysicalDevice physical_device() const { return physical_device_; }
+  VkDevice device() const { return device_; }
+  VkQueue queue() const { return queue_; }
+  std::uint32_t queue_family() const { return queue_family_; }
+  VkCommandPool command_pool() const { return command_pool_; }
+  const VkPhysicalDeviceProperties& properties() const { return properties_; }
+  const DeviceInfo& info() const { return info_; }
+  /// Nanoseconds per timestamp tick; 0 when the compute queue has no timestamps.
+  double timestamp_period_ns() const { return timestamp_period_ns_; }
+  std::uint32_t subgroup_size() const { return subgroup_size_; }
+
+  /// Validation messages reported so far (0 when validation is off).
+  std::size_t validation_message_count() const { return message_count_.load(); }
+  /// The validation messages reported so far, removed from the context.
+  std::vector<std::string> take_validation_messages();
+
+  /// Index of a memory type allowed by `type_bits` with all of `required` flags, preferring
+  /// one that also has `preferred`. Throws vk::Error if none.
+  std::uint32_t find_memory_type(std::uint32_t type_bits, VkMemoryPropertyFlags required,
+                                 VkMemoryPropertyFlags preferred) const;
+
+  /// Submits one recorded command buffer to the queue and waits for it to finish.
+  void submit_and_wait(VkCommandBuffer cmd) const;
+
+ private:
+  static VKAPI_ATTR VkBool32 VKAPI_CALL debug_callback(VkDebugUtilsMessageSeverityFlagBitsEXT severity,
+                                                       VkDebugUtilsMessageTypeFlagsEXT types,
+                                                       const VkDebugUtilsMessengerCallbackDataEXT* data, void* user);
+  void destroy();
+
+  VkInstance instance_ = VK_NULL_HANDLE;
+  VkDebugUtilsMessengerEXT messenger_ = VK_NULL_HANDLE;
+  VkPhysicalDevice physical_device_ = VK_NULL_HANDLE;
+  VkDevice device_ = VK_NULL_HANDLE;
+  VkQueue queue_ = VK_NULL_HANDLE;
+  VkCommandPool command_pool_ = VK_NULL_HANDLE;
+  VkFence fence_ = VK_NULL_HANDLE;
+  std::uint32_t queue_family_ = 0;
+  VkPhysicalDeviceProperties properties_{};
+  VkPhysicalDeviceMemoryProperties memory_properties_{};
+  DeviceInfo info_;
+  double timestamp_period_ns_ = 0.0;
+  std::uint32_t subgroup_size_ = 0;
+
+  std::function<void(std::string_view)> on_message_;
+  std::atomic<std::size_t> message_count_{0};
+  std::mutex messages_mutex_;
+  std::vector<std::string> messages_;
+};
+
+}  // namespace cullpipe::vk

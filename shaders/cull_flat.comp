@@ -1,0 +1,110 @@
+#version 460
+// Flat frustum culling: one invocation per object and view; gl_GlobalInvocationID.y is the
+// view. One dispatch covers all views (and a chunk of at most maxComputeWorkGroupCount[0]
+// groups of objects). Writes each object's classification, appends
+// visible ids to the view's list and counts visible / inside / intersecting objects.
+//
+// Bit-exact contract with host/cull/reference.cpp: every distance is computed as
+// ((n.x*p.x + n.y*p.y) + n.z*p.z) + d, written out (not dot()) and marked `precise`, so no
+// reassociation or fused multiply-add can change a result.
+// Tests: p/n-vertex box test (Greene 1994; Assarsson & Moller 2000), the OBB test by
+// projected radius r = sum |n.u_i| h_i (Ericson, Real-Time Collision Detection 5.2.3), the
+// sphere test by signed distance.
+#extension GL_GOOGLE_include_directive : require
+#extension GL_KHR_shader_subgroup_basic : require
+#extension GL_KHR_shader_subgroup_ballot : require
+
+#include "shared/cull_types.h"
+
+layout(local_size_x_id = 1) in;                 // = FLAT_CULL_GROUP_SIZE, set by the host
+layout(constant_id = 0) const uint BV_KIND = BV_KIND_AABB;
+
+layout(std430, set = 0, binding = 0) readonly buffer Bounds { vec4 bounds[]; };
+layout(std430, set = 0, binding = 1) writeonly buffer Classes { uint classes[]; };  // [view * object_count + i]
+layout(std430, set = 0, binding = 2) writeonly buffer Visible { uint visible_ids[]; };  // [view * capacity + k]
+layout(std430, set = 0, binding = 3) buffer Counters { ViewCounters counters[]; };
+layout(std430, set = 0, binding = 4) readonly buffer Views { GpuFrustum views[]; };
+
+layout(push_constant, std430) uniform Push { FlatCullParams params; };
+
+uint view;             // this invocation's view (gl_GlobalInvocationID.y)
+uint view_plane_count;
+
+float plane_distance(vec4 plane, vec3 p) {
+  precise float s = plane.x * p.x + plane.y * p.y + plane.z * p.z + plane.w;
+  return s;
+}
+
+uint classify_aabb(vec3 lo, vec3 hi) {
+  bool intersecting = false;
+  for (uint k = 0; k < view_plane_count; ++k) {
+    vec4 plane = views[view].planes[k];
+    vec3 p_vertex = vec3(plane.x >= 0.0 ? hi.x : lo.x, plane.y >= 0.0 ? hi.y : lo.y, plane.z >= 0.0 ? hi.z : lo.z);
+    vec3 n_vertex = vec3(plane.x >= 0.0 ? lo.x : hi.x, plane.y >= 0.0 ? lo.y : hi.y, plane.z >= 0.0 ? lo.z : hi.z);
+    if (plane_distance(plane, p_vertex) < 0.0) return CLASS_OUTSIDE;
+    if (plane_distance(plane, n_vertex) < 0.0) intersecting = true;
+  }
+  return intersecting ? CLASS_INTERSECTING : CLASS_INSIDE;
+}
+
+uint classify_obb(vec3 center, vec4 u0, vec4 u1, vec4 u2) {
+  bool intersecting = false;
+  for (uint k = 0; k < view_plane_count; ++k) {
+    vec4 plane = views[view].planes[k];
+    float s = plane_distance(plane, center);
+    precise float n_dot_u0 = plane.x * u0.x + plane.y * u0.y + plane.z * u0.z;
+    precise float n_dot_u1 = plane.x * u1.x + plane.y * u1.y + plane.z * u1.z;
+    precise float n_dot_u2 = plane.x * u2.x + plane.y * u2.y + plane.z * u2.z;
+    precise float r = abs(n_dot_u0) * u0.w + abs(n_dot_u1) * u1.w + abs(n_dot_u2) * u2.w;
+    if (s < -r) return CLASS_OUTSIDE;
+    if (s < r) intersecting = true;
+  }
+  return intersecting ? CLASS_INTERSECTING : CLASS_INSIDE;
+}
+
+uint classify_sphere(vec4 center_radius) {
+  bool intersecting = false;
+  float radius = center_radius.w;
+  for (uint k = 0; k < view_plane_count; ++k) {
+    float s = plane_distance(views[view].planes[k], center_radius.xyz);
+    if (s < -radius) return CLASS_OUTSIDE;
+    if (s < radius) intersecting = true;
+  }
+  return intersecting ? CLASS_INTERSECTING : CLASS_INSIDE;
+}
+
+void main() {
+  uint i = params.first_object + gl_GlobalInvocationID.x;
+  view = gl_GlobalInvocationID.y;
+  if (i >= params.object_count || view >= params.view_count) return;
+  view_plane_count = min(views[view].plane_count, MAX_FRUSTUM_PLANES);
+
+  uint c;
+  if (BV_KIND == BV_KIND_AABB) {
+    c = classify_aabb(bounds[AABB_VEC4S * i].xyz, bounds[AABB_VEC4S * i + 1].xyz);
+  } else if (BV_KIND == BV_KIND_OBB) {
+    uint b = OBB_VEC4S * i;
+    c = classify_obb(bounds[b].xyz, bounds[b + 1], bounds[b + 2], bounds[b + 3]);
+  } else {
+    c = classify_sphere(bounds[SPHERE_VEC4S * i]);
+  }
+  classes[view * params.object_count + i] = c;
+
+  // Compaction: one atomic per subgroup for the visible list, then each visible invocation
+  // writes its id at its rank within the subgroup. Order across subgroups is arrival order.
+  bool visible = c != CLASS_OUTSIDE;
+  uvec4 vis_ballot = subgroupBallot(visible);
+  uint vis_total = subgroupBallotBitCount(vis_ballot);
+  uint inside_total = subgroupBallotBitCount(subgroupBallot(c == CLASS_INSIDE));
+  uint base = 0;
+  if (subgroupElect() && vis_total > 0) {
+    base = atomicAdd(counters[view].visible_count, vis_total);
+    atomicAdd(counters[view].inside_count, inside_total);
+    atomicAdd(counters[view].intersecting_count, vis_total - inside_total);
+  }
+  base = subgroupBroadcastFirst(base);
+  uint slot = base + subgroupBallotExclusiveBitCount(vis_ballot);
+  if (visible && slot < params.visible_capacity) {
+    visible_ids[view * params.visible_capacity + slot] = i;
+  }
+}

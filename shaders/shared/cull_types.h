@@ -1,0 +1,88 @@
+// cull_types.h: the one definition of every struct and constant shared by the GLSL compute
+// shaders and the C++ host. Included by both; std430 layout, vec4-packed, no implicit padding.
+// Offsets and sizes are checked by static_assert in host/gpu/layout_checks.cpp.
+#ifndef CULLPIPE_SHADERS_SHARED_CULL_TYPES_H
+#define CULLPIPE_SHADERS_SHARED_CULL_TYPES_H
+
+#ifdef __cplusplus
+#include <cstdint>
+#include <glm/vec4.hpp>
+namespace cullpipe::gpu {
+using vec4 = glm::vec4;
+using uint = std::uint32_t;
+#define CP_CONST inline constexpr uint
+#else
+#define CP_CONST const uint
+#endif
+
+// Bounding-volume kinds; selected in the shader by specialization constant 0.
+CP_CONST BV_KIND_AABB = 0u;
+CP_CONST BV_KIND_OBB = 1u;
+CP_CONST BV_KIND_SPHERE = 2u;
+
+// Classification values written per object (same numbering as cullpipe::Classification).
+CP_CONST CLASS_OUTSIDE = 0u;
+CP_CONST CLASS_INTERSECTING = 1u;
+CP_CONST CLASS_INSIDE = 2u;
+
+// Invocations per workgroup of the flat culling shader.
+CP_CONST FLAT_CULL_GROUP_SIZE = 256u;
+// Planes in a frustum: left, right, bottom, top, near, far (far may be absent: infinite).
+CP_CONST MAX_FRUSTUM_PLANES = 6u;
+
+// Number of vec4 words each volume kind occupies in the bounds buffer.
+CP_CONST AABB_VEC4S = 2u;    // GpuAabb
+CP_CONST OBB_VEC4S = 4u;     // GpuObb
+CP_CONST SPHERE_VEC4S = 1u;  // GpuSphere
+
+// Axis-aligned box, min/max form. w components are unused (kept 0).
+struct GpuAabb {
+  vec4 min_corner;  // xyz = minimum corner
+  vec4 max_corner;  // xyz = maximum corner
+};
+
+// Oriented box, basis matrix + radius form: centre, three unit axes, half extent per axis.
+struct GpuObb {
+  vec4 center;  // xyz = centre
+  vec4 axis_x;  // xyz = unit axis, w = half extent along it
+  vec4 axis_y;
+  vec4 axis_z;
+};
+
+// Sphere: xyz = centre, w = radius.
+struct GpuSphere {
+  vec4 center_radius;
+};
+
+// One view's frustum, as stored in the views buffer (one entry per view).
+struct GpuFrustum {
+  vec4 planes[MAX_FRUSTUM_PLANES];  // xyz = unit inward normal, w = d; inside when dot(n,p)+d >= 0
+  uint plane_count;                 // planes actually used (5 when the far plane is at infinity)
+  uint reserved0;
+  uint reserved1;
+  uint reserved2;
+};
+
+// Push constants of the flat culling pass. One dispatch covers every view (y = view index)
+// and up to maxComputeWorkGroupCount[0] groups of objects, starting at first_object.
+struct FlatCullParams {
+  uint object_count;      // objects in the bounds buffer
+  uint first_object;      // index of the first object of this dispatch
+  uint view_count;        // views in the views buffer
+  uint visible_capacity;  // capacity of each view's visible-id list
+};
+
+// Per-view counters, written by the shader (cleared with vkCmdFillBuffer before each pass).
+struct ViewCounters {
+  uint visible_count;  // visible objects found; may exceed visible_capacity (overflow)
+  uint inside_count;
+  uint intersecting_count;
+  uint reserved;
+};
+
+#ifdef __cplusplus
+}  // namespace cullpipe::gpu
+#undef CP_CONST
+#endif
+
+#endif
