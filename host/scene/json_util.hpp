@@ -66,7 +66,7 @@ struct Reader {
 inline json parse(const std::string& text, const std::string& source) {
   try {
     return json::parse(text);
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {  // syntax errors, and numbers beyond double range
     throw InputError(source + ": invalid JSON: " + e.what());
   }
 }

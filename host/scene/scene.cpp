@@ -56,7 +56,7 @@ void validate(const Scene& scene, const std::string& source) {
         if (!std::isfinite(o.world[c][r])) throw InputError(where + "world transform has a NaN or infinite entry");
     if (o.world[0][3] != 0.0f || o.world[1][3] != 0.0f || o.world[2][3] != 0.0f || o.world[3][3] != 1.0f)
       throw InputError(where + "world transform is not affine (last row must be 0 0 0 1)");
-    const float det = glm::determinant(glm::mat3(o.world));
+    const double det = glm::determinant(glm::dmat3(glm::mat3(o.world)));
     if (!(std::abs(det) > 0.0f) || !std::isfinite(det)) throw InputError(where + "world transform is singular");
     // World-space volumes must be finite too (a huge scale can overflow float).
     const Aabb w = o.local_bounds.transformed(o.world);

@@ -1,0 +1,186 @@
+// The cullpipe tool end to end: runs the built binary and checks its output and exit codes.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Result {
+  int code = -1;
+  std::string out, err;
+};
+
+fs::path temp_dir() {
+  static const fs::path dir = [] {
+    fs::path d = fs::temp_directory_path() / ("cullpipe_cli_test_" + std::to_string(::getpid()));
+    fs::create_directories(d);
+    return d;
+  }();
+  return dir;
+}
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// Runs `cullpipe ARGS` through the shell with optional environment prefix.
+Result cullpipe(const std::string& args, const std::string& env = "") {
+  const fs::path out = temp_dir() / "stdout.txt", err = temp_dir() / "stderr.txt";
+  const std::string cmd = env + " '" CULLPIPE_EXE "' " + args + " >'" + out.string() + "' 2>'" + err.string() + "'";
+  const int status = std::system(cmd.c_str());
+  Result r;
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  r.out = slurp(out);
+  r.err = slurp(err);
+  return r;
+}
+
+const std::string kData = CULLPIPE_TEST_DATA;
+const std::string kNoVulkan = "VK_ICD_FILENAMES=/nonexistent/icd.json VK_DRIVER_FILES=/nonexistent/icd.json";
+
+TEST(Cli, HelpListsSubcommands) {
+  const Result r = cullpipe("--help");
+  EXPECT_EQ(r.code, 0);
+  for (const char* word : {"run", "classify", "generate", "devices"}) EXPECT_NE(r.out.find(word), std::string::npos) << word;
+}
+
+TEST(Cli, RunWithNoArgumentsCullsTheDefaultSceneAndAgrees) {
+  const Result r = cullpipe("--validate_placeholder_is_not_an_option");
+  EXPECT_EQ(r.code, 2) << "unknown options are rejected";
+  const Result ok = cullpipe("");
+  EXPECT_EQ(ok.code, 0) << ok.err;
+  EXPECT_NE(ok.out.find("default.json"), std::string::npos) << ok.out;
+  EXPECT_NE(ok.out.find("identical (gpu == cpu)"), std::string::npos) << ok.out;
+}
+
+TEST(Cli, RunEveryVolumeKindWithValidation) {
+  for (const char* bv : {"aabb", "obb", "sphere"}) {
+    const fs::path json = temp_dir() / "summary.json";
+    const Result r = cullpipe(std::string("run --generate clustered:3000 --seed 4 --views 3 --validate --bv ") + bv +
+                              " --json '" + json.string() + "'");
+    ASSERT_EQ(r.code, 0) << r.out << r.err;
+    EXPECT_EQ(r.err, "") << "validation or other messages";
+    const auto j = nlohmann::json::parse(slurp(json));
+    EXPECT_EQ(j["objects"], 3000);
+    EXPECT_EQ(j["bv"], bv);
+    EXPECT_EQ(j["agree"], true);
+    EXPECT_EQ(j["per_view"].size(), 3u);
+    EXPECT_GT(j["gpu_ns"].get<double>(), 0.0);
+  }
+}
+
+TEST(Cli, ClassifyGivesTheDerivedAnswers) {
+  const Result r = cullpipe("classify '" + kData + "/classify_cube.json' --validate");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  const std::vector<std::string> expected = {"inside",       "outside", "intersecting", "inside",      "outside",
+                                             "intersecting", "inside",  "intersecting", "outside"};
+  EXPECT_EQ(j["cpu"].get<std::vector<std::string>>(), expected);
+  EXPECT_EQ(j["gpu"].get<std::vector<std::string>>(), expected);
+}
+
+TEST(Cli, ClassifyReadsStandardInputAndOneBackend) {
+  const Result r = cullpipe("classify - --backend cpu < '" + kData + "/classify_cube.json'");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_TRUE(j.contains("cpu"));
+  EXPECT_FALSE(j.contains("gpu"));
+}
+
+TEST(Cli, DumpReadsBackIntoClassifyWithTheSameAnswers) {
+  const fs::path dump = temp_dir() / "dump.json";
+  const Result r = cullpipe("run --generate uniform:2000 --bv obb --dump '" + dump.string() + "'");
+  ASSERT_EQ(r.code, 0) << r.err;
+  const auto d = nlohmann::json::parse(slurp(dump));
+  ASSERT_EQ(d["volumes"].size(), 2000u);
+  std::vector<std::string> dumped;
+  for (const auto& v : d["volumes"]) dumped.push_back(v["class"]);
+  const Result c = cullpipe("classify '" + dump.string() + "'");
+  ASSERT_EQ(c.code, 0) << c.err;
+  const auto j = nlohmann::json::parse(c.out);
+  EXPECT_EQ(j["cpu"].get<std::vector<std::string>>(), dumped);
+  EXPECT_EQ(j["gpu"].get<std::vector<std::string>>(), dumped);
+}
+
+TEST(Cli, MultiViewDumpRoundTrips) {
+  const fs::path dump = temp_dir() / "dump_views.json";
+  ASSERT_EQ(cullpipe("run --generate city:500 --views 3 --bv sphere --dump '" + dump.string() + "'").code, 0);
+  const auto d = nlohmann::json::parse(slurp(dump));
+  ASSERT_EQ(d["frusta"].size(), 3u);
+  const Result c = cullpipe("classify '" + dump.string() + "'");
+  ASSERT_EQ(c.code, 0) << c.err;
+  const auto j = nlohmann::json::parse(c.out);
+  ASSERT_EQ(j["views"].size(), 3u);
+  for (std::size_t v = 0; v < 3; ++v)
+    for (std::size_t i = 0; i < 500; ++i) ASSERT_EQ(j["views"][v]["gpu"][i], d["volumes"][i]["classes"][v]);
+}
+
+TEST(Cli, BadInputIsAClearErrorNotACrash) {
+  const fs::path bad = temp_dir() / "bad.json";
+  auto write = [&](const std::string& text) { std::ofstream(bad) << text; };
+  struct Case {
+    std::string text, message;
+  };
+  const std::vector<Case> cases = {
+      {"{not json", "invalid JSON"},
+      {R"({"frustum": {"planes": [[1,0,0,1]]}, "volumes": [{"sphere": {"center": [0,0,0], "radius": -2}}]})",
+       "volumes[0].sphere: radius is negative"},
+      {R"({"frustum": {"planes": [[1,0,0,1]]}, "volumes": [{"aabb": {"min": [0,0,1e39], "max": [1,1,1]}}]})",
+       "volumes[0].aabb.min[2]: number out of float range"},
+      {R"({"frustum": {"planes": [[1,0,0,1]]}, "volumes": [{"aabb": {"min": [0,0,1e999], "max": [1,1,1]}}]})",
+       "number overflow"},
+      {R"({"frustum": {"view_proj": [1,0,0,0, 1,0,0,0, 0,0,1,0, 0,0,0,1]}, "volumes": []})", "singular"},
+      {R"({"volumes": []})", "missing \"frustum\""},
+  };
+  for (const Case& c : cases) {
+    write(c.text);
+    const Result r = cullpipe("classify '" + bad.string() + "'");
+    EXPECT_EQ(r.code, 2) << c.text;
+    EXPECT_NE(r.err.find(bad.string()), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find(c.message), std::string::npos) << r.err;
+  }
+  EXPECT_EQ(cullpipe("classify /nonexistent/x.json").code, 2);
+  EXPECT_EQ(cullpipe("run --bv cone").code, 2);
+  EXPECT_EQ(cullpipe("run --generate town:5").code, 2);
+  EXPECT_EQ(cullpipe("run --scene /nonexistent/scene.json").code, 2);
+  EXPECT_EQ(cullpipe("run --views 0").code, 2);
+}
+
+TEST(Cli, NoVulkanDeviceIsClearAndTheCpuBackendStillWorks) {
+  const Result gpu = cullpipe("run --generate city:100 --backend gpu", kNoVulkan);
+  EXPECT_EQ(gpu.code, 3);
+  EXPECT_NE(gpu.err.find("no Vulkan device"), std::string::npos) << gpu.err;
+  EXPECT_NE(gpu.err.find("--backend cpu"), std::string::npos) << gpu.err;
+  const Result cpu = cullpipe("run --generate city:100 --backend cpu", kNoVulkan);
+  EXPECT_EQ(cpu.code, 0) << cpu.err;
+  EXPECT_NE(cpu.out.find("cpu reference"), std::string::npos);
+  const Result classify = cullpipe("classify '" + kData + "/classify_cube.json' --backend cpu", kNoVulkan);
+  EXPECT_EQ(classify.code, 0) << classify.err;
+}
+
+TEST(Cli, GenerateWritesALoadableScene) {
+  const fs::path scene = temp_dir() / "gen.json";
+  ASSERT_EQ(cullpipe("generate city:300 --seed 2 --out '" + scene.string() + "'").code, 0);
+  const Result r = cullpipe("run --scene '" + scene.string() + "' --backend both");
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("300 objects"), std::string::npos) << r.out;
+}
+
+TEST(Cli, DevicesListsAtLeastOne) {
+  const Result r = cullpipe("devices");
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_FALSE(r.out.empty());
+}
+
+}  // namespace

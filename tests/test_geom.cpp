@@ -1,0 +1,232 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <glm/ext/matrix_clip_space.hpp>
+#include <glm/ext/matrix_transform.hpp>
+#include <limits>
+
+#include "geom/aabb.hpp"
+#include "geom/frustum.hpp"
+#include "geom/obb.hpp"
+#include "geom/sphere.hpp"
+#include "geom/validate.hpp"
+#include "test_util.hpp"
+
+namespace cullpipe {
+namespace {
+
+TEST(Aabb, FormsRoundTripExactlyOnDyadicValues) {
+  const Aabb box{{-1.5f, 2.0f, -8.25f}, {3.5f, 6.0f, 0.75f}};
+  EXPECT_EQ(to_min_max(to_min_diameter(box)), box);
+  EXPECT_EQ(to_min_max(to_center_radius(box)), box);
+  const AabbCenterRadius cr = to_center_radius(box);
+  EXPECT_EQ(cr.center, glm::vec3(1.0f, 4.0f, -3.75f));
+  EXPECT_EQ(cr.radius, glm::vec3(2.5f, 2.0f, 4.5f));
+  EXPECT_EQ(to_min_diameter(box).diameter, glm::vec3(5.0f, 4.0f, 9.0f));
+}
+
+TEST(Aabb, FormsRoundTripWithinRoundingOnRandomValues) {
+  test::Rng rng{7};
+  for (int i = 0; i < 10000; ++i) {
+    const Aabb box = test::random_aabb(rng, 1000.0f, 50.0f);
+    const Aabb a = to_min_max(to_center_radius(box));
+    const Aabb b = to_min_max(to_min_diameter(box));
+    const float tol = 1e-4f;  // ~ulp of 1000
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_NEAR(a.min[k], box.min[k], tol);
+      EXPECT_NEAR(a.max[k], box.max[k], tol);
+      EXPECT_NEAR(b.max[k], box.max[k], tol);
+      EXPECT_EQ(b.min[k], box.min[k]);
+    }
+  }
+}
+
+TEST(Aabb, TransformedEnclosesTransformedCorners) {
+  test::Rng rng{3};
+  for (int i = 0; i < 1000; ++i) {
+    const Aabb box = test::random_aabb(rng, 10.0f, 5.0f);
+    glm::mat4 m = glm::mat4(rng.rotation());
+    m = glm::scale(m, rng.vec3(0.1f, 3.0f));
+    m[3] = glm::vec4(rng.vec3(-20.0f, 20.0f), 1.0f);
+    const Aabb t = box.transformed(m);
+    for (const glm::vec3& c : box.corners()) {
+      const glm::vec3 p = glm::vec3(m * glm::vec4(c, 1.0f));
+      for (int k = 0; k < 3; ++k) {
+        EXPECT_LE(t.min[k], p[k] + 1e-4f);
+        EXPECT_GE(t.max[k], p[k] - 1e-4f);
+      }
+    }
+  }
+}
+
+TEST(Obb, BaseAxesRoundTrip) {
+  test::Rng rng{11};
+  for (int i = 0; i < 1000; ++i) {
+    const Obb b = test::random_obb(rng, 10.0f, 4.0f);
+    const Obb r = to_basis_radius(to_base_axes(b));
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_NEAR(r.center[k], b.center[k], 1e-4f);
+      EXPECT_NEAR(r.half_extents[k], b.half_extents[k], 1e-4f);
+      if (b.half_extents[k] > 1e-3f) {
+        for (int j = 0; j < 3; ++j) EXPECT_NEAR(r.basis[k][j], b.basis[k][j], 1e-3f);
+      }
+    }
+    EXPECT_EQ(invalid_reason(r), "");
+  }
+}
+
+TEST(Obb, ZeroEdgeStillGivesOrthonormalBasis) {
+  const ObbBaseAxes flat{{0, 0, 0}, {glm::vec3(2, 0, 0), glm::vec3(0, 0, 0), glm::vec3(0, 0, 3)}};
+  const Obb b = to_basis_radius(flat);
+  EXPECT_EQ(invalid_reason(b), "");
+  EXPECT_EQ(b.half_extents, glm::vec3(1.0f, 0.0f, 1.5f));
+  EXPECT_EQ(b.center, glm::vec3(1.0f, 0.0f, 1.5f));
+}
+
+TEST(Obb, FromTransformedAabbEnclosesCornersEvenWithShear) {
+  test::Rng rng{5};
+  for (int i = 0; i < 500; ++i) {
+    const Aabb box = test::random_aabb(rng, 5.0f, 2.0f);
+    glm::mat4 m = glm::mat4(rng.rotation());
+    m[1] += m[0] * rng.uniform(-0.5f, 0.5f);  // shear
+    m[3] = glm::vec4(rng.vec3(-10.0f, 10.0f), 1.0f);
+    const Obb o = Obb::from_transformed_aabb(box, m);
+    ASSERT_EQ(invalid_reason(o), "");
+    for (const glm::vec3& c : box.corners()) {
+      const glm::vec3 p = glm::vec3(m * glm::vec4(c, 1.0f)) - o.center;
+      for (int k = 0; k < 3; ++k) EXPECT_LE(std::abs(glm::dot(p, o.basis[k])), o.half_extents[k] + 1e-4f);
+    }
+  }
+}
+
+TEST(Validate, NamesWhatIsWrong) {
+  const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+  EXPECT_EQ(invalid_reason(Aabb{{0, nan, 0}, {1, 1, 1}}), "min.y is NaN");
+  EXPECT_EQ(invalid_reason(Aabb{{0, 0, 0}, {1, 1, inf}}), "max.z is infinite");
+  EXPECT_EQ(invalid_reason(Aabb{{2, 0, 0}, {1, 1, 1}}), "min.x > max.x");
+  EXPECT_EQ(invalid_reason(Aabb{{1, 1, 1}, {1, 1, 1}}), "");  // a point box is valid
+  EXPECT_EQ(invalid_reason(Sphere{{0, 0, 0}, -1.0f}), "radius is negative");
+  EXPECT_EQ(invalid_reason(Sphere{{0, 0, 0}, nan}), "radius is NaN");
+  Obb o;
+  o.half_extents = {1, -1, 1};
+  EXPECT_EQ(invalid_reason(o), "half_extents.y is negative");
+  o.half_extents = {1, 1, 1};
+  o.basis[2] = glm::vec3(1, 0, 0);
+  EXPECT_EQ(invalid_reason(o), "axes[0] and axes[2] are not orthogonal");
+}
+
+// ---- frusta ---------------------------------------------------------------------------------
+
+bool inside(const Frustum& f, const glm::vec3& p) {
+  for (const Plane& pl : f.active())
+    if (pl.distance(p) < 0.0f) return false;
+  return true;
+}
+
+void expect_normalised(const Frustum& f) {
+  for (const Plane& p : f.active()) EXPECT_NEAR(glm::length(p.normal), 1.0f, 1e-6f);
+}
+
+glm::mat4 view() { return glm::lookAtRH(glm::vec3(0, 0, 10), glm::vec3(0), glm::vec3(0, 1, 0)); }
+
+// Camera at z = 10 looking down -z; near 1, far 100, 90 degree vertical fov, aspect 2.
+void expect_perspective_classification(const Frustum& f, bool finite_far) {
+  expect_normalised(f);
+  EXPECT_TRUE(inside(f, {0, 0, 0}));            // straight ahead
+  EXPECT_TRUE(inside(f, {0, 0, 8.5f}));         // just past the near plane (z = 9)
+  EXPECT_FALSE(inside(f, {0, 0, 9.5f}));        // between camera and near plane
+  EXPECT_FALSE(inside(f, {0, 0, 20}));          // behind the camera
+  EXPECT_TRUE(inside(f, {0, 9.5f, 0}));         // tan(45) * 10 = 10: just inside top
+  EXPECT_FALSE(inside(f, {0, 10.5f, 0}));       // just outside top
+  EXPECT_FALSE(inside(f, {0, -10.5f, 0}));      // outside bottom
+  EXPECT_TRUE(inside(f, {19.5f, 0, 0}));        // aspect 2: half width 20 at distance 10
+  EXPECT_FALSE(inside(f, {20.5f, 0, 0}));       // outside right
+  EXPECT_FALSE(inside(f, {-20.5f, 0, 0}));      // outside left
+  EXPECT_TRUE(inside(f, {0, 0, -89}));          // before far (distance 99)
+  EXPECT_EQ(inside(f, {0, 0, -91}), !finite_far);  // beyond far (distance 101)
+  EXPECT_EQ(inside(f, {0, 0, -1e6f}), !finite_far);
+}
+
+glm::mat4 flip_y(glm::mat4 p) {
+  p[1][1] *= -1.0f;
+  return p;
+}
+
+TEST(Frustum, PerspectiveVulkanDepthZeroToOne) {
+  const glm::mat4 proj = flip_y(glm::perspectiveRH_ZO(glm::radians(90.0f), 2.0f, 1.0f, 100.0f));
+  const Frustum f = Frustum::from_view_proj(proj * view());
+  EXPECT_EQ(f.plane_count, 6u);
+  expect_perspective_classification(f, true);
+}
+
+TEST(Frustum, ReversedZ) {
+  // Reversed Z: near maps to depth 1, far to 0. Same as swapping near and far arguments.
+  const glm::mat4 proj = flip_y(glm::perspectiveRH_ZO(glm::radians(90.0f), 2.0f, 100.0f, 1.0f));
+  const Frustum f = Frustum::from_view_proj(proj * view());
+  EXPECT_EQ(f.plane_count, 6u);
+  expect_perspective_classification(f, true);
+}
+
+TEST(Frustum, InfiniteFarDropsTheFarPlane) {
+  glm::mat4 proj(0.0f);  // depth = (-z - near) / -z: 0 at the near plane, 1 at infinity
+  const float focal = 1.0f / std::tan(glm::radians(45.0f));
+  proj[0][0] = focal / 2.0f;
+  proj[1][1] = -focal;
+  proj[2][2] = -1.0f;
+  proj[2][3] = -1.0f;
+  proj[3][2] = -1.0f;  // near = 1
+  const Frustum f = Frustum::from_view_proj(proj * view());
+  EXPECT_EQ(f.plane_count, 5u);
+  expect_perspective_classification(f, false);
+}
+
+TEST(Frustum, ReversedZInfiniteFar) {
+  glm::mat4 proj(0.0f);  // depth = near / -z_view
+  const float focal = 1.0f / std::tan(glm::radians(45.0f));
+  proj[0][0] = focal / 2.0f;
+  proj[1][1] = -focal;
+  proj[2][3] = -1.0f;
+  proj[3][2] = 1.0f;  // near = 1
+  const Frustum f = Frustum::from_view_proj(proj * view());
+  EXPECT_EQ(f.plane_count, 5u);
+  expect_perspective_classification(f, false);
+}
+
+TEST(Frustum, Orthographic) {
+  const glm::mat4 proj = flip_y(glm::orthoRH_ZO(-4.0f, 4.0f, -2.0f, 2.0f, 1.0f, 30.0f));
+  const Frustum f = Frustum::from_view_proj(proj * view());
+  EXPECT_EQ(f.plane_count, 6u);
+  expect_normalised(f);
+  EXPECT_TRUE(inside(f, {3.9f, 1.9f, 0}));
+  EXPECT_FALSE(inside(f, {4.1f, 0, 0}));
+  EXPECT_FALSE(inside(f, {0, -2.1f, 0}));
+  EXPECT_TRUE(inside(f, {0, 0, -19.9f}));   // depth 29.9
+  EXPECT_FALSE(inside(f, {0, 0, -20.1f}));  // depth 30.1
+  EXPECT_FALSE(inside(f, {0, 0, 9.1f}));    // depth 0.9
+  // Orthographic side planes are exactly axis aligned.
+  EXPECT_EQ(f.planes[0].normal, glm::vec3(1, 0, 0));
+}
+
+TEST(Frustum, RejectsBadMatrices) {
+  EXPECT_THROW(Frustum::from_view_proj(glm::mat4(0.0f)), std::invalid_argument);
+  glm::mat4 m = test::test_view_proj();
+  m[2][1] = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_THROW(Frustum::from_view_proj(m), std::invalid_argument);
+  glm::mat4 rank3 = test::test_view_proj();
+  rank3[1] = rank3[0];  // two equal columns: singular
+  EXPECT_THROW(Frustum::from_view_proj(rank3), std::invalid_argument);
+}
+
+TEST(Frustum, FromPlanesNormalisesButKeepsUnitPlanesBitExact) {
+  const glm::vec4 planes[2] = {{2, 0, 0, 4}, {0.6f, 0.8f, 0, 0.1f}};
+  const Frustum f = Frustum::from_planes(planes);
+  EXPECT_EQ(f.plane_count, 2u);
+  EXPECT_EQ(f.planes[0], (Plane{{1, 0, 0}, 2}));
+  EXPECT_EQ(f.planes[1].as_vec4(), planes[1]);  // |n| = 1 within 1e-6: unchanged
+  const glm::vec4 zero[1] = {{0, 0, 0, 1}};
+  EXPECT_THROW(Frustum::from_planes(zero), std::invalid_argument);
+  EXPECT_THROW(Frustum::from_planes(std::span<const glm::vec4>()), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace cullpipe

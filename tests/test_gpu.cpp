@@ -1,0 +1,323 @@
+// GPU vs CPU, bit for bit, on the Vulkan device chosen by CULLPIPE_DEVICE (lavapipe in CI),
+// with validation layers (including synchronization validation) on: any message fails.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <memory>
+
+#include "cull/compare.hpp"
+#include "cull/reference.hpp"
+#include "gpu/gpu_culler.hpp"
+#include "gpu/layout.hpp"
+#include "scene/generators.hpp"
+#include "test_util.hpp"
+#include "vk/check.hpp"
+
+namespace cullpipe {
+namespace {
+
+// One validated context and culler for the whole process.
+class GpuEnvironment : public ::testing::Environment {
+ public:
+  static inline std::unique_ptr<vk::Context> context;
+  static inline std::unique_ptr<gpu::GpuCuller> culler;
+  void SetUp() override {
+    vk::ContextOptions options;
+    options.validation = true;
+    options.on_message = [](std::string_view m) { ADD_FAILURE() << m; };
+    context = std::make_unique<vk::Context>(options);
+    culler = std::make_unique<gpu::GpuCuller>(*context);
+    std::printf("device: %s (%s)\n", context->info().name.c_str(), context->info().driver.c_str());
+  }
+  void TearDown() override {
+    culler.reset();
+    context.reset();
+  }
+};
+const auto* const kEnvironment = ::testing::AddGlobalTestEnvironment(new GpuEnvironment);
+
+class Gpu : public ::testing::Test {
+ protected:
+  gpu::GpuCuller& culler() { return *GpuEnvironment::culler; }
+  void TearDown() override { EXPECT_EQ(GpuEnvironment::context->validation_message_count(), 0u); }
+};
+
+// Culls `volumes` against `frusta` on the GPU and the CPU; every classification, every
+// counter and the visible-id set must agree. Returns the CPU classes of view 0.
+template <class Volume>
+std::vector<Classification> expect_agreement(gpu::GpuCuller& culler, const std::vector<Volume>& volumes,
+                                             const std::vector<Frustum>& frusta) {
+  culler.upload(std::span<const Volume>(volumes));
+  const gpu::CullResult result = culler.cull(frusta);
+  EXPECT_EQ(result.views.size(), frusta.size());
+  std::vector<Classification> first;
+  for (std::size_t v = 0; v < frusta.size() && v < result.views.size(); ++v) {
+    std::vector<Classification> cpu(volumes.size());
+    const reference::CullCounts counts = reference::classify_all(std::span<const Volume>(volumes), frusta[v], cpu);
+    const gpu::ViewResult& g = result.views[v];
+    const std::size_t bad = first_mismatch(cpu, g.classes);
+    if (bad != npos) {
+      ADD_FAILURE() << count_mismatches(cpu, g.classes) << " mismatches in view " << v << "; first: "
+                    << (bad < volumes.size() && bad < g.classes.size()
+                            ? describe_mismatch(bad, volumes[bad], frusta[v], cpu[bad], g.classes[bad])
+                            : "sizes differ");
+    }
+    EXPECT_EQ(g.counts, counts) << "view " << v;
+    EXPECT_FALSE(g.overflow);
+    std::vector<std::uint32_t> ids = g.visible_ids, expected;
+    std::sort(ids.begin(), ids.end());
+    for (std::size_t i = 0; i < cpu.size(); ++i)
+      if (is_visible(cpu[i])) expected.push_back(std::uint32_t(i));
+    EXPECT_EQ(ids, expected) << "visible list of view " << v;
+    if (v == 0) first = cpu;
+  }
+  return first;
+}
+
+std::vector<Frustum> test_frusta() {
+  return {Frustum::from_view_proj(test::test_view_proj()), Frustum::from_view_proj(test::test_view_proj(100.0f, 0.5f))};
+}
+
+TEST_F(Gpu, EdgeCountsAroundTheWorkgroupSize) {
+  test::Rng rng{100};
+  for (std::size_t n : {0u, 1u, 63u, 64u, 65u, 255u, 256u, 257u, 1000u}) {
+    std::vector<Aabb> boxes;
+    std::vector<Obb> obbs;
+    std::vector<Sphere> spheres;
+    for (std::size_t i = 0; i < n; ++i) {
+      boxes.push_back(test::random_aabb(rng, 30.0f, 5.0f));
+      obbs.push_back(test::random_obb(rng, 30.0f, 5.0f));
+      spheres.push_back(test::random_sphere(rng, 30.0f, 5.0f));
+    }
+    SCOPED_TRACE("n = " + std::to_string(n));
+    expect_agreement(culler(), boxes, test_frusta());
+    expect_agreement(culler(), obbs, test_frusta());
+    expect_agreement(culler(), spheres, test_frusta());
+  }
+}
+
+TEST_F(Gpu, OneMillionObjects) {
+  test::Rng rng{101};
+  std::vector<Aabb> boxes(1000000);
+  for (Aabb& b : boxes) b = test::random_aabb(rng, 60.0f, 3.0f);
+  const auto classes = expect_agreement(culler(), boxes, test_frusta());
+  const auto visible = std::count_if(classes.begin(), classes.end(), is_visible);
+  EXPECT_GT(visible, 10000);
+  EXPECT_LT(visible, 990000);
+  std::vector<Sphere> spheres(1000000);
+  for (Sphere& s : spheres) s = test::random_sphere(rng, 60.0f, 3.0f);
+  expect_agreement(culler(), spheres, test_frusta());
+}
+
+TEST_F(Gpu, GeneratedScenesManyViews) {
+  for (SceneKind kind : {SceneKind::Uniform, SceneKind::Clustered, SceneKind::City}) {
+    const Scene scene = generate_scene(kind, 20000, 5);
+    std::vector<Frustum> frusta;
+    for (const Camera& c : camera_path(scene.camera, scene.bounds(), 6)) frusta.push_back(Frustum::from_view_proj(c.view_proj()));
+    SCOPED_TRACE(std::string(to_string(kind)));
+    expect_agreement(culler(), world_aabbs(scene), frusta);
+    expect_agreement(culler(), world_obbs(scene), frusta);
+    expect_agreement(culler(), world_spheres(scene), frusta);
+  }
+}
+
+TEST_F(Gpu, ReversedZAndInfiniteProjections) {
+  const Scene scene = generate_scene(SceneKind::Uniform, 5000, 6);
+  for (int variant = 0; variant < 3; ++variant) {
+    Camera cam = scene.camera;
+    cam.reversed_z = variant != 1;
+    cam.infinite_far = variant != 0;
+    const std::vector<Frustum> frusta = {Frustum::from_view_proj(cam.view_proj())};
+    EXPECT_EQ(frusta[0].plane_count, cam.infinite_far ? 5u : 6u);
+    expect_agreement(culler(), world_aabbs(scene), frusta);
+    expect_agreement(culler(), world_obbs(scene), frusta);
+    expect_agreement(culler(), world_spheres(scene), frusta);
+  }
+}
+
+// Volumes placed so that a plane distance is within a few float steps of zero (or of +-r):
+// the only cases where a fused multiply-add or a reordered sum changes the answer.
+struct NearPlaneSet {
+  std::vector<Aabb> boxes;
+  std::vector<Sphere> spheres;
+  std::vector<Obb> obbs;
+};
+
+NearPlaneSet near_plane_set(const Frustum& f, std::size_t per_plane) {
+  test::Rng rng{77};
+  NearPlaneSet set;
+  for (const Plane& plane : f.active())
+    for (std::size_t i = 0; i < per_plane; ++i) {
+      const glm::vec3 n = plane.normal;
+      const int steps = int(i % 9) - 4;  // -4..4 float steps
+      // AABB: move the box along n so its p-vertex (or n-vertex) lies on the plane.
+      Aabb b = test::random_aabb(rng, 20.0f, 3.0f);
+      const glm::vec3 pv(n.x >= 0 ? b.max.x : b.min.x, n.y >= 0 ? b.max.y : b.min.y, n.z >= 0 ? b.max.z : b.min.z);
+      const glm::vec3 nv(n.x >= 0 ? b.min.x : b.max.x, n.y >= 0 ? b.min.y : b.max.y, n.z >= 0 ? b.min.z : b.max.z);
+      const float s = plane.distance(i % 2 ? pv : nv);
+      glm::vec3 shift = -s * n;
+      for (int k = 0; k < 3; ++k) {  // then nudge each coordinate by a few ulps
+        float v = b.min[k] + shift[k];
+        for (int st = 0; st < std::abs(steps); ++st) v = std::nextafter(v, steps > 0 ? 1e30f : -1e30f);
+        shift[k] = v - b.min[k];
+      }
+      set.boxes.push_back({b.min + shift, b.max + shift});
+      // Sphere: centre at distance +-r from the plane, nudged.
+      Sphere sp = test::random_sphere(rng, 20.0f, 3.0f);
+      const float target = (i % 2 ? -1.0f : 1.0f) * sp.radius;
+      sp.center += (target - plane.distance(sp.center)) * n;
+      for (int st = 0; st < std::abs(steps); ++st) sp.center.x = std::nextafter(sp.center.x, steps > 0 ? 1e30f : -1e30f);
+      set.spheres.push_back(sp);
+      // OBB: centre at distance +-r (projected radius) from the plane, nudged.
+      Obb ob = test::random_obb(rng, 20.0f, 3.0f);
+      float r = 0.0f;
+      for (int k = 0; k < 3; ++k) r += std::abs(glm::dot(n, ob.basis[k])) * ob.half_extents[k];
+      ob.center += ((i % 2 ? -r : r) - plane.distance(ob.center)) * n;
+      for (int st = 0; st < std::abs(steps); ++st) ob.center.y = std::nextafter(ob.center.y, steps > 0 ? 1e30f : -1e30f);
+      set.obbs.push_back(ob);
+    }
+  return set;
+}
+
+// The same p/n-vertex test with every plane distance fused (fma), as a GPU that contracts
+// would compute it. Used to show the near-plane set can tell the difference.
+Classification classify_pn_fused(const Aabb& box, const Frustum& f) {
+  bool crossing = false;
+  for (const Plane& p : f.active()) {
+    const glm::vec3& n = p.normal;
+    auto dist = [&](glm::vec3 v) { return std::fma(n.z, v.z, std::fma(n.y, v.y, std::fma(n.x, v.x, p.d))); };
+    const glm::vec3 pv(n.x >= 0 ? box.max.x : box.min.x, n.y >= 0 ? box.max.y : box.min.y, n.z >= 0 ? box.max.z : box.min.z);
+    const glm::vec3 nv(n.x >= 0 ? box.min.x : box.max.x, n.y >= 0 ? box.min.y : box.max.y, n.z >= 0 ? box.min.z : box.max.z);
+    if (dist(pv) < 0.0f) return Classification::Outside;
+    if (dist(nv) < 0.0f) crossing = true;
+  }
+  return crossing ? Classification::Intersecting : Classification::Inside;
+}
+
+TEST_F(Gpu, VolumesWithinFloatStepsOfThePlanes) {
+  for (const Frustum& f : test_frusta()) {
+    const NearPlaneSet set = near_plane_set(f, 3000);
+    const auto classes = expect_agreement(culler(), set.boxes, {f});
+    expect_agreement(culler(), set.spheres, {f});
+    expect_agreement(culler(), set.obbs, {f});
+    // The set is sharp: all three answers occur, and fused arithmetic would change some.
+    EXPECT_GT(std::count(classes.begin(), classes.end(), Classification::Outside), 100);
+    EXPECT_GT(std::count(classes.begin(), classes.end(), Classification::Intersecting), 100);
+    std::size_t fused_differs = 0;
+    for (std::size_t i = 0; i < set.boxes.size(); ++i) fused_differs += classify_pn_fused(set.boxes[i], f) != classes[i];
+    EXPECT_GT(fused_differs, 0u) << "the near-plane set would not catch contraction";
+  }
+}
+
+TEST_F(Gpu, DegenerateBehindCameraHugeAndTiny) {
+  const Frustum f = Frustum::from_view_proj(test::test_view_proj());
+  std::vector<Aabb> boxes = {
+      {{0, 0, 0}, {0, 0, 0}},                     // point box at the target
+      {{-1, 0, -1}, {1, 0, 1}},                   // flat box
+      {{0, 0, 11}, {1, 1, 12}},                   // behind the camera (camera at z = 10)
+      {{-1, -1, 5}, {1, 1, 30}},                  // from behind the camera through the near plane
+      {{-1e30f, -1e30f, -1e30f}, {1e30f, 1e30f, 1e30f}},  // huge: encloses everything
+      {{1e30f, 0, 0}, {1.0001e30f, 1, 1}},        // huge and far away
+      {{1e-30f, 1e-30f, 1e-30f}, {2e-30f, 2e-30f, 2e-30f}},  // tiny, at the origin
+      {{-1e-38f, -1e-38f, -1e-38f}, {1e-38f, 1e-38f, 1e-38f}},  // near the denormal range
+  };
+  const auto classes = expect_agreement(culler(), boxes, {f});
+  EXPECT_EQ(classes[0], Classification::Inside);
+  EXPECT_EQ(classes[2], Classification::Outside);
+  EXPECT_EQ(classes[3], Classification::Intersecting);
+  EXPECT_EQ(classes[4], Classification::Intersecting);
+  EXPECT_EQ(classes[5], Classification::Outside);
+  EXPECT_EQ(classes[6], Classification::Inside);
+  std::vector<Sphere> spheres = {{{0, 0, 0}, 0}, {{0, 0, 20}, 1}, {{0, 0, 0}, 1e30f}, {{1e30f, 0, 0}, 1}, {{0, 0, 0}, 1e-30f}};
+  const auto sphere_classes = expect_agreement(culler(), spheres, {f});
+  EXPECT_EQ(sphere_classes[1], Classification::Outside);
+  EXPECT_EQ(sphere_classes[2], Classification::Intersecting);
+  std::vector<Obb> obbs(3);
+  obbs[1].center = {0, 0, 20};
+  obbs[1].half_extents = {1, 1, 1};
+  obbs[2].half_extents = {1e30f, 0, 1e30f};
+  expect_agreement(culler(), obbs, {f});
+}
+
+TEST_F(Gpu, ManyViewsInOnePass) {
+  const Scene scene = generate_scene(SceneKind::Clustered, 3000, 8);
+  std::vector<Frustum> frusta;
+  for (const Camera& c : camera_path(scene.camera, scene.bounds(), 64)) frusta.push_back(Frustum::from_view_proj(c.view_proj()));
+  expect_agreement(culler(), world_obbs(scene), frusta);
+}
+
+TEST_F(Gpu, RepeatedCullsReuseBuffersAndStayCorrect) {
+  test::Rng rng{9};
+  for (int round = 0; round < 20; ++round) {
+    std::vector<Sphere> spheres(std::size_t(rng.next() % 5000));
+    for (Sphere& s : spheres) s = test::random_sphere(rng, 30.0f, 4.0f);
+    expect_agreement(culler(), spheres, test_frusta());
+  }
+}
+
+TEST_F(Gpu, ScenesLargerThanAStorageBufferAreRejectedClearly) {
+  const VkDeviceSize limit = GpuEnvironment::context->properties().limits.maxStorageBufferRange;
+  const std::size_t too_many = std::size_t(limit / sizeof(gpu::GpuObb)) + 1;
+  if (too_many > 50'000'000) GTEST_SKIP() << "device storage range too large to test cheaply";
+  std::vector<Obb> obbs(too_many);
+  try {
+    culler().upload(std::span<const Obb>(obbs));
+    FAIL() << "expected std::length_error";
+  } catch (const std::length_error& e) {
+    EXPECT_NE(std::string(e.what()).find("more than one storage buffer can hold"), std::string::npos) << e.what();
+  }
+}
+
+TEST_F(Gpu, TimestampsAreReported) {
+  std::vector<Aabb> boxes(10000);
+  test::Rng rng{4};
+  for (Aabb& b : boxes) b = test::random_aabb(rng, 30.0f, 2.0f);
+  culler().upload(std::span<const Aabb>(boxes));
+  const auto r = culler().cull(test_frusta());
+  if (GpuEnvironment::context->timestamp_period_ns() > 0) {
+    EXPECT_GT(r.timings.gpu_ns, 0.0);
+  }
+  EXPECT_GE(r.timings.wall_ns, r.timings.gpu_ns);
+}
+
+TEST(GpuDevice, UnknownDeviceNameIsAClearError) {
+  vk::ContextOptions options;
+  options.device_filter = "no-such-device-xyz";
+  try {
+    vk::Context ctx(options);
+    FAIL() << "expected vk::Error";
+  } catch (const vk::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("no usable Vulkan device matching 'no-such-device-xyz'"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace cullpipe
+
+namespace cullpipe {
+namespace {
+
+// The validation layer is really on: an invalid call is reported (and counted), so the
+// "no validation message" checks above can fail.
+TEST(GpuValidation, InvalidCallIsReported) {
+  std::vector<std::string> seen;
+  vk::ContextOptions options;
+  options.validation = true;
+  options.on_message = [&](std::string_view m) { seen.emplace_back(m); };
+  vk::Context ctx(options);
+  VkBufferCreateInfo info{VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO};
+  info.size = 16;
+  info.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
+  info.sharingMode = VK_SHARING_MODE_CONCURRENT;  // invalid: needs at least two queue families
+  VkBuffer buffer = VK_NULL_HANDLE;
+  vkCreateBuffer(ctx.device(), &info, nullptr, &buffer);
+  if (buffer) vkDestroyBuffer(ctx.device(), buffer, nullptr);
+  EXPECT_GT(ctx.validation_message_count(), 0u);
+  ASSERT_FALSE(seen.empty());
+  EXPECT_NE(seen.front().find("VkBufferCreateInfo"), std::string::npos) << seen.front();
+}
+
+}  // namespace
+}  // namespace cullpipe

@@ -1,0 +1,183 @@
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include "cull/reference.hpp"
+#include "geom/validate.hpp"
+#include "scene/cull_case_io.hpp"
+#include "scene/generators.hpp"
+#include "scene/scene_io.hpp"
+
+namespace cullpipe {
+namespace {
+
+bool same_scene(const Scene& a, const Scene& b) {
+  if (a.name != b.name || !(a.camera == b.camera) || a.objects.size() != b.objects.size()) return false;
+  for (std::size_t i = 0; i < a.objects.size(); ++i)
+    if (!(a.objects[i].local_bounds == b.objects[i].local_bounds) || a.objects[i].world != b.objects[i].world) return false;
+  return true;
+}
+
+TEST(Generators, DeterministicPerSeedAndSized) {
+  for (SceneKind kind : {SceneKind::Uniform, SceneKind::Clustered, SceneKind::City}) {
+    for (std::size_t n : {0u, 1u, 7u, 1000u}) {
+      const Scene a = generate_scene(kind, n, 9), b = generate_scene(kind, n, 9);
+      EXPECT_EQ(a.objects.size(), n);
+      EXPECT_TRUE(same_scene(a, b)) << to_string(kind) << ":" << n;
+      EXPECT_NO_THROW(validate(a, "generated"));
+    }
+    const Scene c = generate_scene(kind, 100, 1), d = generate_scene(kind, 100, 2);
+    EXPECT_FALSE(same_scene(c, d)) << "different seeds give different scenes";
+  }
+}
+
+TEST(Generators, DefaultCameraSeesPartOfTheScene) {
+  for (SceneKind kind : {SceneKind::Uniform, SceneKind::Clustered, SceneKind::City}) {
+    const Scene s = generate_scene(kind, 2000, 1);
+    const Frustum f = Frustum::from_view_proj(s.camera.view_proj());
+    const auto boxes = world_aabbs(s);
+    std::vector<Classification> out(boxes.size());
+    const auto counts = reference::classify_all(boxes, f, out);
+    EXPECT_GT(counts.visible, boxes.size() / 20) << to_string(kind);
+    EXPECT_LT(counts.visible, boxes.size()) << to_string(kind);
+    EXPECT_GT(counts.inside, 0u);
+    EXPECT_GT(counts.intersecting, 0u);
+  }
+}
+
+TEST(Generators, ParseSpec) {
+  EXPECT_EQ(parse_generate_spec("city:2000"), std::make_pair(SceneKind::City, std::size_t(2000)));
+  EXPECT_EQ(parse_generate_spec("uniform:1e6"), std::make_pair(SceneKind::Uniform, std::size_t(1000000)));
+  EXPECT_THROW(parse_generate_spec("town:5"), InputError);
+  EXPECT_THROW(parse_generate_spec("city"), InputError);
+  EXPECT_THROW(parse_generate_spec("city:-1"), InputError);
+  EXPECT_THROW(parse_generate_spec("city:1.5"), InputError);
+  EXPECT_THROW(parse_generate_spec("city:abc"), InputError);
+}
+
+TEST(Camera, PathCirclesTheSceneAndKeepsTheLens) {
+  Camera base;
+  base.eye = {10, 5, 0};
+  base.target = {0, 0, 0};
+  const auto path = camera_path(base, Aabb{{-1, -1, -1}, {1, 1, 1}}, 4);
+  ASSERT_EQ(path.size(), 4u);
+  for (const Camera& c : path) {
+    EXPECT_NEAR(glm::length(glm::vec2(c.eye.x, c.eye.z)), 10.0f, 1e-4f);
+    EXPECT_EQ(c.eye.y, 5.0f);
+    EXPECT_EQ(c.fov_y_degrees, base.fov_y_degrees);
+  }
+  EXPECT_NEAR(path[2].eye.x, -10.0f, 1e-4f);
+  EXPECT_EQ(camera_path(base, Aabb{}, 1).front(), base);
+}
+
+TEST(World, VolumesEncloseTheTransformedBox) {
+  const Scene s = generate_scene(SceneKind::Uniform, 300, 4);
+  const auto aabbs = world_aabbs(s);
+  const auto obbs = world_obbs(s);
+  const auto spheres = world_spheres(s);
+  for (std::size_t i = 0; i < s.objects.size(); ++i) {
+    EXPECT_EQ(invalid_reason(obbs[i]), "");
+    for (const glm::vec3& c : s.objects[i].local_bounds.corners()) {
+      const glm::vec3 p = glm::vec3(s.objects[i].world * glm::vec4(c, 1.0f));
+      for (int k = 0; k < 3; ++k) {
+        EXPECT_LE(aabbs[i].min[k], p[k] + 1e-4f);
+        EXPECT_GE(aabbs[i].max[k], p[k] - 1e-4f);
+        EXPECT_LE(std::abs(glm::dot(p - obbs[i].center, obbs[i].basis[k])), obbs[i].half_extents[k] + 1e-4f);
+      }
+      EXPECT_LE(glm::length(p - spheres[i].center), spheres[i].radius + 1e-4f);
+    }
+  }
+}
+
+TEST(SceneIo, RoundTripsBitExact) {
+  const Scene s = generate_scene(SceneKind::City, 50, 3);
+  const Scene back = parse_scene(scene_to_json(s), "memory");
+  EXPECT_TRUE(same_scene(s, back));
+}
+
+TEST(SceneIo, ErrorsNameTheFileAndElement) {
+  auto error_of = [](const std::string& text) {
+    try {
+      parse_scene(text, "bad.json");
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(error_of("{").find("bad.json: invalid JSON"), std::string::npos);
+  EXPECT_EQ(error_of(R"({"format":"x","version":1,"objects":[]})"), "bad.json: format: expected \"cullpipe-scene\"");
+  EXPECT_NE(error_of(R"({"format":"cullpipe-scene","version":2,"objects":[]})").find("unsupported version 2"), std::string::npos);
+  EXPECT_EQ(error_of(R"({"format":"cullpipe-scene","version":1,"objects":[{"min":[0,0],"max":[1,1,1]}]})"),
+            "bad.json: objects[0].min: expected 3 numbers, got 2");
+  EXPECT_EQ(error_of(R"({"format":"cullpipe-scene","version":1,"objects":[{"min":[0,0,0],"max":[1,1e39,1]}]})"),
+            "bad.json: objects[0].max[1]: number out of float range");
+  EXPECT_NE(error_of(R"({"format":"cullpipe-scene","version":1,"objects":[{"min":[0,0,0],"max":[1,1e999,1]}]})")
+                .find("bad.json: invalid JSON: [json.exception.out_of_range.406] number overflow"),
+            std::string::npos);
+  EXPECT_EQ(error_of(R"({"format":"cullpipe-scene","version":1,"objects":[{"min":[0,0,0],"max":[1,"a",1]}]})"),
+            "bad.json: objects[0].max[1]: expected a number, got string");
+  EXPECT_EQ(error_of(R"({"format":"cullpipe-scene","version":1,"objects":[{"min":[2,0,0],"max":[1,1,1]}]})"),
+            "bad.json: objects[0]: min.x > max.x");
+  EXPECT_EQ(error_of(R"({"format":"cullpipe-scene","version":1,"objects":[{"min":[0,0,0],"max":[1,1,1],
+              "world":[0,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1]}]})"),
+            "bad.json: objects[0]: world transform is singular");
+  EXPECT_EQ(error_of(R"({"format":"cullpipe-scene","version":1,"objects":[{"min":[0,0,0],"max":[1,1,1],
+              "world":[1e38,0,0,0, 0,1,0,0, 0,0,1,0, 3e38,0,0,1]}]})"),
+            "bad.json: objects[0]: world-space bounds: min.x is infinite");
+  EXPECT_EQ(error_of(R"({"format":"cullpipe-scene","version":1,"camera":{"eye":[0,0,1],"target":[0,0,0],"near":-1},"objects":[]})"),
+            "bad.json: camera.near: must be positive");
+  EXPECT_THROW(load_scene("/nonexistent/scene.json"), InputError);
+}
+
+TEST(CullCaseIo, ParsesEveryVolumeFormAndRoundTrips) {
+  const std::string text = R"({
+    "frustum": {"planes": [[1,0,0,1],[-1,0,0,1],[0,1,0,1],[0,-1,0,1],[0,0,1,1],[0,0,-1,1]]},
+    "volumes": [
+      {"aabb": {"min": [-0.5,-0.5,-0.5], "max": [0.5,0.5,0.5]}},
+      {"aabb": {"center": [2,0,0], "half_extents": [0.5,0.5,0.5]}},
+      {"sphere": {"center": [1,0,0], "radius": 0.5}},
+      {"obb": {"center": [0,0,0], "half_extents": [1,2,3], "axes": [[0,1,0],[-1,0,0],[0,0,1]]}}
+    ]})";
+  const CullCase c = parse_cull_case(text, "case.json");
+  ASSERT_EQ(c.volumes.size(), 4u);
+  EXPECT_EQ(std::get<Aabb>(c.volumes[1]), (Aabb{{1.5f, -0.5f, -0.5f}, {2.5f, 0.5f, 0.5f}}));
+  EXPECT_EQ(std::get<Sphere>(c.volumes[2]).radius, 0.5f);
+  EXPECT_EQ(std::get<Obb>(c.volumes[3]).basis[1], glm::vec3(-1, 0, 0));
+  const std::vector<std::vector<Classification>> classes = {
+      {Classification::Inside, Classification::Outside, Classification::Intersecting, Classification::Intersecting}};
+  const std::string dumped = cull_case_to_json(c, &classes);
+  EXPECT_NE(dumped.find("\"class\": \"outside\""), std::string::npos);
+  const CullCase back = parse_cull_case(dumped, "dump.json");
+  EXPECT_EQ(back.frusta, c.frusta);
+  EXPECT_EQ(back.volumes, c.volumes);
+}
+
+TEST(CullCaseIo, RejectsBadInputNamingTheElement) {
+  auto error_of = [](const std::string& volumes, const std::string& frustum = R"({"planes": [[1,0,0,1]]})") {
+    try {
+      parse_cull_case(R"({"frustum": )" + frustum + R"(, "volumes": )" + volumes + "}", "in.json");
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_EQ(error_of(R"([{"sphere": {"center": [0,0,0], "radius": -1}}])"), "in.json: volumes[0].sphere: radius is negative");
+  EXPECT_EQ(error_of(R"([{"aabb": {"center": [0,0,0], "half_extents": [1,-1,1]}}])"),
+            "in.json: volumes[0].aabb.half_extents: negative extent");
+  EXPECT_EQ(error_of(R"([{"aabb": {"min": [0,0,0], "max": [-1,1,1]}}])"), "in.json: volumes[0].aabb: min.x > max.x");
+  EXPECT_EQ(error_of(R"([{"cone": {}}])"), "in.json: volumes[0]: expected \"aabb\", \"obb\" or \"sphere\"");
+  EXPECT_EQ(error_of(R"([{"obb": {"center": [0,0,0], "half_extents": [1,1,1], "axes": [[1,0,0],[1,0,0],[0,0,1]]}}])"),
+            "in.json: volumes[0].obb: axes[0] and axes[1] are not orthogonal");
+  EXPECT_EQ(error_of("[]", R"({"view_proj": [0,0,0,0, 0,0,0,0, 0,0,0,0, 0,0,0,0]})"),
+            "in.json: frustum: view-projection matrix is singular (determinant 0)");
+  EXPECT_EQ(error_of("[]", R"({"planes": [[0,0,0,1]]})"), "in.json: frustum: plane 0 has a zero normal");
+  EXPECT_EQ(error_of("[]", R"({"planes": [[1,0,0,-1e39]]})"), "in.json: frustum.planes[0][3]: number out of float range");
+  EXPECT_EQ(error_of("[]", R"({"nothing": 1})"), "in.json: frustum: expected \"planes\" or \"view_proj\"");
+  EXPECT_NE(error_of("[", "").find("in.json: invalid JSON"), std::string::npos);
+  EXPECT_EQ(error_of("{}"), "in.json: volumes: expected an array");
+}
+
+}  // namespace
+}  // namespace cullpipe
