@@ -13,6 +13,7 @@
 #extension GL_GOOGLE_include_directive : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_ballot : require
+#extension GL_EXT_control_flow_attributes : require
 
 #include "shared/cull_types.h"
 
@@ -29,6 +30,7 @@ layout(push_constant, std430) uniform Push { FlatCullParams params; };
 
 uint view;             // this invocation's view (gl_GlobalInvocationID.y)
 uint view_plane_count;
+vec4 view_planes[MAX_FRUSTUM_PLANES];
 
 float plane_distance(vec4 plane, vec3 p) {
   precise float s = plane.x * p.x + plane.y * p.y + plane.z * p.z + plane.w;
@@ -36,41 +38,55 @@ float plane_distance(vec4 plane, vec3 p) {
 }
 
 uint classify_aabb(vec3 lo, vec3 hi) {
-  bool intersecting = false;
-  for (uint k = 0; k < view_plane_count; ++k) {
-    vec4 plane = views[view].planes[k];
-    vec3 p_vertex = vec3(plane.x >= 0.0 ? hi.x : lo.x, plane.y >= 0.0 ? hi.y : lo.y, plane.z >= 0.0 ? hi.z : lo.z);
-    vec3 n_vertex = vec3(plane.x >= 0.0 ? lo.x : hi.x, plane.y >= 0.0 ? lo.y : hi.y, plane.z >= 0.0 ? lo.z : hi.z);
-    if (plane_distance(plane, p_vertex) < 0.0) return CLASS_OUTSIDE;
-    if (plane_distance(plane, n_vertex) < 0.0) intersecting = true;
+  // Branch-free over a fixed trip count (SIMD-friendly); the answer is the reference's:
+  // OUTSIDE if any p-vertex is behind, else INTERSECTING if any n-vertex is behind.
+  bool outside = false, intersecting = false;
+  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) {
+    if (k < view_plane_count) {
+      vec4 plane = view_planes[k];
+      vec3 p_vertex = vec3(plane.x >= 0.0 ? hi.x : lo.x, plane.y >= 0.0 ? hi.y : lo.y, plane.z >= 0.0 ? hi.z : lo.z);
+      vec3 n_vertex = vec3(plane.x >= 0.0 ? lo.x : hi.x, plane.y >= 0.0 ? lo.y : hi.y, plane.z >= 0.0 ? lo.z : hi.z);
+      bool p_behind = plane_distance(plane, p_vertex) < 0.0;
+      bool n_behind = plane_distance(plane, n_vertex) < 0.0;
+      outside = outside || p_behind;
+      intersecting = intersecting || n_behind;
+    }
   }
-  return intersecting ? CLASS_INTERSECTING : CLASS_INSIDE;
+  return outside ? CLASS_OUTSIDE : intersecting ? CLASS_INTERSECTING : CLASS_INSIDE;
 }
 
 uint classify_obb(vec3 center, vec4 u0, vec4 u1, vec4 u2) {
-  bool intersecting = false;
-  for (uint k = 0; k < view_plane_count; ++k) {
-    vec4 plane = views[view].planes[k];
-    float s = plane_distance(plane, center);
-    precise float n_dot_u0 = plane.x * u0.x + plane.y * u0.y + plane.z * u0.z;
-    precise float n_dot_u1 = plane.x * u1.x + plane.y * u1.y + plane.z * u1.z;
-    precise float n_dot_u2 = plane.x * u2.x + plane.y * u2.y + plane.z * u2.z;
-    precise float r = abs(n_dot_u0) * u0.w + abs(n_dot_u1) * u1.w + abs(n_dot_u2) * u2.w;
-    if (s < -r) return CLASS_OUTSIDE;
-    if (s < r) intersecting = true;
+  bool outside = false, intersecting = false;
+  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) {
+    if (k < view_plane_count) {
+      vec4 plane = view_planes[k];
+      float s = plane_distance(plane, center);
+      precise float n_dot_u0 = plane.x * u0.x + plane.y * u0.y + plane.z * u0.z;
+      precise float n_dot_u1 = plane.x * u1.x + plane.y * u1.y + plane.z * u1.z;
+      precise float n_dot_u2 = plane.x * u2.x + plane.y * u2.y + plane.z * u2.z;
+      precise float r = abs(n_dot_u0) * u0.w + abs(n_dot_u1) * u1.w + abs(n_dot_u2) * u2.w;
+      bool all_behind = s < -r;
+      bool some_behind = s < r;
+      outside = outside || all_behind;
+      intersecting = intersecting || some_behind;
+    }
   }
-  return intersecting ? CLASS_INTERSECTING : CLASS_INSIDE;
+  return outside ? CLASS_OUTSIDE : intersecting ? CLASS_INTERSECTING : CLASS_INSIDE;
 }
 
 uint classify_sphere(vec4 center_radius) {
-  bool intersecting = false;
+  bool outside = false, intersecting = false;
   float radius = center_radius.w;
-  for (uint k = 0; k < view_plane_count; ++k) {
-    float s = plane_distance(views[view].planes[k], center_radius.xyz);
-    if (s < -radius) return CLASS_OUTSIDE;
-    if (s < radius) intersecting = true;
+  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) {
+    if (k < view_plane_count) {
+      float s = plane_distance(view_planes[k], center_radius.xyz);
+      bool all_behind = s < -radius;
+      bool some_behind = s < radius;
+      outside = outside || all_behind;
+      intersecting = intersecting || some_behind;
+    }
   }
-  return intersecting ? CLASS_INTERSECTING : CLASS_INSIDE;
+  return outside ? CLASS_OUTSIDE : intersecting ? CLASS_INTERSECTING : CLASS_INSIDE;
 }
 
 void main() {
@@ -78,6 +94,7 @@ void main() {
   view = gl_GlobalInvocationID.y;
   if (i >= params.object_count || view >= params.view_count) return;
   view_plane_count = min(views[view].plane_count, MAX_FRUSTUM_PLANES);
+  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = views[view].planes[k];
 
   uint c;
   if (BV_KIND == BV_KIND_AABB) {
@@ -100,7 +117,6 @@ void main() {
   if (subgroupElect() && vis_total > 0) {
     base = atomicAdd(counters[view].visible_count, vis_total);
     atomicAdd(counters[view].inside_count, inside_total);
-    atomicAdd(counters[view].intersecting_count, vis_total - inside_total);
   }
   base = subgroupBroadcastFirst(base);
   uint slot = base + subgroupBallotExclusiveBitCount(vis_ballot);

@@ -217,7 +217,7 @@ CullResult GpuCuller::cull(std::span<const Frustum> views, const ReadbackOptions
   for (std::size_t v = 0; v < views.size(); ++v) {
     ViewResult& out = result.views[v];
     const ViewCounters& c = counters[v];
-    out.counts = {c.visible_count, c.inside_count, c.intersecting_count};
+    out.counts = {c.visible_count, c.inside_count, c.visible_count - c.inside_count};
     out.overflow = c.visible_count > object_count_;
     if (readback.classes) {
       out.classes.resize(object_count_);

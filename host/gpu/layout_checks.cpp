@@ -35,7 +35,7 @@ static_assert(offsetof(FlatCullParams, visible_capacity) == 12);
 static_assert(sizeof(ViewCounters) == 16);
 static_assert(offsetof(ViewCounters, visible_count) == 0);
 static_assert(offsetof(ViewCounters, inside_count) == 4);
-static_assert(offsetof(ViewCounters, intersecting_count) == 8);
+static_assert(offsetof(ViewCounters, reserved0) == 8);
 
 static_assert(CLASS_OUTSIDE == 0 && CLASS_INTERSECTING == 1 && CLASS_INSIDE == 2,
               "must match cullpipe::Classification");

@@ -73,11 +73,12 @@ struct FlatCullParams {
 };
 
 // Per-view counters, written by the shader (cleared with vkCmdFillBuffer before each pass).
+// INTERSECTING = visible - inside, derived on the host (one atomic fewer per subgroup).
 struct ViewCounters {
   uint visible_count;  // visible objects found; may exceed visible_capacity (overflow)
-  uint inside_count;
-  uint intersecting_count;
-  uint reserved;
+  uint inside_count;   // of which INSIDE
+  uint reserved0;
+  uint reserved1;
 };
 
 #ifdef __cplusplus
