@@ -31,10 +31,12 @@ std::string pad(const std::string& s, std::size_t width) {
   return s.size() >= width ? s : std::string(width - s.size(), ' ') + s;
 }
 
+// Culls one kind of volume; with a dump path, also keeps the volumes for the dump.
 template <class Volume>
-void append_volumes(std::vector<Volume> src, std::vector<Volume>& dst_typed, std::vector<cullpipe::Volume>& dst_any) {
-  dst_any.assign(src.begin(), src.end());
-  dst_typed = std::move(src);
+BackendResults cull_kind(const std::vector<Volume>& volumes, std::span<const Frustum> frusta, const RunOptions& o,
+                         GpuSession& session, std::vector<cullpipe::Volume>& dump_volumes) {
+  if (!o.dump_path.empty()) dump_volumes.assign(volumes.begin(), volumes.end());
+  return cull_on_backends<Volume>(volumes, frusta, o.backend, session);
 }
 
 }  // namespace
@@ -83,23 +85,11 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
 
     GpuSession session{o.device, nullptr, nullptr};
     BackendResults r;
-    std::vector<Aabb> aabbs;
-    std::vector<Obb> obbs;
-    std::vector<Sphere> spheres;
-    std::vector<cullpipe::Volume> any;  // for --dump
+    std::vector<cullpipe::Volume> dump_volumes;
     switch (*bv) {
-      case BvKind::Aabb:
-        append_volumes(world_aabbs(scene), aabbs, any);
-        r = cull_on_backends<Aabb>(aabbs, frusta, o.backend, session);
-        break;
-      case BvKind::Obb:
-        append_volumes(world_obbs(scene), obbs, any);
-        r = cull_on_backends<Obb>(obbs, frusta, o.backend, session);
-        break;
-      case BvKind::Sphere:
-        append_volumes(world_spheres(scene), spheres, any);
-        r = cull_on_backends<Sphere>(spheres, frusta, o.backend, session);
-        break;
+      case BvKind::Aabb: r = cull_kind(world_aabbs(scene), frusta, o, session, dump_volumes); break;
+      case BvKind::Obb: r = cull_kind(world_obbs(scene), frusta, o, session, dump_volumes); break;
+      case BvKind::Sphere: r = cull_kind(world_spheres(scene), frusta, o, session, dump_volumes); break;
     }
 
     const std::size_t n = scene.objects.size();
@@ -160,7 +150,7 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
       json_util::write_file_atomic(o.json_path, j.dump(2) + "\n");
     }
     if (!o.dump_path.empty()) {
-      CullCase c{frusta, frusta.size() > 1, std::move(any)};
+      CullCase c{frusta, frusta.size() > 1, std::move(dump_volumes)};
       json_util::write_file_atomic(o.dump_path, cull_case_to_json(c, have_cpu ? &r.cpu : &r.gpu));
     }
 
