@@ -1,0 +1,124 @@
+#include "bounds/aabb_update.hpp"
+
+#include <cmath>
+#include <glm/geometric.hpp>
+#include <limits>
+
+#include "bounds/sphere_fit.hpp"
+
+namespace cullpipe::bounds {
+namespace {
+
+using dvec3 = glm::dvec3;
+
+float round_down(double v) {
+  float f = float(v);
+  if (double(f) > v) f = std::nextafter(f, -std::numeric_limits<float>::infinity());
+  return f;
+}
+float round_up(double v) {
+  float f = float(v);
+  if (double(f) < v) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+  return f;
+}
+
+Aabb round_outward(const dvec3& lo, const dvec3& hi) {
+  return {{round_down(lo.x), round_down(lo.y), round_down(lo.z)}, {round_up(hi.x), round_up(hi.y), round_up(hi.z)}};
+}
+
+// Row i of the linear part of m, as the local direction whose dot product gives world axis i.
+dvec3 row(const glm::mat4& m, int i) { return {m[0][i], m[1][i], m[2][i]}; }
+
+template <class Points>
+Aabb transform_points(const Points& pts, const glm::mat4& m, double pad) {
+  const glm::dmat4 dm(m);
+  dvec3 lo(std::numeric_limits<double>::infinity()), hi(-std::numeric_limits<double>::infinity());
+  for (const glm::vec3& p : pts) {
+    const dvec3 q = dvec3(dm * glm::dvec4(dvec3(p), 1.0));
+    lo = glm::min(lo, q);
+    hi = glm::max(hi, q);
+  }
+  dvec3 pads;
+  for (int i = 0; i < 3; ++i) pads[i] = pad * glm::length(row(m, i));
+  return round_outward(lo - pads, hi + pads);
+}
+
+}  // namespace
+
+std::string_view to_string(AabbUpdate method) {
+  switch (method) {
+    case AabbUpdate::Recompute: return "recompute";
+    case AabbUpdate::HullRecompute: return "hull";
+    case AabbUpdate::TransformBox: return "transform-box";
+    case AabbUpdate::HillClimb: return "hill-climb";
+  }
+  return "?";
+}
+
+std::optional<AabbUpdate> parse_aabb_update(std::string_view name) {
+  for (AabbUpdate m : {AabbUpdate::Recompute, AabbUpdate::HullRecompute, AabbUpdate::TransformBox, AabbUpdate::HillClimb})
+    if (to_string(m) == name) return m;
+  return std::nullopt;
+}
+
+AabbTracker::AabbTracker(std::span<const glm::vec3> local_points)
+    : points_(local_points.begin(), local_points.end()), hull_(convex_hull(local_points)), local_(aabb_of_points(local_points)) {
+  // Start every climb at the vertex extreme along the local axes.
+  for (int axis = 0; axis < 3; ++axis)
+    for (std::uint32_t v = 0; v < hull_.vertices.size(); ++v) {
+      if (hull_.vertices[v][axis] < hull_.vertices[extreme_[std::size_t(2 * axis)]][axis]) extreme_[std::size_t(2 * axis)] = v;
+      if (hull_.vertices[v][axis] > hull_.vertices[extreme_[std::size_t(2 * axis + 1)]][axis])
+        extreme_[std::size_t(2 * axis + 1)] = v;
+    }
+}
+
+Aabb AabbTracker::update(const glm::mat4& world, AabbUpdate method) {
+  switch (method) {
+    case AabbUpdate::Recompute: return transform_points(points_, world, 0.0);
+    case AabbUpdate::HullRecompute: return transform_points(hull_.vertices, world, hull_.tolerance);
+    case AabbUpdate::TransformBox: {
+      // Arvo in double: centre transformed, half extent i = sum_j |M[j][i]| h_j.
+      const dvec3 c = (dvec3(local_.min) + dvec3(local_.max)) * 0.5, h = (dvec3(local_.max) - dvec3(local_.min)) * 0.5;
+      const glm::dmat4 dm(world);
+      const dvec3 wc = dvec3(dm * glm::dvec4(c, 1.0));
+      dvec3 wh(0.0);
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) wh[i] += std::abs(dm[j][i]) * h[j];
+      return round_outward(wc - wh, wc + wh);
+    }
+    case AabbUpdate::HillClimb: break;
+  }
+  // Hill climbing: for world axis i, maximise (and minimise) row_i(M) . p over hull vertices by
+  // moving to a better neighbour until none is better. On a convex polytope a local maximum of
+  // a linear function is the global one.
+  climb_steps_ = 0;
+  const glm::dmat4 dm(world);
+  dvec3 lo, hi;
+  for (int axis = 0; axis < 3; ++axis) {
+    const dvec3 r = row(world, axis);
+    for (int side = 0; side < 2; ++side) {
+      const dvec3 dir = side ? r : -r;
+      std::uint32_t& v = extreme_[std::size_t(2 * axis + side)];
+      double best = glm::dot(dir, dvec3(hull_.vertices[v]));
+      for (bool moved = true; moved;) {
+        moved = false;
+        for (std::uint32_t w : hull_.vertex_neighbours[v]) {
+          const double value = glm::dot(dir, dvec3(hull_.vertices[w]));
+          if (value > best) {
+            best = value;
+            v = w;
+            moved = true;
+          }
+        }
+        ++climb_steps_;
+      }
+      const double world_value = glm::dot(r, dvec3(hull_.vertices[v])) + dm[3][axis];
+      (side ? hi : lo)[axis] = world_value;
+    }
+  }
+  dvec3 pads;
+  for (int i = 0; i < 3; ++i) pads[i] = hull_.tolerance * glm::length(row(world, i));
+  return round_outward(lo - pads, hi + pads);
+}
+
+}  // namespace cullpipe::bounds

@@ -1,0 +1,51 @@
+#pragma once
+#include <array>
+#include <glm/mat4x4.hpp>
+#include <glm/vec3.hpp>
+#include <optional>
+#include <span>
+#include <string_view>
+#include <vector>
+
+#include "bounds/convex_hull.hpp"
+#include "geom/aabb.hpp"
+
+namespace cullpipe::bounds {
+
+/// Ways to find the world AABB of an object's points after a new transform.
+enum class AabbUpdate {
+  Recompute,      ///< transform every point: exact, O(n)
+  HullRecompute,  ///< transform the convex-hull vertices only: exact, O(h)
+  TransformBox,   ///< the AABB of the transformed local AABB (Arvo): O(1), loose
+  HillClimb,      ///< walk hull edges from the last extreme vertex per axis: exact, ~O(1) for small motions
+};
+
+std::string_view to_string(AabbUpdate method);
+std::optional<AabbUpdate> parse_aabb_update(std::string_view name);
+
+/// Keeps an object's world AABB as its transform changes. Built once from the object's local
+/// points (hull and local AABB computed up front); then `update` returns the world AABB for
+/// any affine transform by the chosen method. Each method encloses every transformed point:
+/// results are computed in double and rounded outward to float, and the hull-based methods
+/// are widened by the hull tolerance (points within it of a hull face may lie outside it).
+class AabbTracker {
+ public:
+  /// Throws BadPoints on an empty set or a non-finite coordinate.
+  explicit AabbTracker(std::span<const glm::vec3> local_points);
+
+  Aabb update(const glm::mat4& world, AabbUpdate method);
+
+  const ConvexHull& hull() const { return hull_; }
+  const Aabb& local_bounds() const { return local_; }
+  /// Hull vertices visited by the last HillClimb update (its cost).
+  std::size_t last_climb_steps() const { return climb_steps_; }
+
+ private:
+  std::vector<glm::vec3> points_;
+  ConvexHull hull_;
+  Aabb local_;
+  std::array<std::uint32_t, 6> extreme_{};  // hull vertex index maximising -x, +x, -y, +y, -z, +z
+  std::size_t climb_steps_ = 0;
+};
+
+}  // namespace cullpipe::bounds

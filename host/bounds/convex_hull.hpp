@@ -1,0 +1,44 @@
+#pragma once
+#include <array>
+#include <cstdint>
+#include <glm/vec3.hpp>
+#include <span>
+#include <vector>
+
+namespace cullpipe::bounds {
+
+/// A convex hull of a point set, with adjacency.
+struct ConvexHull {
+  /// What the points span. A degenerate set gives the lower-dimensional hull: one point
+  /// (all points coincide within the tolerance), a segment (collinear), or a convex polygon
+  /// (coplanar).
+  enum class Dimension { Point = 0, Segment = 1, Polygon = 2, Polyhedron = 3 };
+  Dimension dimension = Dimension::Point;
+
+  /// Hull vertices (a subset of the input points). For a Polygon they are in counter-clockwise
+  /// order about `normal`; for a Segment they are its two ends.
+  std::vector<glm::vec3> vertices;
+  /// For each hull vertex, its index in the input.
+  std::vector<std::uint32_t> input_index;
+  /// Polyhedron only: triangles as vertex indices, counter-clockwise seen from outside.
+  std::vector<std::array<std::uint32_t, 3>> faces;
+  /// Polyhedron only: face_neighbours[f][i] is the face across edge (faces[f][i], faces[f][(i+1)%3]).
+  std::vector<std::array<std::uint32_t, 3>> face_neighbours;
+  /// For each vertex, the vertices joined to it by a hull edge (sorted).
+  std::vector<std::vector<std::uint32_t>> vertex_neighbours;
+  /// Polygon only: the unit normal of the plane of the points.
+  glm::vec3 normal{0.0f};
+  /// The distance tolerance used: a point within it of a face counts as on the face.
+  double tolerance = 0.0;
+};
+
+/// Quickhull (Barber, Dobkin, Huhdanpaa 1996) in double precision. With M = max|x| + max|y| +
+/// max|z| of the input: a set whose points all lie within 3 * FLT_EPSILON * M of one point, one
+/// line or one plane (degenerate to float precision) gets the lower-dimensional hull; otherwise
+/// Quickhull runs with Lloyd's visibility tolerance 3 * DBL_EPSILON * M. `tolerance` reports how
+/// far an input point may lie outside the result (for a Polygon, off its plane). Faces are
+/// triangles (coplanar neighbours are not merged). Throws BadPoints on an empty input or a
+/// non-finite coordinate.
+ConvexHull convex_hull(std::span<const glm::vec3> points);
+
+}  // namespace cullpipe::bounds

@@ -1,0 +1,254 @@
+#include "bounds/sphere_fit.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <glm/geometric.hpp>
+#include <limits>
+#include <numeric>
+#include <string>
+#include <vector>
+
+#include "bounds/points.hpp"
+
+namespace cullpipe::bounds {
+
+void check_points(std::span<const glm::vec3> points) {
+  if (points.empty()) throw BadPoints("no points: a bounding volume needs at least one point");
+  for (std::size_t i = 0; i < points.size(); ++i)
+    for (int k = 0; k < 3; ++k)
+      if (!std::isfinite(points[i][k]))
+        throw BadPoints("point " + std::to_string(i) + " has a" + (std::isnan(points[i][k]) ? " NaN" : "n infinite") +
+                        " coordinate");
+}
+
+namespace {
+
+using dvec3 = glm::dvec3;
+
+struct Ball {
+  dvec3 c{0.0};
+  double r2 = -1.0;  // squared radius; negative: empty
+};
+
+struct SplitMix {
+  std::uint64_t s;
+  std::uint64_t next() {
+    std::uint64_t z = (s += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+  }
+};
+
+void shuffle(std::vector<dvec3>& v, std::uint64_t seed) {
+  SplitMix rng{seed};
+  for (std::size_t i = v.size(); i > 1; --i) std::swap(v[i - 1], v[rng.next() % i]);
+}
+
+std::vector<dvec3> to_double(std::span<const glm::vec3> points) { return {points.begin(), points.end()}; }
+
+// Membership with a relative tolerance for rounding in the ball constructions.
+struct Tolerance {
+  double abs2;  // absolute slack (squared), from the coordinate scale
+  bool contains(const Ball& b, const dvec3& p) const {
+    if (b.r2 < 0.0) return false;
+    const dvec3 d = p - b.c;
+    return glm::dot(d, d) <= b.r2 * (1.0 + 1e-12) + abs2;
+  }
+};
+
+Ball ball1(const dvec3& a) { return {a, 0.0}; }
+
+Ball ball2(const dvec3& a, const dvec3& b) {
+  const dvec3 c = (a + b) * 0.5;
+  const dvec3 d = a - c;
+  return {c, glm::dot(d, d)};
+}
+
+// Smallest ball with a, b, c on its boundary (their circumcircle); for collinear points,
+// the smallest ball enclosing them.
+Ball ball3(const dvec3& a, const dvec3& b, const dvec3& c, const Tolerance& tol) {
+  const dvec3 ab = b - a, ac = c - a;
+  const dvec3 n = glm::cross(ab, ac);
+  const double n2 = glm::dot(n, n);
+  if (n2 <= 1e-24 * glm::dot(ab, ab) * glm::dot(ac, ac) || n2 == 0.0) {
+    Ball best;
+    for (const Ball& cand : {ball2(a, b), ball2(a, c), ball2(b, c)})
+      if (tol.contains(cand, a) && tol.contains(cand, b) && tol.contains(cand, c) && (best.r2 < 0 || cand.r2 < best.r2))
+        best = cand;
+    return best;
+  }
+  const dvec3 offset = (glm::dot(ac, ac) * glm::cross(n, ab) + glm::dot(ab, ab) * glm::cross(ac, n)) / (2.0 * n2);
+  return {a + offset, glm::dot(offset, offset)};
+}
+
+// Smallest ball with a, b, c, d on its boundary (circumsphere); for coplanar points, the
+// smallest ball enclosing the four.
+Ball ball4(const dvec3& a, const dvec3& b, const dvec3& c, const dvec3& d, const Tolerance& tol) {
+  const dvec3 v1 = b - a, v2 = c - a, v3 = d - a;
+  const double det = glm::dot(v1, glm::cross(v2, v3));
+  const double scale = glm::length(v1) * glm::length(v2) * glm::length(v3);
+  if (std::abs(det) <= 1e-12 * scale || det == 0.0) {
+    const dvec3 pts[4] = {a, b, c, d};
+    Ball best;
+    auto consider = [&](const Ball& cand) {
+      if (cand.r2 < 0) return;
+      for (const dvec3& p : pts)
+        if (!tol.contains(cand, p)) return;
+      if (best.r2 < 0 || cand.r2 < best.r2) best = cand;
+    };
+    for (int i = 0; i < 4; ++i)
+      for (int j = i + 1; j < 4; ++j) {
+        consider(ball2(pts[i], pts[j]));
+        for (int k = j + 1; k < 4; ++k) consider(ball3(pts[i], pts[j], pts[k], tol));
+      }
+    return best;
+  }
+  const dvec3 offset =
+      (glm::dot(v1, v1) * glm::cross(v2, v3) + glm::dot(v2, v2) * glm::cross(v3, v1) + glm::dot(v3, v3) * glm::cross(v1, v2)) /
+      (2.0 * det);
+  return {a + offset, glm::dot(offset, offset)};
+}
+
+Tolerance tolerance_for(const std::vector<dvec3>& pts) {
+  double scale = 0.0;
+  for (const dvec3& p : pts) scale = std::max({scale, std::abs(p.x), std::abs(p.y), std::abs(p.z)});
+  const double abs = scale * 1e-14;
+  return {abs * abs};
+}
+
+// The float sphere about `center` that encloses every point: radius = the largest distance,
+// evaluated in double and rounded up to a float.
+Sphere enclosing_sphere(const dvec3& center, std::span<const glm::vec3> points) {
+  Sphere s;
+  s.center = glm::vec3(center);
+  const dvec3 c(s.center);
+  double r2 = 0.0;
+  for (const glm::vec3& p : points) {
+    const dvec3 d = dvec3(p) - c;
+    r2 = std::max(r2, glm::dot(d, d));
+  }
+  const double r = std::sqrt(r2);
+  s.radius = float(r);
+  if (double(s.radius) < r) s.radius = std::nextafter(s.radius, std::numeric_limits<float>::infinity());
+  return s;
+}
+
+// Ritter's grow step: the smallest sphere containing the sphere and p.
+void grow(dvec3& c, double& r, const dvec3& p) {
+  const dvec3 d = p - c;
+  const double d2 = glm::dot(d, d);
+  if (d2 <= r * r) return;
+  const double dist = std::sqrt(d2);
+  const double new_r = (r + dist) * 0.5;
+  c += d * ((new_r - r) / dist);
+  r = new_r;
+}
+
+}  // namespace
+
+Aabb aabb_of_points(std::span<const glm::vec3> points) {
+  check_points(points);
+  Aabb b{points[0], points[0]};
+  for (const glm::vec3& p : points) {
+    b.min = glm::min(b.min, p);
+    b.max = glm::max(b.max, p);
+  }
+  return b;
+}
+
+Sphere ritter_sphere(std::span<const glm::vec3> points) {
+  check_points(points);
+  // Seed: among the min/max points on each axis, the pair farthest apart.
+  std::size_t lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
+  for (std::size_t i = 1; i < points.size(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      if (points[i][k] < points[lo[k]][k]) lo[k] = i;
+      if (points[i][k] > points[hi[k]][k]) hi[k] = i;
+    }
+  int axis = 0;
+  double best = -1.0;
+  for (int k = 0; k < 3; ++k) {
+    const dvec3 d = dvec3(points[hi[k]]) - dvec3(points[lo[k]]);
+    if (glm::dot(d, d) > best) {
+      best = glm::dot(d, d);
+      axis = k;
+    }
+  }
+  dvec3 c = (dvec3(points[lo[axis]]) + dvec3(points[hi[axis]])) * 0.5;
+  double r = std::sqrt(best) * 0.5;
+  for (const glm::vec3& p : points) grow(c, r, dvec3(p));
+  return enclosing_sphere(c, points);
+}
+
+Sphere refined_sphere(std::span<const glm::vec3> points, int iterations, std::uint64_t seed) {
+  const Aabb box = aabb_of_points(points);
+  std::vector<dvec3> pts = to_double(points);
+  dvec3 best_c = dvec3(box.min) * 0.5 + dvec3(box.max) * 0.5;
+  double best_r = 0.0;
+  for (const dvec3& p : pts) best_r = std::max(best_r, glm::length(p - best_c));
+  for (int it = 0; it < iterations; ++it) {
+    dvec3 c = best_c;
+    double r = best_r * 0.95;
+    shuffle(pts, seed + std::uint64_t(it));
+    for (const dvec3& p : pts) grow(c, r, p);
+    if (r < best_r) {
+      best_r = r;
+      best_c = c;
+    }
+  }
+  return enclosing_sphere(best_c, points);
+}
+
+Sphere exact_sphere(std::span<const glm::vec3> points) {
+  check_points(points);
+  std::vector<dvec3> p = to_double(points);
+  shuffle(p, 0x5EED);
+  const Tolerance tol = tolerance_for(p);
+  Ball b = ball1(p[0]);
+  for (std::size_t i = 1; i < p.size(); ++i) {
+    if (tol.contains(b, p[i])) continue;
+    b = ball1(p[i]);
+    for (std::size_t j = 0; j < i; ++j) {
+      if (tol.contains(b, p[j])) continue;
+      b = ball2(p[i], p[j]);
+      for (std::size_t k = 0; k < j; ++k) {
+        if (tol.contains(b, p[k])) continue;
+        b = ball3(p[i], p[j], p[k], tol);
+        for (std::size_t l = 0; l < k; ++l) {
+          if (tol.contains(b, p[l])) continue;
+          b = ball4(p[i], p[j], p[k], p[l], tol);
+        }
+      }
+    }
+  }
+  return enclosing_sphere(b.c, points);
+}
+
+Sphere brute_force_sphere(std::span<const glm::vec3> points) {
+  check_points(points);
+  if (points.size() > 64) throw std::invalid_argument("brute_force_sphere: at most 64 points");
+  const std::vector<dvec3> p = to_double(points);
+  const Tolerance tol = tolerance_for(p);
+  const std::size_t n = p.size();
+  Ball best;
+  auto consider = [&](const Ball& b) {
+    if (b.r2 < 0 || (best.r2 >= 0 && b.r2 >= best.r2)) return;
+    for (const dvec3& q : p)
+      if (!tol.contains(b, q)) return;
+    best = b;
+  };
+  for (std::size_t i = 0; i < n; ++i) {
+    consider(ball1(p[i]));
+    for (std::size_t j = i + 1; j < n; ++j) {
+      consider(ball2(p[i], p[j]));
+      for (std::size_t k = j + 1; k < n; ++k) {
+        consider(ball3(p[i], p[j], p[k], tol));
+        for (std::size_t l = k + 1; l < n; ++l) consider(ball4(p[i], p[j], p[k], p[l], tol));
+      }
+    }
+  }
+  return enclosing_sphere(best.c, points);
+}
+
+}  // namespace cullpipe::bounds

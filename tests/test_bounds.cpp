@@ -1,0 +1,364 @@
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <glm/ext/matrix_transform.hpp>
+#include <limits>
+#include <set>
+
+#include "bounds/aabb_update.hpp"
+#include "bounds/convex_hull.hpp"
+#include "bounds/points.hpp"
+#include "bounds/sphere_fit.hpp"
+#include "test_util.hpp"
+
+namespace cullpipe::bounds {
+namespace {
+
+using Points = std::vector<glm::vec3>;
+
+// Enclosure is checked in double with this relative slack (documented in sphere_fit.hpp: the
+// radius is the largest double distance rounded up, so the slack only absorbs the test's
+// own rounding).
+constexpr double kRel = 1e-12;
+
+void expect_encloses(const Sphere& s, const Points& pts, const char* what) {
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    const double d = glm::length(glm::dvec3(pts[i]) - glm::dvec3(s.center));
+    ASSERT_LE(d, double(s.radius) * (1 + kRel) + 1e-300) << what << ": point " << i << " outside";
+  }
+}
+
+void expect_encloses(const Aabb& b, const Points& pts, const char* what) {
+  for (std::size_t i = 0; i < pts.size(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      ASSERT_LE(b.min[k], pts[i][k]) << what << ": point " << i;
+      ASSERT_GE(b.max[k], pts[i][k]) << what << ": point " << i;
+    }
+}
+
+Points random_cube(std::size_t n, std::uint64_t seed, float half = 1.0f) {
+  test::Rng rng{seed};
+  Points p(n);
+  for (auto& q : p) q = rng.vec3(-half, half);
+  return p;
+}
+
+Points random_on_sphere(std::size_t n, std::uint64_t seed, float radius = 1.0f) {
+  test::Rng rng{seed};
+  Points p(n);
+  for (auto& q : p) {
+    glm::vec3 v;
+    do v = rng.vec3(-1, 1);
+    while (glm::dot(v, v) < 1e-3f || glm::dot(v, v) > 1.0f);
+    q = glm::normalize(v) * radius;
+  }
+  return p;
+}
+
+// Named degenerate and awkward sets every builder must survive.
+std::vector<std::pair<std::string, Points>> awkward_sets() {
+  std::vector<std::pair<std::string, Points>> sets;
+  sets.push_back({"one point", {{1, 2, 3}}});
+  sets.push_back({"two points", {{1, 2, 3}, {-4, 5, 0.5f}}});
+  sets.push_back({"duplicates", Points(50, glm::vec3(7, -1, 2))});
+  Points collinear, coplanar, dup_mix;
+  for (int i = 0; i < 40; ++i) collinear.push_back(glm::vec3(1, 2, 3) + float(i % 7) * glm::vec3(0.5f, -1, 2));
+  test::Rng rng{5};
+  for (int i = 0; i < 200; ++i) {
+    const float a = rng.uniform(-3, 3), b = rng.uniform(-3, 3);
+    coplanar.push_back(glm::vec3(1, 0, 0) * a + glm::vec3(0, 0.6f, 0.8f) * b + glm::vec3(0, 0, 5));
+  }
+  for (int i = 0; i < 300; ++i) dup_mix.push_back(random_cube(5, 9)[std::size_t(i % 5)]);
+  sets.push_back({"collinear", collinear});
+  sets.push_back({"coplanar", coplanar});
+  sets.push_back({"five points repeated", dup_mix});
+  Points huge = random_cube(300, 1), tiny = random_cube(300, 2);
+  for (auto& p : huge) p *= 1e30f;
+  for (auto& p : tiny) p *= 1e-30f;
+  sets.push_back({"huge scale", huge});
+  sets.push_back({"tiny scale", tiny});
+  Points offset = random_cube(300, 3);
+  for (auto& p : offset) p = p * 1e-3f + glm::vec3(1e4f, -2e4f, 3e4f);  // small object far from the origin
+  sets.push_back({"far from origin", offset});
+  sets.push_back({"sphere surface", random_on_sphere(500, 4)});
+  return sets;
+}
+
+// ---- spheres --------------------------------------------------------------------------------
+
+TEST(Spheres, ExactEqualsBruteForceOnSmallSets) {
+  test::Rng rng{10};
+  for (int trial = 0; trial < 300; ++trial) {
+    const std::size_t n = 1 + std::size_t(trial % 12);
+    const Points p = random_cube(n, 1000 + std::uint64_t(trial), rng.uniform(0.1f, 10.0f));
+    const Sphere exact = exact_sphere(p), brute = brute_force_sphere(p);
+    ASSERT_NEAR(exact.radius, brute.radius, 1e-5f * brute.radius + 1e-7f) << "trial " << trial << " n " << n;
+  }
+}
+
+TEST(Spheres, KnownAnswers) {
+  // Regular tetrahedron with edge 2*sqrt(2): circumradius = edge * sqrt(6) / 4 = sqrt(3).
+  const Points tetra = {{1, 1, 1}, {1, -1, -1}, {-1, 1, -1}, {-1, -1, 1}};
+  EXPECT_NEAR(exact_sphere(tetra).radius, std::sqrt(3.0f), 1e-6f);
+  EXPECT_NEAR(brute_force_sphere(tetra).radius, std::sqrt(3.0f), 1e-6f);
+  // Obtuse triangle: the sphere is on its longest side, not the circumcircle.
+  const Points obtuse = {{-1, 0, 0}, {1, 0, 0}, {0, 0.1f, 0}};
+  EXPECT_NEAR(exact_sphere(obtuse).radius, 1.0f, 1e-6f);
+  EXPECT_NEAR(glm::length(exact_sphere(obtuse).center), 0.0f, 1e-6f);
+  // Cube corners: radius sqrt(3) about the centre, with many cospherical points.
+  Points cube;
+  for (int i = 0; i < 8; ++i) cube.push_back({i & 1 ? 1.f : -1.f, i & 2 ? 1.f : -1.f, i & 4 ? 1.f : -1.f});
+  EXPECT_NEAR(exact_sphere(cube).radius, std::sqrt(3.0f), 1e-6f);
+  // Points on the unit sphere (all cospherical): radius 1.
+  EXPECT_NEAR(exact_sphere(random_on_sphere(2000, 7)).radius, 1.0f, 1e-5f);
+}
+
+TEST(Spheres, EveryBuilderEnclosesAwkwardSets) {
+  for (const auto& [name, pts] : awkward_sets()) {
+    SCOPED_TRACE(name);
+    const Sphere exact = exact_sphere(pts);
+    expect_encloses(exact, pts, "exact");
+    expect_encloses(ritter_sphere(pts), pts, "ritter");
+    expect_encloses(refined_sphere(pts), pts, "refined");
+    EXPECT_LE(exact.radius, ritter_sphere(pts).radius * (1 + 1e-6f));
+    EXPECT_LE(exact.radius, refined_sphere(pts).radius * (1 + 1e-6f));
+    if (pts.size() <= 40) {
+      const Sphere brute = brute_force_sphere(pts);
+      expect_encloses(brute, pts, "brute");
+      EXPECT_NEAR(exact.radius, brute.radius, 1e-5f * brute.radius + 1e-37f);
+    }
+    expect_encloses(aabb_of_points(pts), pts, "aabb");
+  }
+  // Single point and duplicates: radius 0 exactly.
+  EXPECT_EQ(exact_sphere(Points{{1, 2, 3}}).radius, 0.0f);
+  EXPECT_EQ(exact_sphere(Points(10, glm::vec3(4, 4, 4))).radius, 0.0f);
+}
+
+TEST(Spheres, RandomSetsTightnessOrder) {
+  for (std::uint64_t seed = 1; seed <= 20; ++seed) {
+    const Points p = seed % 2 ? random_cube(2000, seed) : random_on_sphere(2000, seed, 3.0f);
+    const Sphere exact = exact_sphere(p), ritter = ritter_sphere(p), refined = refined_sphere(p, 16, seed);
+    expect_encloses(exact, p, "exact");
+    expect_encloses(ritter, p, "ritter");
+    expect_encloses(refined, p, "refined");
+    EXPECT_LE(exact.radius, refined.radius * (1 + 1e-6f));
+    EXPECT_LE(exact.radius, ritter.radius * (1 + 1e-6f));
+    EXPECT_LE(refined.radius, exact.radius * 1.05f) << "refinement within 5% on random sets";
+  }
+}
+
+TEST(Spheres, RefinedIsDeterministicPerSeed) {
+  const Points p = random_cube(5000, 3);
+  EXPECT_EQ(refined_sphere(p, 8, 42), refined_sphere(p, 8, 42));
+}
+
+TEST(Spheres, BadInputIsAnError) {
+  EXPECT_THROW(exact_sphere(Points{}), BadPoints);
+  const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+  try {
+    ritter_sphere(Points{{0, 0, 0}, {1, nan, 0}});
+    FAIL();
+  } catch (const BadPoints& e) {
+    EXPECT_STREQ(e.what(), "point 1 has a NaN coordinate");
+  }
+  EXPECT_THROW(refined_sphere(Points{{inf, 0, 0}}), BadPoints);
+  EXPECT_THROW(aabb_of_points(Points{{0, 0, -inf}}), BadPoints);
+  EXPECT_THROW(convex_hull(Points{}), BadPoints);
+}
+
+// Reference data from the miniball test suite (../shared/refdata), when present.
+Points read_miniball(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  std::size_t n = 0, d = 0;
+  in >> n >> d;
+  Points p(n);
+  for (auto& q : p) in >> q.x >> q.y >> q.z;
+  return p;
+}
+
+TEST(Spheres, MiniballReferenceSets) {
+  const std::filesystem::path dir = std::filesystem::path(CULLPIPE_SHARED_DIR) / "refdata" / "minsphere";
+  if (!std::filesystem::exists(dir)) GTEST_SKIP() << dir << " not present";
+  for (const char* name : {"miniball_random_points_3.data", "miniball_almost_cospherical_points_3.data",
+                           "miniball_longitude_latitude_model_3.data"}) {
+    SCOPED_TRACE(name);
+    const Points p = read_miniball(dir / name);
+    ASSERT_EQ(p.size(), 10000u);
+    const Sphere exact = exact_sphere(p);
+    expect_encloses(exact, p, "exact");
+    EXPECT_LE(exact.radius, refined_sphere(p).radius * (1 + 1e-6f));
+    if (std::string(name).find("cospherical") != std::string::npos || std::string(name).find("longitude") != std::string::npos) {
+      EXPECT_NEAR(exact.radius, 1.0f, 1e-4f);  // points on or very near the unit sphere
+    }
+  }
+}
+
+// ---- convex hull ----------------------------------------------------------------------------
+
+// Checks a polyhedral hull of `input`: topology, adjacency, and that every point of `check`
+// (default: all of `input`) is inside every face plane within the hull's tolerance.
+void expect_valid_polyhedron(const ConvexHull& h, const Points& input, const Points* check = nullptr) {
+  if (!check) check = &input;
+  ASSERT_EQ(h.dimension, ConvexHull::Dimension::Polyhedron);
+  const std::size_t v = h.vertices.size(), f = h.faces.size();
+  ASSERT_EQ(f % 2, 0u);
+  EXPECT_EQ(v - f * 3 / 2 + f, 2u) << "Euler characteristic of a closed convex surface";
+  for (std::size_t i = 0; i < v; ++i) ASSERT_EQ(h.vertices[i], input[h.input_index[i]]);
+  // Adjacency is reciprocal; faces are outward; every input point is inside within tolerance.
+  for (std::size_t fi = 0; fi < f; ++fi) {
+    const auto& t = h.faces[fi];
+    const glm::dvec3 a(h.vertices[t[0]]), b(h.vertices[t[1]]), c(h.vertices[t[2]]);
+    const glm::dvec3 n = glm::cross(b - a, c - a);
+    const double len = glm::length(n);
+    for (int e = 0; e < 3; ++e) {
+      const auto& nb = h.faces[h.face_neighbours[fi][std::size_t(e)]];
+      const std::uint32_t from = t[std::size_t(e)], to = t[std::size_t((e + 1) % 3)];
+      bool found = false;
+      for (int k = 0; k < 3; ++k) found |= nb[std::size_t(k)] == to && nb[std::size_t((k + 1) % 3)] == from;
+      ASSERT_TRUE(found) << "face " << fi << " edge " << e;
+    }
+    if (len == 0) continue;
+    for (const glm::vec3& p : *check) ASSERT_LE(glm::dot(n / len, glm::dvec3(p) - a), h.tolerance + 1e-300);
+  }
+  for (std::size_t i = 0; i < v; ++i) {
+    ASSERT_FALSE(h.vertex_neighbours[i].empty());
+    for (std::uint32_t w : h.vertex_neighbours[i])
+      ASSERT_TRUE(std::binary_search(h.vertex_neighbours[w].begin(), h.vertex_neighbours[w].end(), std::uint32_t(i)));
+  }
+}
+
+TEST(ConvexHull, CubeWithInteriorPoints) {
+  Points p = random_cube(500, 1, 0.9f);
+  for (int i = 0; i < 8; ++i) p.push_back({i & 1 ? 1.f : -1.f, i & 2 ? 1.f : -1.f, i & 4 ? 1.f : -1.f});
+  const ConvexHull h = convex_hull(p);
+  expect_valid_polyhedron(h, p);
+  EXPECT_EQ(h.vertices.size(), 8u);
+  EXPECT_EQ(h.faces.size(), 12u);
+  for (const auto& nb : h.vertex_neighbours) EXPECT_GE(nb.size(), 3u);
+}
+
+TEST(ConvexHull, RandomAndSphereSets) {
+  for (std::uint64_t seed = 1; seed <= 5; ++seed) {
+    const Points cube = random_cube(5000, seed);
+    expect_valid_polyhedron(convex_hull(cube), cube);
+    const Points sphere = random_on_sphere(3000, seed);
+    const ConvexHull h = convex_hull(sphere);
+    expect_valid_polyhedron(h, sphere);
+    EXPECT_EQ(h.vertices.size(), sphere.size()) << "every point on a sphere is a hull vertex";
+  }
+}
+
+TEST(ConvexHull, DegenerateSetsGiveLowerDimensionalHulls) {
+  const auto sets = awkward_sets();
+  auto find = [&](const std::string& name) {
+    for (const auto& [n, p] : sets)
+      if (n == name) return p;
+    return Points{};
+  };
+  EXPECT_EQ(convex_hull(find("one point")).dimension, ConvexHull::Dimension::Point);
+  const ConvexHull dup = convex_hull(find("duplicates"));
+  EXPECT_EQ(dup.dimension, ConvexHull::Dimension::Point);
+  EXPECT_EQ(dup.vertices.size(), 1u);
+  const ConvexHull two = convex_hull(find("two points"));
+  EXPECT_EQ(two.dimension, ConvexHull::Dimension::Segment);
+  const ConvexHull line = convex_hull(find("collinear"));
+  ASSERT_EQ(line.dimension, ConvexHull::Dimension::Segment);
+  const std::set<float> ends = {line.vertices[0].x, line.vertices[1].x};
+  EXPECT_EQ(ends, (std::set<float>{1.0f, 4.0f}));  // i % 7 in 0..6 times 0.5 from x = 1
+  const ConvexHull plane = convex_hull(find("coplanar"));
+  ASSERT_EQ(plane.dimension, ConvexHull::Dimension::Polygon);
+  EXPECT_GE(plane.vertices.size(), 3u);
+  EXPECT_NEAR(std::abs(glm::dot(plane.normal, glm::vec3(0, -0.8f, 0.6f))), 1.0f, 1e-5f);
+  // A square with interior and edge points: exactly its 4 corners, counter-clockwise.
+  Points square = {{0, 0, 0}, {2, 0, 0}, {2, 2, 0}, {0, 2, 0}, {1, 1, 0}, {1, 0, 0}, {0.5f, 1.5f, 0}};
+  const ConvexHull sq = convex_hull(square);
+  ASSERT_EQ(sq.dimension, ConvexHull::Dimension::Polygon);
+  EXPECT_EQ(sq.vertices.size(), 4u);
+  for (std::size_t i = 0; i < 4; ++i) {
+    const glm::vec3 e1 = sq.vertices[(i + 1) % 4] - sq.vertices[i], e2 = sq.vertices[(i + 2) % 4] - sq.vertices[(i + 1) % 4];
+    EXPECT_GT(glm::dot(glm::cross(e1, e2), sq.normal), 0.0f) << "counter-clockwise about the normal";
+  }
+  // Every other awkward set still gives a valid hull.
+  for (const auto& [name, pts] : sets) {
+    SCOPED_TRACE(name);
+    const ConvexHull h = convex_hull(pts);
+    if (h.dimension == ConvexHull::Dimension::Polyhedron) expect_valid_polyhedron(h, pts);
+  }
+}
+
+TEST(ConvexHull, MillionPoints) {
+  const Points p = random_cube(1000000, 11);
+  const ConvexHull h = convex_hull(p);
+  ASSERT_EQ(h.dimension, ConvexHull::Dimension::Polyhedron);
+  // Check closure and enclosure on a sample (the full check is O(n * faces)).
+  Points sample(p.begin(), p.begin() + 2000);
+  for (std::uint32_t i : h.input_index) sample.push_back(p[i]);
+  expect_valid_polyhedron(h, p, &sample);
+}
+
+// ---- AABB updates ---------------------------------------------------------------------------
+
+TEST(AabbUpdate, EveryMethodEnclosesAndHullMethodsAreExact) {
+  const Points p = random_on_sphere(3000, 21, 2.0f);
+  Points squashed = p;
+  for (auto& q : squashed) q *= glm::vec3(3.0f, 0.5f, 1.0f);
+  AabbTracker tracker(squashed);
+  double loose_volume_ratio = 0;
+  int frames = 0;
+  for (float angle = 0.0f; angle < 6.3f; angle += 0.05f, ++frames) {
+    glm::mat4 m = glm::rotate(glm::mat4(1.0f), angle, glm::normalize(glm::vec3(1, 2, 3)));
+    m[3] = glm::vec4(10.0f, -5.0f, 2.0f, 1.0f);
+    Points world;
+    for (const auto& q : squashed) world.push_back(glm::vec3(m * glm::vec4(q, 1.0f)));
+    const Aabb full = tracker.update(m, AabbUpdate::Recompute);
+    const Aabb hull = tracker.update(m, AabbUpdate::HullRecompute);
+    const Aabb climb = tracker.update(m, AabbUpdate::HillClimb);
+    const Aabb box = tracker.update(m, AabbUpdate::TransformBox);
+    // Enclosure of the exactly transformed points (double), with float rounding slack.
+    for (const Aabb* b : {&full, &hull, &climb, &box}) {
+      for (const auto& q : squashed) {
+        const glm::dvec3 w = glm::dvec3(glm::dmat4(m) * glm::dvec4(glm::dvec3(q), 1.0));
+        for (int k = 0; k < 3; ++k) {
+          ASSERT_LE(double(b->min[k]), w[k]);
+          ASSERT_GE(double(b->max[k]), w[k]);
+        }
+      }
+    }
+    for (int k = 0; k < 3; ++k) {  // hull-based methods are as tight as the full recompute
+      EXPECT_NEAR(hull.min[k], full.min[k], 1e-5f);
+      EXPECT_NEAR(hull.max[k], full.max[k], 1e-5f);
+      EXPECT_NEAR(climb.min[k], full.min[k], 1e-5f);
+      EXPECT_NEAR(climb.max[k], full.max[k], 1e-5f);
+    }
+    auto volume = [](const Aabb& b) { return double(b.extent().x) * b.extent().y * b.extent().z; };
+    loose_volume_ratio += volume(box) / volume(full);
+    EXPECT_LT(tracker.last_climb_steps(), 200u) << "small rotations need short climbs";
+  }
+  EXPECT_GT(loose_volume_ratio / frames, 1.05) << "the transformed box is looser than the recompute";
+}
+
+TEST(AabbUpdate, DegenerateObjects) {
+  for (const auto& [name, pts] : awkward_sets()) {
+    SCOPED_TRACE(name);
+    AabbTracker tracker(pts);
+    const glm::mat4 m = glm::rotate(glm::mat4(1.0f), 0.7f, glm::vec3(0, 1, 0));
+    Points world;
+    for (const auto& q : pts) world.push_back(glm::vec3(m * glm::vec4(q, 1.0f)));
+    for (AabbUpdate method : {AabbUpdate::Recompute, AabbUpdate::HullRecompute, AabbUpdate::TransformBox, AabbUpdate::HillClimb}) {
+      const Aabb b = tracker.update(m, method);
+      for (const auto& q : pts) {
+        const glm::dvec3 w = glm::dvec3(glm::dmat4(m) * glm::dvec4(glm::dvec3(q), 1.0));
+        for (int k = 0; k < 3; ++k) {
+          ASSERT_LE(double(b.min[k]), w[k] + 1e-6 * std::abs(w[k])) << to_string(method);
+          ASSERT_GE(double(b.max[k]), w[k] - 1e-6 * std::abs(w[k])) << to_string(method);
+        }
+      }
+    }
+  }
+}
+
+}  // namespace
+}  // namespace cullpipe::bounds
