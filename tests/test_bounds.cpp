@@ -10,8 +10,10 @@
 
 #include "bounds/aabb_update.hpp"
 #include "bounds/convex_hull.hpp"
+#include "bounds/obb_fit.hpp"
 #include "bounds/points.hpp"
 #include "bounds/sphere_fit.hpp"
+#include "geom/validate.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe::bounds {
@@ -357,6 +359,100 @@ TEST(AabbUpdate, DegenerateObjects) {
         }
       }
     }
+  }
+}
+
+// ---- oriented boxes -------------------------------------------------------------------------
+
+void expect_encloses(const Obb& b, const Points& pts, const char* what) {
+  ASSERT_EQ(invalid_reason(b), "") << what;
+  double scale = 0;
+  for (const auto& p : pts) scale = std::max(scale, double(glm::length(p)));
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    const glm::dvec3 d = glm::dvec3(pts[i]) - glm::dvec3(b.center);
+    for (int k = 0; k < 3; ++k) {
+      // Float axes are orthonormal to ~1e-7, and the test's own float points carry rounding
+      // of their magnitude: allow a few float steps of both.
+      const double slack = 1e-6 * (glm::length(d) + glm::length(pts[i]) + scale * 1e-3) + 1e-300;
+      ASSERT_LE(std::abs(glm::dot(d, glm::dvec3(b.basis[k]))), double(b.half_extents[k]) + slack)
+          << what << ": point " << i << " axis " << k;
+    }
+  }
+}
+
+using ObbBuilder = Obb (*)(std::span<const glm::vec3>);
+const std::pair<const char*, ObbBuilder> kObbBuilders[] = {{"pca", pca_obb}, {"dito", dito_obb}, {"hull-face", hull_face_obb}};
+
+TEST(Obbs, EveryBuilderEnclosesRandomAndAwkwardSets) {
+  auto sets = awkward_sets();
+  sets.push_back({"random cube", random_cube(3000, 31)});
+  Points slab = random_cube(2000, 32);
+  const glm::mat3 rot = test::Rng{33}.rotation();
+  for (auto& p : slab) p = rot * (p * glm::vec3(5.0f, 1.0f, 0.2f));
+  sets.push_back({"rotated slab", slab});
+  for (const auto& [name, pts] : sets) {
+    SCOPED_TRACE(name);
+    for (const auto& [builder, fn] : kObbBuilders) expect_encloses(fn(pts), pts, builder);
+  }
+}
+
+TEST(Obbs, RotatedCubeIsFoundExactlyByTheHullFaceMethod) {
+  const glm::mat3 rot = glm::mat3(glm::rotate(glm::mat4(1.0f), 0.5235988f, glm::normalize(glm::vec3(1, 1, 0))));
+  Points cube;
+  for (int i = 0; i < 8; ++i) cube.push_back(rot * glm::vec3(i & 1 ? 1.f : -1.f, i & 2 ? 2.f : -2.f, i & 4 ? 3.f : -3.f));
+  Points with_inside = cube;
+  for (const auto& p : random_cube(200, 34, 0.9f)) with_inside.push_back(rot * (p * glm::vec3(1, 2, 3)));
+  const Obb b = hull_face_obb(with_inside);
+  EXPECT_NEAR(volume(b), 8.0 * 1 * 2 * 3, 1e-3);
+  EXPECT_NEAR(volume(dito_obb(with_inside)), 48.0, 1e-3) << "DiTO finds the frame of a box";
+  const Obb aabb = fit_box(with_inside, glm::mat3(1.0f));
+  EXPECT_GT(volume(aabb), 60.0);
+}
+
+TEST(Obbs, TighterThanTheAabbOnRotatedShapes) {
+  for (std::uint64_t seed = 40; seed < 45; ++seed) {
+    test::Rng rng{seed};
+    const glm::mat3 rot = rng.rotation();
+    Points p = random_cube(1000, seed);
+    for (auto& q : p) q = rot * (q * glm::vec3(4.0f, 1.0f, 0.5f));
+    const double aabb = volume(fit_box(p, glm::mat3(1.0f)));
+    const double face = volume(hull_face_obb(p)), pca = volume(pca_obb(p)), dito = volume(dito_obb(p));
+    EXPECT_LT(face, aabb);
+    EXPECT_LT(pca, aabb * 1.01);
+    EXPECT_LE(dito, aabb);
+    EXPECT_LT(face, 4 * 2 * 1 * 8 * 1.05) << "within 5% of the generating box";
+  }
+}
+
+TEST(Obbs, TransformKeepsEnclosing) {
+  const Points p = random_on_sphere(500, 50);
+  Points stretched;
+  for (const auto& q : p) stretched.push_back(q * glm::vec3(2.0f, 0.5f, 1.0f));
+  const Obb b = dito_obb(stretched);
+  test::Rng rng{51};
+  for (int i = 0; i < 50; ++i) {
+    glm::mat4 m = glm::mat4(rng.rotation());
+    if (i % 2) m = glm::scale(m, rng.vec3(0.5f, 2.0f));
+    m[3] = glm::vec4(rng.vec3(-10, 10), 1.0f);
+    Points world;
+    for (const auto& q : stretched) world.push_back(glm::vec3(m * glm::vec4(q, 1.0f)));
+    expect_encloses(transform_obb(b, m), world, "transformed");
+  }
+}
+
+TEST(Obbs, CgalTetrahedraWhenPresent) {
+  const std::filesystem::path dir = std::filesystem::path(CULLPIPE_SHARED_DIR) / "refdata" / "minobb";
+  if (!std::filesystem::exists(dir)) GTEST_SKIP() << dir << " not present";
+  for (const char* name : {"cgal_long_tetrahedron.off", "cgal_reference_tetrahedron.off"}) {
+    std::ifstream in(dir / name);
+    std::string magic;
+    std::size_t nv = 0, nf = 0, ne = 0;
+    in >> magic >> nv >> nf >> ne;
+    Points p(nv);
+    for (auto& q : p) in >> q.x >> q.y >> q.z;
+    ASSERT_EQ(p.size(), 4u) << name;
+    for (const auto& [builder, fn] : kObbBuilders) expect_encloses(fn(p), p, builder);
+    EXPECT_LE(volume(hull_face_obb(p)), volume(fit_box(p, glm::mat3(1.0f))) * (1 + 1e-6)) << name;
   }
 }
 
