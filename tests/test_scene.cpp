@@ -3,6 +3,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <glm/ext/matrix_transform.hpp>
 
 #include "cull/reference.hpp"
 #include "geom/validate.hpp"
@@ -72,23 +73,63 @@ TEST(Camera, PathCirclesTheSceneAndKeepsTheLens) {
   EXPECT_EQ(camera_path(base, Aabb{}, 1).front(), base);
 }
 
-TEST(World, VolumesEncloseTheTransformedBox) {
-  const Scene s = generate_scene(SceneKind::Uniform, 300, 4);
+// Enclosure with no slack: every corner transformed exactly (in double) is inside each
+// world volume, also measured in double.
+void expect_world_volumes_enclose(const Scene& s) {
   const auto aabbs = world_aabbs(s);
   const auto obbs = world_obbs(s);
   const auto spheres = world_spheres(s);
   for (std::size_t i = 0; i < s.objects.size(); ++i) {
-    EXPECT_EQ(invalid_reason(obbs[i]), "");
+    ASSERT_EQ(invalid_reason(obbs[i]), "");
+    ASSERT_EQ(invalid_reason(spheres[i]), "");
+    const glm::dmat4 m(s.objects[i].world);
     for (const glm::vec3& c : s.objects[i].local_bounds.corners()) {
-      const glm::vec3 p = glm::vec3(s.objects[i].world * glm::vec4(c, 1.0f));
+      const glm::dvec3 p = glm::dvec3(m * glm::dvec4(glm::dvec3(c), 1.0));
       for (int k = 0; k < 3; ++k) {
-        EXPECT_LE(aabbs[i].min[k], p[k] + 1e-4f);
-        EXPECT_GE(aabbs[i].max[k], p[k] - 1e-4f);
-        EXPECT_LE(std::abs(glm::dot(p - obbs[i].center, obbs[i].basis[k])), obbs[i].half_extents[k] + 1e-4f);
+        ASSERT_LE(double(aabbs[i].min[k]), p[k]) << "object " << i;
+        ASSERT_GE(double(aabbs[i].max[k]), p[k]) << "object " << i;
+        ASSERT_LE(std::abs(glm::dot(p - glm::dvec3(obbs[i].center), glm::dvec3(obbs[i].basis[k]))),
+                  double(obbs[i].half_extents[k]))
+            << "object " << i;
       }
-      EXPECT_LE(glm::length(p - spheres[i].center), spheres[i].radius + 1e-4f);
+      ASSERT_LE(glm::length(p - glm::dvec3(spheres[i].center)), double(spheres[i].radius)) << "object " << i;
     }
   }
+}
+
+TEST(World, VolumesEncloseTheTransformedBoxExactly) {
+  for (SceneKind kind : {SceneKind::Uniform, SceneKind::Clustered, SceneKind::City}) {
+    Scene s = generate_scene(kind, 3000, 4);
+    // Add translation far from the origin and non-uniform scale.
+    for (std::size_t i = 0; i < s.objects.size(); i += 3) {
+      s.objects[i].world = glm::scale(s.objects[i].world, glm::vec3(0.3f, 2.0f, 1.7f));
+      s.objects[i].world[3] += glm::vec4(1e4f, -3e3f, 7e3f, 0.0f);
+    }
+    expect_world_volumes_enclose(s);
+  }
+}
+
+TEST(World, HugeScaleObjectsGetValidVolumes) {
+  // A scale whose squared column length overflows float: volumes are built in double.
+  Scene s;
+  SceneObject o;
+  o.local_bounds = {{-0.5f, -0.5f, -0.5f}, {0.5f, 0.5f, 0.5f}};
+  o.world = glm::scale(glm::mat4(1.0f), glm::vec3(1e20f));
+  o.world[3] = glm::vec4(2.5e20f, 0.0f, -1.5e20f, 1.0f);
+  s.objects.push_back(o);
+  EXPECT_NO_THROW(validate(s, "huge"));
+  expect_world_volumes_enclose(s);
+  const Obb b = world_obbs(s)[0];
+  EXPECT_NEAR(b.half_extents.x, 0.5e20f, 1e14f);
+  // Seen from the origin looking down -z, the object crosses the view: never OUTSIDE.
+  Camera cam;
+  cam.eye = glm::vec3(0);
+  cam.target = glm::vec3(0, 0, -1);
+  cam.far_plane = 1e30f;
+  const Frustum f = Frustum::from_view_proj(cam.view_proj());
+  EXPECT_NE(reference::classify(b, f), Classification::Outside);
+  EXPECT_NE(reference::classify(world_aabbs(s)[0], f), Classification::Outside);
+  EXPECT_NE(reference::classify(world_spheres(s)[0], f), Classification::Outside);
 }
 
 TEST(SceneIo, RoundTripsBitExact) {
@@ -125,7 +166,7 @@ TEST(SceneIo, ErrorsNameTheFileAndElement) {
             "bad.json: objects[0]: world transform is singular");
   EXPECT_EQ(error_of(R"({"format":"cullpipe-scene","version":1,"objects":[{"min":[0,0,0],"max":[1,1,1],
               "world":[1e38,0,0,0, 0,1,0,0, 0,0,1,0, 3e38,0,0,1]}]})"),
-            "bad.json: objects[0]: world-space bounds: min.x is infinite");
+            "bad.json: objects[0]: world-space bounds: max.x is infinite");
   EXPECT_EQ(error_of(R"({"format":"cullpipe-scene","version":1,"camera":{"eye":[0,0,1],"target":[0,0,0],"near":-1},"objects":[]})"),
             "bad.json: camera.near: must be positive");
   EXPECT_THROW(load_scene("/nonexistent/scene.json"), InputError);

@@ -5,22 +5,12 @@
 #include <limits>
 
 #include "bounds/sphere_fit.hpp"
+#include "geom/rounding.hpp"
 
 namespace cullpipe::bounds {
 namespace {
 
 using dvec3 = glm::dvec3;
-
-float round_down(double v) {
-  float f = float(v);
-  if (double(f) > v) f = std::nextafter(f, -std::numeric_limits<float>::infinity());
-  return f;
-}
-float round_up(double v) {
-  float f = float(v);
-  if (double(f) < v) f = std::nextafter(f, std::numeric_limits<float>::infinity());
-  return f;
-}
 
 Aabb round_outward(const dvec3& lo, const dvec3& hi) {
   return {{round_down(lo.x), round_down(lo.y), round_down(lo.z)}, {round_up(hi.x), round_up(hi.y), round_up(hi.z)}};
@@ -76,16 +66,7 @@ Aabb AabbTracker::update(const glm::mat4& world, AabbUpdate method) {
   switch (method) {
     case AabbUpdate::Recompute: return transform_points(points_, world, 0.0);
     case AabbUpdate::HullRecompute: return transform_points(hull_.vertices, world, hull_.tolerance);
-    case AabbUpdate::TransformBox: {
-      // Arvo in double: centre transformed, half extent i = sum_j |M[j][i]| h_j.
-      const dvec3 c = (dvec3(local_.min) + dvec3(local_.max)) * 0.5, h = (dvec3(local_.max) - dvec3(local_.min)) * 0.5;
-      const glm::dmat4 dm(world);
-      const dvec3 wc = dvec3(dm * glm::dvec4(c, 1.0));
-      dvec3 wh(0.0);
-      for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) wh[i] += std::abs(dm[j][i]) * h[j];
-      return round_outward(wc - wh, wc + wh);
-    }
+    case AabbUpdate::TransformBox: return local_.transformed(world);
     case AabbUpdate::HillClimb: break;
   }
   // Hill climbing: for world axis i, maximise (and minimise) row_i(M) . p over hull vertices by

@@ -9,18 +9,13 @@
 
 #include "bounds/convex_hull.hpp"
 #include "bounds/points.hpp"
+#include "geom/rounding.hpp"
 
 namespace cullpipe::bounds {
 namespace {
 
 using dvec3 = glm::dvec3;
 using dmat3 = glm::dmat3;
-
-float round_up(double v) {
-  float f = float(v);
-  if (double(f) < v) f = std::nextafter(f, std::numeric_limits<float>::infinity());
-  return f;
-}
 
 // Right-handed orthonormal float basis from a double frame whose first column is kept.
 glm::mat3 to_basis(dvec3 u, dvec3 v) {
@@ -332,19 +327,11 @@ Obb hull_face_obb(std::span<const glm::vec3> points) {
 }
 
 Obb transform_obb(const Obb& b, const glm::mat4& m) {
-  // Transform the 8 corners in double; new axes: the transformed box axes, orthonormalised
-  // (exact for rotation and uniform scale); then fit and round outward.
-  const glm::dmat4 dm(m);
-  std::array<dvec3, 8> corners;
-  for (int i = 0; i < 8; ++i) {
-    dvec3 p(b.center);
-    for (int k = 0; k < 3; ++k) p += dvec3(b.basis[k]) * (double((i >> k) & 1 ? b.half_extents[k] : -b.half_extents[k]));
-    corners[std::size_t(i)] = dvec3(dm * glm::dvec4(p, 1.0));
-  }
-  const glm::dmat3 linear(dm);
-  dvec3 u = linear * dvec3(b.basis[0]), v = linear * dvec3(b.basis[1]);
-  if (glm::length(glm::cross(u, v)) <= 1e-300) return fit_box_impl(std::span<const dvec3>(corners), glm::mat3(1.0f));
-  return fit_box_impl(std::span<const dvec3>(corners), to_basis(u, v));
+  // The box is the cube [-h, h] in its own frame: compose frame and transform in double.
+  glm::dmat4 frame(1.0);
+  for (int k = 0; k < 3; ++k) frame[k] = glm::dvec4(dvec3(b.basis[k]), 0.0);
+  frame[3] = glm::dvec4(dvec3(b.center), 1.0);
+  return Obb::from_transformed_aabb(Aabb{-b.half_extents, b.half_extents}, glm::dmat4(m) * frame);
 }
 
 }  // namespace cullpipe::bounds

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "bounds/points.hpp"
+#include "geom/rounding.hpp"
 
 namespace cullpipe::bounds {
 
@@ -128,9 +129,7 @@ Sphere enclosing_sphere(const dvec3& center, std::span<const glm::vec3> points) 
     const dvec3 d = dvec3(p) - c;
     r2 = std::max(r2, glm::dot(d, d));
   }
-  const double r = std::sqrt(r2);
-  s.radius = float(r);
-  if (double(s.radius) < r) s.radius = std::nextafter(s.radius, std::numeric_limits<float>::infinity());
+  s.radius = round_up(std::sqrt(r2));
   return s;
 }
 

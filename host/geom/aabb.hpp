@@ -26,7 +26,9 @@ struct Aabb {
   }
 
   /// The AABB of this box after an affine transform (Arvo 1990: the new half extent along
-  /// axis i is sum_j |M[j][i]| * h_j). Encloses the transformed box; tight for it.
+  /// axis i is sum_j |M[j][i]| * h_j), evaluated in double and rounded outward to float, so it
+  /// encloses the exactly transformed box and is the tightest float box doing so (up to the
+  /// double rounding).
   Aabb transformed(const glm::mat4& m) const;
 
   bool operator==(const Aabb&) const = default;

@@ -2,6 +2,7 @@
 #include <array>
 #include <glm/mat3x3.hpp>
 #include <glm/mat4x4.hpp>
+#include <glm/ext/matrix_double4x4.hpp>
 #include <glm/vec3.hpp>
 
 #include "geom/aabb.hpp"
@@ -29,11 +30,12 @@ struct Obb {
     return c;
   }
 
-  /// The box `local` carried by the affine transform `m`, as an OBB. With orthogonal matrix
-  /// columns (rotation, scale, translation) this is exact up to rounding; with shear the
-  /// axes are Gram-Schmidt orthonormalised and extents taken from the 8 transformed corners,
-  /// so the result still encloses the transformed box.
+  /// The box `local` carried by the affine transform `m`, as an OBB: axes are the matrix
+  /// columns orthonormalised in double (Gram-Schmidt), extents the 8 corners transformed in
+  /// double and projected on the stored float axes, rounded up. Tight for rotation, scale and
+  /// translation; with shear still enclosing. Overflow shows as infinite extents.
   static Obb from_transformed_aabb(const Aabb& local, const glm::mat4& m);
+  static Obb from_transformed_aabb(const Aabb& local, const glm::dmat4& m);
 
   bool operator==(const Obb&) const = default;
 };

@@ -5,51 +5,61 @@
 
 #include "geom/aabb.hpp"
 #include "geom/obb.hpp"
+#include "geom/rounding.hpp"
 #include "geom/validate.hpp"
 
 namespace cullpipe {
 
 Aabb Aabb::transformed(const glm::mat4& m) const {
-  const glm::vec3 c = center();
-  const glm::vec3 h = half_extent();
-  const glm::vec3 new_c = glm::vec3(m * glm::vec4(c, 1.0f));
-  glm::vec3 new_h(0.0f);
+  // Arvo in double, rounded outward: encloses the exactly transformed corners.
+  const glm::dvec3 c = (glm::dvec3(min) + glm::dvec3(max)) * 0.5, h = (glm::dvec3(max) - glm::dvec3(min)) * 0.5;
+  const glm::dmat4 dm(m);
+  const glm::dvec3 new_c = glm::dvec3(dm * glm::dvec4(c, 1.0));
+  glm::dvec3 new_h(0.0);
   for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) new_h[i] += std::abs(m[j][i]) * h[j];
-  return {new_c - new_h, new_c + new_h};
+    for (int j = 0; j < 3; ++j) new_h[i] += std::abs(dm[j][i]) * h[j];
+  const glm::dvec3 lo = new_c - new_h, hi = new_c + new_h;
+  return {{round_down(lo.x), round_down(lo.y), round_down(lo.z)}, {round_up(hi.x), round_up(hi.y), round_up(hi.z)}};
 }
 
 namespace {
 
-// A unit vector orthogonal to both a and b (assumed unit or zero), completing a basis.
-glm::vec3 any_orthogonal(const glm::vec3& a) {
-  const glm::vec3 helper = std::abs(a.x) < 0.9f ? glm::vec3(1, 0, 0) : glm::vec3(0, 1, 0);
+// A unit vector orthogonal to unit a.
+glm::dvec3 any_orthogonal(const glm::dvec3& a) {
+  const glm::dvec3 helper = std::abs(a.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0);
   return glm::normalize(glm::cross(a, helper));
 }
 
-// Gram-Schmidt on three vectors; zero or dependent vectors are replaced so the result is
-// always a right-handed orthonormal basis.
-glm::mat3 orthonormalise(glm::vec3 u, glm::vec3 v, glm::vec3 w) {
-  const float eps = 1e-20f;
-  u = glm::dot(u, u) > eps ? glm::normalize(u) : glm::vec3(1, 0, 0);
+// Gram-Schmidt in double on three vectors; zero or dependent vectors are replaced, so the
+// result is always an orthonormal basis. The third axis points to the side of w, so a
+// mirrored transform gives a left-handed basis (its axes still span the same box).
+glm::dmat3 orthonormalise(glm::dvec3 u, glm::dvec3 v, const glm::dvec3& w) {
+  u = glm::dot(u, u) > 0.0 ? glm::normalize(u) : glm::dvec3(1, 0, 0);
   v = v - glm::dot(v, u) * u;
-  v = glm::dot(v, v) > eps ? glm::normalize(v) : any_orthogonal(u);
-  glm::vec3 n = glm::cross(u, v);
-  // Keep w's orientation when it is usable, so mirrored transforms keep their axis order.
-  if (glm::dot(w, n) < 0.0f) n = -n;
-  return glm::mat3(u, v, n);
+  v = glm::dot(v, v) > 1e-24 * glm::dot(u, u) ? glm::normalize(v) : any_orthogonal(u);
+  glm::dvec3 n = glm::cross(u, v);
+  if (glm::dot(w, n) < 0.0) n = -n;
+  return glm::dmat3(u, v, n);
 }
 
 }  // namespace
 
-Obb Obb::from_transformed_aabb(const Aabb& local, const glm::mat4& m) {
+Obb Obb::from_transformed_aabb(const Aabb& local, const glm::mat4& m) { return from_transformed_aabb(local, glm::dmat4(m)); }
+
+Obb Obb::from_transformed_aabb(const Aabb& local, const glm::dmat4& m) {
   Obb b;
-  b.center = glm::vec3(m * glm::vec4(local.center(), 1.0f));
-  b.basis = orthonormalise(glm::vec3(m[0]), glm::vec3(m[1]), glm::vec3(m[2]));
+  b.center = glm::vec3(m * glm::dvec4((glm::dvec3(local.min) + glm::dvec3(local.max)) * 0.5, 1.0));
+  const glm::dmat3 axes = orthonormalise(glm::dvec3(m[0]), glm::dvec3(m[1]), glm::dvec3(m[2]));
+  b.basis = glm::mat3(axes);
+  // Extents about the stored float centre along the stored float axes, from the corners
+  // transformed in double, rounded up: the box encloses the transformed box.
+  const glm::dvec3 c(b.center);
+  glm::dvec3 ext(0.0);
   for (const glm::vec3& corner : local.corners()) {
-    const glm::vec3 p = glm::vec3(m * glm::vec4(corner, 1.0f)) - b.center;
-    for (int k = 0; k < 3; ++k) b.half_extents[k] = std::max(b.half_extents[k], std::abs(glm::dot(p, b.basis[k])));
+    const glm::dvec3 p = glm::dvec3(m * glm::dvec4(glm::dvec3(corner), 1.0)) - c;
+    for (int k = 0; k < 3; ++k) ext[k] = std::max(ext[k], std::abs(glm::dot(p, glm::dvec3(b.basis[k]))));
   }
+  for (int k = 0; k < 3; ++k) b.half_extents[k] = round_up(ext[k]);
   return b;
 }
 
@@ -68,7 +78,7 @@ Obb to_basis_radius(const ObbBaseAxes& b) {
   Obb out;
   glm::vec3 len;
   for (int k = 0; k < 3; ++k) len[k] = glm::length(b.edges[static_cast<std::size_t>(k)]);
-  out.basis = orthonormalise(b.edges[0], b.edges[1], b.edges[2]);
+  out.basis = glm::mat3(orthonormalise(glm::dvec3(b.edges[0]), glm::dvec3(b.edges[1]), glm::dvec3(b.edges[2])));
   out.half_extents = len * 0.5f;
   out.center = b.base + (b.edges[0] + b.edges[1] + b.edges[2]) * 0.5f;
   return out;

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <glm/geometric.hpp>
 
+#include "geom/rounding.hpp"
 #include "geom/validate.hpp"
 
 namespace cullpipe {
@@ -37,10 +38,16 @@ std::vector<Sphere> world_spheres(const Scene& scene) {
   std::vector<Sphere> out;
   out.reserve(scene.objects.size());
   for (const SceneObject& o : scene.objects) {
+    // In double: centre = transformed box centre; radius = farthest transformed corner,
+    // measured from the stored float centre and rounded up, so the sphere encloses the box.
+    const glm::dmat4 m(o.world);
+    const glm::dvec3 local_c = (glm::dvec3(o.local_bounds.min) + glm::dvec3(o.local_bounds.max)) * 0.5;
     Sphere s;
-    s.center = glm::vec3(o.world * glm::vec4(o.local_bounds.center(), 1.0f));
+    s.center = glm::vec3(m * glm::dvec4(local_c, 1.0));
+    double r = 0.0;
     for (const glm::vec3& corner : o.local_bounds.corners())
-      s.radius = std::max(s.radius, glm::length(glm::vec3(o.world * glm::vec4(corner, 1.0f)) - s.center));
+      r = std::max(r, glm::length(glm::dvec3(m * glm::dvec4(glm::dvec3(corner), 1.0)) - glm::dvec3(s.center)));
+    s.radius = round_up(r);
     out.push_back(s);
   }
   return out;
@@ -61,6 +68,11 @@ void validate(const Scene& scene, const std::string& source) {
     // World-space volumes must be finite too (a huge scale can overflow float).
     const Aabb w = o.local_bounds.transformed(o.world);
     if (const std::string why = invalid_reason(w); !why.empty()) throw InputError(where + "world-space bounds: " + why);
+    const Obb ob = Obb::from_transformed_aabb(o.local_bounds, o.world);
+    if (const std::string why = invalid_reason(ob); !why.empty()) throw InputError(where + "world-space OBB: " + why);
+    // The world sphere's radius is at most the world AABB's diagonal.
+    if (!std::isfinite(float(glm::length(glm::dvec3(w.max) - glm::dvec3(w.min)))))
+      throw InputError(where + "world-space bounding sphere: radius is infinite");
   }
 }
 
