@@ -80,7 +80,7 @@ Cell measure(gpu::GpuCuller& culler, const std::vector<Volume>& volumes, const F
   }
   const gpu::CullResult checked = culler.cull(views);  // warm-up (pipeline compile) and check
   cell.agree = checked.views[0].classes == cpu && checked.views[0].counts == counts;
-  const gpu::ReadbackOptions counters_only{false, false};
+  const gpu::CullOptions counters_only{false, false, 0};
   for (int r = 0; r < repeats; ++r) {
     const gpu::CullResult g = culler.cull(views, counters_only);
     gpu_times.push_back(g.timings.gpu_ns);
@@ -110,11 +110,23 @@ int main(int argc, char** argv) {
     };
     if (a == "--sizes") {
       sizes.clear();
-      for (const std::string& s : split(value())) sizes.push_back(std::size_t(std::stod(s)));
+      for (const std::string& s : split(value())) {
+        char* end = nullptr;
+        const double n = std::strtod(s.c_str(), &end);
+        if (*end != '\0' || !(n >= 0) || n > 1e9) {
+          std::fprintf(stderr, "bench_flat: --sizes: '%s' is not a count\n", s.c_str());
+          return 2;
+        }
+        sizes.push_back(std::size_t(n));
+      }
+      if (sizes.empty()) {
+        std::fprintf(stderr, "bench_flat: --sizes needs at least one count\n");
+        return 2;
+      }
     } else if (a == "--bv") {
       kinds = split(value());
     } else if (a == "--repeats") {
-      repeats = std::stoi(value());
+      repeats = std::atoi(value().c_str());
     } else if (a == "--device") {
       device = value();
     } else if (a == "--csv") {

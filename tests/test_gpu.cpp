@@ -45,32 +45,23 @@ class Gpu : public ::testing::Test {
 };
 
 // Culls `volumes` against `frusta` on the GPU and the CPU; every classification, every
-// counter and the visible-id set must agree. Returns the CPU classes of view 0.
+// counter and the visible-id list must agree (cull/compare.hpp). Returns the CPU classes of
+// view 0.
 template <class Volume>
 std::vector<Classification> expect_agreement(gpu::GpuCuller& culler, const std::vector<Volume>& volumes,
-                                             const std::vector<Frustum>& frusta) {
+                                             const std::vector<Frustum>& frusta, const gpu::CullOptions& options = {}) {
   culler.upload(std::span<const Volume>(volumes));
-  const gpu::CullResult result = culler.cull(frusta);
+  const gpu::CullResult result = culler.cull(frusta, options);
   EXPECT_EQ(result.views.size(), frusta.size());
+  const std::size_t capacity = options.visible_capacity ? options.visible_capacity : volumes.size();
   std::vector<Classification> first;
   for (std::size_t v = 0; v < frusta.size() && v < result.views.size(); ++v) {
     std::vector<Classification> cpu(volumes.size());
     const reference::CullCounts counts = reference::classify_all(std::span<const Volume>(volumes), frusta[v], cpu);
     const gpu::ViewResult& g = result.views[v];
-    const std::size_t bad = first_mismatch(cpu, g.classes);
-    if (bad != npos) {
-      ADD_FAILURE() << count_mismatches(cpu, g.classes) << " mismatches in view " << v << "; first: "
-                    << (bad < volumes.size() && bad < g.classes.size()
-                            ? describe_mismatch(bad, volumes[bad], frusta[v], cpu[bad], g.classes[bad])
-                            : "sizes differ");
-    }
-    EXPECT_EQ(g.counts, counts) << "view " << v;
-    EXPECT_FALSE(g.overflow);
-    std::vector<std::uint32_t> ids = g.visible_ids, expected;
-    std::sort(ids.begin(), ids.end());
-    for (std::size_t i = 0; i < cpu.size(); ++i)
-      if (is_visible(cpu[i])) expected.push_back(std::uint32_t(i));
-    EXPECT_EQ(ids, expected) << "visible list of view " << v;
+    const Agreement a = check_agreement<Volume>(volumes, frusta[v], cpu, counts, g.classes, g.counts, g.visible_ids, capacity);
+    EXPECT_TRUE(a.ok()) << a.mismatches << " mismatches in view " << v << "; first: " << (a.reports.empty() ? "" : a.reports[0]);
+    EXPECT_EQ(g.overflow, counts.visible > capacity) << "view " << v;
     if (v == 0) first = cpu;
   }
   return first;
@@ -241,6 +232,24 @@ TEST_F(Gpu, DegenerateBehindCameraHugeAndTiny) {
   expect_agreement(culler(), obbs, {f});
 }
 
+// Subnormal inputs and results: Vulkan lets a device flush them to zero unless the shader
+// asks to preserve them (shaderDenormPreserveFloat32). This documents what the device does.
+TEST_F(Gpu, SubnormalCoordinatesAgree) {
+  const glm::vec4 planes[2] = {{1, 0, 0, 0}, {0, 1, 0, 0}};  // x >= 0, y >= 0
+  const Frustum f = Frustum::from_planes(planes);
+  const float tiny = 1e-40f;  // subnormal
+  ASSERT_LT(tiny, std::numeric_limits<float>::min());
+  std::vector<Aabb> boxes = {
+      {{-2 * tiny, 0, 0}, {-tiny, 1, 1}},  // just behind x = 0 by a subnormal: OUTSIDE
+      {{-tiny, 0, 0}, {tiny, 1, 1}},       // straddles x = 0: INTERSECTING
+      {{tiny, tiny, 0}, {1, 1, 1}},        // inside by a subnormal: INSIDE
+  };
+  const auto classes = expect_agreement(culler(), boxes, {f});
+  EXPECT_EQ(classes, (std::vector<Classification>{Classification::Outside, Classification::Intersecting, Classification::Inside}));
+  std::vector<Sphere> spheres = {{{-2 * tiny, 1, 1}, tiny}, {{tiny, 1, 1}, 0.5f}};
+  expect_agreement(culler(), spheres, {f});
+}
+
 TEST_F(Gpu, ManyViewsInOnePass) {
   const Scene scene = generate_scene(SceneKind::Clustered, 3000, 8);
   std::vector<Frustum> frusta;
@@ -268,6 +277,34 @@ TEST_F(Gpu, ScenesLargerThanAStorageBufferAreRejectedClearly) {
   } catch (const std::length_error& e) {
     EXPECT_NE(std::string(e.what()).find("more than one storage buffer can hold"), std::string::npos) << e.what();
   }
+}
+
+TEST_F(Gpu, VisibleListOverflowIsReportedNotSilent) {
+  test::Rng rng{12};
+  std::vector<Sphere> spheres(5000);
+  for (Sphere& sp : spheres) sp = test::random_sphere(rng, 30.0f, 4.0f);
+  // A list with room for 100 ids per view: the counters still count everything, the list
+  // holds 100 distinct visible ids, and overflow is flagged.
+  expect_agreement(culler(), spheres, test_frusta(), gpu::CullOptions{true, true, 100});
+  culler().upload(std::span<const Sphere>(spheres));
+  const auto r = culler().cull(test_frusta(), gpu::CullOptions{false, true, 100});
+  EXPECT_TRUE(r.views[0].overflow);
+  EXPECT_EQ(r.views[0].visible_ids.size(), 100u);
+  EXPECT_GT(r.views[0].counts.visible, 100u);
+  EXPECT_TRUE(r.views[0].classes.empty()) << "classes not read back when not asked for";
+}
+
+TEST_F(Gpu, PassesSplitIntoChunksAgree) {
+  // At most 3 workgroups per dispatch: 10,000 objects take many chunked dispatches.
+  gpu::GpuCuller chunked(*GpuEnvironment::context, gpu::GpuCullerConfig{64, 3});
+  EXPECT_EQ(chunked.group_size(), 64u);
+  test::Rng rng{13};
+  std::vector<Obb> obbs(10000);
+  for (Obb& b : obbs) b = test::random_obb(rng, 30.0f, 3.0f);
+  expect_agreement(chunked, obbs, test_frusta());
+  std::vector<Aabb> boxes(193);  // not a multiple of the chunk
+  for (Aabb& b : boxes) b = test::random_aabb(rng, 30.0f, 3.0f);
+  expect_agreement(chunked, boxes, test_frusta());
 }
 
 TEST_F(Gpu, TimestampsAreReported) {

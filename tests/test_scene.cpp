@@ -169,6 +169,8 @@ TEST(SceneIo, ErrorsNameTheFileAndElement) {
             "bad.json: objects[0]: world-space bounds: max.x is infinite");
   EXPECT_EQ(error_of(R"({"format":"cullpipe-scene","version":1,"camera":{"eye":[0,0,1],"target":[0,0,0],"near":-1},"objects":[]})"),
             "bad.json: camera.near: must be positive");
+  EXPECT_EQ(error_of(R"({"format":"cullpipe-scene","version":1,"camera":{"eye":[0,0,1],"target":[0,0,0],"reversed_z":"yes"},"objects":[]})"),
+            "bad.json: camera.reversed_z: expected true or false, got string");
   EXPECT_THROW(load_scene("/nonexistent/scene.json"), InputError);
 }
 
@@ -218,6 +220,8 @@ TEST(CullCaseIo, RejectsBadInputNamingTheElement) {
   EXPECT_EQ(error_of("[]", R"({"nothing": 1})"), "in.json: frustum: expected \"planes\" or \"view_proj\"");
   EXPECT_NE(error_of("[", "").find("in.json: invalid JSON"), std::string::npos);
   EXPECT_EQ(error_of("{}"), "in.json: volumes: expected an array");
+  EXPECT_EQ(error_of(R"([{"sphere": {"center": [0,0,0], "radius": 1}, "aabb": {"min": [0,0,0], "max": [1,1,1]}}])"),
+            "in.json: volumes[0]: more than one of \"aabb\", \"obb\", \"sphere\" in one volume");
 }
 
 }  // namespace

@@ -14,18 +14,13 @@
 #include "geom/frustum.hpp"
 #include "geom/obb.hpp"
 #include "geom/sphere.hpp"
+#include "geom/splitmix.hpp"
 
 namespace cullpipe::test {
 
-struct Rng {
-  std::uint64_t state;
-  std::uint64_t next() {
-    std::uint64_t z = (state += 0x9E3779B97F4A7C15ull);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
-  }
-  float uniform(float lo = 0.0f, float hi = 1.0f) { return lo + (hi - lo) * float(next() >> 40) * (1.0f / 16777216.0f); }
+struct Rng : SplitMix64 {
+  explicit Rng(std::uint64_t seed) : SplitMix64{seed} {}
+  using SplitMix64::uniform;
   glm::vec3 vec3(float lo, float hi) { return {uniform(lo, hi), uniform(lo, hi), uniform(lo, hi)}; }
   glm::mat3 rotation() {
     glm::mat4 m(1.0f);

@@ -55,7 +55,8 @@ struct GpuSession {
 
 template <class Volume>
 BackendResults cull_on_backends(std::span<const Volume> volumes, std::span<const Frustum> frusta, Backend backend,
-                                GpuSession& session, std::size_t max_reports = 10) {
+                                GpuSession& session, bool warm_up, std::span<const std::size_t> object_ids = {},
+                                std::size_t max_reports = 10) {
   BackendResults r;
   if (backend != Backend::Gpu) {
     r.cpu.assign(frusta.size(), std::vector<Classification>(volumes.size()));
@@ -66,7 +67,7 @@ BackendResults cull_on_backends(std::span<const Volume> volumes, std::span<const
   if (backend != Backend::Cpu) {
     gpu::GpuCuller& culler = session.get();
     culler.upload(volumes);
-    culler.cull(frusta);  // warm-up: the first dispatch of a pipeline compiles it (lavapipe)
+    if (warm_up) culler.cull(frusta, {false, false, 0});  // the first dispatch compiles the pipeline (lavapipe)
     gpu::CullResult g = culler.cull(frusta);
     session.check_validation();
     r.gpu_ns = g.timings.gpu_ns;
@@ -80,29 +81,11 @@ BackendResults cull_on_backends(std::span<const Volume> volumes, std::span<const
   }
   if (backend == Backend::Both) {
     for (std::size_t v = 0; v < frusta.size(); ++v) {
-      r.mismatches += count_mismatches(r.cpu[v], r.gpu[v]);
-      for (std::size_t i = 0; i < volumes.size() && r.mismatch_reports.size() < max_reports; ++i)
-        if (r.cpu[v][i] != r.gpu[v][i])
-          r.mismatch_reports.push_back("view " + std::to_string(v) + ", " +
-                                       describe_mismatch(i, volumes[i], frusta[v], r.cpu[v][i], r.gpu[v][i]));
-      if (r.cpu_counts[v] != r.gpu_counts[v]) {
-        ++r.mismatches;
-        r.mismatch_reports.push_back("view " + std::to_string(v) + ": GPU counters (visible " +
-                                     std::to_string(r.gpu_counts[v].visible) + ") differ from the CPU's (" +
-                                     std::to_string(r.cpu_counts[v].visible) + ")");
-      }
-      // The compacted list must hold exactly the visible objects, each once.
-      std::vector<std::uint32_t> ids = r.gpu_visible_ids[v];
-      std::sort(ids.begin(), ids.end());
-      std::vector<std::uint32_t> expected;
-      for (std::size_t i = 0; i < volumes.size(); ++i)
-        if (is_visible(r.cpu[v][i])) expected.push_back(std::uint32_t(i));
-      if (ids != expected) {
-        ++r.mismatches;
-        r.mismatch_reports.push_back("view " + std::to_string(v) + ": the GPU's visible-id list (" +
-                                     std::to_string(ids.size()) + " ids) is not the CPU's visible set (" +
-                                     std::to_string(expected.size()) + " objects)");
-      }
+      Agreement a = check_agreement<Volume>(volumes, frusta[v], r.cpu[v], r.cpu_counts[v], r.gpu[v], r.gpu_counts[v],
+                                            r.gpu_visible_ids[v], volumes.size(), max_reports, object_ids);
+      r.mismatches += a.mismatches;
+      for (std::string& m : a.reports)
+        if (r.mismatch_reports.size() < max_reports) r.mismatch_reports.push_back("view " + std::to_string(v) + ", " + m);
     }
   }
   return r;

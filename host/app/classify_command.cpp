@@ -25,13 +25,14 @@ std::size_t classify_kind(const CullCase& c, Backend backend, GpuSession& sessio
       where.push_back(i);
     }
   if (volumes.empty()) return 0;
-  BackendResults r = cull_on_backends<Volume>(volumes, c.frusta, backend, session);
+  // No warm-up: classify reports no timings. Reports name volumes by their index in the file.
+  BackendResults r = cull_on_backends<Volume>(volumes, c.frusta, backend, session, /*warm_up=*/false, where);
   for (std::size_t v = 0; v < c.frusta.size(); ++v)
     for (std::size_t k = 0; k < volumes.size(); ++k) {
       if (!r.cpu.empty()) cpu[v][where[k]] = r.cpu[v][k];
       if (!r.gpu.empty()) gpu[v][where[k]] = r.gpu[v][k];
     }
-  for (std::string& m : r.mismatch_reports) reports.push_back(std::move(m));  // object numbers are within the kind
+  for (std::string& m : r.mismatch_reports) reports.push_back(std::move(m));
   return r.mismatches;
 }
 

@@ -13,6 +13,7 @@ inline constexpr int kExitOk = 0;
 inline constexpr int kExitMismatch = 1;   ///< GPU and CPU disagreed
 inline constexpr int kExitBadInput = 2;   ///< bad arguments or input files
 inline constexpr int kExitNoDevice = 3;   ///< Vulkan failed or no usable device
+inline constexpr int kExitInternal = 4;   ///< a bug: an unexpected exception
 
 /// Options shared by commands that use a Vulkan device.
 struct DeviceOptions {

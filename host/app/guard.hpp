@@ -25,11 +25,11 @@ int guarded(std::ostream& err, F&& body) {
     err << "error: too large: " << e.what() << "\n";
     return kExitBadInput;
   } catch (const std::bad_alloc&) {
-    err << "error: out of host memory\n";
+    err << "error: out of host memory (the scene is too large for this machine)\n";
     return kExitBadInput;
   } catch (const std::exception& e) {
-    err << "error: " << e.what() << "\n";
-    return kExitBadInput;
+    err << "internal error: " << e.what() << "\n";
+    return kExitInternal;
   }
 }
 

@@ -36,7 +36,7 @@ template <class Volume>
 BackendResults cull_kind(const std::vector<Volume>& volumes, std::span<const Frustum> frusta, const RunOptions& o,
                          GpuSession& session, std::vector<cullpipe::Volume>& dump_volumes) {
   if (!o.dump_path.empty()) dump_volumes.assign(volumes.begin(), volumes.end());
-  return cull_on_backends<Volume>(volumes, frusta, o.backend, session);
+  return cull_on_backends<Volume>(volumes, frusta, o.backend, session, /*warm_up=*/true);
 }
 
 }  // namespace

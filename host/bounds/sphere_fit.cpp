@@ -10,6 +10,7 @@
 
 #include "bounds/points.hpp"
 #include "geom/rounding.hpp"
+#include "geom/splitmix.hpp"
 
 namespace cullpipe::bounds {
 
@@ -31,18 +32,8 @@ struct Ball {
   double r2 = -1.0;  // squared radius; negative: empty
 };
 
-struct SplitMix {
-  std::uint64_t s;
-  std::uint64_t next() {
-    std::uint64_t z = (s += 0x9E3779B97F4A7C15ull);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
-  }
-};
-
 void shuffle(std::vector<dvec3>& v, std::uint64_t seed) {
-  SplitMix rng{seed};
+  SplitMix64 rng{seed};
   for (std::size_t i = v.size(); i > 1; --i) std::swap(v[i - 1], v[rng.next() % i]);
 }
 

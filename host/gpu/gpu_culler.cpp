@@ -30,23 +30,39 @@ void check_storage_range(const vk::Context& ctx, VkDeviceSize bytes, const std::
                             std::to_string(limit) + " bytes, " + mib(limit) + ")");
 }
 
-// Grows `buffer` to at least `bytes` (never shrinks). Returns true when it was reallocated.
-bool ensure_buffer(const vk::Context& ctx, vk::Buffer& buffer, VkDeviceSize bytes, VkBufferUsageFlags usage,
-                   const char* what) {
+// Grows `buffer` to at least `bytes` (never shrinks). Sets `dirty` (descriptors must be
+// rewritten) before the old buffer is freed, so a failed allocation cannot leave a descriptor
+// pointing at a destroyed buffer.
+void ensure_buffer(const vk::Context& ctx, vk::Buffer& buffer, VkDeviceSize bytes, VkBufferUsageFlags usage,
+                   const char* what, bool& dirty) {
   bytes = std::max(bytes, kMinBufferSize);
-  if (buffer && buffer.size() >= bytes) return false;
+  if (buffer && buffer.size() >= bytes) return;
+  dirty = true;
   buffer = vk::Buffer();  // free first, so peak memory is not old + new
   buffer = vk::Buffer(ctx, bytes, usage, what);
-  return true;
 }
 
 }  // namespace
 
-GpuCuller::GpuCuller(const vk::Context& ctx) : ctx_(ctx) {
+GpuCuller::GpuCuller(const vk::Context& ctx, const GpuCullerConfig& config) : ctx_(ctx) {
+  try {
+    setup(config);
+  } catch (...) {
+    release();
+    throw;
+  }
+}
+
+void GpuCuller::setup(const GpuCullerConfig& config) {
+  const VkPhysicalDeviceLimits& limits = ctx_.properties().limits;
+  group_size_ = std::max<std::uint32_t>(
+      1, std::min({config.group_size, limits.maxComputeWorkGroupSize[0], limits.maxComputeWorkGroupInvocations}));
+  max_groups_ = config.max_groups_per_dispatch ? std::min(config.max_groups_per_dispatch, limits.maxComputeWorkGroupCount[0])
+                                               : limits.maxComputeWorkGroupCount[0];
   const std::span<const std::uint32_t> spirv(cullpipe_cull_flat_spv, sizeof(cullpipe_cull_flat_spv) / sizeof(std::uint32_t));
   static const char* names[3] = {"flat cull (aabb)", "flat cull (obb)", "flat cull (sphere)"};
   for (std::uint32_t k = 0; k < 3; ++k) {
-    const std::uint32_t spec[2] = {k, FLAT_CULL_GROUP_SIZE};
+    const std::uint32_t spec[2] = {k, group_size_};
     pipelines_[k] = std::make_unique<vk::ComputePipeline>(
         ctx_, vk::ComputePipelineDesc{spirv, kBindingCount, sizeof(FlatCullParams), spec, names[k]});
   }
@@ -80,12 +96,17 @@ GpuCuller::GpuCuller(const vk::Context& ctx) : ctx_(ctx) {
   }
 }
 
-GpuCuller::~GpuCuller() {
+GpuCuller::~GpuCuller() { release(); }
+
+void GpuCuller::release() {
   VkDevice dev = ctx_.device();
   vkDeviceWaitIdle(dev);
   if (query_pool_) vkDestroyQueryPool(dev, query_pool_, nullptr);
   if (cmd_) vkFreeCommandBuffers(dev, ctx_.command_pool(), 1, &cmd_);
   if (descriptor_pool_) vkDestroyDescriptorPool(dev, descriptor_pool_, nullptr);
+  query_pool_ = VK_NULL_HANDLE;
+  cmd_ = VK_NULL_HANDLE;
+  descriptor_pool_ = VK_NULL_HANDLE;
 }
 
 void GpuCuller::upload(std::span<const Aabb> volumes) {
@@ -107,27 +128,28 @@ void GpuCuller::upload(std::span<const Sphere> volumes) {
 }
 
 void GpuCuller::upload_words(BvKind kind, const void* data, std::size_t count, std::size_t bytes_per_object) {
-  if (count > UINT32_MAX / 2) throw std::length_error("too many objects for 32-bit object ids: " + std::to_string(count));
+  // The storage-range limit also keeps object ids and output indices within 32 bits.
   const VkDeviceSize bytes = VkDeviceSize(count) * bytes_per_object;
   check_storage_range(ctx_, bytes, std::to_string(count) + " " + std::string(to_string(kind)) + " volumes");
-  if (ensure_buffer(ctx_, bounds_, bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "bounds buffer")) descriptors_dirty_ = true;
+  object_count_ = 0;  // stays 0 if the allocation below fails
+  ensure_buffer(ctx_, bounds_, bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "bounds buffer", descriptors_dirty_);
   if (bytes) std::memcpy(bounds_.data(), data, bytes);
   kind_ = kind;
   object_count_ = count;
 }
 
-void GpuCuller::ensure_outputs(std::size_t view_count) {
-  const VkDeviceSize per_view = VkDeviceSize(object_count_) * sizeof(std::uint32_t);
-  const VkDeviceSize outputs = per_view * view_count;
+void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capacity) {
+  const VkDeviceSize outputs = VkDeviceSize(object_count_) * view_count * sizeof(std::uint32_t);
+  const VkDeviceSize visible = VkDeviceSize(visible_capacity) * view_count * sizeof(std::uint32_t);
   check_storage_range(ctx_, outputs, std::to_string(view_count) + " views x " + std::to_string(object_count_) + " objects of output");
+  check_storage_range(ctx_, visible, std::to_string(view_count) + " views x " + std::to_string(visible_capacity) + " visible ids");
   constexpr VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
-  bool changed = false;
-  changed |= ensure_buffer(ctx_, classes_, outputs, storage, "classification buffer");
-  changed |= ensure_buffer(ctx_, visible_, outputs, storage, "visible-id buffer");
-  changed |= ensure_buffer(ctx_, counters_, view_count * sizeof(ViewCounters), storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
-                           "counter buffer");
-  changed |= ensure_buffer(ctx_, views_, view_count * sizeof(GpuFrustum), storage, "view buffer");
-  if (changed) descriptors_dirty_ = true;
+  bool& dirty = descriptors_dirty_;
+  ensure_buffer(ctx_, classes_, outputs, storage, "classification buffer", dirty);
+  ensure_buffer(ctx_, visible_, visible, storage, "visible-id buffer", dirty);
+  ensure_buffer(ctx_, counters_, view_count * sizeof(ViewCounters), storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, "counter buffer",
+                dirty);
+  ensure_buffer(ctx_, views_, view_count * sizeof(GpuFrustum), storage, "view buffer", dirty);
 }
 
 void GpuCuller::update_descriptors() {
@@ -148,21 +170,21 @@ void GpuCuller::update_descriptors() {
   descriptors_dirty_ = false;
 }
 
-CullResult GpuCuller::cull(std::span<const Frustum> views, const ReadbackOptions& readback) {
+CullResult GpuCuller::cull(std::span<const Frustum> views, const CullOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   CullResult result;
   result.views.resize(views.size());
   if (views.empty()) return result;
-  if (!bounds_) ensure_buffer(ctx_, bounds_, 0, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "bounds buffer");
-  ensure_outputs(views.size());
+  const std::size_t capacity = options.visible_capacity ? options.visible_capacity : object_count_;
+  ensure_buffer(ctx_, bounds_, 0, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "bounds buffer", descriptors_dirty_);
+  ensure_outputs(views.size(), capacity);
   update_descriptors();
 
   auto gpu_views = views_.as<GpuFrustum>();
   for (std::size_t v = 0; v < views.size(); ++v) gpu_views[v] = pack(views[v]);
 
   const VkDeviceSize counters_bytes = views.size() * sizeof(ViewCounters);
-  const std::uint32_t max_groups = ctx_.properties().limits.maxComputeWorkGroupCount[0];
-  const std::uint64_t objects_per_dispatch = std::uint64_t(max_groups) * FLAT_CULL_GROUP_SIZE;
+  const std::uint64_t objects_per_dispatch = std::uint64_t(max_groups_) * group_size_;
   if (views.size() > ctx_.properties().limits.maxComputeWorkGroupCount[1])
     throw std::length_error(std::to_string(views.size()) + " views exceed the device's dispatch limit of " +
                             std::to_string(ctx_.properties().limits.maxComputeWorkGroupCount[1]));
@@ -193,9 +215,9 @@ CullResult GpuCuller::cull(std::span<const Frustum> views, const ReadbackOptions
     }
     const std::uint64_t count = std::min<std::uint64_t>(objects_per_dispatch, object_count_ - first);
     const FlatCullParams params{std::uint32_t(object_count_), std::uint32_t(first), std::uint32_t(views.size()),
-                                std::uint32_t(object_count_)};
+                                std::uint32_t(capacity)};
     vkCmdPushConstants(cmd_, pipe.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
-    vkCmdDispatch(cmd_, vk::group_count(count, FLAT_CULL_GROUP_SIZE), std::uint32_t(views.size()), 1);
+    vkCmdDispatch(cmd_, vk::group_count(count, group_size_), std::uint32_t(views.size()), 1);
   }
   if (query_pool_) vkCmdWriteTimestamp(cmd_, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, query_pool_, 1);
   VkMemoryBarrier host_barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, VK_ACCESS_SHADER_WRITE_BIT, VK_ACCESS_HOST_READ_BIT};
@@ -208,7 +230,9 @@ CullResult GpuCuller::cull(std::span<const Frustum> views, const ReadbackOptions
     std::uint64_t stamps[2] = {0, 0};
     CULLPIPE_VK_CHECK(vkGetQueryPoolResults(ctx_.device(), query_pool_, 0, 2, sizeof(stamps), stamps, sizeof(std::uint64_t),
                                             VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT));
-    result.timings.gpu_ns = double(stamps[1] - stamps[0]) * ctx_.timestamp_period_ns();
+    const std::uint32_t bits = ctx_.timestamp_valid_bits();
+    const std::uint64_t mask = bits >= 64 ? ~0ull : (1ull << bits) - 1;
+    result.timings.gpu_ns = double((stamps[1] - stamps[0]) & mask) * ctx_.timestamp_period_ns();
   }
 
   const auto counters = counters_.as<const ViewCounters>();
@@ -218,15 +242,15 @@ CullResult GpuCuller::cull(std::span<const Frustum> views, const ReadbackOptions
     ViewResult& out = result.views[v];
     const ViewCounters& c = counters[v];
     out.counts = {c.visible_count, c.inside_count, c.visible_count - c.inside_count};
-    out.overflow = c.visible_count > object_count_;
-    if (readback.classes) {
+    out.overflow = c.visible_count > capacity;
+    if (options.classes) {
       out.classes.resize(object_count_);
       const std::uint32_t* src = classes.data() + v * object_count_;
       for (std::size_t i = 0; i < object_count_; ++i) out.classes[i] = static_cast<Classification>(src[i]);
     }
-    if (readback.visible_ids) {
-      const std::uint32_t* src = visible.data() + v * object_count_;
-      out.visible_ids.assign(src, src + std::min<std::size_t>(c.visible_count, object_count_));
+    if (options.visible_ids) {
+      const std::uint32_t* src = visible.data() + v * capacity;
+      out.visible_ids.assign(src, src + std::min<std::size_t>(c.visible_count, capacity));
     }
   }
   result.timings.wall_ns = double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());

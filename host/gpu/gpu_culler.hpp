@@ -12,6 +12,7 @@
 #include "geom/frustum.hpp"
 #include "geom/obb.hpp"
 #include "geom/sphere.hpp"
+#include "gpu/layout.hpp"
 #include "vk/buffer.hpp"
 #include "vk/compute_pipeline.hpp"
 #include "vk/context.hpp"
@@ -38,10 +39,23 @@ struct CullResult {
   CullTimings timings;
 };
 
-/// What to read back after a pass. Reading less makes the wall time closer to the GPU time.
-struct ReadbackOptions {
-  bool classes = true;      ///< per-object classifications
-  bool visible_ids = true;  ///< the compacted visible list
+/// Options of one culling pass.
+struct CullOptions {
+  bool classes = true;      ///< read back per-object classifications
+  bool visible_ids = true;  ///< read back the compacted visible list
+  /// Room for visible ids per view; 0 means the object count (cannot overflow). With less,
+  /// the list holds the first ids that fit, the counters still count every visible object and
+  /// ViewResult::overflow is set.
+  std::size_t visible_capacity = 0;
+};
+
+/// How a GpuCuller is set up.
+struct GpuCullerConfig {
+  /// Invocations per workgroup; lowered to the device's limits when larger.
+  std::uint32_t group_size = FLAT_CULL_GROUP_SIZE;
+  /// Workgroups per dispatch before the pass is split into chunks; 0 means the device limit
+  /// (maxComputeWorkGroupCount[0]). Tests set it low to exercise the chunked path.
+  std::uint32_t max_groups_per_dispatch = 0;
 };
 
 /// Flat frustum culling on a Vulkan device: uploads one set of volumes, then classifies them
@@ -49,7 +63,7 @@ struct ReadbackOptions {
 /// results identical bit for bit to cullpipe::reference. Not thread-safe; one pass at a time.
 class GpuCuller {
  public:
-  explicit GpuCuller(const vk::Context& ctx);
+  explicit GpuCuller(const vk::Context& ctx, const GpuCullerConfig& config = {});
   ~GpuCuller();
   GpuCuller(const GpuCuller&) = delete;
   GpuCuller& operator=(const GpuCuller&) = delete;
@@ -63,19 +77,23 @@ class GpuCuller {
 
   /// Classifies the uploaded volumes against every view in one submission.
   /// Throws std::length_error when views x objects outputs exceed a storage buffer.
-  CullResult cull(std::span<const Frustum> views, const ReadbackOptions& readback = {});
+  CullResult cull(std::span<const Frustum> views, const CullOptions& options = {});
 
   BvKind kind() const { return kind_; }
+  std::uint32_t group_size() const { return group_size_; }
   std::size_t object_count() const { return object_count_; }
   const vk::Context& context() const { return ctx_; }
 
  private:
   void upload_words(BvKind kind, const void* data, std::size_t count, std::size_t bytes_per_object);
-  const vk::ComputePipeline& pipeline(BvKind kind);
-  void ensure_outputs(std::size_t view_count);
+  void ensure_outputs(std::size_t view_count, std::size_t visible_capacity);
   void update_descriptors();
+  void setup(const GpuCullerConfig& config);
+  void release();
 
   const vk::Context& ctx_;
+  std::uint32_t group_size_ = FLAT_CULL_GROUP_SIZE;
+  std::uint32_t max_groups_ = 0;
   BvKind kind_ = BvKind::Aabb;
   std::size_t object_count_ = 0;
   std::unique_ptr<vk::ComputePipeline> pipelines_[3];

@@ -35,6 +35,8 @@ void check_volume(const json_util::Reader& r, const V& v, const std::string& pat
 
 Volume read_volume(const json_util::Reader& r, const json& v, const std::string& path) {
   if (!v.is_object()) r.fail(path, "expected an object with \"aabb\", \"obb\" or \"sphere\"");
+  if (int(v.contains("aabb")) + int(v.contains("obb")) + int(v.contains("sphere")) > 1)
+    r.fail(path, "more than one of \"aabb\", \"obb\", \"sphere\" in one volume");
   if (v.contains("aabb")) {
     const json& a = v["aabb"];
     const std::string p = path + ".aabb";
@@ -100,6 +102,7 @@ CullCase parse_cull_case(const std::string& text, const std::string& source) {
   const json_util::Reader r{source};
   if (!root.is_object()) r.fail("(root)", "expected an object with \"frustum\" and \"volumes\"");
   CullCase c;
+  if (root.contains("frusta") && root.contains("frustum")) r.fail("(root)", "give \"frustum\" or \"frusta\", not both");
   if (root.contains("frusta")) {
     const json& frusta = root["frusta"];
     if (!frusta.is_array() || frusta.empty()) r.fail("frusta", "expected a non-empty array of frusta");

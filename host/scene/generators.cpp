@@ -3,20 +3,12 @@
 #include <cmath>
 #include <glm/ext/matrix_transform.hpp>
 
+#include "geom/splitmix.hpp"
+
 namespace cullpipe {
 namespace {
 
-// SplitMix64 (Steele, Lea, Flood 2014): small, fast, and identical everywhere.
-struct Rng {
-  std::uint64_t state;
-  std::uint64_t next() {
-    std::uint64_t z = (state += 0x9E3779B97F4A7C15ull);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
-  }
-  float uniform() { return float(next() >> 40) * (1.0f / 16777216.0f); }  // [0, 1), 24 bits
-  float uniform(float lo, float hi) { return lo + (hi - lo) * uniform(); }
+struct Rng : SplitMix64 {
   float normal() {  // Box-Muller
     const float u1 = std::max(uniform(), 1e-7f), u2 = uniform();
     return std::sqrt(-2.0f * std::log(u1)) * std::cos(6.2831853f * u2);
@@ -70,7 +62,7 @@ std::string_view to_string(SceneKind kind) {
 }
 
 Scene generate_scene(SceneKind kind, std::size_t count, std::uint64_t seed) {
-  Rng rng{seed * 0x2545F4914F6CDD1Dull + std::uint64_t(kind) + 1};
+  Rng rng{{seed * 0x2545F4914F6CDD1Dull + std::uint64_t(kind) + 1}};
   Scene scene;
   scene.name = std::string(to_string(kind)) + ":" + std::to_string(count) + " seed " + std::to_string(seed);
   scene.objects.reserve(count);

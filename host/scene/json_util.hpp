@@ -37,6 +37,11 @@ struct Reader {
     return f;
   }
 
+  bool boolean(const json& v, const std::string& path) const {
+    if (!v.is_boolean()) fail(path, "expected true or false, got " + std::string(v.type_name()));
+    return v.get<bool>();
+  }
+
   const json& array(const json& v, const std::string& path, std::size_t size) const {
     if (!v.is_array()) fail(path, "expected an array of " + std::to_string(size) + " numbers");
     if (v.size() != size) fail(path, "expected " + std::to_string(size) + " numbers, got " + std::to_string(v.size()));

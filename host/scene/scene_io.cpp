@@ -56,8 +56,8 @@ Scene parse_scene(const std::string& text, const std::string& source) {
     if (c.contains("aspect")) cam.aspect = r.number(c["aspect"], "camera.aspect");
     if (c.contains("near")) cam.near_plane = r.number(c["near"], "camera.near");
     if (c.contains("far")) cam.far_plane = r.number(c["far"], "camera.far");
-    if (c.contains("reversed_z")) cam.reversed_z = c["reversed_z"].is_boolean() && c["reversed_z"].get<bool>();
-    if (c.contains("infinite_far")) cam.infinite_far = c["infinite_far"].is_boolean() && c["infinite_far"].get<bool>();
+    if (c.contains("reversed_z")) cam.reversed_z = r.boolean(c["reversed_z"], "camera.reversed_z");
+    if (c.contains("infinite_far")) cam.infinite_far = r.boolean(c["infinite_far"], "camera.infinite_far");
     if (!(cam.fov_y_degrees > 0.0f && cam.fov_y_degrees < 180.0f)) r.fail("camera.fov_y_degrees", "must be in (0, 180)");
     if (!(cam.aspect > 0.0f)) r.fail("camera.aspect", "must be positive");
     if (!(cam.near_plane > 0.0f)) r.fail("camera.near", "must be positive");

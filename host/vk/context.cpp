@@ -81,7 +81,9 @@ DeviceInfo describe(VkPhysicalDevice pd) {
   return info;
 }
 
-VkInstance create_instance(bool validation, bool& have_debug_utils) {
+// Creates the instance; with validation, `messenger` is chained into the create info so
+// messages raised during vkCreateInstance/vkDestroyInstance are reported too.
+VkInstance create_instance(bool validation, const VkDebugUtilsMessengerCreateInfoEXT* messenger) {
   std::uint32_t api = 0;
   if (vkEnumerateInstanceVersion(&api) != VK_SUCCESS || api < VK_API_VERSION_1_2)
     throw Error("the Vulkan loader supports only API " + std::to_string(VK_API_VERSION_MAJOR(api)) + "." +
@@ -90,7 +92,6 @@ VkInstance create_instance(bool validation, bool& have_debug_utils) {
   std::vector<const char*> layers, extensions;
   VkValidationFeaturesEXT features{VK_STRUCTURE_TYPE_VALIDATION_FEATURES_EXT, nullptr, 0, nullptr, 0, nullptr};
   static const VkValidationFeatureEnableEXT enables[] = {VK_VALIDATION_FEATURE_ENABLE_SYNCHRONIZATION_VALIDATION_EXT};
-  have_debug_utils = false;
   if (validation) {
     std::uint32_t n = 0;
     vkEnumerateInstanceLayerProperties(&n, nullptr);
@@ -106,7 +107,7 @@ VkInstance create_instance(bool validation, bool& have_debug_utils) {
     extensions.push_back(VK_EXT_VALIDATION_FEATURES_EXTENSION_NAME);
     features.enabledValidationFeatureCount = 1;
     features.pEnabledValidationFeatures = enables;
-    have_debug_utils = true;
+    features.pNext = messenger;
   }
   VkApplicationInfo app{VK_STRUCTURE_TYPE_APPLICATION_INFO, nullptr, "cullpipe", 1, "cullpipe", 1, VK_API_VERSION_1_2};
   VkInstanceCreateInfo info{VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO};
@@ -166,8 +167,7 @@ int usable_queue_family(VkPhysicalDevice pd, std::string& why) {
 }  // namespace
 
 std::vector<DeviceInfo> list_devices() {
-  bool debug_utils = false;
-  VkInstance instance = create_instance(false, debug_utils);
+  VkInstance instance = create_instance(false, nullptr);
   std::vector<DeviceInfo> out;
   try {
     for (VkPhysicalDevice pd : physical_devices(instance)) out.push_back(describe(pd));
@@ -181,19 +181,17 @@ std::vector<DeviceInfo> list_devices() {
 
 Context::Context(const ContextOptions& options) : on_message_(options.on_message) {
   try {
-    bool debug_utils = false;
-    instance_ = create_instance(options.validation, debug_utils);
-    if (debug_utils) {
+    VkDebugUtilsMessengerCreateInfoEXT info{VK_STRUCTURE_TYPE_DEBUG_UTILS_MESSENGER_CREATE_INFO_EXT};
+    info.messageSeverity = VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT;
+    info.messageType = VK_DEBUG_UTILS_MESSAGE_TYPE_GENERAL_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_TYPE_VALIDATION_BIT_EXT |
+                       VK_DEBUG_UTILS_MESSAGE_TYPE_PERFORMANCE_BIT_EXT;
+    info.pfnUserCallback = &Context::debug_callback;
+    info.pUserData = this;
+    instance_ = create_instance(options.validation, options.validation ? &info : nullptr);
+    if (options.validation) {
       auto create = reinterpret_cast<PFN_vkCreateDebugUtilsMessengerEXT>(
           vkGetInstanceProcAddr(instance_, "vkCreateDebugUtilsMessengerEXT"));
       if (!create) throw Error("vkCreateDebugUtilsMessengerEXT is not available");
-      VkDebugUtilsMessengerCreateInfoEXT info{VK_STRUCTURE_TYPE_DEBUG_UTILS_MESSENGER_CREATE_INFO_EXT};
-      info.messageSeverity =
-          VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT;
-      info.messageType = VK_DEBUG_UTILS_MESSAGE_TYPE_GENERAL_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_TYPE_VALIDATION_BIT_EXT |
-                         VK_DEBUG_UTILS_MESSAGE_TYPE_PERFORMANCE_BIT_EXT;
-      info.pfnUserCallback = &Context::debug_callback;
-      info.pUserData = this;
       CULLPIPE_VK_CHECK(create(instance_, &info, nullptr, &messenger_));
     }
 
@@ -237,16 +235,12 @@ Context::Context(const ContextOptions& options) : on_message_(options.on_message
     vkGetPhysicalDeviceProperties(physical_device_, &properties_);
     vkGetPhysicalDeviceMemoryProperties(physical_device_, &memory_properties_);
 
-    VkPhysicalDeviceSubgroupProperties sub{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_SUBGROUP_PROPERTIES};
-    VkPhysicalDeviceProperties2 p2{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2, &sub, {}};
-    vkGetPhysicalDeviceProperties2(physical_device_, &p2);
-    subgroup_size_ = sub.subgroupSize;
-
     std::uint32_t nfam = 0;
     vkGetPhysicalDeviceQueueFamilyProperties(physical_device_, &nfam, nullptr);
     std::vector<VkQueueFamilyProperties> families(nfam);
     vkGetPhysicalDeviceQueueFamilyProperties(physical_device_, &nfam, families.data());
-    if (families[queue_family_].timestampValidBits > 0) timestamp_period_ns_ = properties_.limits.timestampPeriod;
+    timestamp_valid_bits_ = families[queue_family_].timestampValidBits;
+    if (timestamp_valid_bits_ > 0) timestamp_period_ns_ = properties_.limits.timestampPeriod;
 
     const float priority = 1.0f;
     VkDeviceQueueCreateInfo queue_info{VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO};

@@ -55,7 +55,8 @@ class Context {
   const DeviceInfo& info() const { return info_; }
   /// Nanoseconds per timestamp tick; 0 when the compute queue has no timestamps.
   double timestamp_period_ns() const { return timestamp_period_ns_; }
-  std::uint32_t subgroup_size() const { return subgroup_size_; }
+  /// Valid bits of the compute queue's timestamps (0: none).
+  std::uint32_t timestamp_valid_bits() const { return timestamp_valid_bits_; }
 
   /// Validation messages reported so far (0 when validation is off).
   std::size_t validation_message_count() const { return message_count_.load(); }
@@ -88,7 +89,7 @@ class Context {
   VkPhysicalDeviceMemoryProperties memory_properties_{};
   DeviceInfo info_;
   double timestamp_period_ns_ = 0.0;
-  std::uint32_t subgroup_size_ = 0;
+  std::uint32_t timestamp_valid_bits_ = 0;
 
   std::function<void(std::string_view)> on_message_;
   std::atomic<std::size_t> message_count_{0};
