@@ -7,6 +7,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
+#include <cmath>
 #include <string>
 
 namespace {
@@ -177,6 +178,30 @@ TEST(Cli, GenerateWritesALoadableScene) {
   const Result r = cullpipe("run --scene '" + scene.string() + "' --backend both");
   EXPECT_EQ(r.code, 0) << r.err;
   EXPECT_NE(r.out.find("300 objects"), std::string::npos) << r.out;
+}
+
+TEST(Cli, BoundsReportsEveryBuilder) {
+  const fs::path pts = temp_dir() / "pts.txt", json = temp_dir() / "bounds.json";
+  std::ofstream(pts) << "# cube corners and the centre\n-1 -1 -1\n1 -1 -1\n-1 1 -1\n1 1 -1\n-1 -1 1\n1 -1 1\n-1 1 1\n1 1 1\n0 0 0\n";
+  const Result r = cullpipe("bounds --points '" + pts.string() + "' --json '" + json.string() + "'");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("9 points"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("8 vertices"), std::string::npos) << r.out;
+  const auto j = nlohmann::json::parse(slurp(json));
+  ASSERT_EQ(j["volumes"].size(), 7u);
+  for (const auto& v : j["volumes"]) {
+    EXPECT_TRUE(v.contains("builder") && v.contains("time_ms"));
+    if (v.contains("sphere")) {  // exact: the cube's circumradius; the others enclose it
+      if (v["builder"] == "sphere-exact") {
+        EXPECT_NEAR(v["sphere"]["radius"].get<double>(), std::sqrt(3.0), 1e-5);
+      }
+      EXPECT_GE(v["sphere"]["radius"].get<double>(), std::sqrt(3.0) - 1e-6) << v["builder"];
+    }
+  }
+  std::ofstream(pts) << "1 2 3\n4 5\n";
+  const Result bad = cullpipe("bounds --points '" + pts.string() + "'");
+  EXPECT_EQ(bad.code, 2);
+  EXPECT_NE(bad.err.find("pts.txt:2: expected three coordinates"), std::string::npos) << bad.err;
 }
 
 TEST(Cli, DevicesListsAtLeastOne) {

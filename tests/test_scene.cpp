@@ -9,7 +9,9 @@
 #include "geom/validate.hpp"
 #include "scene/cull_case_io.hpp"
 #include "scene/generators.hpp"
+#include "scene/point_io.hpp"
 #include "scene/scene_io.hpp"
+#include <unistd.h>
 
 namespace cullpipe {
 namespace {
@@ -222,6 +224,49 @@ TEST(CullCaseIo, RejectsBadInputNamingTheElement) {
   EXPECT_EQ(error_of("{}"), "in.json: volumes: expected an array");
   EXPECT_EQ(error_of(R"([{"sphere": {"center": [0,0,0], "radius": 1}, "aabb": {"min": [0,0,0], "max": [1,1,1]}}])"),
             "in.json: volumes[0]: more than one of \"aabb\", \"obb\", \"sphere\" in one volume");
+}
+
+}  // namespace
+}  // namespace cullpipe
+
+namespace cullpipe {
+namespace {
+
+std::string write_temp(const std::string& name, const std::string& text) {
+  const auto path = std::filesystem::temp_directory_path() / ("cullpipe_points_" + std::to_string(::getpid()) + "_" + name);
+  std::ofstream(path) << text;
+  return path.string();
+}
+
+std::string points_error(const std::string& name, const std::string& text) {
+  try {
+    load_points(write_temp(name, text));
+  } catch (const InputError& e) {
+    const std::string m = e.what();
+    return m.substr(m.find(name));
+  }
+  return "no error";
+}
+
+TEST(PointIo, ReadsTextOffAndObj) {
+  const auto txt = load_points(write_temp("a.txt", "# comment\n1 2 3\n\n  -4.5 5e-1 6  \n7 8 9 # trailing\n"));
+  EXPECT_EQ(txt, (std::vector<glm::vec3>{{1, 2, 3}, {-4.5f, 0.5f, 6}, {7, 8, 9}}));
+  const auto off = load_points(write_temp("b.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"));
+  EXPECT_EQ(off.size(), 3u);
+  const auto obj = load_points(write_temp("c.obj", "# obj\no thing\nv 1 2 3\nvn 0 0 1\nv 4 5 6 1.0\nf 1 2 1\n"));
+  EXPECT_EQ(obj, (std::vector<glm::vec3>{{1, 2, 3}, {4, 5, 6}}));
+}
+
+TEST(PointIo, BadFilesNameTheLine) {
+  EXPECT_EQ(points_error("d.txt", "1 2 3\n1 2\n"), "d.txt:2: expected three coordinates");
+  EXPECT_EQ(points_error("e.txt", "1 2 nan\n"), "e.txt:1: 'nan' is not finite");
+  EXPECT_EQ(points_error("f.txt", "1 2 1e39\n"), "f.txt:1: '1e39' is out of float range");
+  EXPECT_EQ(points_error("g.txt", "1 2 x\n"), "g.txt:1: 'x' is not a number");
+  EXPECT_EQ(points_error("h.txt", "1 2 3 4\n"), "h.txt:1: more than three numbers on a line");
+  EXPECT_EQ(points_error("i.txt", "# nothing\n\n"), "i.txt: no points");
+  EXPECT_EQ(points_error("j.off", "OFF\n5 0 0\n0 0 0\n"), "j.off: file ends before all 5 vertices");
+  EXPECT_EQ(points_error("k.off", "PLY\n"), "k.off:1: expected the OFF header");
+  EXPECT_THROW(load_points("/nonexistent/points.txt"), InputError);
 }
 
 }  // namespace

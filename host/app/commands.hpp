@@ -45,12 +45,18 @@ struct GenerateOptions {
   std::string out_path;
 };
 
+struct BoundsOptions {
+  std::string points_path;  ///< points file: .txt (x y z per line), .off or .obj
+  std::string json_path;    ///< every builder's volume (classify schema), name and time
+};
+
 /// Each command writes its report to `out`, errors to `err`, and returns an exit code.
 /// Exceptions do not escape: they are reported on `err` with the matching exit code.
 int run_command(const RunOptions& options, std::ostream& out, std::ostream& err);
 int classify_command(const ClassifyOptions& options, std::ostream& out, std::ostream& err);
 int generate_command(const GenerateOptions& options, std::ostream& out, std::ostream& err);
 int devices_command(std::ostream& out, std::ostream& err);
+int bounds_command(const BoundsOptions& options, std::ostream& out, std::ostream& err);
 
 /// The default scene shipped in scenes/: found next to the source tree the tool was built
 /// from, or under <prefix>/share/cullpipe/scenes relative to the executable.

@@ -49,6 +49,11 @@ int main(int argc, char** argv) {
 
   CLI::App* devices_cmd = app.add_subcommand("devices", "List Vulkan devices");
 
+  BoundsOptions bounds;
+  CLI::App* bounds_cmd = app.add_subcommand("bounds", "Build every bounding volume of a point set and compare them");
+  bounds_cmd->add_option("--points", bounds.points_path, "Points file: x y z per line (.txt), .off or .obj")->required();
+  bounds_cmd->add_option("--json", bounds.json_path, "Write every volume (classify schema) with builder name and time");
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -59,5 +64,6 @@ int main(int argc, char** argv) {
   if (*classify_cmd) return classify_command(classify, std::cout, std::cerr);
   if (*generate_cmd) return generate_command(generate, std::cout, std::cerr);
   if (*devices_cmd) return devices_command(std::cout, std::cerr);
+  if (*bounds_cmd) return bounds_command(bounds, std::cout, std::cerr);
   return run_command(run, std::cout, std::cerr);
 }

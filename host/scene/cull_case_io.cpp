@@ -97,6 +97,8 @@ json frustum_to_json(const Frustum& f) {
 
 }  // namespace
 
+std::string volume_to_json_text(const Volume& v) { return volume_to_json(v).dump(); }
+
 CullCase parse_cull_case(const std::string& text, const std::string& source) {
   const json root = json_util::parse(text, source);
   const json_util::Reader r{source};

@@ -36,6 +36,9 @@ struct CullCase {
 /// degenerate view-projection matrix, non-orthonormal OBB axes).
 CullCase parse_cull_case(const std::string& text, const std::string& source);
 
+/// One volume as compact JSON in the schema above, e.g. {"sphere":{"center":[..],"radius":r}}.
+std::string volume_to_json_text(const Volume& v);
+
 /// Serialises a cull case, with each volume's classes per frustum when `classes` is given
 /// (classes[view][volume]) and optional object ids.
 std::string cull_case_to_json(const CullCase& c, const std::vector<std::vector<Classification>>* classes = nullptr,
