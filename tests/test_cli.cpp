@@ -187,7 +187,7 @@ TEST(Cli, BoundsReportsEveryBuilder) {
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_NE(r.out.find("9 points"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("8 vertices"), std::string::npos) << r.out;
-  const auto j = nlohmann::json::parse(slurp(json));
+  const auto j = nlohmann::json::parse(slurp(json))["sets"][0];
   ASSERT_EQ(j["volumes"].size(), 7u);
   for (const auto& v : j["volumes"]) {
     EXPECT_TRUE(v.contains("builder") && v.contains("time_ms"));

@@ -271,3 +271,72 @@ TEST(PointIo, BadFilesNameTheLine) {
 
 }  // namespace
 }  // namespace cullpipe
+
+#include "bounds/sphere_fit.hpp"
+#include "scene/gltf_points.hpp"
+
+namespace cullpipe {
+namespace {
+
+const std::filesystem::path kScenes = std::filesystem::path(CULLPIPE_SHARED_DIR) / "scenes";
+
+TEST(GltfPoints, RealScenesMatchTheirDeclaredBounds) {
+  if (!std::filesystem::exists(kScenes)) GTEST_SKIP() << kScenes << " not present";
+  std::size_t meshes = 0;
+  for (const auto& dir : std::filesystem::directory_iterator(kScenes)) {
+    if (!dir.is_directory()) continue;
+    for (const auto& file : std::filesystem::directory_iterator(dir.path())) {
+      const std::string ext = file.path().extension().string();
+      if (ext != ".gltf" && ext != ".glb") continue;
+      SCOPED_TRACE(file.path().string());
+      for (const GltfMeshPoints& m : load_gltf_mesh_points(file.path().string())) {
+        ++meshes;
+        ASSERT_FALSE(m.positions.empty());
+        ASSERT_TRUE(m.declared_bounds.has_value());
+        const Aabb b = bounds::aabb_of_points(m.positions);
+        const float scale = glm::length(m.declared_bounds->extent()) + 1e-30f;
+        for (int k = 0; k < 3; ++k) {  // exporters print min/max in decimal: 1e-6 relative
+          EXPECT_NEAR(b.min[k], m.declared_bounds->min[k], 1e-6f * scale) << m.name;
+          EXPECT_NEAR(b.max[k], m.declared_bounds->max[k], 1e-6f * scale) << m.name;
+        }
+      }
+    }
+  }
+  EXPECT_GT(meshes, 200u);  // 263 meshes in the shipped set
+}
+
+std::string gltf_error(const std::string& name, const std::string& text) {
+  try {
+    load_gltf_mesh_points(write_temp(name, text));
+  } catch (const InputError& e) {
+    const std::string m = e.what();
+    return m.substr(m.find(name));
+  }
+  return "no error";
+}
+
+// A one-triangle glTF with its buffer inline (base64 of three float3 positions: 36 bytes).
+std::string triangle_gltf(const std::string& accessor_patch, std::size_t byte_length = 36) {
+  // (0,0,0) (1,0,0) (0,1,0) as little-endian floats
+  const std::string b64 = "AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA";
+  return R"({"asset":{"version":"2.0"},"buffers":[{"byteLength":36,"uri":"data:application/octet-stream;base64,)" + b64 +
+         R"("}],"bufferViews":[{"buffer":0,"byteLength":)" + std::to_string(byte_length) +
+         R"(}],"accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3",)" + accessor_patch +
+         R"("min":[0,0,0],"max":[1,1,0]}],"meshes":[{"primitives":[{"attributes":{"POSITION":0}}]}]})";
+}
+
+TEST(GltfPoints, ReadsAMinimalFileAndRejectsBrokenOnes) {
+  const auto good = load_gltf_mesh_points(write_temp("ok.gltf", triangle_gltf("")));
+  ASSERT_EQ(good.size(), 1u);
+  EXPECT_EQ(good[0].positions, (std::vector<glm::vec3>{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}));
+  EXPECT_NE(gltf_error("trunc.gltf", triangle_gltf("").substr(0, 100)).find("trunc.gltf: not a readable glTF file"), std::string::npos);
+  EXPECT_NE(gltf_error("offset.gltf", triangle_gltf(R"("byteOffset":12,)")).find("POSITION accessor 0 reads past its buffer view"),
+            std::string::npos);
+  EXPECT_NE(gltf_error("type.gltf", triangle_gltf("").replace(triangle_gltf("").find("5126"), 4, "5123")).find("not FLOAT"),
+            std::string::npos);
+  EXPECT_EQ(gltf_error("missing.gltf", "{}").find("missing.gltf"), 0u);
+  EXPECT_THROW(load_gltf_mesh_points("/nonexistent/model.gltf"), InputError);
+}
+
+}  // namespace
+}  // namespace cullpipe

@@ -46,7 +46,8 @@ struct GenerateOptions {
 };
 
 struct BoundsOptions {
-  std::string points_path;  ///< points file: .txt (x y z per line), .off or .obj
+  std::string model_path;   ///< glTF file (.gltf or .glb): one report per mesh
+  std::string points_path;  ///< or a points file: .txt (x y z per line), .off or .obj
   std::string json_path;    ///< every builder's volume (classify schema), name and time
 };
 

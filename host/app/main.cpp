@@ -51,7 +51,8 @@ int main(int argc, char** argv) {
 
   BoundsOptions bounds;
   CLI::App* bounds_cmd = app.add_subcommand("bounds", "Build every bounding volume of a point set and compare them");
-  bounds_cmd->add_option("--points", bounds.points_path, "Points file: x y z per line (.txt), .off or .obj")->required();
+  auto* model_opt = bounds_cmd->add_option("file", bounds.model_path, "glTF file (.gltf, .glb): one report per mesh");
+  bounds_cmd->add_option("--points", bounds.points_path, "Points file: x y z per line (.txt), .off or .obj")->excludes(model_opt);
   bounds_cmd->add_option("--json", bounds.json_path, "Write every volume (classify schema) with builder name and time");
 
   try {
