@@ -14,6 +14,7 @@
 #include "bounds/points.hpp"
 #include "bounds/sphere_fit.hpp"
 #include "geom/validate.hpp"
+#include "scene/gltf_points.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe::bounds {
@@ -301,6 +302,39 @@ TEST(ConvexHull, MillionPoints) {
   expect_valid_polyhedron(h, p, &sample);
 }
 
+// Every mesh of the shipped glTF scenes (skipped when ../shared/scenes is absent).
+std::vector<Points> real_meshes() {
+  std::vector<Points> out;
+  const std::filesystem::path dir = std::filesystem::path(CULLPIPE_SHARED_DIR) / "scenes";
+  if (!std::filesystem::exists(dir)) return out;
+  for (const auto& sub : std::filesystem::directory_iterator(dir)) {
+    if (!sub.is_directory()) continue;
+    for (const auto& f : std::filesystem::directory_iterator(sub.path()))
+      if (f.path().extension() == ".gltf")
+        for (GltfMeshPoints& m : load_gltf_mesh_points(f.path().string()))
+          if (!m.positions.empty()) out.push_back(std::move(m.positions));
+  }
+  return out;
+}
+
+TEST(ConvexHull, RealMeshesGiveValidHulls) {
+  const auto meshes = real_meshes();
+  if (meshes.empty()) GTEST_SKIP() << "no scenes in ../shared/scenes";
+  std::size_t polyhedra = 0;
+  for (std::size_t i = 0; i < meshes.size(); ++i) {
+    SCOPED_TRACE("mesh " + std::to_string(i));
+    const ConvexHull h = convex_hull(meshes[i]);
+    if (h.dimension != ConvexHull::Dimension::Polyhedron) continue;
+    ++polyhedra;
+    // Hull vertices plus a sample of the input (the full check is O(n * faces)).
+    Points check = h.vertices;
+    for (std::size_t k = 0; k < meshes[i].size(); k += 1 + meshes[i].size() / 3000) check.push_back(meshes[i][k]);
+    expect_valid_polyhedron(h, meshes[i], &check);
+    if (HasFatalFailure()) return;
+  }
+  EXPECT_GT(polyhedra, 200u);
+}
+
 // ---- AABB updates ---------------------------------------------------------------------------
 
 TEST(AabbUpdate, EveryMethodEnclosesAndHullMethodsAreExact) {
@@ -340,6 +374,19 @@ TEST(AabbUpdate, EveryMethodEnclosesAndHullMethodsAreExact) {
     EXPECT_LT(tracker.last_climb_steps(), 200u) << "small rotations need short climbs";
   }
   EXPECT_GT(loose_volume_ratio / frames, 1.05) << "the transformed box is looser than the recompute";
+}
+
+TEST(AabbUpdate, HillClimbingEqualsTheHullRecomputeOnRealMeshes) {
+  const auto meshes = real_meshes();
+  if (meshes.empty()) GTEST_SKIP() << "no scenes in ../shared/scenes";
+  for (std::size_t i = 0; i < meshes.size(); ++i) {
+    AabbTracker tracker(meshes[i]);
+    for (int step = 0; step < 24; ++step) {
+      const glm::mat4 m = glm::rotate(glm::mat4(1.0f), 0.2618f * float(step), glm::normalize(glm::vec3(1, 3, 2)));
+      const Aabb hull = tracker.update(m, AabbUpdate::HullRecompute), climb = tracker.update(m, AabbUpdate::HillClimb);
+      ASSERT_EQ(climb, hull) << "mesh " << i << " step " << step;
+    }
+  }
 }
 
 TEST(AabbUpdate, DegenerateObjects) {
@@ -421,6 +468,45 @@ TEST(Obbs, TighterThanTheAabbOnRotatedShapes) {
     EXPECT_LT(pca, aabb * 1.01);
     EXPECT_LE(dito, aabb);
     EXPECT_LT(face, 4 * 2 * 1 * 8 * 1.05) << "within 5% of the generating box";
+  }
+}
+
+// Oracle for the hull-face method: for every hull face, every direction in the face plane
+// given by a pair of hull vertices (a superset of the 2D hull's edges), the box volume by
+// projection. The rotating calipers must find the same minimum.
+double hull_face_oracle(const Points& p) {
+  const ConvexHull h = convex_hull(p);
+  double best = 1e300;
+  for (const auto& f : h.faces) {
+    const glm::dvec3 a(h.vertices[f[0]]), b(h.vertices[f[1]]), c(h.vertices[f[2]]);
+    const glm::dvec3 n = glm::normalize(glm::cross(b - a, c - a));
+    for (std::size_t i = 0; i < h.vertices.size(); ++i)
+      for (std::size_t j = 0; j < h.vertices.size(); ++j) {
+        glm::dvec3 u = glm::dvec3(h.vertices[j]) - glm::dvec3(h.vertices[i]);
+        u -= glm::dot(u, n) * n;
+        if (glm::length(u) < 1e-9) continue;
+        u = glm::normalize(u);
+        const glm::dvec3 v = glm::cross(n, u);
+        glm::dvec3 lo(1e300), hi(-1e300);
+        for (const glm::vec3& q : h.vertices) {
+          const glm::dvec3 c3(glm::dot(glm::dvec3(q), u), glm::dot(glm::dvec3(q), v), glm::dot(glm::dvec3(q), n));
+          lo = glm::min(lo, c3);
+          hi = glm::max(hi, c3);
+        }
+        best = std::min(best, (hi.x - lo.x) * (hi.y - lo.y) * (hi.z - lo.z));
+      }
+  }
+  return best;
+}
+
+TEST(Obbs, RotatingCalipersMatchTheBruteForceOracle) {
+  for (std::uint64_t seed = 60; seed < 100; ++seed) {
+    test::Rng rng{seed};
+    Points p = seed % 2 ? random_on_sphere(12 + seed % 9, seed) : random_cube(25, seed);
+    const glm::mat3 rot = rng.rotation();
+    for (auto& q : p) q = rot * (q * glm::vec3(3.0f, 1.0f, 0.4f));
+    const double oracle = hull_face_oracle(p), calipers = volume(hull_face_obb(p));
+    EXPECT_NEAR(calipers, oracle, 1e-4 * oracle) << "seed " << seed;
   }
 }
 

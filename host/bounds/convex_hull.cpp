@@ -112,7 +112,11 @@ class Quickhull {
       ++fr.next;
       const std::uint32_t f = fr.face, g = faces_[f].nb[e];
       if (faces_[g].visited) continue;
-      if (faces_[g].distance(eye) > tol_) {
+      // A neighbour counts as visible when the eye is above it, or in its plane (within the
+      // tolerance): keeping such a face would pair its edge with an eye lying on the same
+      // plane (often on the edge's own line, in CAD models), making a flat or zero-area face
+      // with no usable normal. Replacing it fans the coplanar region to the eye instead.
+      if (faces_[g].distance(eye) > -tol_) {
         faces_[g].visited = true;
         visible_.push_back(g);
         stack.push_back({g, edge_of(g, faces_[f].v[(e + 1) % 3], faces_[f].v[e]), 0});

@@ -114,7 +114,8 @@ Rect min_area_rect(const std::vector<std::array<double, 2>>& poly) {
     if (i == 0) top = right;
     while (dot((top + 1) % m, nx, ny) >= dot(top, nx, ny) && (top + 1) % m != i) top = (top + 1) % m;
     if (i == 0) left = top;
-    while (dot((left + 1) % m, ex, ey) <= dot(left, ex, ey) && (left + 1) % m != i) left = (left + 1) % m;
+    // The minimum along the edge may be the edge's own start vertex i, so left may reach i.
+    while (left != i && dot((left + 1) % m, ex, ey) <= dot(left, ex, ey)) left = (left + 1) % m;
     const double width = dot(right, ex, ey) - dot(left, ex, ey);
     const double height = dot(top, nx, ny) - dot(i, nx, ny);
     if (width * height < best.area) best = {ex, ey, width * height};
