@@ -242,17 +242,9 @@ ConvexHull convex_hull(std::span<const glm::vec3> points) {
     hull.vertex_neighbours.assign(input.size(), {});
   };
 
-  // Extreme points per axis; the pair farthest apart seeds the simplex.
-  std::uint32_t lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
-  for (std::uint32_t i = 1; i < p.size(); ++i)
-    for (int k = 0; k < 3; ++k) {
-      if (p[i][k] < p[lo[k]][k]) lo[k] = i;
-      if (p[i][k] > p[hi[k]][k]) hi[k] = i;
-    }
-  int axis = 0;
-  for (int k = 1; k < 3; ++k)
-    if (p[hi[k]][k] - p[lo[k]][k] > p[hi[axis]][axis] - p[lo[axis]][axis]) axis = k;
-  const std::uint32_t a = lo[axis], b = hi[axis];
+  // The most separated pair of axis-extreme points seeds the simplex.
+  const auto [seed_a, seed_b] = most_separated_axis_extremes(points);
+  const std::uint32_t a = std::uint32_t(seed_a), b = std::uint32_t(seed_b);
   if (glm::length(p[b] - p[a]) <= tol) {
     hull.dimension = ConvexHull::Dimension::Point;
     finish({a});

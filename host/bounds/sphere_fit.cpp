@@ -23,6 +23,25 @@ void check_points(std::span<const glm::vec3> points) {
                         " coordinate");
 }
 
+std::pair<std::size_t, std::size_t> most_separated_axis_extremes(std::span<const glm::vec3> points) {
+  std::size_t lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
+  for (std::size_t i = 1; i < points.size(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      if (points[i][k] < points[lo[k]][k]) lo[k] = i;
+      if (points[i][k] > points[hi[k]][k]) hi[k] = i;
+    }
+  int axis = 0;
+  double best = -1.0;
+  for (int k = 0; k < 3; ++k) {
+    const glm::dvec3 d = glm::dvec3(points[hi[k]]) - glm::dvec3(points[lo[k]]);
+    if (glm::dot(d, d) > best) {
+      best = glm::dot(d, d);
+      axis = k;
+    }
+  }
+  return {lo[axis], hi[axis]};
+}
+
 namespace {
 
 using dvec3 = glm::dvec3;
@@ -149,24 +168,10 @@ Aabb aabb_of_points(std::span<const glm::vec3> points) {
 
 Sphere ritter_sphere(std::span<const glm::vec3> points) {
   check_points(points);
-  // Seed: among the min/max points on each axis, the pair farthest apart.
-  std::size_t lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
-  for (std::size_t i = 1; i < points.size(); ++i)
-    for (int k = 0; k < 3; ++k) {
-      if (points[i][k] < points[lo[k]][k]) lo[k] = i;
-      if (points[i][k] > points[hi[k]][k]) hi[k] = i;
-    }
-  int axis = 0;
-  double best = -1.0;
-  for (int k = 0; k < 3; ++k) {
-    const dvec3 d = dvec3(points[hi[k]]) - dvec3(points[lo[k]]);
-    if (glm::dot(d, d) > best) {
-      best = glm::dot(d, d);
-      axis = k;
-    }
-  }
-  dvec3 c = (dvec3(points[lo[axis]]) + dvec3(points[hi[axis]])) * 0.5;
-  double r = std::sqrt(best) * 0.5;
+  // Seed: the diameter sphere of the most separated pair of axis-extreme points.
+  const auto [a, b] = most_separated_axis_extremes(points);
+  dvec3 c = (dvec3(points[a]) + dvec3(points[b])) * 0.5;
+  double r = glm::length(dvec3(points[b]) - dvec3(points[a])) * 0.5;
   for (const glm::vec3& p : points) grow(c, r, dvec3(p));
   return enclosing_sphere(c, points);
 }
