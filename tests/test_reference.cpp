@@ -160,5 +160,35 @@ TEST(Compare, ReportsTheFirstMismatchAndCounts) {
   EXPECT_NE(report.find("cpu says inside, gpu says outside"), std::string::npos);
 }
 
+TEST(Compare, AgreementCheckCatchesEveryKindOfDifference) {
+  const Frustum f = unit_cube();
+  const std::vector<Sphere> spheres = {{{0, 0, 0}, 0.1f}, {{5, 0, 0}, 1}, {{1, 0, 0}, 0.5f}};
+  std::vector<Classification> cpu(3);
+  const reference::CullCounts counts = reference::classify_all(spheres, f, cpu);
+  const std::vector<std::uint32_t> ids = {2, 0};
+  EXPECT_TRUE(check_agreement<Sphere>(spheres, f, cpu, counts, cpu, counts, ids, 3).ok());
+
+  std::vector<Classification> wrong = cpu;  // one class flipped
+  wrong[1] = kCross;
+  const Agreement a = check_agreement<Sphere>(spheres, f, cpu, counts, wrong, counts, ids, 3, 10,
+                                              std::vector<std::size_t>{10, 11, 12});
+  EXPECT_EQ(a.mismatches, 1u);
+  ASSERT_EQ(a.reports.size(), 1u);
+  EXPECT_NE(a.reports[0].find("object 11: sphere center (5, 0, 0) radius 1"), std::string::npos) << a.reports[0];
+  EXPECT_NE(a.reports[0].find("[1, 0, 0, 1]"), std::string::npos);
+  EXPECT_NE(a.reports[0].find("cpu says outside, gpu says intersecting"), std::string::npos);
+
+  reference::CullCounts bad_counts = counts;
+  ++bad_counts.inside;
+  EXPECT_EQ(check_agreement<Sphere>(spheres, f, cpu, counts, cpu, bad_counts, ids, 3).mismatches, 1u);
+  const std::vector<std::uint32_t> duplicate = {2, 2}, missing = {2}, extra = {0, 1, 2};
+  EXPECT_FALSE(check_agreement<Sphere>(spheres, f, cpu, counts, cpu, counts, duplicate, 3).ok());
+  EXPECT_FALSE(check_agreement<Sphere>(spheres, f, cpu, counts, cpu, counts, missing, 3).ok());
+  EXPECT_FALSE(check_agreement<Sphere>(spheres, f, cpu, counts, cpu, counts, extra, 3).ok());
+  // With room for one id, any one visible object is a correct (overflowed) list.
+  EXPECT_TRUE(check_agreement<Sphere>(spheres, f, cpu, counts, cpu, counts, missing, 1).ok());
+  EXPECT_FALSE(check_agreement<Sphere>(spheres, f, cpu, counts, cpu, counts, std::vector<std::uint32_t>{1}, 1).ok());
+}
+
 }  // namespace
 }  // namespace cullpipe

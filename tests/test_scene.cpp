@@ -99,6 +99,33 @@ void expect_world_volumes_enclose(const Scene& s) {
   }
 }
 
+TEST(Camera, EveryDepthConventionGivesTheSameFrustumShape) {
+  Camera base;
+  base.eye = {0, 0, 10};
+  base.target = {0, 0, 0};
+  base.fov_y_degrees = 90.0f;
+  base.aspect = 2.0f;
+  base.near_plane = 1.0f;
+  base.far_plane = 100.0f;
+  // (point, inside the finite frustum?) -- camera looks down -z from z = 10.
+  const std::vector<std::pair<glm::vec3, bool>> points = {
+      {{0, 0, 0}, true},      {{0, 0, 9.5f}, false},  {{0, 0, 8.5f}, true},   {{0, 9.5f, 0}, true},
+      {{0, 10.5f, 0}, false}, {{19.5f, 0, 0}, true},  {{20.5f, 0, 0}, false}, {{0, 0, -89}, true},
+      {{0, 0, -91}, false},   {{0, 0, 20}, false}};
+  for (int variant = 0; variant < 4; ++variant) {
+    Camera c = base;
+    c.reversed_z = variant & 1;
+    c.infinite_far = variant & 2;
+    const Frustum f = Frustum::from_view_proj(c.view_proj());
+    for (const auto& [p, inside] : points) {
+      bool in = true;
+      for (const Plane& pl : f.active()) in &= pl.distance(p) >= 0.0f;
+      const bool beyond_far = p.z < -90.0f;  // only the finite far plane cuts it
+      EXPECT_EQ(in, inside || (c.infinite_far && beyond_far)) << "variant " << variant << " point " << p.z;
+    }
+  }
+}
+
 TEST(World, VolumesEncloseTheTransformedBoxExactly) {
   for (SceneKind kind : {SceneKind::Uniform, SceneKind::Clustered, SceneKind::City}) {
     Scene s = generate_scene(kind, 3000, 4);
