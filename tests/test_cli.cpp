@@ -188,7 +188,7 @@ TEST(Cli, BoundsReportsEveryBuilder) {
   EXPECT_NE(r.out.find("9 points"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("8 vertices"), std::string::npos) << r.out;
   const auto j = nlohmann::json::parse(slurp(json))["sets"][0];
-  ASSERT_EQ(j["volumes"].size(), 7u);
+  ASSERT_EQ(j["volumes"].size(), 8u);
   for (const auto& v : j["volumes"]) {
     EXPECT_TRUE(v.contains("builder") && v.contains("time_ms"));
     if (v.contains("sphere")) {  // exact: the cube's circumradius; the others enclose it

@@ -32,6 +32,14 @@ Obb dito_obb(std::span<const glm::vec3> points);
 /// 1983), extended by the hull's depth below the face; the box of least volume. O(F h log h).
 Obb hull_face_obb(std::span<const glm::vec3> points);
 
+/// The minimum-volume box: the hull-face candidates plus a sweep over every one-parameter
+/// family of boxes with two adjacent faces flush with hull edges (O'Rourke 1985), with the
+/// support vertices tracked through exact event times and the volume minimised between
+/// events (see obb_exact.cpp). Beats the hull-face method where the best box has no face flush
+/// with a hull face (e.g. a long thin tetrahedron whose best box is rotated 45 degrees).
+/// Cost grows with the square of the hull's edge count.
+Obb exact_obb(std::span<const glm::vec3> points);
+
 /// The box `b` carried by an affine transform (`update` for a moving object): exact for
 /// rotations, translations and uniform scale; with non-uniform scale or shear the transformed
 /// box is re-fitted as an OBB that still encloses it.
