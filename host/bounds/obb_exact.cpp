@@ -62,6 +62,7 @@ class Sweeper {
     dvec3 lo(1e300), hi(-1e300);
     for (const dvec3& v : p_) lo = glm::min(lo, v), hi = glm::max(hi, v);
     diameter_ = glm::length(hi - lo);  // bounds every |p - q|
+    build_support_table();
     for (std::size_t f = 0; f < hull.faces.size(); ++f) {
       const auto& t = hull.faces[f];
       const dvec3 n = glm::cross(p_[t[1]] - p_[t[0]], p_[t[2]] - p_[t[0]]);
@@ -131,6 +132,38 @@ class Sweeper {
     f.n[2] = glm::cross(f.n[0], f.n[1]);
     return f;
   }
+
+  // A coarse table of support vertices (cube map, kCells x kCells per face): climbs start
+  // from the entry for their direction, so each takes a few steps wherever the last one was.
+  static constexpr int kCells = 16;
+  std::size_t cell(const dvec3& d) const {
+    const dvec3 a = glm::abs(d);
+    const int axis = a.x >= a.y && a.x >= a.z ? 0 : a.y >= a.z ? 1 : 2;
+    const double m = a[axis] > 0 ? a[axis] : 1.0;
+    const int face = 2 * axis + (d[axis] < 0 ? 1 : 0);
+    const double u = d[(axis + 1) % 3] / m, v = d[(axis + 2) % 3] / m;  // in [-1, 1]
+    const int iu = std::clamp(int((u + 1.0) * 0.5 * kCells), 0, kCells - 1);
+    const int iv = std::clamp(int((v + 1.0) * 0.5 * kCells), 0, kCells - 1);
+    return std::size_t((face * kCells + iu) * kCells + iv);
+  }
+
+  void build_support_table() {
+    table_.assign(6 * kCells * kCells, 0);
+    std::uint32_t v = 0;
+    for (int face = 0; face < 6; ++face)
+      for (int iu = 0; iu < kCells; ++iu)
+        for (int iv = 0; iv < kCells; ++iv) {
+          dvec3 d(0.0);
+          const int axis = face / 2;
+          d[axis] = face % 2 ? -1.0 : 1.0;
+          d[(axis + 1) % 3] = (iu + 0.5) / kCells * 2.0 - 1.0;
+          d[(axis + 2) % 3] = (iv + 0.5) / kCells * 2.0 - 1.0;
+          v = climb(v, d);
+          table_[std::size_t((face * kCells + iu) * kCells + iv)] = v;
+        }
+  }
+
+  std::uint32_t support(const dvec3& d) const { return climb(table_[cell(d)], d); }
 
   std::uint32_t climb(std::uint32_t v, const dvec3& d) const {
     double best = glm::dot(d, p_[v]);
@@ -204,7 +237,7 @@ class Sweeper {
     auto refresh = [&](int k, double t) {
       const int axis = k / 2, side = k % 2;
       const dvec3 dir = side ? -fp.n[axis] : fp.n[axis];
-      const std::uint32_t v = start_[std::size_t(k)] = climb(start_[std::size_t(k)], dir);
+      const std::uint32_t v = support(dir);
       sup[std::size_t(axis)][std::size_t(side)] = v;
       event[std::size_t(k)] = next_event(a, b, d2, axis, side, v, t, hi, at_hi);
     };
@@ -273,7 +306,7 @@ class Sweeper {
   std::vector<dvec3> p_, normals_;
   std::vector<Edge> edges_;
   double diameter_ = 0.0;
-  std::array<std::uint32_t, 6> start_{};
+  std::vector<std::uint32_t> table_;
   double best_ = std::numeric_limits<double>::infinity();
 };
 
