@@ -90,8 +90,9 @@ class Sweeper {
       // 2 sin(theta/4) of it: a dot product with a unit vector changes by at most that much.
       const dvec3 mid = std::cos(0.5 * theta) * a + std::sin(0.5 * theta) * b;
       const double reach = 2.0 * std::sin(0.25 * theta) + 1e-9;
-      for (std::size_t j = 0; j < edges_.size(); ++j) {
-        if (j == i) continue;
+      // Unordered pairs suffice: the family of (e1, e2) and that of (e2, e1) are the same
+      // boxes (e1 and e2 flush with adjacent faces), parameterised along either arc.
+      for (std::size_t j = i + 1; j < edges_.size(); ++j) {
         const Edge& e2 = edges_[j];
         const double ma = glm::dot(mid, e2.fa), mb = glm::dot(mid, e2.fb);
         if (ma * mb > 0.0 && std::abs(ma) > reach && std::abs(mb) > reach) continue;

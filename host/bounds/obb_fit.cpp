@@ -294,30 +294,61 @@ Obb hull_face_obb(std::span<const glm::vec3> points) {
     return fit_box(points, to_basis(u * r.ux + v * r.uy, n));
   }
   const std::vector<glm::vec3>& hv = hull.vertices;
+  const std::size_t nf = hull.faces.size();
+  std::vector<dvec3> normal(nf, dvec3(0.0));
+  for (std::size_t f = 0; f < nf; ++f) {
+    const auto& t = hull.faces[f];
+    const dvec3 raw = glm::cross(dvec3(hv[t[1]]) - dvec3(hv[t[0]]), dvec3(hv[t[2]]) - dvec3(hv[t[0]]));
+    if (glm::length(raw) > 0) normal[f] = glm::normalize(raw);
+  }
+  // Coplanar neighbouring triangles form one hull face and give the same box: label each
+  // group once (flood fill over neighbours with the same normal).
+  std::vector<std::uint32_t> group(nf, ~0u);
+  std::vector<std::size_t> representatives;
+  for (std::size_t f = 0; f < nf; ++f) {
+    if (group[f] != ~0u || glm::length(normal[f]) == 0) continue;
+    group[f] = std::uint32_t(representatives.size());
+    representatives.push_back(f);
+    std::vector<std::size_t> stack = {f};
+    while (!stack.empty()) {
+      const std::size_t g = stack.back();
+      stack.pop_back();
+      for (std::uint32_t h : hull.face_neighbours[g])
+        if (group[h] == ~0u && glm::dot(normal[h], normal[f]) > 1 - 1e-12) {
+          group[h] = group[f];
+          stack.push_back(h);
+        }
+    }
+  }
+  // Faces around each vertex, to find the outline of the hull seen along a direction.
+  std::vector<std::vector<std::uint32_t>> vertex_faces(hv.size());
+  for (std::size_t f = 0; f < nf; ++f)
+    for (std::uint32_t v : hull.faces[f]) vertex_faces[v].push_back(std::uint32_t(f));
+
   double best_volume = std::numeric_limits<double>::infinity();
   glm::mat3 best_basis(1.0f);
-  std::vector<dvec3> normals_done;
-  for (const auto& f : hull.faces) {
-    const dvec3 a(hv[f[0]]), b(hv[f[1]]), c(hv[f[2]]);
-    const dvec3 raw = glm::cross(b - a, c - a);
-    if (glm::length(raw) <= 0) continue;
-    const dvec3 n = glm::normalize(raw);
-    // Coplanar triangles of one hull face give the same box: skip repeated normals.
-    bool seen = false;
-    for (const dvec3& m : normals_done) seen |= glm::dot(m, n) > 1 - 1e-12;
-    if (seen) continue;
-    normals_done.push_back(n);
+  std::vector<std::array<double, 2>> proj;
+  for (std::size_t f : representatives) {
+    const dvec3 n = normal[f];
+    const dvec3 a(hv[hull.faces[f][0]]), b(hv[hull.faces[f][1]]);
     const dvec3 u = glm::normalize(b - a), v = glm::cross(n, u);
-    std::vector<std::array<double, 2>> proj;
-    proj.reserve(hv.size());
+    // Only outline vertices (with faces turned towards and away from n around them) can be
+    // corners of the projection's 2D hull.
+    proj.clear();
     double depth = 0;
     const double top = glm::dot(n, a);
-    for (const glm::vec3& p : hv) {
-      const dvec3 q(p);
-      proj.push_back({glm::dot(q, u), glm::dot(q, v)});
+    for (std::size_t i = 0; i < hv.size(); ++i) {
+      const dvec3 q(hv[i]);
       depth = std::max(depth, top - glm::dot(q, n));
+      bool towards = false, away = false;
+      for (std::uint32_t g : vertex_faces[i]) {
+        const double s = glm::dot(normal[g], n);
+        towards |= s >= -1e-12;
+        away |= s <= 1e-12;
+      }
+      if (towards && away) proj.push_back({glm::dot(q, u), glm::dot(q, v)});
     }
-    const Rect r = min_area_rect(hull2d(std::move(proj)));
+    const Rect r = min_area_rect(hull2d(proj));
     const double vol = r.area * depth;
     if (vol < best_volume) {
       best_volume = vol;
