@@ -265,12 +265,18 @@ std::string write_temp(const std::string& name, const std::string& text) {
   return path.string();
 }
 
+// The message from the part naming the file on (the temp directory prefix removed), or a
+// marker when the message does not name the file at all.
+std::string from_name(const std::string& message, const std::string& name) {
+  const auto at = message.find(name);
+  return at == std::string::npos ? "message without the file name: " + message : message.substr(at);
+}
+
 std::string points_error(const std::string& name, const std::string& text) {
   try {
     load_points(write_temp(name, text));
   } catch (const InputError& e) {
-    const std::string m = e.what();
-    return m.substr(m.find(name));
+    return from_name(e.what(), name);
   }
   return "no error";
 }
@@ -336,8 +342,7 @@ std::string gltf_error(const std::string& name, const std::string& text) {
   try {
     load_gltf_mesh_points(write_temp(name, text));
   } catch (const InputError& e) {
-    const std::string m = e.what();
-    return m.substr(m.find(name));
+    return from_name(e.what(), name);
   }
   return "no error";
 }
@@ -362,6 +367,14 @@ TEST(GltfPoints, ReadsAMinimalFileAndRejectsBrokenOnes) {
   EXPECT_NE(gltf_error("type.gltf", triangle_gltf("").replace(triangle_gltf("").find("5126"), 4, "5123")).find("not FLOAT"),
             std::string::npos);
   EXPECT_EQ(gltf_error("missing.gltf", "{}").find("missing.gltf"), 0u);
+  // Offsets near 2^64 must not wrap the range checks into an out-of-bounds read.
+  std::string wrap_view = triangle_gltf("");
+  wrap_view.replace(wrap_view.find(R"("buffer":0,)"), 11, R"("buffer":0,"byteOffset":18446744073709551615,)");
+  EXPECT_NE(gltf_error("wrap1.gltf", wrap_view).find("reads past"), std::string::npos) << gltf_error("wrap1.gltf", wrap_view);
+  EXPECT_NE(gltf_error("wrap2.gltf", triangle_gltf(R"("byteOffset":18446744073709551604,)")).find("reads past"),
+            std::string::npos);
+  EXPECT_NE(gltf_error("count.gltf", triangle_gltf("").replace(triangle_gltf("").find(R"("count":3)"), 9, R"("count":4)")).find("reads past"),
+            std::string::npos);
   EXPECT_THROW(load_gltf_mesh_points("/nonexistent/model.gltf"), InputError);
 }
 

@@ -68,11 +68,13 @@ std::vector<GltfMeshPoints> load_gltf_mesh_points(const std::string& path) {
       const std::vector<unsigned char>& data = model.buffers[std::size_t(view.buffer)].data;
       const std::size_t stride = view.byteStride ? view.byteStride : 12;
       if (stride < 12) throw InputError(what + "has a byte stride of " + std::to_string(stride) + ", less than 12");
-      // Range checks in 64-bit arithmetic, no overflow for counts < 2^40.
-      if (acc.count > (std::size_t(1) << 32)) throw InputError(what + "has an absurd count " + std::to_string(acc.count));
-      const std::uint64_t need = std::uint64_t(acc.byteOffset) + std::uint64_t(stride) * (acc.count - 1) + 12;
-      if (need > view.byteLength) throw InputError(what + "reads past its buffer view");
-      if (std::uint64_t(view.byteOffset) + view.byteLength > data.size()) throw InputError(what + "'s buffer view reads past its buffer");
+      // Range checks by subtraction, so no sum can wrap around (offsets come from the file).
+      if (view.byteOffset > data.size() || view.byteLength > data.size() - view.byteOffset)
+        throw InputError(what + "uses buffer view " + std::to_string(acc.bufferView) + ", which reads past its buffer");
+      if (acc.byteOffset > view.byteLength || view.byteLength - acc.byteOffset < 12)
+        throw InputError(what + "reads past its buffer view");
+      const std::size_t room = view.byteLength - acc.byteOffset - 12;  // bytes after the first element
+      if ((acc.count - 1) > room / stride) throw InputError(what + "reads past its buffer view");
       const unsigned char* base = data.data() + view.byteOffset + acc.byteOffset;
       for (std::size_t i = 0; i < acc.count; ++i) {
         float v[3];
