@@ -206,6 +206,7 @@ TEST(Spheres, MiniballReferenceSets) {
 void expect_valid_polyhedron(const ConvexHull& h, const Points& input, const Points* check = nullptr) {
   if (!check) check = &input;
   ASSERT_EQ(h.dimension, ConvexHull::Dimension::Polyhedron);
+  EXPECT_TRUE(h.valid);
   const std::size_t v = h.vertices.size(), f = h.faces.size();
   ASSERT_EQ(f % 2, 0u);
   EXPECT_EQ(v - f * 3 / 2 + f, 2u) << "Euler characteristic of a closed convex surface";
@@ -383,8 +384,86 @@ TEST(AabbUpdate, HillClimbingEqualsTheHullRecomputeOnRealMeshes) {
     AabbTracker tracker(meshes[i]);
     for (int step = 0; step < 24; ++step) {
       const glm::mat4 m = glm::rotate(glm::mat4(1.0f), 0.2618f * float(step), glm::normalize(glm::vec3(1, 3, 2)));
-      const Aabb hull = tracker.update(m, AabbUpdate::HullRecompute), climb = tracker.update(m, AabbUpdate::HillClimb);
-      ASSERT_EQ(climb, hull) << "mesh " << i << " step " << step;
+      const Aabb full = tracker.update(m, AabbUpdate::Recompute), hull = tracker.update(m, AabbUpdate::HullRecompute),
+                 climb = tracker.update(m, AabbUpdate::HillClimb);
+      const float scale = glm::length(full.extent()) + 1e-30f;
+      for (int k = 0; k < 3; ++k) {  // encloses the recompute, as tight as the hull recompute
+        ASSERT_LE(climb.min[k], full.min[k]) << "mesh " << i << " step " << step;
+        ASSERT_GE(climb.max[k], full.max[k]) << "mesh " << i << " step " << step;
+        ASSERT_NEAR(climb.min[k], hull.min[k], 1e-6f * scale) << "mesh " << i << " step " << step;
+        ASSERT_NEAR(climb.max[k], hull.max[k], 1e-6f * scale) << "mesh " << i << " step " << step;
+      }
+    }
+  }
+}
+
+// Near-degenerate sets that defeat a Quickhull without face merging: clusters of points a
+// few float steps apart, near-collinear runs with duplicates, dense circles. Whatever the
+// hull makes of them, every AABB update must contain the full recompute.
+std::vector<Points> near_degenerate_sets() {
+  std::vector<Points> sets;
+  test::Rng rng{404};
+  for (int trial = 0; trial < 300; ++trial) {
+    Points p;
+    const int kind = trial % 3;
+    if (kind == 0) {  // jittered cube corners
+      for (int i = 0; i < 10; ++i) {
+        const int c = int(rng.next() % 8);
+        p.push_back(glm::vec3(c & 1 ? 0.5f : -0.5f, c & 2 ? 0.5f : -0.5f, c & 4 ? 0.5f : -0.5f) + rng.vec3(-1e-7f, 1e-7f));
+      }
+    } else if (kind == 1) {  // near-collinear with exact duplicates
+      for (int i = 0; i < 10; ++i) p.push_back(glm::vec3(float(i % 5), 2.0f * float(i % 5), 0.0f) + rng.vec3(-1e-6f, 1e-6f));
+      p.push_back(p[3]);
+      p.push_back(p[7]);
+    } else {  // points on a circle, slightly off its plane
+      for (int i = 0; i < 2000; ++i) {
+        const float a = rng.uniform(0.0f, 6.2831853f);
+        p.push_back({std::cos(a), std::sin(a), rng.uniform(-1e-7f, 1e-7f)});
+      }
+      p.push_back({1, 0, 0});
+    }
+    sets.push_back(std::move(p));
+  }
+  Points circle;  // 100,000 points exactly in a plane: the ring must keep (1, 0, 0)'s extent
+  for (int i = 0; i < 100000; ++i) circle.push_back({std::cos(6.2831853f * float(i) / 100000.0f), std::sin(6.2831853f * float(i) / 100000.0f), 0.0f});
+  sets.push_back(std::move(circle));
+  return sets;
+}
+
+TEST(AabbUpdate, NearDegenerateSetsStillEnclose) {
+  int invalid = 0;
+  for (const Points& p : near_degenerate_sets()) {
+    AabbTracker tracker(p);
+    invalid += !tracker.hull().valid;
+    for (int step = 0; step < 8; ++step) {
+      const glm::mat4 m = glm::rotate(glm::mat4(1.0f), 0.8f * float(step), glm::normalize(glm::vec3(1, 2, 3)));
+      const Aabb full = tracker.update(m, AabbUpdate::Recompute);
+      for (AabbUpdate method : {AabbUpdate::HullRecompute, AabbUpdate::HillClimb, AabbUpdate::TransformBox}) {
+        const Aabb b = tracker.update(m, method);
+        for (int k = 0; k < 3; ++k) {
+          ASSERT_LE(b.min[k], full.min[k]) << to_string(method) << " points " << p.size() << " step " << step;
+          ASSERT_GE(b.max[k], full.max[k]) << to_string(method) << " points " << p.size() << " step " << step;
+        }
+      }
+    }
+  }
+  std::printf("near-degenerate sets whose hull failed validation (recomputed from all points): %d\n", invalid);
+}
+
+TEST(ConvexHull, LowerDimensionalToleranceCoversEveryPoint) {
+  for (const Points& p : near_degenerate_sets()) {
+    const ConvexHull h = convex_hull(p);
+    if (h.dimension == ConvexHull::Dimension::Polyhedron) continue;
+    const glm::dvec3 origin(h.vertices[0]);
+    for (const glm::vec3& q : p) {
+      const glm::dvec3 d = glm::dvec3(q) - origin;
+      double off = 0.0;
+      if (h.dimension == ConvexHull::Dimension::Point) off = glm::length(d);
+      if (h.dimension == ConvexHull::Dimension::Segment)
+        off = glm::length(glm::cross(d, glm::normalize(glm::dvec3(h.vertices[1]) - origin)));
+      if (h.dimension == ConvexHull::Dimension::Polygon)
+        off = std::abs(glm::dot(d, glm::dvec3(h.normal))) / glm::length(glm::dvec3(h.normal));
+      ASSERT_LE(off, h.tolerance * (1 + 1e-12) + 1e-300);
     }
   }
 }

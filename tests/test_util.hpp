@@ -1,6 +1,7 @@
 #pragma once
 // Shared helpers for the tests: a deterministic RNG, random volumes near a frustum, and an
 // exact (double precision, separating-axis) intersection test used to check conservativeness.
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>

@@ -9,6 +9,7 @@
 #include "bounds/convex_hull.hpp"
 #include "bounds/obb_fit.hpp"
 #include "bounds/sphere_fit.hpp"
+#include "geom/validate.hpp"
 #include "scene/cull_case_io.hpp"
 #include "scene/gltf_points.hpp"
 #include "scene/json_util.hpp"
@@ -62,6 +63,13 @@ nlohmann::json report(const std::string& title, const std::vector<glm::vec3>& pt
   spheres.push_back(timed("sphere-refined", [&] { return Volume(bounds::refined_sphere(pts)); }));
   spheres.push_back(timed("sphere-exact", [&] { return Volume(bounds::exact_sphere(pts)); }));
 
+  // Coordinates near the float limit can overflow a volume (e.g. a radius beyond 3.4e38):
+  // report that rather than print or write non-finite numbers.
+  for (const auto* list : {&boxes, &spheres})
+    for (const Built& b : *list) {
+      const std::string why = std::visit([](const auto& v) { return invalid_reason(v); }, b.volume);
+      if (!why.empty()) throw InputError(title + ": " + b.builder + " gives no finite volume (" + why + "); coordinates too large");
+    }
   const double exact_box = boxes.back().size, exact_radius = spheres.back().size;
 
   char hull_ms_text[32];

@@ -53,6 +53,22 @@ std::optional<AabbUpdate> parse_aabb_update(std::string_view name) {
 
 AabbTracker::AabbTracker(std::span<const glm::vec3> local_points)
     : points_(local_points.begin(), local_points.end()), hull_(convex_hull(local_points)), local_(aabb_of_points(local_points)) {
+  // Climb over the hull vertices; for a flat or linear hull, over their projections onto its
+  // plane or line, where the ring (or segment) is exactly convex. Off-plane scatter is covered
+  // by the tolerance padding; climbing over the raw points could stop at a local maximum the
+  // scatter creates.
+  const dvec3 origin(hull_.vertices[0]);
+  for (const glm::vec3& v : hull_.vertices) {
+    dvec3 q(v);
+    if (hull_.dimension == ConvexHull::Dimension::Polygon) {
+      const dvec3 n(hull_.normal);
+      q -= glm::dot(q - origin, n) / glm::dot(n, n) * n;
+    } else if (hull_.dimension == ConvexHull::Dimension::Segment) {
+      const dvec3 line = glm::normalize(dvec3(hull_.vertices[1]) - origin);
+      q = origin + glm::dot(q - origin, line) * line;
+    }
+    climb_points_.push_back(q);
+  }
   // Start every climb at the vertex extreme along the local axes.
   for (int axis = 0; axis < 3; ++axis)
     for (std::uint32_t v = 0; v < hull_.vertices.size(); ++v) {
@@ -63,6 +79,8 @@ AabbTracker::AabbTracker(std::span<const glm::vec3> local_points)
 }
 
 Aabb AabbTracker::update(const glm::mat4& world, AabbUpdate method) {
+  // A hull that failed validation may not contain the points: use every point instead.
+  if (!hull_.valid && (method == AabbUpdate::HullRecompute || method == AabbUpdate::HillClimb)) method = AabbUpdate::Recompute;
   switch (method) {
     case AabbUpdate::Recompute: return transform_points(points_, world, 0.0);
     case AabbUpdate::HullRecompute: return transform_points(hull_.vertices, world, hull_.tolerance);
@@ -80,11 +98,11 @@ Aabb AabbTracker::update(const glm::mat4& world, AabbUpdate method) {
     for (int side = 0; side < 2; ++side) {
       const dvec3 dir = side ? r : -r;
       std::uint32_t& v = extreme_[std::size_t(2 * axis + side)];
-      double best = glm::dot(dir, dvec3(hull_.vertices[v]));
+      double best = glm::dot(dir, climb_points_[v]);
       for (bool moved = true; moved;) {
         moved = false;
         for (std::uint32_t w : hull_.vertex_neighbours[v]) {
-          const double value = glm::dot(dir, dvec3(hull_.vertices[w]));
+          const double value = glm::dot(dir, climb_points_[w]);
           if (value > best) {
             best = value;
             v = w;
@@ -93,7 +111,7 @@ Aabb AabbTracker::update(const glm::mat4& world, AabbUpdate method) {
         }
         ++climb_steps_;
       }
-      const double world_value = glm::dot(r, dvec3(hull_.vertices[v])) + dm[3][axis];
+      const double world_value = glm::dot(r, climb_points_[v]) + dm[3][axis];
       (side ? hi : lo)[axis] = world_value;
     }
   }

@@ -1,6 +1,7 @@
 #pragma once
 #include <array>
 #include <glm/mat4x4.hpp>
+#include <glm/ext/vector_double3.hpp>
 #include <glm/vec3.hpp>
 #include <optional>
 #include <span>
@@ -15,9 +16,9 @@ namespace cullpipe::bounds {
 /// Ways to find the world AABB of an object's points after a new transform.
 enum class AabbUpdate {
   Recompute,      ///< transform every point: exact, O(n)
-  HullRecompute,  ///< transform the convex-hull vertices only: exact, O(h)
+  HullRecompute,  ///< transform the convex-hull vertices only: O(h), padded by the hull tolerance
   TransformBox,   ///< the AABB of the transformed local AABB (Arvo): O(1), loose
-  HillClimb,      ///< walk hull edges from the last extreme vertex per axis: exact, ~O(1) for small motions
+  HillClimb,      ///< walk hull edges from the last extreme vertex per axis: ~O(1) for small motions, padded
 };
 
 std::string_view to_string(AabbUpdate method);
@@ -28,6 +29,8 @@ std::optional<AabbUpdate> parse_aabb_update(std::string_view name);
 /// any affine transform by the chosen method. Each method encloses every transformed point:
 /// results are computed in double and rounded outward to float, and the hull-based methods
 /// are widened by the hull tolerance (points within it of a hull face may lie outside it).
+/// When the hull failed validation (ConvexHull::valid), the hull-based methods recompute from
+/// every point instead.
 class AabbTracker {
  public:
   /// Throws BadPoints on an empty set or a non-finite coordinate.
@@ -46,6 +49,7 @@ class AabbTracker {
   Aabb local_;
   std::array<std::uint32_t, 6> extreme_{};  // hull vertex index maximising -x, +x, -y, +y, -z, +z
   std::size_t climb_steps_ = 0;
+  std::vector<glm::dvec3> climb_points_;  // hull vertices (projected onto a flat hull's plane)
 };
 
 }  // namespace cullpipe::bounds

@@ -1,6 +1,7 @@
 #include "bounds/convex_hull.hpp"
 
 #include <algorithm>
+#include <tuple>
 #include <cfloat>
 #include <cmath>
 #include <glm/geometric.hpp>
@@ -189,7 +190,7 @@ class Quickhull {
 };
 
 // Andrew's monotone chain on points projected to the plane (u, v); counter-clockwise.
-std::vector<std::uint32_t> hull_2d(const std::vector<dvec3>& p, const dvec3& u, const dvec3& v, double tol) {
+std::vector<std::uint32_t> hull_2d(const std::vector<dvec3>& p, const dvec3& u, const dvec3& v) {
   std::vector<std::uint32_t> idx(p.size());
   for (std::uint32_t i = 0; i < idx.size(); ++i) idx[i] = i;
   auto uv = [&](std::uint32_t i) { return std::pair<double, double>(glm::dot(p[i], u), glm::dot(p[i], v)); };
@@ -198,10 +199,9 @@ std::vector<std::uint32_t> hull_2d(const std::vector<dvec3>& p, const dvec3& u, 
     const auto [ox, oy] = uv(o);
     const auto [ax, ay] = uv(a);
     const auto [bx, by] = uv(b);
-    // Twice the signed area; compared against tolerance * base length.
-    const double area2 = (ax - ox) * (by - oy) - (ay - oy) * (bx - ox);
-    const double base = std::hypot(bx - ox, by - oy);
-    return area2 > tol * base;
+    // A strict left turn: points on or near a chord are dropped only when exactly collinear
+    // in double, so no input point ends up outside the ring by more than rounding.
+    return (ax - ox) * (by - oy) - (ay - oy) * (bx - ox) > 0.0;
   };
   std::vector<std::uint32_t> h(2 * idx.size());
   std::size_t k = 0;
@@ -222,7 +222,20 @@ std::vector<std::uint32_t> hull_2d(const std::vector<dvec3>& p, const dvec3& u, 
 
 ConvexHull convex_hull(std::span<const glm::vec3> points) {
   check_points(points);
-  const std::vector<dvec3> p(points.begin(), points.end());
+  // Exact duplicates are dropped first (they would only make zero-area faces); `unique_index`
+  // maps the remaining points back to the input.
+  std::vector<std::uint32_t> unique_index(points.size());
+  for (std::uint32_t i = 0; i < unique_index.size(); ++i) unique_index[i] = i;
+  auto key = [&](std::uint32_t i) { return std::tuple(points[i].x, points[i].y, points[i].z); };
+  std::sort(unique_index.begin(), unique_index.end(), [&](std::uint32_t x, std::uint32_t y) { return key(x) < key(y); });
+  unique_index.erase(std::unique(unique_index.begin(), unique_index.end(), [&](std::uint32_t x, std::uint32_t y) { return key(x) == key(y); }),
+                     unique_index.end());
+  std::vector<glm::vec3> unique_points;
+  std::vector<dvec3> p;
+  for (std::uint32_t i : unique_index) {
+    unique_points.push_back(points[i]);
+    p.push_back(dvec3(points[i]));
+  }
   dvec3 max_abs(0.0);
   for (const dvec3& q : p) max_abs = glm::max(max_abs, glm::abs(q));
   ConvexHull hull;
@@ -236,18 +249,22 @@ ConvexHull convex_hull(std::span<const glm::vec3> points) {
 
   auto finish = [&](std::vector<std::uint32_t> input) {
     for (std::uint32_t i : input) {
-      hull.vertices.push_back(points[i]);
-      hull.input_index.push_back(i);
+      hull.vertices.push_back(unique_points[i]);
+      hull.input_index.push_back(unique_index[i]);
     }
     hull.vertex_neighbours.assign(input.size(), {});
   };
 
   // The most separated pair of axis-extreme points seeds the simplex.
-  const auto [seed_a, seed_b] = most_separated_axis_extremes(points);
+  const auto [seed_a, seed_b] = most_separated_axis_extremes(unique_points);
   const std::uint32_t a = std::uint32_t(seed_a), b = std::uint32_t(seed_b);
+  // For the lower-dimensional hulls the tolerance is measured: the largest distance of any
+  // point from the point, line or plane of the result.
   if (glm::length(p[b] - p[a]) <= tol) {
     hull.dimension = ConvexHull::Dimension::Point;
     finish({a});
+    hull.tolerance = 0.0;
+    for (const dvec3& q : p) hull.tolerance = std::max(hull.tolerance, glm::length(q - p[a]));
     return hull;
   }
 
@@ -273,6 +290,9 @@ ConvexHull convex_hull(std::span<const glm::vec3> points) {
     }
     finish({s0, s1});
     hull.vertex_neighbours = {{1}, {0}};
+    const dvec3 line = glm::normalize(p[s1] - p[s0]);
+    hull.tolerance = 0.0;
+    for (const dvec3& q : p) hull.tolerance = std::max(hull.tolerance, glm::length(glm::cross(q - p[s0], line)));
     return hull;
   }
 
@@ -291,8 +311,12 @@ ConvexHull convex_hull(std::span<const glm::vec3> points) {
     hull.dimension = ConvexHull::Dimension::Polygon;
     hull.normal = glm::vec3(n);
     const dvec3 u = dir, v = glm::cross(n, dir);
-    const std::vector<std::uint32_t> ring = hull_2d(p, u, v, tol);
+    const std::vector<std::uint32_t> ring = hull_2d(p, u, v);
     finish(ring);
+    hull.tolerance = 0.0;
+    // Measured from the plane through vertices[0], which users of the hull can rebuild.
+    const dvec3 stored_n(hull.normal), first(hull.vertices[0]);
+    for (const dvec3& q : p) hull.tolerance = std::max(hull.tolerance, std::abs(glm::dot(q - first, stored_n)) / glm::length(stored_n));
     const std::uint32_t m = std::uint32_t(ring.size());
     for (std::uint32_t i = 0; i < m; ++i) {
       hull.vertex_neighbours[i] = {(i + m - 1) % m, (i + 1) % m};
@@ -337,6 +361,30 @@ ConvexHull convex_hull(std::span<const glm::vec3> points) {
   // Every edge a->b of a closed triangle mesh also appears as b->a in the neighbouring face,
   // so the lists are symmetric; sort them for binary search and stable output.
   for (auto& list : hull.vertex_neighbours) std::sort(list.begin(), list.end());
+
+  // Validation: adjacency reciprocal, no zero-area face, and every edge convex to within the
+  // declared tolerance (the neighbour's far vertex not above the face). Near-degenerate
+  // input (clusters of almost equal points, slivers) can defeat a Quickhull without face
+  // merging; such a hull is flagged rather than trusted.
+  const std::vector<glm::vec3>& hv = hull.vertices;
+  for (std::size_t f = 0; f < hull.faces.size() && hull.valid; ++f) {
+    const auto& t = hull.faces[f];
+    const dvec3 raw = glm::cross(dvec3(hv[t[1]]) - dvec3(hv[t[0]]), dvec3(hv[t[2]]) - dvec3(hv[t[0]]));
+    if (!(glm::length(raw) > 0.0)) {
+      hull.valid = false;
+      break;
+    }
+    const dvec3 fn = glm::normalize(raw);
+    for (int k = 0; k < 3 && hull.valid; ++k) {
+      const std::uint32_t g = hull.face_neighbours[f][std::size_t(k)];
+      const auto& gt = hull.faces[g];
+      bool back = false;
+      for (int j = 0; j < 3; ++j) back |= hull.face_neighbours[g][std::size_t(j)] == f;
+      double above = 0.0;
+      for (std::uint32_t w : gt) above = std::max(above, glm::dot(fn, dvec3(hv[w]) - dvec3(hv[t[0]])));
+      if (!back || above > hull.tolerance) hull.valid = false;
+    }
+  }
   return hull;
 }
 

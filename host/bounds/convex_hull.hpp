@@ -28,17 +28,24 @@ struct ConvexHull {
   std::vector<std::vector<std::uint32_t>> vertex_neighbours;
   /// Polygon only: the unit normal of the plane of the points.
   glm::vec3 normal{0.0f};
-  /// The distance tolerance used: a point within it of a face counts as on the face.
+  /// How far an input point may lie outside the result: measured for a Point, Segment or
+  /// Polygon (distance from vertices[0], from the line through vertices[0] and [1], or from
+  /// the plane through vertices[0] with `normal`); for a Polyhedron, a bound
+  /// on Quickhull's rounding (16 x Lloyd's tolerance), which holds when `valid`.
   double tolerance = 0.0;
+  /// Polyhedron only: false when the built surface failed validation (non-reciprocal
+  /// adjacency, a zero-area face, or an edge not convex to within `tolerance`), which
+  /// near-degenerate inputs can cause. Users that rely on convexity must not trust it then.
+  bool valid = true;
 };
 
 /// Quickhull (Barber, Dobkin, Huhdanpaa 1996) in double precision. With M = max|x| + max|y| +
 /// max|z| of the input: a set whose points all lie within 3 * FLT_EPSILON * M of one point, one
 /// line or one plane (degenerate to float precision) gets the lower-dimensional hull; otherwise
 /// Quickhull runs with Lloyd's visibility tolerance 3 * DBL_EPSILON * M. `tolerance` reports how
-/// far an input point may lie outside the result (for a Polygon, off its plane). Faces are
-/// triangles (coplanar neighbours are not merged). Throws BadPoints on an empty input or a
-/// non-finite coordinate.
+/// far an input point may lie outside the result; `valid` says whether a polyhedron passed
+/// validation. Exact duplicates are dropped first. Faces are triangles (coplanar neighbours
+/// are not merged). Throws BadPoints on an empty input or a non-finite coordinate.
 ConvexHull convex_hull(std::span<const glm::vec3> points);
 
 }  // namespace cullpipe::bounds

@@ -165,12 +165,15 @@ Obb fit_box_impl(std::span<const Point> points, const glm::mat3& basis) {
   b.basis = basis;
   const dvec3 mid = (lo + hi) * 0.5;
   b.center = glm::vec3(axes[0] * mid.x + axes[1] * mid.y + axes[2] * mid.z);
-  // Extents about the float centre actually stored, rounded up.
+  // Extents about the float centre actually stored, from p - c (a second pass: subtracting
+  // projections instead would cancel for small objects far from the origin), rounded up.
   const dvec3 c(b.center);
-  for (int k = 0; k < 3; ++k) {
-    const double cc = glm::dot(c, axes[k]);
-    b.half_extents[k] = round_up(std::max(hi[k] - cc, cc - lo[k]));
+  dvec3 ext(0.0);
+  for (const Point& p : points) {
+    const dvec3 d = dvec3(p) - c;
+    for (int k = 0; k < 3; ++k) ext[k] = std::max(ext[k], std::abs(glm::dot(d, axes[k])));
   }
+  for (int k = 0; k < 3; ++k) b.half_extents[k] = round_up(ext[k]);
   return b;
 }
 
@@ -285,7 +288,8 @@ Obb hull_face_obb(std::span<const glm::vec3> points) {
   if (hull.dimension != ConvexHull::Dimension::Polyhedron) {
     // Flat or lower: the best rectangle in the plane (or along the line), zero thickness.
     dvec3 n = hull.dimension == ConvexHull::Dimension::Polygon ? dvec3(hull.normal) : dvec3(0, 0, 1);
-    if (hull.dimension == ConvexHull::Dimension::Segment) n = orthogonal(glm::normalize(dvec3(hull.vertices[1] - hull.vertices[0])));
+    if (hull.dimension == ConvexHull::Dimension::Segment)
+      n = orthogonal(glm::normalize(dvec3(hull.vertices[1]) - dvec3(hull.vertices[0])));  // double: no float overflow
     if (hull.dimension == ConvexHull::Dimension::Point) return fit_box(points, glm::mat3(1.0f));
     const dvec3 u = orthogonal(n), v = glm::cross(n, u);
     std::vector<std::array<double, 2>> proj;
