@@ -15,6 +15,7 @@
 #include "bounds/sphere_fit.hpp"
 #include "geom/validate.hpp"
 #include "scene/gltf_points.hpp"
+#include "scene/point_io.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe::bounds {
@@ -669,12 +670,7 @@ TEST(Obbs, CgalTetrahedraWhenPresent) {
   const std::filesystem::path dir = std::filesystem::path(CULLPIPE_SHARED_DIR) / "refdata" / "minobb";
   if (!std::filesystem::exists(dir)) GTEST_SKIP() << dir << " not present";
   for (const char* name : {"cgal_long_tetrahedron.off", "cgal_reference_tetrahedron.off"}) {
-    std::ifstream in(dir / name);
-    std::string magic;
-    std::size_t nv = 0, nf = 0, ne = 0;
-    in >> magic >> nv >> nf >> ne;
-    Points p(nv);
-    for (auto& q : p) in >> q.x >> q.y >> q.z;
+    const Points p = load_points((dir / name).string());
     ASSERT_EQ(p.size(), 4u) << name;
     for (const auto& [builder, fn] : kObbBuilders) expect_encloses(fn(p), p, builder);
     EXPECT_LE(volume(hull_face_obb(p)), volume(fit_box(p, glm::mat3(1.0f))) * (1 + 1e-6)) << name;
