@@ -314,8 +314,8 @@ class Sweeper {
 }  // namespace
 
 Obb exact_obb(std::span<const glm::vec3> points) {
-  const Obb face = hull_face_obb(points);  // checks the points; the face-flush candidates
-  const ConvexHull hull = convex_hull(points);
+  const ConvexHull hull = convex_hull(points);  // checks the points
+  const Obb face = hull_face_obb(points, hull);  // the face-flush candidates
   if (hull.dimension != ConvexHull::Dimension::Polyhedron) return face;
   Sweeper sweeper(hull);
   const double face_volume = volume(face);

@@ -282,9 +282,10 @@ Obb dito_obb(std::span<const glm::vec3> points) {
   return volume(box) < volume(aabb_box) ? box : aabb_box;
 }
 
-Obb hull_face_obb(std::span<const glm::vec3> points) {
+Obb hull_face_obb(std::span<const glm::vec3> points) { return hull_face_obb(points, convex_hull(points)); }
+
+Obb hull_face_obb(std::span<const glm::vec3> points, const ConvexHull& hull) {
   check_points(points);
-  const ConvexHull hull = convex_hull(points);
   if (hull.dimension != ConvexHull::Dimension::Polyhedron) {
     // Flat or lower: the best rectangle in the plane (or along the line), zero thickness.
     dvec3 n = hull.dimension == ConvexHull::Dimension::Polygon ? dvec3(hull.normal) : dvec3(0, 0, 1);

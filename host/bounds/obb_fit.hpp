@@ -4,6 +4,7 @@
 #include <glm/vec3.hpp>
 #include <span>
 
+#include "bounds/convex_hull.hpp"
 #include "geom/obb.hpp"
 
 /// Oriented bounding boxes from point sets. Every builder throws BadPoints on an empty set or
@@ -31,6 +32,8 @@ Obb dito_obb(std::span<const glm::vec3> points);
 /// hull's projection onto the face plane (rotating calipers over the 2D hull, Toussaint
 /// 1983), extended by the hull's depth below the face; the box of least volume. O(F h log h).
 Obb hull_face_obb(std::span<const glm::vec3> points);
+/// The same, with the convex hull of `points` already computed.
+Obb hull_face_obb(std::span<const glm::vec3> points, const ConvexHull& hull);
 
 /// The minimum-volume box: the hull-face candidates plus a sweep over every one-parameter
 /// family of boxes with two adjacent faces flush with hull edges (O'Rourke 1985), with the
