@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <limits>
 #include <memory>
 
@@ -12,6 +13,7 @@
 #include "gpu/gpu_culler.hpp"
 #include "gpu/layout.hpp"
 #include "scene/generators.hpp"
+#include "scene/gltf_scene.hpp"
 #include "test_util.hpp"
 #include "vk/check.hpp"
 
@@ -112,6 +114,43 @@ TEST_F(Gpu, GeneratedScenesManyViews) {
     expect_agreement(culler(), world_obbs(scene), frusta);
     expect_agreement(culler(), world_spheres(scene), frusta);
   }
+}
+
+// The real glTF scenes, every AABB update method, their own cameras where they have them,
+// and a repeated model large enough for many workgroups.
+TEST_F(Gpu, GltfScenesAgree) {
+  const std::filesystem::path dir = std::filesystem::path(CULLPIPE_SHARED_DIR) / "scenes";
+  if (!std::filesystem::exists(dir)) GTEST_SKIP() << dir << " not present";
+  std::size_t files = 0;
+  for (const auto& sub : std::filesystem::directory_iterator(dir)) {
+    if (!sub.is_directory()) continue;
+    for (const auto& file : std::filesystem::directory_iterator(sub.path())) {
+      if (file.path().extension() != ".gltf") continue;
+      SCOPED_TRACE(file.path().string());
+      ++files;
+      const GltfScene g = load_gltf_scene(file.path().string());
+      std::vector<Frustum> frusta;
+      for (const Camera& c : camera_path(g.scene.camera, g.scene.bounds(), 8)) frusta.push_back(Frustum::from_view_proj(c.view_proj()));
+      for (std::size_t c = 0; c < g.cameras.size(); ++c) {
+        if (g.cameras[c].node < 0) continue;
+        GltfSceneOptions o;
+        o.camera = std::to_string(c);
+        frusta.push_back(Frustum::from_view_proj(load_gltf_scene(file.path().string(), o).scene.camera.view_proj()));
+      }
+      for (bounds::AabbUpdate m : {bounds::AabbUpdate::Recompute, bounds::AabbUpdate::TransformBox, bounds::AabbUpdate::HillClimb})
+        expect_agreement(culler(), world_aabbs(g.scene, m), frusta);
+      expect_agreement(culler(), world_obbs(g.scene), frusta);
+      expect_agreement(culler(), world_spheres(g.scene), frusta);
+      if (file.path().filename() == "VC.gltf") {  // 167 objects x 300 = 50,100
+        const Scene big = replicate_scene(g.scene, 300, InstanceLayout::Random, 3);
+        std::vector<Frustum> views;
+        for (const Camera& c : camera_path(big.camera, big.bounds(), 4)) views.push_back(Frustum::from_view_proj(c.view_proj()));
+        expect_agreement(culler(), world_aabbs(big), views);
+        expect_agreement(culler(), world_spheres(big), views);
+      }
+    }
+  }
+  EXPECT_EQ(files, 10u);
 }
 
 TEST_F(Gpu, ReversedZAndInfiniteProjections) {

@@ -22,7 +22,7 @@ struct DeviceOptions {
 };
 
 struct RunOptions {
-  std::string scene_path;   ///< a cullpipe scene JSON; empty with no `generate`: the default scene
+  std::string scene_path;   ///< a cullpipe scene JSON or a glTF file (.gltf, .glb); empty with no `generate`: the default scene
   std::string generate;     ///< "KIND:N" procedural scene instead of a file
   std::uint64_t seed = 1;
   std::string bv = "aabb";  ///< aabb | obb | sphere
@@ -30,6 +30,15 @@ struct RunOptions {
   std::size_t views = 1;    ///< views along the camera path around the scene
   std::string json_path;    ///< summary as JSON
   std::string dump_path;    ///< planes, volumes and classes (classify schema)
+  // glTF scenes
+  int gltf_scene = -1;              ///< index in scenes[]; -1: the file's default scene
+  std::string camera;               ///< glTF camera name or index; empty: a camera framing the scene
+  std::string obb = "dito";         ///< OBB builder for mesh objects: pca | dito | hull-face | exact
+  std::string sphere = "exact";     ///< sphere builder for mesh objects: ritter | refined | exact
+  std::string aabb_update = "hull"; ///< world AABBs of mesh objects: recompute | hull | transform-box | hill-climb
+  // Any scene
+  std::size_t instances = 1;        ///< copies of the scene
+  std::string layout = "grid";      ///< grid | random placement of the copies
   DeviceOptions device;
 };
 

@@ -25,7 +25,7 @@ int main(int argc, char** argv) {
 
   RunOptions run;
   CLI::App* run_cmd = app.add_subcommand("run", "Cull a scene on the GPU and/or the CPU and compare, view by view");
-  auto* scene_opt = run_cmd->add_option("--scene", run.scene_path, "Scene file (cullpipe-scene JSON); default: scenes/default.json");
+  auto* scene_opt = run_cmd->add_option("--scene", run.scene_path, "Scene file: cullpipe-scene JSON, or glTF (.gltf, .glb); default: scenes/default.json");
   run_cmd->add_option("--generate", run.generate, "Procedural scene KIND:N, KIND = uniform | clustered | city")->excludes(scene_opt);
   run_cmd->add_option("--seed", run.seed, "Seed for --generate")->capture_default_str();
   run_cmd->add_option("--bv", run.bv, "Bounding volume: aabb | obb | sphere")->capture_default_str()->check(CLI::IsMember({"aabb", "obb", "sphere"}));
@@ -33,6 +33,13 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--views", run.views, "Number of views on a camera path around the scene")->capture_default_str()->check(CLI::PositiveNumber);
   run_cmd->add_option("--json", run.json_path, "Write a summary as JSON");
   run_cmd->add_option("--dump", run.dump_path, "Write planes, volumes and classes (the classify schema)");
+  run_cmd->add_option("--gltf-scene", run.gltf_scene, "glTF: index of the scene to load (default: the file's default scene)");
+  run_cmd->add_option("--camera", run.camera, "glTF: camera name or index in cameras[] (default: a camera framing the scene)");
+  run_cmd->add_option("--obb", run.obb, "glTF: OBB builder: pca | dito | hull-face | exact")->capture_default_str();
+  run_cmd->add_option("--sphere", run.sphere, "glTF: sphere builder: ritter | refined | exact")->capture_default_str();
+  run_cmd->add_option("--aabb-update", run.aabb_update, "glTF: world AABB method: recompute | hull | transform-box | hill-climb")->capture_default_str();
+  run_cmd->add_option("--instances", run.instances, "Repeat the scene this many times (scale tests)")->capture_default_str()->check(CLI::PositiveNumber);
+  run_cmd->add_option("--layout", run.layout, "Placement of --instances copies: grid | random")->capture_default_str();
   add_device_options(run_cmd, run.device);
 
   ClassifyOptions classify;

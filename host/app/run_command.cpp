@@ -1,4 +1,5 @@
 #include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <nlohmann/json.hpp>
@@ -11,6 +12,7 @@
 #include "geom/bv_kind.hpp"
 #include "scene/cull_case_io.hpp"
 #include "scene/generators.hpp"
+#include "scene/gltf_scene.hpp"
 #include "scene/json_util.hpp"
 #include "scene/scene_io.hpp"
 
@@ -62,16 +64,43 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
     if (o.views == 0) throw InputError("--views must be at least 1");
     if (!o.scene_path.empty() && !o.generate.empty()) throw InputError("give --scene or --generate, not both");
 
+    const auto obb_method = bounds::parse_obb_method(o.obb);
+    if (!obb_method) throw InputError("--obb " + o.obb + ": expected pca, dito, hull-face or exact");
+    const auto sphere_method = bounds::parse_sphere_method(o.sphere);
+    if (!sphere_method) throw InputError("--sphere " + o.sphere + ": expected ritter, refined or exact");
+    const auto aabb_update = bounds::parse_aabb_update(o.aabb_update);
+    if (!aabb_update) throw InputError("--aabb-update " + o.aabb_update + ": expected recompute, hull, transform-box or hill-climb");
+    const auto layout = parse_instance_layout(o.layout);
+    if (!layout) throw InputError("--layout " + o.layout + ": expected grid or random");
+
     Scene scene;
     std::string source;
+    bool from_gltf = false;
+    std::size_t zero_scale = 0;
+    const auto load_start = std::chrono::steady_clock::now();
     if (!o.generate.empty()) {
       const auto [kind, n] = parse_generate_spec(o.generate);
       scene = generate_scene(kind, n, o.seed);
       source = "generated";
     } else {
       source = o.scene_path.empty() ? default_scene_path() : o.scene_path;
-      scene = load_scene(source);
+      if (is_gltf_path(source)) {
+        GltfSceneOptions g;
+        g.scene = o.gltf_scene;
+        g.camera = o.camera;
+        g.bounds = {*obb_method, *sphere_method};
+        GltfScene loaded = load_gltf_scene(source, g);
+        scene = std::move(loaded.scene);
+        zero_scale = loaded.zero_scale_instances;
+        from_gltf = true;
+      } else {
+        scene = load_scene(source);
+      }
     }
+    if (!from_gltf && (!o.camera.empty() || o.gltf_scene >= 0))
+      throw InputError("--camera and --gltf-scene apply to glTF scenes only (" + source + " is not .gltf or .glb)");
+    scene = replicate_scene(scene, o.instances, *layout, o.seed);
+    const double load_ns = double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - load_start).count());
 
     const std::vector<Camera> cameras = camera_path(scene.camera, scene.bounds(), o.views);
     std::vector<Frustum> frusta;
@@ -87,7 +116,7 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
     BackendResults r;
     std::vector<cullpipe::Volume> dump_volumes;
     switch (*bv) {
-      case BvKind::Aabb: r = cull_kind(world_aabbs(scene), frusta, o, session, dump_volumes); break;
+      case BvKind::Aabb: r = cull_kind(world_aabbs(scene, *aabb_update), frusta, o, session, dump_volumes); break;
       case BvKind::Obb: r = cull_kind(world_obbs(scene), frusta, o, session, dump_volumes); break;
       case BvKind::Sphere: r = cull_kind(world_spheres(scene), frusta, o, session, dump_volumes); break;
     }
@@ -98,7 +127,13 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
     out << "cullpipe run: " << (scene.name.empty() ? source : scene.name) << " (" << source << "), " << n << " objects, bv "
         << o.bv << ", " << frusta.size() << (frusta.size() == 1 ? " view" : " views");
     if (session.context) out << ", device " << session.context->info().name;
-    out << "\n\n";
+    out << "\n";
+    if (from_gltf) {
+      out << "  volumes from mesh vertices: obb " << o.obb << ", sphere " << o.sphere << ", world aabb " << o.aabb_update;
+      if (zero_scale) out << "; " << zero_scale << " zero-scale instances skipped";
+      out << "\n";
+    }
+    out << "  scene loaded in " << format_ms(load_ns) << " ms\n\n";
     out << "  view  objects  visible   inside  intersecting  outside\n";
     const std::size_t shown = std::min<std::size_t>(frusta.size(), 16);
     for (std::size_t v = 0; v < shown; ++v) {
@@ -150,7 +185,15 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
       json_util::write_file_atomic(o.json_path, j.dump(2) + "\n");
     }
     if (!o.dump_path.empty()) {
-      CullCase c{frusta, frusta.size() > 1, std::move(dump_volumes)};
+      CullCase c{frusta, frusta.size() > 1, std::move(dump_volumes), {}};
+      if (from_gltf) {
+        // Where each object came from, and all its world-space volumes.
+        const std::vector<Aabb> aabbs = world_aabbs(scene, *aabb_update);
+        const std::vector<Obb> obbs = world_obbs(scene);
+        const std::vector<Sphere> spheres = world_spheres(scene);
+        c.objects.reserve(n);
+        for (std::size_t i = 0; i < n; ++i) c.objects.push_back({scene.objects[i].origin, aabbs[i], obbs[i], spheres[i]});
+      }
       json_util::write_file_atomic(o.dump_path, cull_case_to_json(c, have_cpu ? &r.cpu : &r.gpu));
     }
 

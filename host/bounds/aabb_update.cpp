@@ -76,9 +76,14 @@ AabbTracker::AabbTracker(std::span<const glm::vec3> local_points)
       if (hull_.vertices[v][axis] > hull_.vertices[extreme_[std::size_t(2 * axis + 1)]][axis])
         extreme_[std::size_t(2 * axis + 1)] = v;
     }
+  initial_extreme_ = extreme_;
 }
 
 Aabb AabbTracker::update(const glm::mat4& world, AabbUpdate method) {
+  return update(world, method, extreme_, &climb_steps_);
+}
+
+Aabb AabbTracker::update(const glm::mat4& world, AabbUpdate method, Extremes& extremes, std::size_t* steps) const {
   // A hull that failed validation may not contain the points: use every point instead.
   if (!hull_.valid && (method == AabbUpdate::HullRecompute || method == AabbUpdate::HillClimb)) method = AabbUpdate::Recompute;
   switch (method) {
@@ -90,14 +95,14 @@ Aabb AabbTracker::update(const glm::mat4& world, AabbUpdate method) {
   // Hill climbing: for world axis i, maximise (and minimise) row_i(M) . p over hull vertices by
   // moving to a better neighbour until none is better. On a convex polytope a local maximum of
   // a linear function is the global one.
-  climb_steps_ = 0;
+  std::size_t climb_steps = 0;
   const glm::dmat4 dm(world);
   dvec3 lo, hi;
   for (int axis = 0; axis < 3; ++axis) {
     const dvec3 r = row(world, axis);
     for (int side = 0; side < 2; ++side) {
       const dvec3 dir = side ? r : -r;
-      std::uint32_t& v = extreme_[std::size_t(2 * axis + side)];
+      std::uint32_t& v = extremes[std::size_t(2 * axis + side)];
       double best = glm::dot(dir, climb_points_[v]);
       for (bool moved = true; moved;) {
         moved = false;
@@ -109,12 +114,13 @@ Aabb AabbTracker::update(const glm::mat4& world, AabbUpdate method) {
             moved = true;
           }
         }
-        ++climb_steps_;
+        ++climb_steps;
       }
       const double world_value = glm::dot(r, climb_points_[v]) + dm[3][axis];
       (side ? hi : lo)[axis] = world_value;
     }
   }
+  if (steps) *steps = climb_steps;
   dvec3 pads;
   for (int i = 0; i < 3; ++i) pads[i] = hull_.tolerance * glm::length(row(world, i));
   return round_outward(lo - pads, hi + pads);

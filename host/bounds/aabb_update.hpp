@@ -38,6 +38,15 @@ class AabbTracker {
 
   Aabb update(const glm::mat4& world, AabbUpdate method);
 
+  /// Hull vertex indices maximising -x, +x, -y, +y, -z, +z: where hill climbing starts.
+  using Extremes = std::array<std::uint32_t, 6>;
+  /// The local-space extremes (the start for an object seen for the first time).
+  const Extremes& initial_extremes() const { return initial_extreme_; }
+  /// Stateless form, for one tracker shared by many objects (instances of one mesh): hill
+  /// climbing starts from `extremes` and leaves the new extreme vertices there; `steps`, when
+  /// given, receives the number of vertices visited. Same results as `update` above.
+  Aabb update(const glm::mat4& world, AabbUpdate method, Extremes& extremes, std::size_t* steps = nullptr) const;
+
   const ConvexHull& hull() const { return hull_; }
   const Aabb& local_bounds() const { return local_; }
   /// Hull vertices visited by the last HillClimb update (its cost).
@@ -47,7 +56,8 @@ class AabbTracker {
   std::vector<glm::vec3> points_;
   ConvexHull hull_;
   Aabb local_;
-  std::array<std::uint32_t, 6> extreme_{};  // hull vertex index maximising -x, +x, -y, +y, -z, +z
+  Extremes initial_extreme_{};
+  Extremes extreme_{};  // where the last HillClimb update ended
   std::size_t climb_steps_ = 0;
   std::vector<glm::dvec3> climb_points_;  // hull vertices (projected onto a flat hull's plane)
 };

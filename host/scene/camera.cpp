@@ -11,6 +11,22 @@ namespace cullpipe {
 glm::mat4 Camera::view() const { return glm::lookAtRH(eye, target, up); }
 
 glm::mat4 Camera::projection() const {
+  if (orthographic) {
+    // x' = x / (aspect h), y' = -y / h, w' = 1; depth linear in -z from near to far.
+    glm::mat4 p(0.0f);
+    p[0][0] = 1.0f / (aspect * ortho_half_height);
+    p[1][1] = -1.0f / ortho_half_height;
+    p[3][3] = 1.0f;
+    const float n = near_plane, fa = far_plane;
+    if (!reversed_z) {  // z' = 0 at -z = n, 1 at -z = far
+      p[2][2] = 1.0f / (n - fa);
+      p[3][2] = n / (n - fa);
+    } else {
+      p[2][2] = 1.0f / (fa - n);
+      p[3][2] = fa / (fa - n);
+    }
+    return p;
+  }
   const float f = 1.0f / std::tan(glm::radians(fov_y_degrees) * 0.5f);
   // Right-handed view space (looking down -z) to Vulkan clip space, written out so every
   // variant is explicit: x' = f/aspect x, y' = -f y (Vulkan's y points down), w' = -z.
@@ -33,6 +49,18 @@ glm::mat4 Camera::projection() const {
     p[3][2] = n;
   }
   return p;
+}
+
+Camera framing_camera(const Aabb& bounds) {
+  Camera cam;
+  const glm::vec3 c = bounds.center();
+  const float r = std::max(0.5f * glm::length(bounds.max - bounds.min), 1e-3f * std::max(glm::length(c), 1.0f));
+  const float dist = r / std::sin(glm::radians(cam.fov_y_degrees) * 0.5f) * 1.05f;
+  cam.target = c;
+  cam.eye = c + glm::normalize(glm::vec3(0.6f, 0.45f, 1.0f)) * dist;
+  cam.near_plane = std::max((dist - r) * 0.5f, dist * 1e-4f);
+  cam.far_plane = (dist + r) * 1.5f;
+  return cam;
 }
 
 std::vector<Camera> camera_path(const Camera& base, const Aabb& bounds, std::size_t count) {

@@ -7,7 +7,7 @@
 
 namespace cullpipe {
 
-/// A perspective camera producing Vulkan clip space (y down, depth 0..1).
+/// A perspective (or orthographic) camera producing Vulkan clip space (y down, depth 0..1).
 struct Camera {
   glm::vec3 eye{0.0f, 10.0f, 30.0f};
   glm::vec3 target{0.0f};
@@ -18,6 +18,10 @@ struct Camera {
   float far_plane = 1000.0f;  ///< ignored when infinite_far
   bool reversed_z = false;    ///< depth 1 at the near plane, 0 at the far plane
   bool infinite_far = false;  ///< far plane at infinity
+  /// Orthographic projection: the view is 2 * ortho_half_height high and aspect times as
+  /// wide; fov_y_degrees is ignored and infinite_far is not allowed.
+  bool orthographic = false;
+  float ortho_half_height = 1.0f;
 
   glm::mat4 view() const;
   glm::mat4 projection() const;
@@ -25,6 +29,10 @@ struct Camera {
 
   bool operator==(const Camera&) const = default;
 };
+
+/// A 60-degree camera looking at the centre of `bounds` from above and to the side, far
+/// enough that the bounding sphere of `bounds` fits the view, near and far planes around it.
+Camera framing_camera(const Aabb& bounds);
 
 /// `count` cameras on a circle around `bounds`, looking at its centre from above at
 /// `base`'s height angle, evenly spaced in angle; each keeps `base`'s lens settings.

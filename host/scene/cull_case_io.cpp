@@ -136,6 +136,13 @@ std::string cull_case_to_json(const CullCase& c, const std::vector<std::vector<C
   for (std::size_t i = 0; i < c.volumes.size(); ++i) {
     json v = volume_to_json(c.volumes[i]);
     if (ids) v["id"] = (*ids)[i];
+    if (i < c.objects.size()) {
+      const CullCase::Object& o = c.objects[i];
+      json obj;
+      obj["gltf"] = {{"node", o.origin.node}, {"mesh", o.origin.mesh}, {"primitive", o.origin.primitive}, {"instance", o.origin.instance}};
+      for (const Volume& w : {Volume(o.aabb), Volume(o.obb), Volume(o.sphere)}) obj.update(volume_to_json(w));
+      v["object"] = std::move(obj);
+    }
     if (classes) {
       if (classes->size() == 1 && !c.multi_view) {
         v["class"] = std::string(to_string((*classes)[0][i]));

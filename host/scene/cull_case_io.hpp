@@ -9,6 +9,7 @@
 #include "geom/frustum.hpp"
 #include "geom/obb.hpp"
 #include "geom/sphere.hpp"
+#include "scene/scene.hpp"
 
 namespace cullpipe {
 
@@ -23,12 +24,22 @@ using Volume = std::variant<Aabb, Obb, Sphere>;
 ///     {"aabb": {"center": [..], "half_extents": [..]}}
 ///     {"sphere": {"center": [..], "radius": r}}
 ///     {"obb": {"center": [..], "half_extents": [..], "axes": [[..],[..],[..]]}}  (unit, orthogonal)
-///   A volume may carry "class" (one frustum) or "classes" (one per frustum) and an "id";
-///   they are written by --dump and ignored on reading.
+///   A volume may carry "class" (one frustum) or "classes" (one per frustum), an "id", and
+///   "object": {"gltf": {"node", "mesh", "primitive", "instance"}, "aabb", "obb", "sphere"}
+///   (where a glTF object came from and all its world-space volumes); they are written by
+///   --dump and ignored on reading.
 struct CullCase {
+  /// A dumped object's origin and world-space volumes.
+  struct Object {
+    ObjectOrigin origin;
+    Aabb aabb;
+    Obb obb;
+    Sphere sphere;
+  };
   std::vector<Frustum> frusta;
   bool multi_view = false;  ///< written as "frusta" rather than "frustum"
   std::vector<Volume> volumes;
+  std::vector<Object> objects;  ///< empty, or one per volume (written only)
 };
 
 /// Parses a cull case; throws InputError naming `source` and the JSON path of what is wrong

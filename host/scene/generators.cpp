@@ -1,5 +1,6 @@
 #include "scene/generators.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <glm/ext/matrix_transform.hpp>
 
@@ -128,6 +129,50 @@ std::pair<SceneKind, std::size_t> parse_generate_spec(std::string_view spec) {
   if (n_text.empty() || *end != '\0' || !(n >= 0.0) || n > 1e9 || n != std::floor(n))
     throw InputError("--generate " + std::string(spec) + ": N must be a whole number from 0 to 1e9");
   return {*kind, std::size_t(n)};
+}
+
+std::optional<InstanceLayout> parse_instance_layout(std::string_view name) {
+  if (name == "grid") return InstanceLayout::Grid;
+  if (name == "random") return InstanceLayout::Random;
+  return std::nullopt;
+}
+
+Scene replicate_scene(const Scene& model, std::size_t copies, InstanceLayout layout, std::uint64_t seed) {
+  if (copies == 0) throw InputError("--instances must be at least 1");
+  if (copies == 1) return model;
+  if (model.objects.size() > kMaxSceneObjects / copies)
+    throw InputError(std::to_string(copies) + " copies of " + std::to_string(model.objects.size()) + " objects exceed the limit of " +
+                     std::to_string(kMaxSceneObjects) + " objects per scene");
+  const Aabb b = model.bounds();
+  const glm::vec3 c = b.center(), e = b.extent();
+  const float cell = std::max({e.x, e.z, 0.25f * e.y, 1e-3f}) * 1.25f;
+  const std::size_t side = std::size_t(std::ceil(std::sqrt(double(copies))));
+  Scene out;
+  out.name = model.name + " x" + std::to_string(copies);
+  out.objects.reserve(model.objects.size() * copies);
+  Rng rng;
+  rng.state = seed;
+  const glm::mat4 to_origin = glm::translate(glm::mat4(1.0f), glm::vec3(-c.x, 0.0f, -c.z));
+  for (std::size_t k = 0; k < copies; ++k) {
+    glm::mat4 place;
+    if (layout == InstanceLayout::Grid) {
+      const float x = (float(k % side) - 0.5f * float(side - 1)) * cell, z = (float(k / side) - 0.5f * float(side - 1)) * cell;
+      place = glm::translate(glm::mat4(1.0f), glm::vec3(x, 0.0f, z)) * to_origin;
+    } else {
+      const float half = 0.5f * float(side) * cell;
+      const glm::vec3 at(rng.uniform(-half, half), 0.0f, rng.uniform(-half, half));
+      place = glm::rotate(glm::translate(glm::mat4(1.0f), at), rng.uniform(0.0f, 6.2831853f), glm::vec3(0, 1, 0)) * to_origin;
+    }
+    for (const SceneObject& o : model.objects) {
+      SceneObject copy = o;
+      copy.world = place * o.world;
+      copy.origin.instance = int(k);
+      out.objects.push_back(std::move(copy));
+    }
+  }
+  out.camera = model.camera;
+  aim_camera(out);
+  return out;
 }
 
 }  // namespace cullpipe

@@ -23,6 +23,24 @@ std::string_view to_string(SceneKind kind);
 /// libraries). The camera looks across the scene so a part of it is visible.
 Scene generate_scene(SceneKind kind, std::size_t count, std::uint64_t seed);
 
+/// How `replicate_scene` places the copies.
+enum class InstanceLayout {
+  Grid,    ///< a square grid in the x-z plane, cells 1.25 times the model's larger horizontal extent
+  Random,  ///< uniform positions in a square of the same area, each copy turned about +y at random
+};
+std::optional<InstanceLayout> parse_instance_layout(std::string_view name);  ///< grid | random
+
+/// The most objects a scene may hold (about 4 GiB of objects and volumes).
+inline constexpr std::size_t kMaxSceneObjects = std::size_t(1) << 25;
+
+/// A scene of `copies` copies of `model`'s objects (for scale tests and benchmarks): copy k's
+/// objects keep their mesh (shared, so millions of objects stay cheap) and origin, with
+/// origin.instance = k, and are moved by the layout; deterministic per `seed`. For copies > 1
+/// the camera looks across the result from inside one corner, so part of it is visible; for
+/// copies == 1 the scene is returned unchanged. Throws InputError when the result would have
+/// more than kMaxSceneObjects objects.
+Scene replicate_scene(const Scene& model, std::size_t copies, InstanceLayout layout, std::uint64_t seed);
+
 /// Parses "KIND:N" (e.g. "city:2000", "uniform:1e6"). Throws InputError on a bad spec.
 std::pair<SceneKind, std::size_t> parse_generate_spec(std::string_view spec);
 

@@ -20,17 +20,34 @@ Aabb Scene::bounds() const {
   return b;
 }
 
-std::vector<Aabb> world_aabbs(const Scene& scene) {
+std::vector<Aabb> world_aabbs(const Scene& scene, bounds::AabbUpdate method,
+                              std::vector<bounds::AabbTracker::Extremes>* climb_state) {
   std::vector<Aabb> out;
   out.reserve(scene.objects.size());
-  for (const SceneObject& o : scene.objects) out.push_back(o.local_bounds.transformed(o.world));
+  if (climb_state && climb_state->size() != scene.objects.size()) {
+    climb_state->resize(scene.objects.size());
+    for (std::size_t i = 0; i < scene.objects.size(); ++i)
+      if (scene.objects[i].mesh) (*climb_state)[i] = scene.objects[i].mesh->tracker().initial_extremes();
+  }
+  for (std::size_t i = 0; i < scene.objects.size(); ++i) {
+    const SceneObject& o = scene.objects[i];
+    if (!o.mesh) {
+      out.push_back(o.local_bounds.transformed(o.world));
+    } else if (climb_state) {
+      out.push_back(o.mesh->world_aabb(o.world, method, (*climb_state)[i]));
+    } else {
+      bounds::AabbTracker::Extremes start = o.mesh->tracker().initial_extremes();
+      out.push_back(o.mesh->world_aabb(o.world, method, start));
+    }
+  }
   return out;
 }
 
 std::vector<Obb> world_obbs(const Scene& scene) {
   std::vector<Obb> out;
   out.reserve(scene.objects.size());
-  for (const SceneObject& o : scene.objects) out.push_back(Obb::from_transformed_aabb(o.local_bounds, o.world));
+  for (const SceneObject& o : scene.objects)
+    out.push_back(o.mesh ? o.mesh->world_obb(o.world) : Obb::from_transformed_aabb(o.local_bounds, o.world));
   return out;
 }
 
@@ -38,6 +55,10 @@ std::vector<Sphere> world_spheres(const Scene& scene) {
   std::vector<Sphere> out;
   out.reserve(scene.objects.size());
   for (const SceneObject& o : scene.objects) {
+    if (o.mesh) {
+      out.push_back(o.mesh->world_sphere(o.world));
+      continue;
+    }
     // In double: centre = transformed box centre; radius = farthest transformed corner,
     // measured from the stored float centre and rounded up, so the sphere encloses the box.
     const glm::dmat4 m(o.world);
@@ -68,8 +89,12 @@ void validate(const Scene& scene, const std::string& source) {
     // World-space volumes must be finite too (a huge scale can overflow float).
     const Aabb w = o.local_bounds.transformed(o.world);
     if (const std::string why = invalid_reason(w); !why.empty()) throw InputError(where + "world-space bounds: " + why);
-    const Obb ob = Obb::from_transformed_aabb(o.local_bounds, o.world);
+    const Obb ob = o.mesh ? o.mesh->world_obb(o.world) : Obb::from_transformed_aabb(o.local_bounds, o.world);
     if (const std::string why = invalid_reason(ob); !why.empty()) throw InputError(where + "world-space OBB: " + why);
+    if (o.mesh) {
+      const Sphere s = o.mesh->world_sphere(o.world);
+      if (const std::string why = invalid_reason(s); !why.empty()) throw InputError(where + "world-space sphere: " + why);
+    }
     // The world sphere's radius is at most the world AABB's diagonal.
     if (!std::isfinite(float(glm::length(glm::dvec3(w.max) - glm::dvec3(w.min)))))
       throw InputError(where + "world-space bounding sphere: radius is infinite");

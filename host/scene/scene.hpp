@@ -1,10 +1,13 @@
 #pragma once
 #include <cstdint>
 #include <glm/mat4x4.hpp>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "bounds/aabb_update.hpp"
+#include "bounds/mesh_bounds.hpp"
 #include "geom/aabb.hpp"
 #include "geom/obb.hpp"
 #include "geom/sphere.hpp"
@@ -19,10 +22,23 @@ class InputError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+/// Where an object came from in a glTF file (-1: not from glTF).
+struct ObjectOrigin {
+  int node = -1;       ///< index in the file's nodes[]
+  int mesh = -1;       ///< index in meshes[]
+  int primitive = -1;  ///< index in that mesh's primitives[]
+  int instance = 0;    ///< which copy, for scenes repeated with --instances
+  bool operator==(const ObjectOrigin&) const = default;
+};
+
 /// One cullable object: its bounds in its own space and where the world puts it.
 struct SceneObject {
-  Aabb local_bounds;
+  Aabb local_bounds;      ///< for a mesh object, the AABB of its vertices
   glm::mat4 world{1.0f};  ///< affine object-to-world transform
+  /// The geometry's volumes (hull, OBB, sphere), shared by every instance of one mesh
+  /// primitive; null for objects that are boxes (generated scenes, scene JSON files).
+  std::shared_ptr<const bounds::MeshBounds> mesh;
+  ObjectOrigin origin;
 };
 
 /// A scene: objects plus the camera it is meant to be seen from.
@@ -35,10 +51,20 @@ struct Scene {
   Aabb bounds() const;
 };
 
-/// World-space volumes of every object, in object order. The AABB is the AABB of the
-/// transformed local box; the OBB is the transformed local box; the sphere is centred on the
-/// transformed box centre with the distance to its farthest transformed corner as radius.
-std::vector<Aabb> world_aabbs(const Scene& scene);
+/// World-space volumes of every object, in object order.
+///
+/// Objects with a mesh: the AABB by the chosen update method over the mesh's points (see
+/// bounds::AabbUpdate; `climb_state`, when given, holds each object's hill-climbing extremes
+/// from one call to the next, for objects that move between calls; it is resized to the
+/// object count and started at the local extremes); the OBB is the mesh's OBB transformed; the
+/// sphere is the mesh's sphere transformed (bounds::transform_sphere).
+///
+/// Box objects (no mesh): the AABB is the AABB of the transformed local box whatever the
+/// method (the box is the geometry); the OBB is the transformed local box; the sphere is
+/// centred on the transformed box centre with the distance to its farthest transformed
+/// corner as radius.
+std::vector<Aabb> world_aabbs(const Scene& scene, bounds::AabbUpdate method = bounds::AabbUpdate::HullRecompute,
+                              std::vector<bounds::AabbTracker::Extremes>* climb_state = nullptr);
 std::vector<Obb> world_obbs(const Scene& scene);
 std::vector<Sphere> world_spheres(const Scene& scene);
 

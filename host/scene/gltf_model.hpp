@@ -1,0 +1,36 @@
+#pragma once
+// Internal to host/scene: tinygltf loading and range-checked accessor reads shared by the
+// glTF readers (gltf_points.cpp, gltf_scene.cpp). Not a public header.
+#include <glm/vec3.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <tiny_gltf.h>
+
+#include "geom/aabb.hpp"
+
+namespace cullpipe::gltf {
+
+/// Loads a .gltf or .glb (chosen by extension) without decoding images; throws InputError
+/// naming the file when tinygltf cannot read it.
+tinygltf::Model load_model(const std::string& path);
+
+/// A primitive's POSITION data, every element range checked and finite.
+struct Positions {
+  std::vector<glm::vec3> points;
+  std::optional<Aabb> declared;  ///< the accessor's min/max, when present
+};
+
+/// Reads meshes[mesh].primitives[primitive]'s POSITION accessor. `where` prefixes every error
+/// ("FILE: meshes[2].primitives[0]: "). Throws InputError for a missing, sparse, non-VEC3 or
+/// non-FLOAT accessor, a read past its buffer view or buffer, an empty accessor, or a NaN or
+/// infinite coordinate.
+Positions read_positions(const tinygltf::Model& model, std::size_t mesh, std::size_t primitive, const std::string& where);
+
+/// Checks the primitive's index accessor, if any: a scalar of UNSIGNED_BYTE/SHORT/INT, within
+/// its buffer view, and every index below `vertex_count`. Throws InputError otherwise.
+void check_indices(const tinygltf::Model& model, const tinygltf::Primitive& primitive, std::size_t vertex_count,
+                   const std::string& where);
+
+}  // namespace cullpipe::gltf
