@@ -1,8 +1,12 @@
 #version 460
 // Flat frustum culling: one invocation per object and view; gl_GlobalInvocationID.y is the
 // view. One dispatch covers all views (and a chunk of at most maxComputeWorkGroupCount[0]
-// groups of objects). Writes each object's classification, appends
-// visible ids to the view's list and counts visible / inside / intersecting objects.
+// groups of objects). Writes each object's classification and counts visible / inside /
+// intersecting objects. Then, by specialization:
+// - ORDERED == 0: appends visible ids (and, with WRITE_DRAWS, draw commands) to the view's
+//   lists in arrival order, one atomic per subgroup;
+// - ORDERED == 1: writes only each workgroup's visible count; compact_scan.comp and
+//   compact_scatter.comp then write the lists in object order.
 //
 // Bit-exact contract with host/cull/reference.cpp: every distance is computed as
 // ((n.x*p.x + n.y*p.y) + n.z*p.z) + d, written out (not dot()) and marked `precise`, so no
@@ -19,12 +23,20 @@
 
 layout(local_size_x_id = 1) in;                 // = FLAT_CULL_GROUP_SIZE, set by the host
 layout(constant_id = 0) const uint BV_KIND = BV_KIND_AABB;
+layout(constant_id = 2) const uint ORDERED = 0;      // 1: object-order compaction by later passes
+layout(constant_id = 3) const uint WRITE_DRAWS = 0;  // 1: also write draw commands (arrival order)
 
-layout(std430, set = 0, binding = 0) readonly buffer Bounds { vec4 bounds[]; };
-layout(std430, set = 0, binding = 1) writeonly buffer Classes { uint classes[]; };  // [view * object_count + i]
-layout(std430, set = 0, binding = 2) writeonly buffer Visible { uint visible_ids[]; };  // [view * capacity + k]
-layout(std430, set = 0, binding = 3) buffer Counters { ViewCounters counters[]; };
-layout(std430, set = 0, binding = 4) readonly buffer Views { GpuFrustum views[]; };
+layout(std430, set = 0, binding = BINDING_BOUNDS) readonly buffer Bounds { vec4 bounds[]; };
+layout(std430, set = 0, binding = BINDING_CLASSES) writeonly buffer Classes { uint classes[]; };
+layout(std430, set = 0, binding = BINDING_VISIBLE) writeonly buffer Visible { uint visible_ids[]; };
+layout(std430, set = 0, binding = BINDING_COUNTERS) buffer Counters { ViewCounters counters[]; };
+layout(std430, set = 0, binding = BINDING_VIEWS) readonly buffer Views { GpuFrustum views[]; };
+layout(std430, set = 0, binding = BINDING_DRAW_TEMPLATES) readonly buffer DrawTemplates { DrawCommand templates[]; };
+layout(std430, set = 0, binding = BINDING_DRAWS) writeonly buffer Draws { DrawCommand draws[]; };
+layout(std430, set = 0, binding = BINDING_GROUP_COUNTS) writeonly buffer GroupCounts { uint group_counts[]; };
+
+shared uint group_visible;  // ORDERED: this workgroup's visible and inside counts
+shared uint group_inside;
 
 layout(push_constant, std430) uniform Push { FlatCullParams params; };
 
@@ -92,27 +104,54 @@ uint classify_sphere(vec4 center_radius) {
 void main() {
   uint i = params.first_object + gl_GlobalInvocationID.x;
   view = gl_GlobalInvocationID.y;
-  if (i >= params.object_count || view >= params.view_count) return;
-  view_plane_count = min(views[view].plane_count, MAX_FRUSTUM_PLANES);
-  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = views[view].planes[k];
-
-  uint c;
-  if (BV_KIND == BV_KIND_AABB) {
-    c = classify_aabb(bounds[AABB_VEC4S * i].xyz, bounds[AABB_VEC4S * i + 1].xyz);
-  } else if (BV_KIND == BV_KIND_OBB) {
-    uint b = OBB_VEC4S * i;
-    c = classify_obb(bounds[b].xyz, bounds[b + 1], bounds[b + 2], bounds[b + 3]);
-  } else {
-    c = classify_sphere(bounds[SPHERE_VEC4S * i]);
+  // No early return: the ordered path has workgroup barriers, which every invocation must reach.
+  bool in_range = i < params.object_count && view < params.view_count;
+  uint c = CLASS_OUTSIDE;
+  if (in_range) {
+    view_plane_count = min(views[view].plane_count, MAX_FRUSTUM_PLANES);
+    [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = views[view].planes[k];
+    if (BV_KIND == BV_KIND_AABB) {
+      c = classify_aabb(bounds[AABB_VEC4S * i].xyz, bounds[AABB_VEC4S * i + 1].xyz);
+    } else if (BV_KIND == BV_KIND_OBB) {
+      uint b = OBB_VEC4S * i;
+      c = classify_obb(bounds[b].xyz, bounds[b + 1], bounds[b + 2], bounds[b + 3]);
+    } else {
+      c = classify_sphere(bounds[SPHERE_VEC4S * i]);
+    }
+    classes[view * params.object_count + i] = c;
   }
-  classes[view * params.object_count + i] = c;
 
-  // Compaction: one atomic per subgroup for the visible list, then each visible invocation
-  // writes its id at its rank within the subgroup. Order across subgroups is arrival order.
-  bool visible = c != CLASS_OUTSIDE;
+  bool visible = c != CLASS_OUTSIDE;  // inactive invocations count as OUTSIDE
   uvec4 vis_ballot = subgroupBallot(visible);
   uint vis_total = subgroupBallotBitCount(vis_ballot);
   uint inside_total = subgroupBallotBitCount(subgroupBallot(c == CLASS_INSIDE));
+
+  if (ORDERED != 0) {
+    // Count per workgroup; one global atomic per workgroup and view.
+    if (gl_LocalInvocationIndex == 0) {
+      group_visible = 0;
+      group_inside = 0;
+    }
+    barrier();
+    if (subgroupElect()) {
+      atomicAdd(group_visible, vis_total);
+      atomicAdd(group_inside, inside_total);
+    }
+    barrier();
+    if (gl_LocalInvocationIndex == 0) {
+      uint groups = (params.object_count + gl_WorkGroupSize.x - 1) / gl_WorkGroupSize.x;
+      uint g = params.first_object / gl_WorkGroupSize.x + gl_WorkGroupID.x;
+      group_counts[view * groups + g] = group_visible;
+      if (group_visible > 0) {
+        atomicAdd(counters[view].visible_count, group_visible);
+        atomicAdd(counters[view].inside_count, group_inside);
+      }
+    }
+    return;
+  }
+
+  // Arrival-order compaction: one atomic per subgroup for the visible list, then each visible
+  // invocation writes its id at its rank within the subgroup.
   uint base = 0;
   if (subgroupElect() && vis_total > 0) {
     base = atomicAdd(counters[view].visible_count, vis_total);
@@ -122,5 +161,10 @@ void main() {
   uint slot = base + subgroupBallotExclusiveBitCount(vis_ballot);
   if (visible && slot < params.visible_capacity) {
     visible_ids[view * params.visible_capacity + slot] = i;
+    if (WRITE_DRAWS != 0) {
+      DrawCommand d = templates[i];
+      d.object_id = i;
+      draws[view * params.visible_capacity + slot] = d;
+    }
   }
 }

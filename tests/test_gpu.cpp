@@ -346,6 +346,99 @@ TEST_F(Gpu, PassesSplitIntoChunksAgree) {
   expect_agreement(chunked, boxes, test_frusta());
 }
 
+// Ordered compaction and draw output: the visible list in object order equals the CPU's
+// visible objects in object order exactly, the draws are the templates of those objects with
+// their ids, and in arrival order the draws follow the visible ids one for one.
+template <class Volume>
+void expect_draws(gpu::GpuCuller& c, const std::vector<Volume>& volumes, const std::vector<Frustum>& frusta, std::uint64_t seed,
+                  std::size_t capacity = 0) {
+  test::Rng rng{seed};
+  std::vector<gpu::DrawCommand> templates(volumes.size());
+  for (gpu::DrawCommand& d : templates)
+    d = {std::uint32_t(rng.next() % 5000), 1 + std::uint32_t(rng.next() % 3), std::uint32_t(rng.next() % 100000),
+         int(rng.next() % 2001) - 1000, std::uint32_t(rng.next() % 70000), 0xdeadbeefu};
+  c.upload(std::span<const Volume>(volumes));
+  c.upload_draws(templates);
+  for (bool ordered : {true, false}) {
+    SCOPED_TRACE(ordered ? "ordered" : "arrival order");
+    const gpu::CullResult r = c.cull(frusta, {true, true, capacity, ordered, true});
+    ASSERT_EQ(r.views.size(), frusta.size());
+    for (std::size_t v = 0; v < frusta.size(); ++v) {
+      std::vector<Classification> cpu(volumes.size());
+      const reference::CullCounts counts = reference::classify_all(std::span<const Volume>(volumes), frusta[v], cpu);
+      const gpu::ViewResult& g = r.views[v];
+      EXPECT_EQ(g.classes, cpu) << "view " << v;
+      EXPECT_EQ(g.counts.visible, counts.visible);
+      EXPECT_EQ(g.counts.inside, counts.inside);
+      const std::size_t cap = capacity ? capacity : volumes.size();
+      EXPECT_EQ(g.overflow, counts.visible > cap);
+      std::vector<std::uint32_t> expected;
+      for (std::uint32_t i = 0; i < volumes.size(); ++i)
+        if (cpu[i] != Classification::Outside) expected.push_back(i);
+      if (expected.size() > cap) expected.resize(cap);
+      ASSERT_EQ(g.visible_ids.size(), expected.size()) << "view " << v;
+      ASSERT_EQ(g.draws.size(), expected.size()) << "view " << v;
+      if (ordered) {
+        EXPECT_EQ(g.visible_ids, expected) << "view " << v;
+      } else if (!capacity) {
+        std::vector<std::uint32_t> sorted = g.visible_ids;
+        std::sort(sorted.begin(), sorted.end());
+        EXPECT_EQ(sorted, expected) << "view " << v;
+      }
+      for (std::size_t k = 0; k < g.draws.size(); ++k) {
+        const gpu::DrawCommand& d = g.draws[k];
+        const std::uint32_t id = g.visible_ids[k];
+        ASSERT_EQ(d.object_id, id) << "view " << v << " draw " << k;
+        const gpu::DrawCommand& t = templates[id];
+        ASSERT_TRUE(d.index_count == t.index_count && d.instance_count == t.instance_count && d.first_index == t.first_index &&
+                    d.vertex_offset == t.vertex_offset && d.first_instance == t.first_instance)
+            << "view " << v << " draw " << k;
+      }
+    }
+  }
+}
+
+TEST_F(Gpu, OrderedCompactionAndDrawCommands) {
+  test::Rng rng{21};
+  for (std::size_t n : {0u, 1u, 255u, 256u, 257u, 5000u}) {
+    SCOPED_TRACE("n = " + std::to_string(n));
+    std::vector<Aabb> boxes(n);
+    std::vector<Obb> obbs(n);
+    std::vector<Sphere> spheres(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      boxes[i] = test::random_aabb(rng, 30.0f, 4.0f);
+      obbs[i] = test::random_obb(rng, 30.0f, 4.0f);
+      spheres[i] = test::random_sphere(rng, 30.0f, 4.0f);
+    }
+    expect_draws(culler(), boxes, test_frusta(), 1);
+    expect_draws(culler(), obbs, test_frusta(), 2);
+    expect_draws(culler(), spheres, test_frusta(), 3);
+  }
+  // Many workgroups and views; a capacity that overflows keeps the first objects in order.
+  std::vector<Aabb> many(300000);
+  for (Aabb& b : many) b = test::random_aabb(rng, 60.0f, 3.0f);
+  const Scene city = generate_scene(SceneKind::City, 20000, 9);
+  std::vector<Frustum> frusta;
+  for (const Camera& c : camera_path(city.camera, city.bounds(), 5)) frusta.push_back(Frustum::from_view_proj(c.view_proj()));
+  expect_draws(culler(), many, test_frusta(), 4);
+  expect_draws(culler(), world_aabbs(city), frusta, 5);
+  expect_draws(culler(), world_spheres(city), frusta, 6, 100);
+  // Chunked dispatches and a small group size; object counts not multiples of either.
+  gpu::GpuCuller chunked(*GpuEnvironment::context, gpu::GpuCullerConfig{32, 5});
+  std::vector<Aabb> some(many.begin(), many.begin() + 12345);
+  expect_draws(chunked, some, test_frusta(), 7);
+  expect_draws(chunked, some, test_frusta(), 8, 77);
+}
+
+TEST_F(Gpu, DrawsNeedTemplatesForEveryObject) {
+  std::vector<Aabb> boxes(10, Aabb{glm::vec3(-1), glm::vec3(1)});
+  culler().upload(std::span<const Aabb>(boxes));
+  culler().upload_draws(std::vector<gpu::DrawCommand>(9));
+  EXPECT_THROW(culler().cull(test_frusta(), {true, true, 0, false, true}), std::invalid_argument);
+  culler().upload_draws(std::vector<gpu::DrawCommand>(10));
+  EXPECT_NO_THROW(culler().cull(test_frusta(), {true, true, 0, false, true}));
+}
+
 TEST_F(Gpu, TimestampsAreReported) {
   std::vector<Aabb> boxes(10000);
   test::Rng rng{4};

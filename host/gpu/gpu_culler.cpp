@@ -9,13 +9,15 @@
 #include "gpu/layout.hpp"
 #include "vk/check.hpp"
 
-// SPIR-V compiled from shaders/cull_flat.comp at build time (glslangValidator --vn).
+// SPIR-V compiled from shaders/*.comp at build time (glslangValidator --vn).
+#include "compact_scan.spv.h"
+#include "compact_scatter.spv.h"
 #include "cull_flat.spv.h"
 
 namespace cullpipe::gpu {
 namespace {
 
-constexpr std::uint32_t kBindingCount = 5;  // bounds, classes, visible ids, counters, views
+constexpr std::uint32_t kBindingCount = CULL_BINDING_COUNT;  // one descriptor set for every shader
 constexpr VkDeviceSize kMinBufferSize = 16;
 
 std::uint32_t kind_index(BvKind k) { return static_cast<std::uint32_t>(k); }
@@ -59,14 +61,11 @@ void GpuCuller::setup(const GpuCullerConfig& config) {
       1, std::min({config.group_size, limits.maxComputeWorkGroupSize[0], limits.maxComputeWorkGroupInvocations}));
   max_groups_ = config.max_groups_per_dispatch ? std::min(config.max_groups_per_dispatch, limits.maxComputeWorkGroupCount[0])
                                                : limits.maxComputeWorkGroupCount[0];
-  const std::span<const std::uint32_t> spirv(cullpipe_cull_flat_spv, sizeof(cullpipe_cull_flat_spv) / sizeof(std::uint32_t));
-  static const char* names[3] = {"flat cull (aabb)", "flat cull (obb)", "flat cull (sphere)"};
-  for (std::uint32_t k = 0; k < 3; ++k) {
-    const std::uint32_t spec[2] = {k, group_size_};
-    pipelines_[k] = std::make_unique<vk::ComputePipeline>(
-        ctx_, vk::ComputePipelineDesc{spirv, kBindingCount, sizeof(FlatCullParams), spec, names[k]});
-  }
+  group_size_ = std::min(group_size_, MAX_CULL_GROUP_SIZE);
+  // Every pipeline has the same set layout; the flat AABB one is built now, for the descriptor
+  // set, the others on first use.
   static_assert(BV_KIND_AABB == 0 && BV_KIND_OBB == 1 && BV_KIND_SPHERE == 2, "BvKind order must match the shader");
+  pipeline(0, 0, false, false);
 
   VkDevice dev = ctx_.device();
   VkDescriptorPoolSize pool_size{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, kBindingCount};
@@ -75,7 +74,7 @@ void GpuCuller::setup(const GpuCullerConfig& config) {
   pool_info.poolSizeCount = 1;
   pool_info.pPoolSizes = &pool_size;
   CULLPIPE_VK_CHECK(vkCreateDescriptorPool(dev, &pool_info, nullptr, &descriptor_pool_));
-  VkDescriptorSetLayout set_layout = pipelines_[0]->set_layout();  // identical in all three
+  VkDescriptorSetLayout set_layout = pipelines_[0][0][0][0]->set_layout();  // identical in all
   VkDescriptorSetAllocateInfo set_info{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO};
   set_info.descriptorPool = descriptor_pool_;
   set_info.descriptorSetCount = 1;
@@ -94,6 +93,30 @@ void GpuCuller::setup(const GpuCullerConfig& config) {
     query_info.queryCount = 2;
     CULLPIPE_VK_CHECK(vkCreateQueryPool(dev, &query_info, nullptr, &query_pool_));
   }
+}
+
+const vk::ComputePipeline& GpuCuller::pipeline(int shader, std::uint32_t kind, bool ordered, bool draws) {
+  if (shader != 0) kind = 0, ordered = false;
+  std::unique_ptr<vk::ComputePipeline>& slot = pipelines_[shader][kind][ordered][draws];
+  if (slot) return *slot;
+  std::span<const std::uint32_t> spirv;
+  std::string name;
+  static const char* kinds[3] = {"aabb", "obb", "sphere"};
+  if (shader == 0) {
+    spirv = {cullpipe_cull_flat_spv, sizeof(cullpipe_cull_flat_spv) / sizeof(std::uint32_t)};
+    name = std::string("flat cull (") + kinds[kind] + (ordered ? ", ordered" : "") + (draws ? ", draws" : "") + ")";
+  } else if (shader == 1) {
+    spirv = {cullpipe_compact_scan_spv, sizeof(cullpipe_compact_scan_spv) / sizeof(std::uint32_t)};
+    name = "ordered compaction scan";
+  } else {
+    spirv = {cullpipe_compact_scatter_spv, sizeof(cullpipe_compact_scatter_spv) / sizeof(std::uint32_t)};
+    name = std::string("ordered compaction scatter") + (draws ? " (draws)" : "");
+  }
+  // Specialization constants: 0 kind, 1 group size, 2 ordered, 3 draws.
+  const std::uint32_t spec[4] = {kind, group_size_, ordered ? 1u : 0u, draws ? 1u : 0u};
+  slot = std::make_unique<vk::ComputePipeline>(
+      ctx_, vk::ComputePipelineDesc{spirv, kBindingCount, sizeof(FlatCullParams), spec, name.c_str()});
+  return *slot;
 }
 
 GpuCuller::~GpuCuller() { release(); }
@@ -138,23 +161,40 @@ void GpuCuller::upload_words(BvKind kind, const void* data, std::size_t count, s
   object_count_ = count;
 }
 
-void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capacity) {
+void GpuCuller::upload_draws(std::span<const DrawCommand> templates) {
+  const VkDeviceSize bytes = VkDeviceSize(templates.size()) * sizeof(DrawCommand);
+  check_storage_range(ctx_, bytes, std::to_string(templates.size()) + " draw templates");
+  template_count_ = 0;
+  ensure_buffer(ctx_, templates_, bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "draw template buffer", descriptors_dirty_);
+  if (bytes) std::memcpy(templates_.data(), templates.data(), bytes);
+  template_count_ = templates.size();
+}
+
+void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capacity, bool draws) {
   const VkDeviceSize outputs = VkDeviceSize(object_count_) * view_count * sizeof(std::uint32_t);
   const VkDeviceSize visible = VkDeviceSize(visible_capacity) * view_count * sizeof(std::uint32_t);
+  const VkDeviceSize draw_bytes = draws ? VkDeviceSize(visible_capacity) * view_count * sizeof(DrawCommand) : 0;
+  const VkDeviceSize groups = VkDeviceSize(vk::group_count(object_count_, group_size_)) * view_count * sizeof(std::uint32_t);
   check_storage_range(ctx_, outputs, std::to_string(view_count) + " views x " + std::to_string(object_count_) + " objects of output");
   check_storage_range(ctx_, visible, std::to_string(view_count) + " views x " + std::to_string(visible_capacity) + " visible ids");
+  check_storage_range(ctx_, draw_bytes, std::to_string(view_count) + " views x " + std::to_string(visible_capacity) + " draw commands");
   constexpr VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
   bool& dirty = descriptors_dirty_;
   ensure_buffer(ctx_, classes_, outputs, storage, "classification buffer", dirty);
   ensure_buffer(ctx_, visible_, visible, storage, "visible-id buffer", dirty);
-  ensure_buffer(ctx_, counters_, view_count * sizeof(ViewCounters), storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, "counter buffer",
-                dirty);
+  ensure_buffer(ctx_, counters_, view_count * sizeof(ViewCounters),
+                storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "counter buffer", dirty);
   ensure_buffer(ctx_, views_, view_count * sizeof(GpuFrustum), storage, "view buffer", dirty);
+  ensure_buffer(ctx_, draws_, draw_bytes, storage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "draw buffer", dirty);
+  ensure_buffer(ctx_, templates_, 0, storage, "draw template buffer", dirty);
+  ensure_buffer(ctx_, group_counts_, groups, storage, "group count buffer", dirty);
 }
 
 void GpuCuller::update_descriptors() {
   if (!descriptors_dirty_) return;
-  const vk::Buffer* buffers[kBindingCount] = {&bounds_, &classes_, &visible_, &counters_, &views_};
+  const vk::Buffer* buffers[kBindingCount] = {&bounds_, &classes_, &visible_, &counters_, &views_, &templates_, &draws_, &group_counts_};
+  static_assert(BINDING_BOUNDS == 0 && BINDING_CLASSES == 1 && BINDING_VISIBLE == 2 && BINDING_COUNTERS == 3 &&
+                BINDING_VIEWS == 4 && BINDING_DRAW_TEMPLATES == 5 && BINDING_DRAWS == 6 && BINDING_GROUP_COUNTS == 7);
   VkDescriptorBufferInfo infos[kBindingCount];
   VkWriteDescriptorSet writes[kBindingCount];
   for (std::uint32_t b = 0; b < kBindingCount; ++b) {
@@ -176,8 +216,12 @@ CullResult GpuCuller::cull(std::span<const Frustum> views, const CullOptions& op
   result.views.resize(views.size());
   if (views.empty()) return result;
   const std::size_t capacity = options.visible_capacity ? options.visible_capacity : object_count_;
+  if (options.draws && template_count_ != object_count_)
+    throw std::invalid_argument("draw commands requested, but " + std::to_string(template_count_) + " draw templates were uploaded for " +
+                                std::to_string(object_count_) + " objects (call upload_draws)");
   ensure_buffer(ctx_, bounds_, 0, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "bounds buffer", descriptors_dirty_);
-  ensure_outputs(views.size(), capacity);
+  ensure_outputs(views.size(), capacity, options.draws);
+  last_capacity_ = capacity;
   update_descriptors();
 
   auto gpu_views = views_.as<GpuFrustum>();
@@ -202,22 +246,41 @@ CullResult GpuCuller::cull(std::span<const Frustum> views, const CullOptions& op
                        nullptr, 0, nullptr);
   if (query_pool_) vkCmdWriteTimestamp(cmd_, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, query_pool_, 0);
 
-  const vk::ComputePipeline& pipe = *pipelines_[kind_index(kind_)];
-  vkCmdBindPipeline(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.pipeline());
-  vkCmdBindDescriptorSets(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.layout(), 0, 1, &descriptor_set_, 0, nullptr);
-  for (std::uint64_t first = 0; first < object_count_; first += objects_per_dispatch) {
-    if (first > 0) {  // successive chunks update the same counters
-      VkMemoryBarrier chunk_barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr,
-                                    VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT,
-                                    VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT};
-      vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1,
-                           &chunk_barrier, 0, nullptr, 0, nullptr);
+  const VkMemoryBarrier compute_barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr,
+                                        VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT,
+                                        VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT};
+  auto compute_to_compute = [&] {
+    vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &compute_barrier,
+                         0, nullptr, 0, nullptr);
+  };
+  const FlatCullParams base_params{std::uint32_t(object_count_), 0, std::uint32_t(views.size()), std::uint32_t(capacity)};
+  // One pass over every object in chunks of at most max_groups_ workgroups.
+  auto object_pass = [&](const vk::ComputePipeline& pipe) {
+    vkCmdBindPipeline(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.pipeline());
+    vkCmdBindDescriptorSets(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.layout(), 0, 1, &descriptor_set_, 0, nullptr);
+    for (std::uint64_t first = 0; first < object_count_; first += objects_per_dispatch) {
+      if (first > 0) compute_to_compute();  // successive chunks update the same counters
+      const std::uint64_t count = std::min<std::uint64_t>(objects_per_dispatch, object_count_ - first);
+      FlatCullParams params = base_params;
+      params.first_object = std::uint32_t(first);
+      vkCmdPushConstants(cmd_, pipe.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
+      vkCmdDispatch(cmd_, vk::group_count(count, group_size_), std::uint32_t(views.size()), 1);
     }
-    const std::uint64_t count = std::min<std::uint64_t>(objects_per_dispatch, object_count_ - first);
-    const FlatCullParams params{std::uint32_t(object_count_), std::uint32_t(first), std::uint32_t(views.size()),
-                                std::uint32_t(capacity)};
-    vkCmdPushConstants(cmd_, pipe.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
-    vkCmdDispatch(cmd_, vk::group_count(count, group_size_), std::uint32_t(views.size()), 1);
+  };
+  const std::uint32_t kind = kind_index(kind_);
+  if (!options.ordered) {
+    object_pass(pipeline(0, kind, false, options.draws));
+  } else if (object_count_ > 0) {
+    // Count per workgroup, scan the counts per view, scatter in object order.
+    object_pass(pipeline(0, kind, true, false));
+    compute_to_compute();
+    const vk::ComputePipeline& scan = pipeline(1, 0, false, false);
+    vkCmdBindPipeline(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, scan.pipeline());
+    vkCmdBindDescriptorSets(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, scan.layout(), 0, 1, &descriptor_set_, 0, nullptr);
+    vkCmdPushConstants(cmd_, scan.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(base_params), &base_params);
+    vkCmdDispatch(cmd_, 1, std::uint32_t(views.size()), 1);
+    compute_to_compute();
+    object_pass(pipeline(2, 0, false, options.draws));
   }
   if (query_pool_) vkCmdWriteTimestamp(cmd_, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, query_pool_, 1);
   VkMemoryBarrier host_barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, VK_ACCESS_SHADER_WRITE_BIT, VK_ACCESS_HOST_READ_BIT};
@@ -251,6 +314,10 @@ CullResult GpuCuller::cull(std::span<const Frustum> views, const CullOptions& op
     if (options.visible_ids) {
       const std::uint32_t* src = visible.data() + v * capacity;
       out.visible_ids.assign(src, src + std::min<std::size_t>(c.visible_count, capacity));
+    }
+    if (options.draws) {
+      const DrawCommand* src = draws_.as<const DrawCommand>().data() + v * capacity;
+      out.draws.assign(src, src + std::min<std::size_t>(c.visible_count, capacity));
     }
   }
   result.timings.wall_ns = double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());

@@ -22,7 +22,12 @@ namespace cullpipe::gpu {
 /// One view's result of a GPU culling pass.
 struct ViewResult {
   std::vector<Classification> classes;     ///< per object, in object order
-  std::vector<std::uint32_t> visible_ids;  ///< ids of INSIDE/INTERSECTING objects, in GPU arrival order
+  /// Ids of INSIDE/INTERSECTING objects: in object order with CullOptions::ordered, else in
+  /// GPU arrival order.
+  std::vector<std::uint32_t> visible_ids;
+  /// With CullOptions::draws: one draw per visible id, in the same order: the object's
+  /// template (upload_draws) with object_id set.
+  std::vector<DrawCommand> draws;
   reference::CullCounts counts;            ///< as counted by the GPU
   bool overflow = false;                   ///< more visible objects than the list could hold
 };
@@ -47,6 +52,12 @@ struct CullOptions {
   /// the list holds the first ids that fit, the counters still count every visible object and
   /// ViewResult::overflow is set.
   std::size_t visible_capacity = 0;
+  /// Deterministic output: visible ids and draws in object order, by prefix-sum compaction
+  /// (two more passes), instead of atomic arrival order. With a capacity, the list holds the
+  /// first visible objects in object order.
+  bool ordered = false;
+  /// Also write a DrawCommand per visible object (needs upload_draws) and read them back.
+  bool draws = false;
 };
 
 /// How a GpuCuller is set up.
@@ -75,6 +86,22 @@ class GpuCuller {
   void upload(std::span<const Obb> volumes);
   void upload(std::span<const Sphere> volumes);
 
+  /// One draw template per object, in object order (object_id is ignored): the indirect draw
+  /// each visible object gets. Needed before a pass with CullOptions::draws; must match the
+  /// object count of the volumes culled then.
+  void upload_draws(std::span<const DrawCommand> templates);
+
+  /// The output buffers of the last pass, for drawing from them without a readback:
+  /// draw_buffer() holds DrawCommand records for view v at byte offset
+  /// v * visible_capacity * sizeof(DrawCommand) (stride 24, usable with
+  /// vkCmdDrawIndexedIndirectCount); counter_buffer() holds ViewCounters per view, and the
+  /// draw count of view v is its visible_count at byte offset v * sizeof(ViewCounters) (it
+  /// may exceed visible_capacity: pass that as maxDrawCount). Both have
+  /// VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT.
+  const vk::Buffer& draw_buffer() const { return draws_; }
+  const vk::Buffer& counter_buffer() const { return counters_; }
+  std::size_t last_visible_capacity() const { return last_capacity_; }
+
   /// Classifies the uploaded volumes against every view in one submission.
   /// Throws std::length_error when views x objects outputs exceed a storage buffer.
   CullResult cull(std::span<const Frustum> views, const CullOptions& options = {});
@@ -86,7 +113,8 @@ class GpuCuller {
 
  private:
   void upload_words(BvKind kind, const void* data, std::size_t count, std::size_t bytes_per_object);
-  void ensure_outputs(std::size_t view_count, std::size_t visible_capacity);
+  void ensure_outputs(std::size_t view_count, std::size_t visible_capacity, bool draws);
+  const vk::ComputePipeline& pipeline(int shader, std::uint32_t kind, bool ordered, bool draws);
   void update_descriptors();
   void setup(const GpuCullerConfig& config);
   void release();
@@ -96,8 +124,12 @@ class GpuCuller {
   std::uint32_t max_groups_ = 0;
   BvKind kind_ = BvKind::Aabb;
   std::size_t object_count_ = 0;
-  std::unique_ptr<vk::ComputePipeline> pipelines_[3];
-  vk::Buffer bounds_, classes_, visible_, counters_, views_;
+  // Built on first use: [shader][kind][ordered][draws]; shader 0 = cull_flat, 1 = compact_scan,
+  // 2 = compact_scatter (kind and ordered unused for 1 and 2).
+  std::unique_ptr<vk::ComputePipeline> pipelines_[3][3][2][2];
+  vk::Buffer bounds_, classes_, visible_, counters_, views_, templates_, draws_, group_counts_;
+  std::size_t template_count_ = 0;
+  std::size_t last_capacity_ = 0;
   VkDescriptorPool descriptor_pool_ = VK_NULL_HANDLE;
   VkDescriptorSet descriptor_set_ = VK_NULL_HANDLE;
   VkCommandBuffer cmd_ = VK_NULL_HANDLE;

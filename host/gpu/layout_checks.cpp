@@ -1,6 +1,7 @@
 // Compile-time checks that the C++ view of shaders/shared/cull_types.h matches std430, so the
 // structs written once there mean the same bytes to the host and to the shaders.
 #include <cstddef>
+#include <vulkan/vulkan.h>
 
 #include "gpu/layout.hpp"
 
@@ -36,6 +37,16 @@ static_assert(sizeof(ViewCounters) == 16);
 static_assert(offsetof(ViewCounters, visible_count) == 0);
 static_assert(offsetof(ViewCounters, inside_count) == 4);
 static_assert(offsetof(ViewCounters, reserved0) == 8);
+
+// DrawCommand starts with exactly VkDrawIndexedIndirectCommand.
+static_assert(sizeof(DrawCommand) == 24);
+static_assert(offsetof(DrawCommand, index_count) == offsetof(VkDrawIndexedIndirectCommand, indexCount));
+static_assert(offsetof(DrawCommand, instance_count) == offsetof(VkDrawIndexedIndirectCommand, instanceCount));
+static_assert(offsetof(DrawCommand, first_index) == offsetof(VkDrawIndexedIndirectCommand, firstIndex));
+static_assert(offsetof(DrawCommand, vertex_offset) == offsetof(VkDrawIndexedIndirectCommand, vertexOffset));
+static_assert(offsetof(DrawCommand, first_instance) == offsetof(VkDrawIndexedIndirectCommand, firstInstance));
+static_assert(sizeof(VkDrawIndexedIndirectCommand) == 20);
+static_assert(offsetof(DrawCommand, object_id) == 20);
 
 static_assert(CLASS_OUTSIDE == 0 && CLASS_INTERSECTING == 1 && CLASS_INSIDE == 2,
               "must match cullpipe::Classification");

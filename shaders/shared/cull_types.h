@@ -72,8 +72,36 @@ struct FlatCullParams {
   uint visible_capacity;  // capacity of each view's visible-id list
 };
 
+// Largest workgroup the compaction shaders support (their shared scan array).
+CP_CONST MAX_CULL_GROUP_SIZE = 1024u;
+
+// Storage-buffer bindings of set 0, shared by every culling shader (one descriptor set).
+CP_CONST BINDING_BOUNDS = 0u;          // vec4 words of the volumes
+CP_CONST BINDING_CLASSES = 1u;         // uint per object and view: [view * object_count + i]
+CP_CONST BINDING_VISIBLE = 2u;         // visible ids: [view * visible_capacity + k]
+CP_CONST BINDING_COUNTERS = 3u;        // ViewCounters per view
+CP_CONST BINDING_VIEWS = 4u;           // GpuFrustum per view
+CP_CONST BINDING_DRAW_TEMPLATES = 5u;  // DrawCommand per object (object_id ignored)
+CP_CONST BINDING_DRAWS = 6u;           // DrawCommand out: [view * visible_capacity + k]
+CP_CONST BINDING_GROUP_COUNTS = 7u;    // ordered mode: visible count, then offset, per workgroup and view
+CP_CONST CULL_BINDING_COUNT = 8u;
+
+// One indirect draw of a visible object: the first five fields are exactly
+// VkDrawIndexedIndirectCommand (so the array can be passed to vkCmdDrawIndexedIndirectCount
+// with stride sizeof(DrawCommand) = 24), followed by the id of the object it draws.
+struct DrawCommand {
+  uint index_count;
+  uint instance_count;
+  uint first_index;
+  int vertex_offset;
+  uint first_instance;
+  uint object_id;
+};
+
 // Per-view counters, written by the shader (cleared with vkCmdFillBuffer before each pass).
 // INTERSECTING = visible - inside, derived on the host (one atomic fewer per subgroup).
+// visible_count (offset 0 of each view's entry) is also the draw count for
+// vkCmdDrawIndexedIndirectCount; pass maxDrawCount = visible_capacity, since it may exceed it.
 struct ViewCounters {
   uint visible_count;  // visible objects found; may exceed visible_capacity (overflow)
   uint inside_count;   // of which INSIDE

@@ -1,0 +1,53 @@
+#version 460
+// Ordered compaction, pass 3 of 3: each visible object's slot is its workgroup's offset (from
+// compact_scan.comp) plus its rank among the visible invocations of its workgroup, in
+// invocation order (a shared-memory scan, independent of how invocations map to subgroups).
+// The visible ids, and with WRITE_DRAWS the draw commands, land in object order; slots at or
+// past visible_capacity are dropped (the counters, from pass 1, report the overflow).
+#extension GL_GOOGLE_include_directive : require
+
+#include "shared/cull_types.h"
+
+layout(local_size_x_id = 1) in;
+layout(constant_id = 3) const uint WRITE_DRAWS = 0;
+
+layout(std430, set = 0, binding = BINDING_CLASSES) readonly buffer Classes { uint classes[]; };
+layout(std430, set = 0, binding = BINDING_VISIBLE) writeonly buffer Visible { uint visible_ids[]; };
+layout(std430, set = 0, binding = BINDING_DRAW_TEMPLATES) readonly buffer DrawTemplates { DrawCommand templates[]; };
+layout(std430, set = 0, binding = BINDING_DRAWS) writeonly buffer Draws { DrawCommand draws[]; };
+layout(std430, set = 0, binding = BINDING_GROUP_COUNTS) readonly buffer GroupCounts { uint group_offsets[]; };
+layout(push_constant, std430) uniform Push { FlatCullParams params; };
+
+shared uint scan[MAX_CULL_GROUP_SIZE];
+
+void main() {
+  uint i = params.first_object + gl_GlobalInvocationID.x;
+  uint view = gl_GlobalInvocationID.y;
+  uint t = gl_LocalInvocationIndex;
+  bool visible = i < params.object_count && view < params.view_count &&
+                 classes[view * params.object_count + i] != CLASS_OUTSIDE;
+  uint flag = visible ? 1u : 0u;
+
+  // Inclusive scan of the flags over the workgroup (Hillis-Steele).
+  scan[t] = flag;
+  barrier();
+  for (uint offset = 1; offset < gl_WorkGroupSize.x; offset <<= 1) {
+    uint add = t >= offset ? scan[t - offset] : 0u;
+    barrier();
+    scan[t] += add;
+    barrier();
+  }
+  if (!visible) return;
+
+  uint groups = (params.object_count + gl_WorkGroupSize.x - 1) / gl_WorkGroupSize.x;
+  uint g = params.first_object / gl_WorkGroupSize.x + gl_WorkGroupID.x;
+  uint slot = group_offsets[view * groups + g] + scan[t] - 1u;
+  if (slot < params.visible_capacity) {
+    visible_ids[view * params.visible_capacity + slot] = i;
+    if (WRITE_DRAWS != 0) {
+      DrawCommand d = templates[i];
+      d.object_id = i;
+      draws[view * params.visible_capacity + slot] = d;
+    }
+  }
+}
