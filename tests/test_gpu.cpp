@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <limits>
 #include <memory>
@@ -428,6 +429,67 @@ TEST_F(Gpu, OrderedCompactionAndDrawCommands) {
   std::vector<Aabb> some(many.begin(), many.begin() + 12345);
   expect_draws(chunked, some, test_frusta(), 7);
   expect_draws(chunked, some, test_frusta(), 8, 77);
+}
+
+// The engine path: a context borrowing the caller's device, the pass recorded into the
+// caller's command buffer and submitted by the caller; results identical to cull().
+TEST_F(Gpu, RecordsIntoTheCallersCommandBufferOnABorrowedDevice) {
+  const vk::Context& owner = *GpuEnvironment::context;
+  vk::Context borrowed(vk::ExternalDevice{owner.instance(), owner.physical_device(), owner.device(), owner.queue(), owner.queue_family()});
+  EXPECT_FALSE(borrowed.owns_device());
+  gpu::GpuCuller engine_culler(borrowed);
+
+  test::Rng rng{31};
+  std::vector<Sphere> spheres(20000);
+  for (Sphere& sp : spheres) sp = test::random_sphere(rng, 40.0f, 3.0f);
+  std::vector<gpu::DrawCommand> templates(spheres.size());
+  for (std::uint32_t i = 0; i < templates.size(); ++i) templates[i] = {36, 1, 36 * i, 0, i, 0};
+  engine_culler.upload(std::span<const Sphere>(spheres));
+  engine_culler.upload_draws(templates);
+
+  // The "engine": its own pool, command buffer and fence on its device.
+  VkDevice dev = owner.device();
+  VkCommandPoolCreateInfo pool_info{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
+  pool_info.queueFamilyIndex = owner.queue_family();
+  VkCommandPool pool = VK_NULL_HANDLE;
+  ASSERT_EQ(vkCreateCommandPool(dev, &pool_info, nullptr, &pool), VK_SUCCESS);
+  VkCommandBufferAllocateInfo alloc{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO, nullptr, pool, VK_COMMAND_BUFFER_LEVEL_PRIMARY, 1};
+  VkCommandBuffer cmd = VK_NULL_HANDLE;
+  ASSERT_EQ(vkAllocateCommandBuffers(dev, &alloc, &cmd), VK_SUCCESS);
+  VkFenceCreateInfo fence_info{VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
+  VkFence fence = VK_NULL_HANDLE;
+  ASSERT_EQ(vkCreateFence(dev, &fence_info, nullptr, &fence), VK_SUCCESS);
+
+  const std::vector<Frustum> frusta = test_frusta();
+  const gpu::CullOptions options{true, true, 0, true, true};
+  VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+  ASSERT_EQ(vkBeginCommandBuffer(cmd, &begin), VK_SUCCESS);
+  engine_culler.record(cmd, frusta, options);
+  ASSERT_EQ(vkEndCommandBuffer(cmd), VK_SUCCESS);
+  VkSubmitInfo submit{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+  submit.commandBufferCount = 1;
+  submit.pCommandBuffers = &cmd;
+  ASSERT_EQ(vkQueueSubmit(owner.queue(), 1, &submit, fence), VK_SUCCESS);
+  ASSERT_EQ(vkWaitForFences(dev, 1, &fence, VK_TRUE, UINT64_MAX), VK_SUCCESS);
+  const gpu::CullResult engine = engine_culler.read_results();
+
+  culler().upload(std::span<const Sphere>(spheres));
+  culler().upload_draws(templates);
+  const gpu::CullResult own = culler().cull(frusta, options);
+  ASSERT_EQ(engine.views.size(), frusta.size());
+  for (std::size_t v = 0; v < frusta.size(); ++v) {
+    std::vector<Classification> cpu(spheres.size());
+    reference::classify_all(std::span<const Sphere>(spheres), frusta[v], cpu);
+    EXPECT_EQ(engine.views[v].classes, cpu);
+    EXPECT_EQ(engine.views[v].visible_ids, own.views[v].visible_ids);  // ordered: deterministic
+    ASSERT_EQ(engine.views[v].draws.size(), own.views[v].draws.size());
+    for (std::size_t k = 0; k < engine.views[v].draws.size(); ++k)
+      ASSERT_EQ(std::memcmp(&engine.views[v].draws[k], &own.views[v].draws[k], sizeof(gpu::DrawCommand)), 0) << k;
+  }
+  EXPECT_TRUE(engine_culler.draw_buffer().handle() != VK_NULL_HANDLE);
+  vkDestroyFence(dev, fence, nullptr);
+  vkDestroyCommandPool(dev, pool, nullptr);
+  EXPECT_THROW(vk::Context(vk::ExternalDevice{}), vk::Error);
 }
 
 TEST_F(Gpu, DrawsNeedTemplatesForEveryObject) {

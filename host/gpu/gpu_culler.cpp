@@ -123,7 +123,10 @@ GpuCuller::~GpuCuller() { release(); }
 
 void GpuCuller::release() {
   VkDevice dev = ctx_.device();
-  vkDeviceWaitIdle(dev);
+  // Our own passes are waited for in cull(); on a borrowed device, the caller must not destroy
+  // the culler while a command buffer it recorded into is pending (and we do not stall the
+  // caller's queues).
+  if (ctx_.owns_device()) vkDeviceWaitIdle(dev);
   if (query_pool_) vkDestroyQueryPool(dev, query_pool_, nullptr);
   if (cmd_) vkFreeCommandBuffers(dev, ctx_.command_pool(), 1, &cmd_);
   if (descriptor_pool_) vkDestroyDescriptorPool(dev, descriptor_pool_, nullptr);
@@ -210,61 +213,64 @@ void GpuCuller::update_descriptors() {
   descriptors_dirty_ = false;
 }
 
-CullResult GpuCuller::cull(std::span<const Frustum> views, const CullOptions& options) {
-  const auto start = std::chrono::steady_clock::now();
-  CullResult result;
-  result.views.resize(views.size());
-  if (views.empty()) return result;
+void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& options) {
   const std::size_t capacity = options.visible_capacity ? options.visible_capacity : object_count_;
   if (options.draws && template_count_ != object_count_)
     throw std::invalid_argument("draw commands requested, but " + std::to_string(template_count_) + " draw templates were uploaded for " +
                                 std::to_string(object_count_) + " objects (call upload_draws)");
-  ensure_buffer(ctx_, bounds_, 0, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "bounds buffer", descriptors_dirty_);
-  ensure_outputs(views.size(), capacity, options.draws);
-  last_capacity_ = capacity;
-  update_descriptors();
-
-  auto gpu_views = views_.as<GpuFrustum>();
-  for (std::size_t v = 0; v < views.size(); ++v) gpu_views[v] = pack(views[v]);
-
-  const VkDeviceSize counters_bytes = views.size() * sizeof(ViewCounters);
-  const std::uint64_t objects_per_dispatch = std::uint64_t(max_groups_) * group_size_;
   if (views.size() > ctx_.properties().limits.maxComputeWorkGroupCount[1])
     throw std::length_error(std::to_string(views.size()) + " views exceed the device's dispatch limit of " +
                             std::to_string(ctx_.properties().limits.maxComputeWorkGroupCount[1]));
+  ensure_buffer(ctx_, bounds_, 0, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "bounds buffer", descriptors_dirty_);
+  ensure_outputs(views.size(), capacity, options.draws);
+  update_descriptors();
+  auto gpu_views = views_.as<GpuFrustum>();
+  for (std::size_t v = 0; v < views.size(); ++v) gpu_views[v] = pack(views[v]);
+  last_capacity_ = capacity;
+  last_view_count_ = views.size();
+  last_options_ = options;
+  // Build every pipeline the pass needs now, not while recording.
+  const std::uint32_t kind = kind_index(kind_);
+  if (!options.ordered) {
+    pipeline(0, kind, false, options.draws);
+  } else {
+    pipeline(0, kind, true, false);
+    pipeline(1, 0, false, false);
+    pipeline(2, 0, false, options.draws);
+  }
+}
 
-  CULLPIPE_VK_CHECK(vkResetCommandBuffer(cmd_, 0));
-  VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
-  begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
-  CULLPIPE_VK_CHECK(vkBeginCommandBuffer(cmd_, &begin));
-  if (query_pool_) vkCmdResetQueryPool(cmd_, query_pool_, 0, 2);
+void GpuCuller::record_passes(VkCommandBuffer cmd, bool timestamps) {
+  const std::size_t view_count = last_view_count_;
+  const CullOptions& options = last_options_;
+  const std::uint64_t objects_per_dispatch = std::uint64_t(max_groups_) * group_size_;
 
-  vkCmdFillBuffer(cmd_, counters_.handle(), 0, counters_bytes, 0);
-  VkMemoryBarrier clear_barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, VK_ACCESS_TRANSFER_WRITE_BIT,
-                                VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT};
-  vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &clear_barrier, 0,
+  vkCmdFillBuffer(cmd, counters_.handle(), 0, view_count * sizeof(ViewCounters), 0);
+  const VkMemoryBarrier clear_barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, VK_ACCESS_TRANSFER_WRITE_BIT,
+                                      VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT};
+  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &clear_barrier, 0,
                        nullptr, 0, nullptr);
-  if (query_pool_) vkCmdWriteTimestamp(cmd_, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, query_pool_, 0);
+  if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, query_pool_, 0);
 
   const VkMemoryBarrier compute_barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr,
                                         VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT,
                                         VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT};
   auto compute_to_compute = [&] {
-    vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &compute_barrier,
+    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &compute_barrier,
                          0, nullptr, 0, nullptr);
   };
-  const FlatCullParams base_params{std::uint32_t(object_count_), 0, std::uint32_t(views.size()), std::uint32_t(capacity)};
+  const FlatCullParams base_params{std::uint32_t(object_count_), 0, std::uint32_t(view_count), std::uint32_t(last_capacity_)};
   // One pass over every object in chunks of at most max_groups_ workgroups.
   auto object_pass = [&](const vk::ComputePipeline& pipe) {
-    vkCmdBindPipeline(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.pipeline());
-    vkCmdBindDescriptorSets(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.layout(), 0, 1, &descriptor_set_, 0, nullptr);
+    vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.pipeline());
+    vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.layout(), 0, 1, &descriptor_set_, 0, nullptr);
     for (std::uint64_t first = 0; first < object_count_; first += objects_per_dispatch) {
       if (first > 0) compute_to_compute();  // successive chunks update the same counters
       const std::uint64_t count = std::min<std::uint64_t>(objects_per_dispatch, object_count_ - first);
       FlatCullParams params = base_params;
       params.first_object = std::uint32_t(first);
-      vkCmdPushConstants(cmd_, pipe.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
-      vkCmdDispatch(cmd_, vk::group_count(count, group_size_), std::uint32_t(views.size()), 1);
+      vkCmdPushConstants(cmd, pipe.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
+      vkCmdDispatch(cmd, vk::group_count(count, group_size_), std::uint32_t(view_count), 1);
     }
   };
   const std::uint32_t kind = kind_index(kind_);
@@ -275,33 +281,39 @@ CullResult GpuCuller::cull(std::span<const Frustum> views, const CullOptions& op
     object_pass(pipeline(0, kind, true, false));
     compute_to_compute();
     const vk::ComputePipeline& scan = pipeline(1, 0, false, false);
-    vkCmdBindPipeline(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, scan.pipeline());
-    vkCmdBindDescriptorSets(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, scan.layout(), 0, 1, &descriptor_set_, 0, nullptr);
-    vkCmdPushConstants(cmd_, scan.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(base_params), &base_params);
-    vkCmdDispatch(cmd_, 1, std::uint32_t(views.size()), 1);
+    vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, scan.pipeline());
+    vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, scan.layout(), 0, 1, &descriptor_set_, 0, nullptr);
+    vkCmdPushConstants(cmd, scan.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(base_params), &base_params);
+    vkCmdDispatch(cmd, 1, std::uint32_t(view_count), 1);
     compute_to_compute();
     object_pass(pipeline(2, 0, false, options.draws));
   }
-  if (query_pool_) vkCmdWriteTimestamp(cmd_, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, query_pool_, 1);
-  VkMemoryBarrier host_barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, VK_ACCESS_SHADER_WRITE_BIT, VK_ACCESS_HOST_READ_BIT};
-  vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &host_barrier, 0, nullptr,
-                       0, nullptr);
-  CULLPIPE_VK_CHECK(vkEndCommandBuffer(cmd_));
-  ctx_.submit_and_wait(cmd_);
+  if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, query_pool_, 1);
+  // Make the outputs visible to indirect draws (the count and the commands), to later shaders
+  // and to the host.
+  const VkMemoryBarrier out_barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, VK_ACCESS_SHADER_WRITE_BIT,
+                                    VK_ACCESS_INDIRECT_COMMAND_READ_BIT | VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_HOST_READ_BIT};
+  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+                       VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_HOST_BIT, 0, 1,
+                       &out_barrier, 0, nullptr, 0, nullptr);
+}
 
-  if (query_pool_) {
-    std::uint64_t stamps[2] = {0, 0};
-    CULLPIPE_VK_CHECK(vkGetQueryPoolResults(ctx_.device(), query_pool_, 0, 2, sizeof(stamps), stamps, sizeof(std::uint64_t),
-                                            VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT));
-    const std::uint32_t bits = ctx_.timestamp_valid_bits();
-    const std::uint64_t mask = bits >= 64 ? ~0ull : (1ull << bits) - 1;
-    result.timings.gpu_ns = double((stamps[1] - stamps[0]) & mask) * ctx_.timestamp_period_ns();
-  }
+void GpuCuller::record(VkCommandBuffer cmd, std::span<const Frustum> views, const CullOptions& options) {
+  if (views.empty()) throw std::invalid_argument("GpuCuller::record: no views");
+  prepare(views, options);
+  record_passes(cmd, false);
+}
 
+CullResult GpuCuller::read_results() const {
+  CullResult result;
+  const CullOptions& options = last_options_;
+  const std::size_t capacity = last_capacity_;
+  result.views.resize(last_view_count_);
+  if (last_view_count_ == 0) return result;
   const auto counters = counters_.as<const ViewCounters>();
   const auto classes = classes_.as<const std::uint32_t>();
   const auto visible = visible_.as<const std::uint32_t>();
-  for (std::size_t v = 0; v < views.size(); ++v) {
+  for (std::size_t v = 0; v < last_view_count_; ++v) {
     ViewResult& out = result.views[v];
     const ViewCounters& c = counters[v];
     out.counts = {c.visible_count, c.inside_count, c.visible_count - c.inside_count};
@@ -319,6 +331,31 @@ CullResult GpuCuller::cull(std::span<const Frustum> views, const CullOptions& op
       const DrawCommand* src = draws_.as<const DrawCommand>().data() + v * capacity;
       out.draws.assign(src, src + std::min<std::size_t>(c.visible_count, capacity));
     }
+  }
+  return result;
+}
+
+CullResult GpuCuller::cull(std::span<const Frustum> views, const CullOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  if (views.empty()) return {};
+  prepare(views, options);
+  CULLPIPE_VK_CHECK(vkResetCommandBuffer(cmd_, 0));
+  VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+  begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+  CULLPIPE_VK_CHECK(vkBeginCommandBuffer(cmd_, &begin));
+  if (query_pool_) vkCmdResetQueryPool(cmd_, query_pool_, 0, 2);
+  record_passes(cmd_, query_pool_ != VK_NULL_HANDLE);
+  CULLPIPE_VK_CHECK(vkEndCommandBuffer(cmd_));
+  ctx_.submit_and_wait(cmd_);
+
+  CullResult result = read_results();
+  if (query_pool_) {
+    std::uint64_t stamps[2] = {0, 0};
+    CULLPIPE_VK_CHECK(vkGetQueryPoolResults(ctx_.device(), query_pool_, 0, 2, sizeof(stamps), stamps, sizeof(std::uint64_t),
+                                            VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT));
+    const std::uint32_t bits = ctx_.timestamp_valid_bits();
+    const std::uint64_t mask = bits >= 64 ? ~0ull : (1ull << bits) - 1;
+    result.timings.gpu_ns = double((stamps[1] - stamps[0]) & mask) * ctx_.timestamp_period_ns();
   }
   result.timings.wall_ns = double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());
   return result;

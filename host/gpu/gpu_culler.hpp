@@ -102,9 +102,20 @@ class GpuCuller {
   const vk::Buffer& counter_buffer() const { return counters_; }
   std::size_t last_visible_capacity() const { return last_capacity_; }
 
-  /// Classifies the uploaded volumes against every view in one submission.
+  /// Classifies the uploaded volumes against every view in one submission and waits.
   /// Throws std::length_error when views x objects outputs exceed a storage buffer.
   CullResult cull(std::span<const Frustum> views, const CullOptions& options = {});
+
+  /// The engine path: records the whole pass (counter reset, dispatches, barriers) into the
+  /// caller's command buffer, which must be recording, outside a render pass, for a queue of
+  /// the context's queue family. Nothing is submitted. The views are written to a host-visible
+  /// buffer now, so one GpuCuller serves one pass in flight: use one per frame in flight. The
+  /// recording ends with a barrier that makes draw_buffer() and counter_buffer() ready for
+  /// vkCmdDrawIndexedIndirectCount (DRAW_INDIRECT stage), later compute shaders and the host.
+  /// Pipelines are built here (not during recording's hot path later). After the caller's
+  /// submission has completed, read_results() returns what cull() would have (no timings).
+  void record(VkCommandBuffer cmd, std::span<const Frustum> views, const CullOptions& options = {});
+  CullResult read_results() const;
 
   BvKind kind() const { return kind_; }
   std::uint32_t group_size() const { return group_size_; }
@@ -114,6 +125,8 @@ class GpuCuller {
  private:
   void upload_words(BvKind kind, const void* data, std::size_t count, std::size_t bytes_per_object);
   void ensure_outputs(std::size_t view_count, std::size_t visible_capacity, bool draws);
+  void prepare(std::span<const Frustum> views, const CullOptions& options);
+  void record_passes(VkCommandBuffer cmd, bool timestamps);
   const vk::ComputePipeline& pipeline(int shader, std::uint32_t kind, bool ordered, bool draws);
   void update_descriptors();
   void setup(const GpuCullerConfig& config);
@@ -130,6 +143,8 @@ class GpuCuller {
   vk::Buffer bounds_, classes_, visible_, counters_, views_, templates_, draws_, group_counts_;
   std::size_t template_count_ = 0;
   std::size_t last_capacity_ = 0;
+  std::size_t last_view_count_ = 0;
+  CullOptions last_options_;
   VkDescriptorPool descriptor_pool_ = VK_NULL_HANDLE;
   VkDescriptorSet descriptor_set_ = VK_NULL_HANDLE;
   VkCommandBuffer cmd_ = VK_NULL_HANDLE;

@@ -154,11 +154,13 @@ int usable_queue_family(VkPhysicalDevice pd, std::string& why) {
   vkGetPhysicalDeviceQueueFamilyProperties(pd, &n, nullptr);
   std::vector<VkQueueFamilyProperties> families(n);
   vkGetPhysicalDeviceQueueFamilyProperties(pd, &n, families.data());
-  // Prefer a compute queue that also does timestamps.
-  int best = -1;
+  // Prefer a compute queue that also does graphics (the renderer draws from the culling
+  // output on the same queue), then one with timestamps.
+  int best = -1, best_score = -1;
   for (std::uint32_t i = 0; i < n; ++i) {
     if (!(families[i].queueFlags & VK_QUEUE_COMPUTE_BIT)) continue;
-    if (best < 0 || (families[i].timestampValidBits && !families[std::size_t(best)].timestampValidBits)) best = int(i);
+    const int score = ((families[i].queueFlags & VK_QUEUE_GRAPHICS_BIT) ? 2 : 0) + (families[i].timestampValidBits ? 1 : 0);
+    if (score > best_score) best = int(i), best_score = score;
   }
   if (best < 0) why = "has no compute queue";
   return best;
@@ -231,16 +233,17 @@ Context::Context(const ContextOptions& options) : on_message_(options.on_message
 
     physical_device_ = devices[std::size_t(chosen)];
     queue_family_ = std::uint32_t(chosen_family);
-    info_ = describe(physical_device_);
-    vkGetPhysicalDeviceProperties(physical_device_, &properties_);
-    vkGetPhysicalDeviceMemoryProperties(physical_device_, &memory_properties_);
+    read_device_properties();
 
-    std::uint32_t nfam = 0;
-    vkGetPhysicalDeviceQueueFamilyProperties(physical_device_, &nfam, nullptr);
-    std::vector<VkQueueFamilyProperties> families(nfam);
-    vkGetPhysicalDeviceQueueFamilyProperties(physical_device_, &nfam, families.data());
-    timestamp_valid_bits_ = families[queue_family_].timestampValidBits;
-    if (timestamp_valid_bits_ > 0) timestamp_period_ns_ = properties_.limits.timestampPeriod;
+    // Features the renderer's indirect draws use, when the device has them.
+    VkPhysicalDeviceVulkan12Features f12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
+    VkPhysicalDeviceFeatures2 f2{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2, &f12, {}};
+    vkGetPhysicalDeviceFeatures2(physical_device_, &f2);
+    VkPhysicalDeviceVulkan12Features enable12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
+    enable12.drawIndirectCount = f12.drawIndirectCount;
+    VkPhysicalDeviceFeatures2 enable{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2, &enable12, {}};
+    enable.features.multiDrawIndirect = f2.features.multiDrawIndirect;
+    draw_indirect_count_ = f12.drawIndirectCount && f2.features.multiDrawIndirect;
 
     const float priority = 1.0f;
     VkDeviceQueueCreateInfo queue_info{VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO};
@@ -248,31 +251,81 @@ Context::Context(const ContextOptions& options) : on_message_(options.on_message
     queue_info.queueCount = 1;
     queue_info.pQueuePriorities = &priority;
     VkDeviceCreateInfo device_info{VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO};
+    device_info.pNext = &enable;
     device_info.queueCreateInfoCount = 1;
     device_info.pQueueCreateInfos = &queue_info;
     CULLPIPE_VK_CHECK(vkCreateDevice(physical_device_, &device_info, nullptr, &device_));
     vkGetDeviceQueue(device_, queue_family_, 0, &queue_);
-
-    VkCommandPoolCreateInfo pool_info{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
-    pool_info.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
-    pool_info.queueFamilyIndex = queue_family_;
-    CULLPIPE_VK_CHECK(vkCreateCommandPool(device_, &pool_info, nullptr, &command_pool_));
-    VkFenceCreateInfo fence_info{VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
-    CULLPIPE_VK_CHECK(vkCreateFence(device_, &fence_info, nullptr, &fence_));
+    create_pool_and_fence();
   } catch (...) {
     destroy();
     throw;
   }
 }
 
+Context::Context(const ExternalDevice& external) : owns_device_(false) {
+  if (!external.instance || !external.physical_device || !external.device || !external.queue)
+    throw Error("ExternalDevice: instance, physical device, device and queue must all be given");
+  instance_ = external.instance;
+  physical_device_ = external.physical_device;
+  device_ = external.device;
+  queue_ = external.queue;
+  queue_family_ = external.queue_family;
+  try {
+    std::string why;
+    if (usable_queue_family(physical_device_, why) < 0)
+      throw Error("ExternalDevice: " + describe(physical_device_).name + " " + why);
+    std::uint32_t nfam = 0;
+    vkGetPhysicalDeviceQueueFamilyProperties(physical_device_, &nfam, nullptr);
+    std::vector<VkQueueFamilyProperties> families(nfam);
+    vkGetPhysicalDeviceQueueFamilyProperties(physical_device_, &nfam, families.data());
+    if (queue_family_ >= nfam || !(families[queue_family_].queueFlags & VK_QUEUE_COMPUTE_BIT))
+      throw Error("ExternalDevice: queue family " + std::to_string(queue_family_) + " has no compute support");
+    read_device_properties();
+    draw_indirect_count_ = false;  // unknown: the caller chose the device's features
+    create_pool_and_fence();
+  } catch (...) {
+    destroy();
+    throw;
+  }
+}
+
+void Context::read_device_properties() {
+  info_ = describe(physical_device_);
+  vkGetPhysicalDeviceProperties(physical_device_, &properties_);
+  vkGetPhysicalDeviceMemoryProperties(physical_device_, &memory_properties_);
+  std::uint32_t nfam = 0;
+  vkGetPhysicalDeviceQueueFamilyProperties(physical_device_, &nfam, nullptr);
+  std::vector<VkQueueFamilyProperties> families(nfam);
+  vkGetPhysicalDeviceQueueFamilyProperties(physical_device_, &nfam, families.data());
+  timestamp_valid_bits_ = families[queue_family_].timestampValidBits;
+  timestamp_period_ns_ = timestamp_valid_bits_ > 0 ? properties_.limits.timestampPeriod : 0.0;
+  queue_flags_ = families[queue_family_].queueFlags;
+}
+
+void Context::create_pool_and_fence() {
+  VkCommandPoolCreateInfo pool_info{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
+  pool_info.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
+  pool_info.queueFamilyIndex = queue_family_;
+  CULLPIPE_VK_CHECK(vkCreateCommandPool(device_, &pool_info, nullptr, &command_pool_));
+  VkFenceCreateInfo fence_info{VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
+  CULLPIPE_VK_CHECK(vkCreateFence(device_, &fence_info, nullptr, &fence_));
+}
+
 Context::~Context() { destroy(); }
 
 void Context::destroy() {
   if (device_) {
-    vkDeviceWaitIdle(device_);
+    // A borrowed device may be busy with the caller's work: do not wait for it (our own
+    // submissions are waited for in submit_and_wait).
+    if (owns_device_) vkDeviceWaitIdle(device_);
     if (fence_) vkDestroyFence(device_, fence_, nullptr);
     if (command_pool_) vkDestroyCommandPool(device_, command_pool_, nullptr);
-    vkDestroyDevice(device_, nullptr);
+    if (owns_device_) vkDestroyDevice(device_, nullptr);
+  }
+  if (!owns_device_) {  // borrowed: the caller destroys them
+    device_ = VK_NULL_HANDLE;
+    instance_ = VK_NULL_HANDLE;
   }
   if (messenger_) {
     auto destroy_messenger = reinterpret_cast<PFN_vkDestroyDebugUtilsMessengerEXT>(

@@ -24,6 +24,18 @@ struct ContextOptions {
   std::function<void(std::string_view)> on_message;
 };
 
+/// Handles of a device the caller already has (an engine's own device). The Context borrows
+/// them: it never destroys them, and creates only its own command pool and fence on them.
+/// The queue family must support compute; for draws from the culling output on the same
+/// queue, it should also support graphics.
+struct ExternalDevice {
+  VkInstance instance = VK_NULL_HANDLE;
+  VkPhysicalDevice physical_device = VK_NULL_HANDLE;
+  VkDevice device = VK_NULL_HANDLE;
+  VkQueue queue = VK_NULL_HANDLE;
+  std::uint32_t queue_family = 0;
+};
+
 /// A physical device as listed by list_devices().
 struct DeviceInfo {
   std::string name;
@@ -35,12 +47,15 @@ struct DeviceInfo {
 /// The Vulkan devices this machine offers. Throws vk::Error when Vulkan cannot be loaded.
 std::vector<DeviceInfo> list_devices();
 
-/// Owns a VkInstance, the chosen VkPhysicalDevice, a VkDevice and one compute queue, plus a
-/// command pool for one-shot submissions. Move-free and copy-free: create it once, pass by
+/// Owns a VkInstance, the chosen VkPhysicalDevice, a VkDevice and one queue (compute, and
+/// graphics when the device has a family with both), plus a command pool for one-shot
+/// submissions; or borrows an ExternalDevice. Move-free and copy-free: create it once, pass by
 /// reference. Throws vk::Error with a clear message when there is no usable device.
 class Context {
  public:
   explicit Context(const ContextOptions& options = {});
+  /// Borrows the caller's device and queue (validation is the caller's business then).
+  explicit Context(const ExternalDevice& external);
   ~Context();
   Context(const Context&) = delete;
   Context& operator=(const Context&) = delete;
@@ -58,6 +73,12 @@ class Context {
   /// Valid bits of the compute queue's timestamps (0: none).
   std::uint32_t timestamp_valid_bits() const { return timestamp_valid_bits_; }
 
+  /// The queue family's flags (VK_QUEUE_GRAPHICS_BIT etc.).
+  VkQueueFlags queue_flags() const { return queue_flags_; }
+  /// drawIndirectCount and multiDrawIndirect are enabled (own devices that support them).
+  bool draw_indirect_count() const { return draw_indirect_count_; }
+  /// Whether this context created (and will destroy) the device.
+  bool owns_device() const { return owns_device_; }
   /// Validation messages reported so far (0 when validation is off).
   std::size_t validation_message_count() const { return message_count_.load(); }
   /// The validation messages reported so far, removed from the context.
@@ -76,6 +97,8 @@ class Context {
                                                        VkDebugUtilsMessageTypeFlagsEXT types,
                                                        const VkDebugUtilsMessengerCallbackDataEXT* data, void* user);
   void destroy();
+  void read_device_properties();
+  void create_pool_and_fence();
 
   VkInstance instance_ = VK_NULL_HANDLE;
   VkDebugUtilsMessengerEXT messenger_ = VK_NULL_HANDLE;
@@ -90,6 +113,9 @@ class Context {
   DeviceInfo info_;
   double timestamp_period_ns_ = 0.0;
   std::uint32_t timestamp_valid_bits_ = 0;
+  VkQueueFlags queue_flags_ = 0;
+  bool draw_indirect_count_ = false;
+  bool owns_device_ = true;
 
   std::function<void(std::string_view)> on_message_;
   std::atomic<std::size_t> message_count_{0};
