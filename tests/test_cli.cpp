@@ -249,6 +249,26 @@ TEST(Cli, GltfSceneRunsAgreesAndDumpsWhereEachObjectCameFrom) {
   EXPECT_NE(cyc.err.find("broken.gltf: nodes[0] is its own child"), std::string::npos) << cyc.err;
 }
 
+TEST(Cli, RenderWritesImagesAndChecksCulledEqualsUnculled) {
+  const fs::path png = temp_dir() / "city.png", top = temp_dir() / "city_top.png";
+  const Result r = cullpipe("render --generate city:800 --width 200 --height 120 --check --validate --out '" + png.string() +
+                            "' --top-down '" + top.string() + "'");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("is identical, pixel for pixel"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("of 800 objects drawn"), std::string::npos) << r.out;
+  for (const fs::path& p : {png, top}) {
+    ASSERT_TRUE(fs::exists(p)) << p;
+    EXPECT_EQ(slurp(p).substr(1, 3), "PNG");
+  }
+  const Result all = cullpipe("render --generate city:50 --no-cull --width 64 --height 64 --out '" + png.string() + "'");
+  ASSERT_EQ(all.code, 0) << all.err;
+  EXPECT_NE(all.out.find("no culling: 50 draws"), std::string::npos) << all.out;
+  EXPECT_EQ(cullpipe("render --generate city:50").code, 2);  // --out is required
+  const Result bad = cullpipe("render --generate city:50 --out /nonexistent-dir/x.png");
+  EXPECT_EQ(bad.code, 2) << bad.err;
+  EXPECT_NE(bad.err.find("/nonexistent-dir/x.png: cannot write"), std::string::npos) << bad.err;
+}
+
 TEST(Cli, DevicesListsAtLeastOne) {
   const Result r = cullpipe("devices");
   EXPECT_EQ(r.code, 0) << r.err;

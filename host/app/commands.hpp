@@ -21,15 +21,11 @@ struct DeviceOptions {
   bool validation = false; ///< Vulkan validation layers on; any message fails the command
 };
 
-struct RunOptions {
+/// Where a scene comes from, shared by `run` and `render`.
+struct SceneOptions {
   std::string scene_path;   ///< a cullpipe scene JSON or a glTF file (.gltf, .glb); empty with no `generate`: the default scene
   std::string generate;     ///< "KIND:N" procedural scene instead of a file
   std::uint64_t seed = 1;
-  std::string bv = "aabb";  ///< aabb | obb | sphere
-  Backend backend = Backend::Both;
-  std::size_t views = 1;    ///< views along the camera path around the scene
-  std::string json_path;    ///< summary as JSON
-  std::string dump_path;    ///< planes, volumes and classes (classify schema)
   // glTF scenes
   int gltf_scene = -1;              ///< index in scenes[]; -1: the file's default scene
   std::string camera;               ///< glTF camera name or index; empty: a camera framing the scene
@@ -39,6 +35,26 @@ struct RunOptions {
   // Any scene
   std::size_t instances = 1;        ///< copies of the scene
   std::string layout = "grid";      ///< grid | random placement of the copies
+};
+
+struct RunOptions : SceneOptions {
+  std::string bv = "aabb";  ///< aabb | obb | sphere
+  Backend backend = Backend::Both;
+  std::size_t views = 1;    ///< views along the camera path around the scene
+  std::string json_path;    ///< summary as JSON
+  std::string dump_path;    ///< planes, volumes and classes (classify schema)
+  DeviceOptions device;
+};
+
+struct RenderOptions : SceneOptions {
+  std::string bv = "aabb";
+  std::size_t view = 0;           ///< which view of a `views`-camera path around the scene (0: the scene's camera)
+  std::size_t views = 1;
+  bool no_cull = false;           ///< draw every object instead of the culling pass's draws
+  bool check = false;             ///< render both ways and require identical images
+  std::uint32_t width = 960, height = 540;
+  std::string out_path;           ///< PNG
+  std::string top_down_path;      ///< optional top-down debug PNG
   DeviceOptions device;
 };
 
@@ -67,6 +83,7 @@ int classify_command(const ClassifyOptions& options, std::ostream& out, std::ost
 int generate_command(const GenerateOptions& options, std::ostream& out, std::ostream& err);
 int devices_command(std::ostream& out, std::ostream& err);
 int bounds_command(const BoundsOptions& options, std::ostream& out, std::ostream& err);
+int render_command(const RenderOptions& options, std::ostream& out, std::ostream& err);
 
 /// The default scene shipped in scenes/: found next to the source tree the tool was built
 /// from, or under <prefix>/share/cullpipe/scenes relative to the executable.

@@ -16,6 +16,20 @@ void add_device_options(CLI::App* cmd, DeviceOptions& d) {
   cmd->add_flag("--validate", d.validation, "Enable Vulkan validation layers; any message fails the command");
 }
 
+// Options choosing and building the scene, shared by `run` and `render`.
+void add_scene_options(CLI::App* cmd, SceneOptions& s) {
+  auto* scene_opt = cmd->add_option("--scene", s.scene_path, "Scene file: cullpipe-scene JSON, or glTF (.gltf, .glb); default: scenes/default.json");
+  cmd->add_option("--generate", s.generate, "Procedural scene KIND:N, KIND = uniform | clustered | city")->excludes(scene_opt);
+  cmd->add_option("--seed", s.seed, "Seed for --generate and --layout random")->capture_default_str();
+  cmd->add_option("--gltf-scene", s.gltf_scene, "glTF: index of the scene to load (default: the file's default scene)");
+  cmd->add_option("--camera", s.camera, "glTF: camera name or index in cameras[] (default: a camera framing the scene)");
+  cmd->add_option("--obb", s.obb, "glTF: OBB builder: pca | dito | hull-face | exact")->capture_default_str();
+  cmd->add_option("--sphere", s.sphere, "glTF: sphere builder: ritter | refined | exact")->capture_default_str();
+  cmd->add_option("--aabb-update", s.aabb_update, "glTF: world AABB method: recompute | hull | transform-box | hill-climb")->capture_default_str();
+  cmd->add_option("--instances", s.instances, "Repeat the scene this many times (scale tests)")->capture_default_str()->check(CLI::PositiveNumber);
+  cmd->add_option("--layout", s.layout, "Placement of --instances copies: grid | random")->capture_default_str();
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -25,22 +39,27 @@ int main(int argc, char** argv) {
 
   RunOptions run;
   CLI::App* run_cmd = app.add_subcommand("run", "Cull a scene on the GPU and/or the CPU and compare, view by view");
-  auto* scene_opt = run_cmd->add_option("--scene", run.scene_path, "Scene file: cullpipe-scene JSON, or glTF (.gltf, .glb); default: scenes/default.json");
-  run_cmd->add_option("--generate", run.generate, "Procedural scene KIND:N, KIND = uniform | clustered | city")->excludes(scene_opt);
-  run_cmd->add_option("--seed", run.seed, "Seed for --generate")->capture_default_str();
+  add_scene_options(run_cmd, run);
   run_cmd->add_option("--bv", run.bv, "Bounding volume: aabb | obb | sphere")->capture_default_str()->check(CLI::IsMember({"aabb", "obb", "sphere"}));
   run_cmd->add_option("--backend", run.backend, "gpu | cpu | both (both compares them)")->transform(CLI::CheckedTransformer(kBackends))->default_str("both");
   run_cmd->add_option("--views", run.views, "Number of views on a camera path around the scene")->capture_default_str()->check(CLI::PositiveNumber);
   run_cmd->add_option("--json", run.json_path, "Write a summary as JSON");
   run_cmd->add_option("--dump", run.dump_path, "Write planes, volumes and classes (the classify schema)");
-  run_cmd->add_option("--gltf-scene", run.gltf_scene, "glTF: index of the scene to load (default: the file's default scene)");
-  run_cmd->add_option("--camera", run.camera, "glTF: camera name or index in cameras[] (default: a camera framing the scene)");
-  run_cmd->add_option("--obb", run.obb, "glTF: OBB builder: pca | dito | hull-face | exact")->capture_default_str();
-  run_cmd->add_option("--sphere", run.sphere, "glTF: sphere builder: ritter | refined | exact")->capture_default_str();
-  run_cmd->add_option("--aabb-update", run.aabb_update, "glTF: world AABB method: recompute | hull | transform-box | hill-climb")->capture_default_str();
-  run_cmd->add_option("--instances", run.instances, "Repeat the scene this many times (scale tests)")->capture_default_str()->check(CLI::PositiveNumber);
-  run_cmd->add_option("--layout", run.layout, "Placement of --instances copies: grid | random")->capture_default_str();
   add_device_options(run_cmd, run.device);
+
+  RenderOptions render;
+  CLI::App* render_cmd = app.add_subcommand("render", "Draw a scene from the culling pass's indirect draws into a PNG (headless Vulkan)");
+  add_scene_options(render_cmd, render);
+  render_cmd->add_option("--out", render.out_path, "Output PNG")->required();
+  render_cmd->add_option("--top-down", render.top_down_path, "Also write a top-down debug PNG: the frustum and every object by class");
+  render_cmd->add_option("--bv", render.bv, "Bounding volume the culling pass tests: aabb | obb | sphere")->capture_default_str()->check(CLI::IsMember({"aabb", "obb", "sphere"}));
+  render_cmd->add_flag("--no-cull", render.no_cull, "Draw every object (no culling pass)");
+  render_cmd->add_flag("--check", render.check, "Also draw without culling and require the same image, pixel for pixel (exit 1 if not)");
+  render_cmd->add_option("--views", render.views, "Camera path of this many views around the scene")->capture_default_str()->check(CLI::PositiveNumber);
+  render_cmd->add_option("--view", render.view, "Which view of the path to draw (0: the scene's camera)")->capture_default_str();
+  render_cmd->add_option("--width", render.width, "Image width")->capture_default_str()->check(CLI::Range(1u, 16384u));
+  render_cmd->add_option("--height", render.height, "Image height")->capture_default_str()->check(CLI::Range(1u, 16384u));
+  add_device_options(render_cmd, render.device);
 
   ClassifyOptions classify;
   CLI::App* classify_cmd = app.add_subcommand("classify", "Classify volumes against frusta given in a JSON file (- for stdin)");
@@ -73,5 +92,6 @@ int main(int argc, char** argv) {
   if (*generate_cmd) return generate_command(generate, std::cout, std::cerr);
   if (*devices_cmd) return devices_command(std::cout, std::cerr);
   if (*bounds_cmd) return bounds_command(bounds, std::cout, std::cerr);
+  if (*render_cmd) return render_command(render, std::cout, std::cerr);
   return run_command(run, std::cout, std::cerr);
 }

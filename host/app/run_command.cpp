@@ -9,6 +9,7 @@
 #include "app/backends.hpp"
 #include "app/commands.hpp"
 #include "app/guard.hpp"
+#include "app/scene_source.hpp"
 #include "geom/bv_kind.hpp"
 #include "scene/cull_case_io.hpp"
 #include "scene/generators.hpp"
@@ -62,45 +63,13 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
     const auto bv = parse_bv_kind(o.bv);
     if (!bv) throw InputError("--bv " + o.bv + ": expected aabb, obb or sphere");
     if (o.views == 0) throw InputError("--views must be at least 1");
-    if (!o.scene_path.empty() && !o.generate.empty()) throw InputError("give --scene or --generate, not both");
 
-    const auto obb_method = bounds::parse_obb_method(o.obb);
-    if (!obb_method) throw InputError("--obb " + o.obb + ": expected pca, dito, hull-face or exact");
-    const auto sphere_method = bounds::parse_sphere_method(o.sphere);
-    if (!sphere_method) throw InputError("--sphere " + o.sphere + ": expected ritter, refined or exact");
-    const auto aabb_update = bounds::parse_aabb_update(o.aabb_update);
-    if (!aabb_update) throw InputError("--aabb-update " + o.aabb_update + ": expected recompute, hull, transform-box or hill-climb");
-    const auto layout = parse_instance_layout(o.layout);
-    if (!layout) throw InputError("--layout " + o.layout + ": expected grid or random");
-
-    Scene scene;
-    std::string source;
-    bool from_gltf = false;
-    std::size_t zero_scale = 0;
-    const auto load_start = std::chrono::steady_clock::now();
-    if (!o.generate.empty()) {
-      const auto [kind, n] = parse_generate_spec(o.generate);
-      scene = generate_scene(kind, n, o.seed);
-      source = "generated";
-    } else {
-      source = o.scene_path.empty() ? default_scene_path() : o.scene_path;
-      if (is_gltf_path(source)) {
-        GltfSceneOptions g;
-        g.scene = o.gltf_scene;
-        g.camera = o.camera;
-        g.bounds = {*obb_method, *sphere_method};
-        GltfScene loaded = load_gltf_scene(source, g);
-        scene = std::move(loaded.scene);
-        zero_scale = loaded.zero_scale_instances;
-        from_gltf = true;
-      } else {
-        scene = load_scene(source);
-      }
-    }
-    if (!from_gltf && (!o.camera.empty() || o.gltf_scene >= 0))
-      throw InputError("--camera and --gltf-scene apply to glTF scenes only (" + source + " is not .gltf or .glb)");
-    scene = replicate_scene(scene, o.instances, *layout, o.seed);
-    const double load_ns = double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - load_start).count());
+    LoadedScene loaded = load_scene_source(o);
+    const Scene& scene = loaded.scene;
+    const std::string& source = loaded.source;
+    const bool from_gltf = loaded.from_gltf;
+    const std::size_t zero_scale = loaded.zero_scale_instances;
+    const double load_ns = loaded.load_ns;
 
     const std::vector<Camera> cameras = camera_path(scene.camera, scene.bounds(), o.views);
     std::vector<Frustum> frusta;
@@ -116,7 +85,7 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
     BackendResults r;
     std::vector<cullpipe::Volume> dump_volumes;
     switch (*bv) {
-      case BvKind::Aabb: r = cull_kind(world_aabbs(scene, *aabb_update), frusta, o, session, dump_volumes); break;
+      case BvKind::Aabb: r = cull_kind(world_aabbs(scene, loaded.aabb_update), frusta, o, session, dump_volumes); break;
       case BvKind::Obb: r = cull_kind(world_obbs(scene), frusta, o, session, dump_volumes); break;
       case BvKind::Sphere: r = cull_kind(world_spheres(scene), frusta, o, session, dump_volumes); break;
     }
@@ -188,7 +157,7 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
       CullCase c{frusta, frusta.size() > 1, std::move(dump_volumes), {}};
       if (from_gltf) {
         // Where each object came from, and all its world-space volumes.
-        const std::vector<Aabb> aabbs = world_aabbs(scene, *aabb_update);
+        const std::vector<Aabb> aabbs = world_aabbs(scene, loaded.aabb_update);
         const std::vector<Obb> obbs = world_obbs(scene);
         const std::vector<Sphere> spheres = world_spheres(scene);
         c.objects.reserve(n);

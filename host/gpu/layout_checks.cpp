@@ -48,6 +48,11 @@ static_assert(offsetof(DrawCommand, first_instance) == offsetof(VkDrawIndexedInd
 static_assert(sizeof(VkDrawIndexedIndirectCommand) == 20);
 static_assert(offsetof(DrawCommand, object_id) == 20);
 
+static_assert(sizeof(RenderObject) == 80);
+static_assert(offsetof(RenderObject, model) == 0);
+static_assert(offsetof(RenderObject, color) == 64);
+static_assert(sizeof(RenderParams) == 64);
+
 static_assert(CLASS_OUTSIDE == 0 && CLASS_INTERSECTING == 1 && CLASS_INSIDE == 2,
               "must match cullpipe::Classification");
 

@@ -103,9 +103,14 @@ Positions read_positions(const tinygltf::Model& model, std::size_t mesh, std::si
   return out;
 }
 
-void check_indices(const tinygltf::Model& model, const tinygltf::Primitive& primitive, std::size_t vertex_count,
-                   const std::string& where) {
-  if (primitive.indices < 0) return;
+std::vector<std::uint32_t> read_indices(const tinygltf::Model& model, const tinygltf::Primitive& primitive,
+                                        std::size_t vertex_count, const std::string& where) {
+  std::vector<std::uint32_t> out;
+  if (primitive.indices < 0) {
+    out.resize(vertex_count);
+    for (std::size_t i = 0; i < vertex_count; ++i) out[i] = std::uint32_t(i);
+    return out;
+  }
   if (std::size_t(primitive.indices) >= model.accessors.size())
     throw InputError(where + "index accessor " + std::to_string(primitive.indices) + " does not exist");
   const tinygltf::Accessor& acc = model.accessors[std::size_t(primitive.indices)];
@@ -121,9 +126,10 @@ void check_indices(const tinygltf::Model& model, const tinygltf::Primitive& prim
       throw InputError(what + "has component type " + std::to_string(acc.componentType) +
                        ", not UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT");
   }
-  if (acc.count == 0) return;
+  if (acc.count == 0) return out;
   std::size_t stride = 0;
   const unsigned char* base = accessor_data(model, acc, size, stride, what);
+  out.reserve(acc.count);
   for (std::size_t i = 0; i < acc.count; ++i) {
     std::uint32_t index = 0;
     const unsigned char* p = base + i * stride;
@@ -139,7 +145,31 @@ void check_indices(const tinygltf::Model& model, const tinygltf::Primitive& prim
     if (index >= vertex_count)
       throw InputError(what + "element " + std::to_string(i) + " is " + std::to_string(index) + ", past the " +
                        std::to_string(vertex_count) + " vertices");
+    out.push_back(index);
   }
+  return out;
+}
+
+std::vector<std::uint32_t> triangle_list(int mode, const std::vector<std::uint32_t>& indices) {
+  std::vector<std::uint32_t> out;
+  const std::size_t n = indices.size();
+  switch (mode) {
+    case TINYGLTF_MODE_TRIANGLES:
+      out.assign(indices.begin(), indices.begin() + std::ptrdiff_t(n - n % 3));
+      break;
+    case TINYGLTF_MODE_TRIANGLE_STRIP:
+      for (std::size_t i = 2; i < n; ++i) {
+        if (i % 2 == 0) out.insert(out.end(), {indices[i - 2], indices[i - 1], indices[i]});
+        else out.insert(out.end(), {indices[i - 1], indices[i - 2], indices[i]});
+      }
+      break;
+    case TINYGLTF_MODE_TRIANGLE_FAN:
+      for (std::size_t i = 2; i < n; ++i) out.insert(out.end(), {indices[i - 1], indices[i], indices[0]});
+      break;
+    default:  // points and lines: nothing to fill
+      break;
+  }
+  return out;
 }
 
 }  // namespace cullpipe::gltf

@@ -28,9 +28,15 @@ struct Positions {
 /// infinite coordinate.
 Positions read_positions(const tinygltf::Model& model, std::size_t mesh, std::size_t primitive, const std::string& where);
 
-/// Checks the primitive's index accessor, if any: a scalar of UNSIGNED_BYTE/SHORT/INT, within
-/// its buffer view, and every index below `vertex_count`. Throws InputError otherwise.
-void check_indices(const tinygltf::Model& model, const tinygltf::Primitive& primitive, std::size_t vertex_count,
-                   const std::string& where);
+/// Reads the primitive's index accessor, if any: a scalar of UNSIGNED_BYTE/SHORT/INT, within
+/// its buffer view, and every index below `vertex_count` (InputError otherwise). Without an
+/// index accessor: 0, 1, ..., vertex_count - 1.
+std::vector<std::uint32_t> read_indices(const tinygltf::Model& model, const tinygltf::Primitive& primitive,
+                                        std::size_t vertex_count, const std::string& where);
+
+/// The primitive's triangles as a list (three indices each) from its mode: TRIANGLES as is
+/// (a trailing partial triangle dropped), TRIANGLE_STRIP and TRIANGLE_FAN unrolled (winding
+/// kept), POINTS and LINES* give none.
+std::vector<std::uint32_t> triangle_list(int mode, const std::vector<std::uint32_t>& indices);
 
 }  // namespace cullpipe::gltf

@@ -191,18 +191,29 @@ GltfScene load_gltf_scene(const std::string& path, const GltfSceneOptions& optio
   }
   std::vector<dmat4> camera_world(model.cameras.size());
 
-  // Each primitive's volumes, built the first time a node uses its mesh.
-  std::map<std::pair<std::size_t, std::size_t>, std::shared_ptr<const bounds::MeshBounds>> cache;
-  auto mesh_bounds = [&](std::size_t m, std::size_t p) {
-    auto& slot = cache[{m, p}];
-    if (!slot) {
+  // Each primitive's volumes and triangles, built the first time a node uses its mesh.
+  struct Primitive {
+    std::shared_ptr<const bounds::MeshBounds> bounds;
+    std::shared_ptr<const TriangleMesh> triangles;
+  };
+  std::map<std::pair<std::size_t, std::size_t>, Primitive> cache;
+  auto primitive = [&](std::size_t m, std::size_t p) -> const Primitive& {
+    Primitive& slot = cache[{m, p}];
+    if (!slot.bounds) {
       const std::string where = file + idx("meshes", m) + ".primitives[" + std::to_string(p) + "]: ";
       gltf::Positions pos = gltf::read_positions(model, m, p, where);
-      gltf::check_indices(model, model.meshes[m].primitives[p], pos.points.size(), where);
+      const tinygltf::Primitive& prim = model.meshes[m].primitives[p];
+      std::vector<std::uint32_t> indices = gltf::read_indices(model, prim, pos.points.size(), where);
       try {
-        slot = std::make_shared<const bounds::MeshBounds>(pos.points, options.bounds);
+        slot.bounds = std::make_shared<const bounds::MeshBounds>(pos.points, options.bounds);
       } catch (const bounds::BadPoints& e) {
         throw InputError(where + e.what());
+      }
+      if (options.keep_triangles) {
+        auto tri = std::make_shared<TriangleMesh>();
+        tri->indices = gltf::triangle_list(prim.mode, indices);
+        tri->positions = std::move(pos.points);
+        slot.triangles = std::move(tri);
       }
     }
     return slot;
@@ -239,15 +250,16 @@ GltfScene load_gltf_scene(const std::string& path, const GltfSceneOptions& optio
       const std::size_t m = std::size_t(node.mesh);
       const double det = glm::determinant(glm::dmat3(world));
       for (std::size_t p = 0; p < model.meshes[m].primitives.size(); ++p) {
-        std::shared_ptr<const bounds::MeshBounds> mb = mesh_bounds(m, p);
+        const Primitive& prim = primitive(m, p);
         if (!(std::abs(det) > 0.0)) {  // scale 0: the instance draws nothing
           ++out.zero_scale_instances;
           continue;
         }
         SceneObject o;
         o.world = glm::mat4(world);
-        o.local_bounds = mb->local_aabb();
-        o.mesh = std::move(mb);
+        o.local_bounds = prim.bounds->local_aabb();
+        o.mesh = prim.bounds;
+        o.triangles = prim.triangles;
         o.origin = {int(n), int(m), int(p), 0};
         out.scene.objects.push_back(std::move(o));
       }

@@ -12,6 +12,7 @@ struct GltfSceneOptions {
   int scene = -1;       ///< index in scenes[]; -1: the file's default scene (scene 0 if none is marked)
   std::string camera;   ///< "": a camera framing the scene; else a camera's name or its index in cameras[]
   bounds::MeshBoundsOptions bounds;  ///< OBB and sphere builders for every mesh primitive
+  bool keep_triangles = true;        ///< keep each primitive's triangles (SceneObject::triangles), for drawing
 };
 
 /// A glTF camera as found in the file.

@@ -31,6 +31,12 @@ struct ObjectOrigin {
   bool operator==(const ObjectOrigin&) const = default;
 };
 
+/// Triangles of one mesh primitive, in its own space, for drawing (host/render).
+struct TriangleMesh {
+  std::vector<glm::vec3> positions;
+  std::vector<std::uint32_t> indices;  ///< three per triangle, each < positions.size()
+};
+
 /// One cullable object: its bounds in its own space and where the world puts it.
 struct SceneObject {
   Aabb local_bounds;      ///< for a mesh object, the AABB of its vertices
@@ -38,6 +44,8 @@ struct SceneObject {
   /// The geometry's volumes (hull, OBB, sphere), shared by every instance of one mesh
   /// primitive; null for objects that are boxes (generated scenes, scene JSON files).
   std::shared_ptr<const bounds::MeshBounds> mesh;
+  /// The triangles to draw (glTF objects); null for box objects, which are drawn as their box.
+  std::shared_ptr<const TriangleMesh> triangles;
   ObjectOrigin origin;
 };
 

@@ -243,7 +243,9 @@ Context::Context(const ContextOptions& options) : on_message_(options.on_message
     enable12.drawIndirectCount = f12.drawIndirectCount;
     VkPhysicalDeviceFeatures2 enable{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2, &enable12, {}};
     enable.features.multiDrawIndirect = f2.features.multiDrawIndirect;
+    enable.features.pipelineStatisticsQuery = f2.features.pipelineStatisticsQuery;
     draw_indirect_count_ = f12.drawIndirectCount && f2.features.multiDrawIndirect;
+    pipeline_statistics_ = f2.features.pipelineStatisticsQuery;
 
     const float priority = 1.0f;
     VkDeviceQueueCreateInfo queue_info{VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO};
@@ -283,6 +285,7 @@ Context::Context(const ExternalDevice& external) : owns_device_(false) {
       throw Error("ExternalDevice: queue family " + std::to_string(queue_family_) + " has no compute support");
     read_device_properties();
     draw_indirect_count_ = false;  // unknown: the caller chose the device's features
+    pipeline_statistics_ = false;
     create_pool_and_fence();
   } catch (...) {
     destroy();

@@ -77,6 +77,8 @@ class Context {
   VkQueueFlags queue_flags() const { return queue_flags_; }
   /// drawIndirectCount and multiDrawIndirect are enabled (own devices that support them).
   bool draw_indirect_count() const { return draw_indirect_count_; }
+  /// pipelineStatisticsQuery is enabled (own devices that support it).
+  bool pipeline_statistics() const { return pipeline_statistics_; }
   /// Whether this context created (and will destroy) the device.
   bool owns_device() const { return owns_device_; }
   /// Validation messages reported so far (0 when validation is off).
@@ -115,6 +117,7 @@ class Context {
   std::uint32_t timestamp_valid_bits_ = 0;
   VkQueueFlags queue_flags_ = 0;
   bool draw_indirect_count_ = false;
+  bool pipeline_statistics_ = false;
   bool owns_device_ = true;
 
   std::function<void(std::string_view)> on_message_;

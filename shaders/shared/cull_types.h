@@ -6,9 +6,11 @@
 
 #ifdef __cplusplus
 #include <cstdint>
+#include <glm/mat4x4.hpp>
 #include <glm/vec4.hpp>
 namespace cullpipe::gpu {
 using vec4 = glm::vec4;
+using mat4 = glm::mat4;
 using uint = std::uint32_t;
 #define CP_CONST inline constexpr uint
 #else
@@ -107,6 +109,19 @@ struct ViewCounters {
   uint inside_count;   // of which INSIDE
   uint reserved0;
   uint reserved1;
+};
+
+// ---- host/render: the headless rasteriser that draws the culled objects ----
+
+// One drawable object, indexed by gl_InstanceIndex (= the draw's first_instance = object id).
+struct RenderObject {
+  mat4 model;  // object-to-world (for box objects: world * box placement of a unit cube)
+  vec4 color;  // rgb in 0..1, a = 1
+};
+
+// Push constants of the mesh pipeline.
+struct RenderParams {
+  mat4 view_proj;  // world to Vulkan clip space
 };
 
 #ifdef __cplusplus

@@ -1,0 +1,82 @@
+#include <cstdio>
+#include <ostream>
+
+#include "app/commands.hpp"
+#include "app/guard.hpp"
+#include "app/scene_source.hpp"
+#include "geom/bv_kind.hpp"
+#include "render/image.hpp"
+#include "render/renderer.hpp"
+
+namespace cullpipe::app {
+
+int render_command(const RenderOptions& o, std::ostream& out, std::ostream& err) {
+  return guarded(err, [&]() -> int {
+    const auto bv = parse_bv_kind(o.bv);
+    if (!bv) throw InputError("--bv " + o.bv + ": expected aabb, obb or sphere");
+    if (o.out_path.empty()) throw InputError("--out FILE.png is required");
+    if (o.views == 0 || o.view >= o.views) throw InputError("--view must be below --views");
+    if (o.no_cull && o.check) throw InputError("give --no-cull or --check, not both");
+    const LoadedScene loaded = load_scene_source(o);
+    const Scene& scene = loaded.scene;
+    const Camera camera = camera_path(scene.camera, scene.bounds(), o.views)[o.view];
+
+    vk::ContextOptions options;
+    options.validation = o.device.validation;
+    options.device_filter = o.device.device;
+    const vk::Context ctx(options);
+    render::RendererConfig config;
+    config.width = o.width;
+    config.height = o.height;
+    config.bv = *bv;
+    config.aabb_update = loaded.aabb_update;
+    render::Renderer renderer(ctx, scene, config);
+
+    render::FrameStats stats;
+    const render::Image image = renderer.render(camera, !o.no_cull, &stats);
+    render::write_png(o.out_path, image);
+    std::uint64_t all_triangles = 0;
+    for (std::size_t i = 0; i < renderer.object_count(); ++i) all_triangles += renderer.triangles(i);
+
+    out << "cullpipe render: " << loaded.source << ", " << scene.objects.size() << " objects, " << o.width << "x" << o.height
+        << ", device " << ctx.info().name << "\n";
+    if (o.no_cull) {
+      out << "  no culling: " << stats.draws << " draws";
+    } else {
+      std::size_t inside = 0;
+      for (Classification c : stats.classes) inside += c == Classification::Inside;
+      out << "  culled with " << o.bv << ": " << stats.draws << " of " << scene.objects.size() << " objects drawn (" << inside
+          << " inside, " << stats.draws - inside << " intersecting)";
+    }
+    if (stats.primitives_counted) out << ", " << stats.primitives << " of " << all_triangles << " triangles";
+    out << "\n  wrote " << o.out_path << "\n";
+
+    int code = kExitOk;
+    if (o.check) {
+      render::FrameStats all_stats;
+      const render::Image all = renderer.render(camera, false, &all_stats);
+      const std::size_t diff = render::count_different_pixels(image, all);
+      out << "  check: image without culling (" << all_stats.draws << " draws) "
+          << (diff == 0 ? "is identical, pixel for pixel\n" : "DIFFERS in " + std::to_string(diff) + " pixels\n");
+      if (diff) {
+        err << "error: culling changed the image (" << diff << " pixels differ)\n";
+        code = kExitMismatch;
+      }
+    }
+    if (!o.top_down_path.empty()) {
+      std::vector<Classification> classes = stats.classes;
+      if (classes.empty()) {  // --no-cull: classify for the picture anyway
+        render::FrameStats culled;
+        renderer.render(camera, true, &culled);
+        classes = culled.classes;
+      }
+      render::write_png(o.top_down_path, render::top_down_image(world_aabbs(scene, loaded.aabb_update), classes, camera, 900));
+      out << "  wrote " << o.top_down_path << " (top-down: green inside, amber intersecting, grey culled, white frustum)\n";
+    }
+    if (ctx.validation_message_count() > 0)
+      throw vk::Error(std::to_string(ctx.validation_message_count()) + " Vulkan validation message(s) reported");
+    return code;
+  });
+}
+
+}  // namespace cullpipe::app

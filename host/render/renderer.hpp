@@ -1,0 +1,82 @@
+#pragma once
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "bounds/aabb_update.hpp"
+#include "geom/bv_kind.hpp"
+#include "geom/classification.hpp"
+#include "gpu/gpu_culler.hpp"
+#include "render/image.hpp"
+#include "scene/camera.hpp"
+#include "scene/scene.hpp"
+#include "vk/buffer.hpp"
+#include "vk/context.hpp"
+
+namespace cullpipe::render {
+
+struct RendererConfig {
+  std::uint32_t width = 960;
+  std::uint32_t height = 540;
+  BvKind bv = BvKind::Aabb;                                        ///< volume the culling pass tests
+  bounds::AabbUpdate aabb_update = bounds::AabbUpdate::HullRecompute;  ///< world AABBs of mesh objects
+};
+
+/// What one frame drew.
+struct FrameStats {
+  std::size_t objects = 0;
+  /// Draws the GPU issued: the draw count the culling pass wrote (culled frames), else objects.
+  std::size_t draws = 0;
+  /// Triangles the input assembler received (pipeline statistics; 0 when the device has none).
+  std::uint64_t primitives = 0;
+  bool primitives_counted = false;
+  std::vector<Classification> classes;  ///< per object, from the culling pass (culled frames)
+};
+
+/// A headless Vulkan rasteriser (offscreen colour + depth, no window) that draws a scene from
+/// the culling pass's output: the pass is recorded into the frame's command buffer with
+/// GpuCuller::record (object-order compaction), and the frame draws with one
+/// vkCmdDrawIndexedIndirectCount from its draw and count buffers. Without culling, the same
+/// draws of every object are issued with vkCmdDrawIndexedIndirect, in the same object order,
+/// so the two images must be identical pixel for pixel. glTF objects are drawn from their
+/// triangles; box objects as their box. Each object gets a fixed colour from its id; shading
+/// is flat from screen-space derivatives. Needs drawIndirectCount and multiDrawIndirect.
+class Renderer {
+ public:
+  Renderer(const vk::Context& ctx, const Scene& scene, const RendererConfig& config = {});
+  ~Renderer();
+  Renderer(const Renderer&) = delete;
+  Renderer& operator=(const Renderer&) = delete;
+
+  /// Draws the scene seen by `camera`, culled or not; waits and reads the image back.
+  Image render(const Camera& camera, bool cull, FrameStats* stats = nullptr);
+
+  /// Triangles of object i (what a draw of it feeds the input assembler).
+  std::uint64_t triangles(std::size_t object) const { return templates_[object].index_count / 3; }
+  std::size_t object_count() const { return templates_.size(); }
+
+ private:
+  void create_targets();
+  void create_pipelines();
+  void release();
+
+  const vk::Context& ctx_;
+  RendererConfig config_;
+  std::vector<gpu::DrawCommand> templates_;
+  std::unique_ptr<gpu::GpuCuller> culler_;
+  vk::Buffer vertices_, indices_, objects_, all_draws_, readback_;
+  VkImage color_ = VK_NULL_HANDLE, depth_ = VK_NULL_HANDLE;
+  VkDeviceMemory color_memory_ = VK_NULL_HANDLE, depth_memory_ = VK_NULL_HANDLE;
+  VkImageView color_view_ = VK_NULL_HANDLE, depth_view_ = VK_NULL_HANDLE;
+  VkRenderPass render_pass_ = VK_NULL_HANDLE;
+  VkFramebuffer framebuffer_ = VK_NULL_HANDLE;
+  VkDescriptorSetLayout set_layout_ = VK_NULL_HANDLE;
+  VkPipelineLayout pipeline_layout_ = VK_NULL_HANDLE;
+  VkPipeline pipeline_[2] = {VK_NULL_HANDLE, VK_NULL_HANDLE};  // [reversed_z]: depth LESS or GREATER
+  VkDescriptorPool descriptor_pool_ = VK_NULL_HANDLE;
+  VkDescriptorSet descriptor_set_ = VK_NULL_HANDLE;
+  VkCommandBuffer cmd_ = VK_NULL_HANDLE;
+  VkQueryPool stats_pool_ = VK_NULL_HANDLE;
+};
+
+}  // namespace cullpipe::render

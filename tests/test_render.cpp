@@ -1,0 +1,170 @@
+// The strongest test of culling: the image drawn from the culling pass's indirect draws equals
+// the image drawn from every object, pixel for pixel, and the GPU issued exactly the visible
+// objects' draws. Vulkan validation (with synchronization validation) is on; any message fails.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+
+#include "cull/reference.hpp"
+#include "render/image.hpp"
+#include "render/renderer.hpp"
+#include "scene/generators.hpp"
+#include "scene/gltf_scene.hpp"
+
+namespace cullpipe {
+namespace {
+
+class RenderEnvironment : public ::testing::Environment {
+ public:
+  static inline std::unique_ptr<vk::Context> context;
+  void SetUp() override {
+    vk::ContextOptions options;
+    options.validation = true;
+    options.on_message = [](std::string_view m) { ADD_FAILURE() << m; };
+    context = std::make_unique<vk::Context>(options);
+  }
+  void TearDown() override { context.reset(); }
+};
+const auto* const kEnv = ::testing::AddGlobalTestEnvironment(new RenderEnvironment);
+
+const std::filesystem::path kScenes = std::filesystem::path(CULLPIPE_SHARED_DIR) / "scenes";
+
+// For each camera: culled image == unculled image; draws issued == visible objects by the CPU
+// reference; triangles drawn == the visible objects' triangles. Returns the total number of
+// (visible, culled) objects over the cameras, so callers can check the views were not trivial.
+std::pair<std::size_t, std::size_t> expect_culling_invisible(const Scene& scene, const std::vector<Camera>& cameras, BvKind bv,
+                                                             std::uint32_t width = 320, std::uint32_t height = 200) {
+  render::RendererConfig config;
+  config.width = width;
+  config.height = height;
+  config.bv = bv;
+  render::Renderer renderer(*RenderEnvironment::context, scene, config);
+  std::vector<Aabb> aabbs;
+  std::vector<Obb> obbs;
+  std::vector<Sphere> spheres;
+  if (bv == BvKind::Aabb) aabbs = world_aabbs(scene);
+  if (bv == BvKind::Obb) obbs = world_obbs(scene);
+  if (bv == BvKind::Sphere) spheres = world_spheres(scene);
+  std::size_t visible_total = 0, culled_total = 0;
+  for (std::size_t v = 0; v < cameras.size(); ++v) {
+    SCOPED_TRACE("camera " + std::to_string(v));
+    render::FrameStats culled_stats, all_stats;
+    const render::Image culled = renderer.render(cameras[v], true, &culled_stats);
+    const render::Image all = renderer.render(cameras[v], false, &all_stats);
+    EXPECT_EQ(render::count_different_pixels(culled, all), 0u);
+    // The CPU reference's visible set.
+    const Frustum f = Frustum::from_view_proj(cameras[v].view_proj());
+    std::vector<Classification> cpu(scene.objects.size());
+    reference::CullCounts counts;
+    if (bv == BvKind::Aabb) counts = reference::classify_all(std::span<const Aabb>(aabbs), f, cpu);
+    if (bv == BvKind::Obb) counts = reference::classify_all(std::span<const Obb>(obbs), f, cpu);
+    if (bv == BvKind::Sphere) counts = reference::classify_all(std::span<const Sphere>(spheres), f, cpu);
+    EXPECT_EQ(culled_stats.classes, cpu);
+    EXPECT_EQ(culled_stats.draws, counts.visible);
+    EXPECT_EQ(all_stats.draws, scene.objects.size());
+    if (culled_stats.primitives_counted) {
+      std::uint64_t visible_triangles = 0, all_triangles = 0;
+      for (std::size_t i = 0; i < cpu.size(); ++i) {
+        all_triangles += renderer.triangles(i);
+        if (cpu[i] != Classification::Outside) visible_triangles += renderer.triangles(i);
+      }
+      EXPECT_EQ(culled_stats.primitives, visible_triangles);
+      EXPECT_EQ(all_stats.primitives, all_triangles);
+    }
+    visible_total += counts.visible;
+    culled_total += scene.objects.size() - counts.visible;
+    // Something is drawn.
+    std::size_t background = 0;
+    for (std::size_t p = 0; p < all.rgba.size(); p += 4) background += all.rgba[p] == all.rgba[0] && all.rgba[p + 1] == all.rgba[1];
+    if (counts.visible > 0) {
+      EXPECT_LT(background, all.rgba.size() / 4);
+    }
+  }
+  return {visible_total, culled_total};
+}
+
+TEST(Render, GeneratedCityCulledEqualsUnculledForEveryVolume) {
+  const Scene city = generate_scene(SceneKind::City, 3000, 4);
+  const std::vector<Camera> cameras = camera_path(city.camera, city.bounds(), 4);
+  for (BvKind bv : {BvKind::Aabb, BvKind::Obb, BvKind::Sphere}) {
+    SCOPED_TRACE(std::string(to_string(bv)));
+    const auto [visible, culled] = expect_culling_invisible(city, cameras, bv);
+    EXPECT_GT(visible, 100u);
+    EXPECT_GT(culled, 1000u);  // the test is not trivial: culling removed many draws
+  }
+}
+
+TEST(Render, DepthConventionsAndCamerasInsideTheScene) {
+  const Scene scene = generate_scene(SceneKind::Uniform, 2000, 11);
+  std::vector<Camera> cameras;
+  Camera c = scene.camera;
+  cameras.push_back(c);
+  c.reversed_z = true;
+  cameras.push_back(c);
+  c.infinite_far = true;
+  cameras.push_back(c);
+  c.reversed_z = false;
+  cameras.push_back(c);
+  Camera ortho = scene.camera;
+  ortho.orthographic = true;
+  ortho.ortho_half_height = 20.0f;
+  cameras.push_back(ortho);
+  expect_culling_invisible(scene, cameras, BvKind::Aabb);
+}
+
+TEST(Render, GltfScenesCulledEqualsUnculled) {
+  if (!std::filesystem::exists(kScenes)) GTEST_SKIP() << kScenes << " not present";
+  std::size_t files = 0;
+  for (const char* name : {"VC/VC.gltf", "2CylinderEngine/2CylinderEngine.gltf", "NegativeScaleTest/NegativeScaleTest.gltf",
+                           "ReciprocatingSaw/ReciprocatingSaw.gltf", "CesiumMilkTruck/CesiumMilkTruck.gltf"}) {
+    const std::filesystem::path path = kScenes / name;
+    if (!std::filesystem::exists(path)) continue;
+    SCOPED_TRACE(path.string());
+    ++files;
+    const GltfScene g = load_gltf_scene(path.string());
+    // Orbit closer than the framing camera so that part of the model is outside the view.
+    Camera base = g.scene.camera;
+    base.eye = base.target + (base.eye - base.target) * 0.45f;
+    base.near_plane *= 0.2f;
+    std::vector<Camera> cameras = camera_path(base, g.scene.bounds(), 4);
+    for (std::size_t c = 0; c < g.cameras.size() && c < 3; ++c) {
+      if (g.cameras[c].node < 0) continue;
+      GltfSceneOptions o;
+      o.camera = std::to_string(c);
+      cameras.push_back(load_gltf_scene(path.string(), o).scene.camera);
+    }
+    expect_culling_invisible(g.scene, cameras, BvKind::Sphere);
+    expect_culling_invisible(g.scene, cameras, BvKind::Obb);
+  }
+  EXPECT_EQ(files, 5u);
+}
+
+TEST(Render, TopDownImageAndPng) {
+  const Scene city = generate_scene(SceneKind::City, 500, 2);
+  const std::vector<Aabb> boxes = world_aabbs(city);
+  std::vector<Classification> classes(boxes.size());
+  reference::classify_all(std::span<const Aabb>(boxes), Frustum::from_view_proj(city.camera.view_proj()), classes);
+  const render::Image img = render::top_down_image(boxes, classes, city.camera, 400);
+  EXPECT_GE(std::max(img.width, img.height), 399u);
+  EXPECT_LE(std::max(img.width, img.height), 420u);
+  std::size_t inside = 0, outside = 0, white = 0;
+  for (std::size_t p = 0; p < img.rgba.size(); p += 4) {
+    const std::uint32_t c = std::uint32_t(img.rgba[p]) << 24 | std::uint32_t(img.rgba[p + 1]) << 16 | std::uint32_t(img.rgba[p + 2]) << 8 | img.rgba[p + 3];
+    inside += c == render::kColorInside;
+    outside += c == render::kColorOutside;
+    white += c == 0xffffffffu;
+  }
+  EXPECT_GT(inside, 100u);
+  EXPECT_GT(outside, 100u);
+  EXPECT_GT(white, 100u);  // the frustum's edges
+  const auto path = std::filesystem::temp_directory_path() / "cullpipe_top_down_test.png";
+  render::write_png(path.string(), img);
+  EXPECT_GT(std::filesystem::file_size(path), 1000u);
+  std::filesystem::remove(path);
+  EXPECT_THROW(render::write_png("/nonexistent-dir/x.png", img), InputError);
+}
+
+}  // namespace
+}  // namespace cullpipe
