@@ -8,7 +8,16 @@ set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 bash "$root/scripts/setup.sh"
 bash "$root/scripts/build.sh" -DCULLPIPE_WERROR=ON
-ctest --test-dir "${CULLPIPE_BUILD_DIR:-$root/build}" --output-on-failure
+build=${CULLPIPE_BUILD_DIR:-$root/build}
+ctest --test-dir "$build" --output-on-failure
+# The installed package works for a consumer: install, build examples/engine against it with
+# find_package(cullpipe), and run it (its own device, culling recorded into its command
+# buffer, checked against the CPU reference, the culled scene drawn to a PNG).
+rm -rf "$build/install" "$build/example"
+cmake --install "$build" --prefix "$build/install" >/dev/null
+cmake -S "$root/examples/engine" -B "$build/example" -G Ninja -DCMAKE_PREFIX_PATH="$build/install" -DCMAKE_BUILD_TYPE=Release >/dev/null
+cmake --build "$build/example"
+(cd "$build/example" && ./engine_example)
 if [ "${1:-}" = "--sanitize" ]; then
   CULLPIPE_BUILD_DIR=$root/build-asan CMAKE_BUILD_TYPE=RelWithDebInfo \
     bash "$root/scripts/build.sh" -DCULLPIPE_WERROR=ON -DCULLPIPE_SANITIZE=ON -DCULLPIPE_BUILD_BENCH=OFF

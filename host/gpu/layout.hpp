@@ -1,7 +1,7 @@
 #pragma once
 // Conversions between the host volume types and the GPU structs of shaders/shared/cull_types.h.
 // Every conversion copies floats unchanged, so CPU and GPU see bit-identical inputs.
-#include "../../shaders/shared/cull_types.h"
+#include "shared/cull_types.h"  // shaders/shared/, on the include path of cullpipe_gpu
 #include "geom/aabb.hpp"
 #include "geom/frustum.hpp"
 #include "geom/obb.hpp"

@@ -284,8 +284,8 @@ Context::Context(const ExternalDevice& external) : owns_device_(false) {
     if (queue_family_ >= nfam || !(families[queue_family_].queueFlags & VK_QUEUE_COMPUTE_BIT))
       throw Error("ExternalDevice: queue family " + std::to_string(queue_family_) + " has no compute support");
     read_device_properties();
-    draw_indirect_count_ = false;  // unknown: the caller chose the device's features
-    pipeline_statistics_ = false;
+    draw_indirect_count_ = external.draw_indirect_count;  // the caller chose the device's features
+    pipeline_statistics_ = external.pipeline_statistics;
     create_pool_and_fence();
   } catch (...) {
     destroy();

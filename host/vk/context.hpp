@@ -34,6 +34,10 @@ struct ExternalDevice {
   VkDevice device = VK_NULL_HANDLE;
   VkQueue queue = VK_NULL_HANDLE;
   std::uint32_t queue_family = 0;
+  /// The caller enabled drawIndirectCount and multiDrawIndirect (needed by render::Renderer).
+  bool draw_indirect_count = false;
+  /// The caller enabled pipelineStatisticsQuery (the renderer then counts triangles drawn).
+  bool pipeline_statistics = false;
 };
 
 /// A physical device as listed by list_devices().
