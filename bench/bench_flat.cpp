@@ -52,6 +52,7 @@ struct Cell {
   std::size_t n = 0;
   double visible_fraction = 0;
   double cpu_ns = 0, gpu_ns = 0, gpu_wall_ns = 0;  // medians, whole pass
+  double gpu_ordered_ns = 0, gpu_draws_ns = 0;     // GPU time with object-order ids; plus draw commands
   bool agree = false;
   std::string note;
 };
@@ -80,12 +81,29 @@ Cell measure(gpu::GpuCuller& culler, const std::vector<Volume>& volumes, const F
   }
   const gpu::CullResult checked = culler.cull(views);  // warm-up (pipeline compile) and check
   cell.agree = checked.views[0].classes == cpu && checked.views[0].counts == counts;
+  // The same pass with object-order compaction, then also writing draw commands (checked
+  // once each: the ordered ids are the CPU's visible objects in order).
+  std::vector<gpu::DrawCommand> templates(volumes.size());
+  for (std::uint32_t i = 0; i < templates.size(); ++i) templates[i] = {36, 1, 0, 0, i, 0};
+  culler.upload_draws(templates);
+  std::vector<std::uint32_t> expected;
+  for (std::uint32_t i = 0; i < cpu.size(); ++i)
+    if (cpu[i] != Classification::Outside) expected.push_back(i);
+  const gpu::CullOptions ordered{false, true, 0, true, false}, draws{false, true, 0, true, true};
+  cell.agree = cell.agree && culler.cull(views, ordered).views[0].visible_ids == expected &&
+               culler.cull(views, draws).views[0].draws.size() == expected.size();
   const gpu::CullOptions counters_only{false, false, 0};
-  for (int r = 0; r < repeats; ++r) {
+  const gpu::CullOptions ordered_timed{false, false, 0, true, false}, draws_timed{false, false, 0, true, true};
+  std::vector<double> ordered_times, draw_times;
+  for (int r = 0; r < repeats; ++r) {  // interleaved, so drift hits all three alike
     const gpu::CullResult g = culler.cull(views, counters_only);
     gpu_times.push_back(g.timings.gpu_ns);
     wall_times.push_back(g.timings.wall_ns);
+    ordered_times.push_back(culler.cull(views, ordered_timed).timings.gpu_ns);
+    draw_times.push_back(culler.cull(views, draws_timed).timings.gpu_ns);
   }
+  cell.gpu_ordered_ns = median(ordered_times);
+  cell.gpu_draws_ns = median(draw_times);
   cell.cpu_ns = median(cpu_times);
   cell.gpu_ns = median(gpu_times);
   cell.gpu_wall_ns = median(wall_times);
@@ -147,8 +165,8 @@ int main(int argc, char** argv) {
   std::printf("cpu: %s, %u hardware threads (reference is single-threaded)\n", cpu_model().c_str(),
               std::thread::hardware_concurrency());
   std::printf("gpu: %s, %s\n\n", ctx.info().name.c_str(), ctx.info().driver.c_str());
-  std::printf("%-7s %9s %8s %8s %12s %12s %12s %10s %6s\n", "bv", "N", "visible", "repeats", "cpu ns/obj", "gpu ns/obj",
-              "wall ns/obj", "cpu/gpu", "agree");
+  std::printf("%-7s %9s %8s %8s %12s %12s %12s %10s %12s %12s %6s\n", "bv", "N", "visible", "repeats", "cpu ns/obj", "gpu ns/obj",
+              "wall ns/obj", "cpu/gpu", "ordered/gpu", "+draws/gpu", "agree");
 
   std::vector<Cell> cells;
   bool all_agree = true;
@@ -178,8 +196,9 @@ int main(int argc, char** argv) {
                     cell.note.c_str());
       } else {
         all_agree &= cell.agree;
-        std::printf("%-7s %9zu %7.1f%% %8d %12.2f %12.2f %12.2f %10.2f %6s\n", kind.c_str(), n, 100 * cell.visible_fraction, reps,
-                    cell.cpu_ns / dn, cell.gpu_ns / dn, cell.gpu_wall_ns / dn, cell.cpu_ns / std::max(cell.gpu_ns, 1.0),
+        std::printf("%-7s %9zu %7.1f%% %8d %12.2f %12.2f %12.2f %10.2f %12.2f %12.2f %6s\n", kind.c_str(), n, 100 * cell.visible_fraction,
+                    reps, cell.cpu_ns / dn, cell.gpu_ns / dn, cell.gpu_wall_ns / dn, cell.cpu_ns / std::max(cell.gpu_ns, 1.0),
+                    cell.gpu_ordered_ns / std::max(cell.gpu_ns, 1.0), cell.gpu_draws_ns / std::max(cell.gpu_ns, 1.0),
                     cell.agree ? "yes" : "NO");
       }
       std::fflush(stdout);
@@ -189,11 +208,13 @@ int main(int argc, char** argv) {
 
   if (!csv_path.empty()) {
     std::ofstream csv(csv_path);
-    csv << "bv,n,visible_fraction,cpu_ns_per_object,gpu_ns_per_object,gpu_wall_ns_per_object,cpu_over_gpu,agree,note\n";
+    csv << "bv,n,visible_fraction,cpu_ns_per_object,gpu_ns_per_object,gpu_wall_ns_per_object,cpu_over_gpu,"
+           "gpu_ordered_ns_per_object,gpu_ordered_draws_ns_per_object,agree,note\n";
     for (const Cell& c : cells) {
       const double dn = double(std::max<std::size_t>(c.n, 1));
       csv << c.bv << "," << c.n << "," << c.visible_fraction << "," << c.cpu_ns / dn << "," << c.gpu_ns / dn << ","
-          << c.gpu_wall_ns / dn << "," << (c.gpu_ns > 0 ? c.cpu_ns / c.gpu_ns : 0.0) << "," << c.agree << "," << c.note << "\n";
+          << c.gpu_wall_ns / dn << "," << (c.gpu_ns > 0 ? c.cpu_ns / c.gpu_ns : 0.0) << "," << c.gpu_ordered_ns / dn << ","
+          << c.gpu_draws_ns / dn << "," << c.agree << "," << c.note << "\n";
     }
   }
   if (!json_path.empty()) {
@@ -207,6 +228,7 @@ int main(int argc, char** argv) {
       const double dn = double(std::max<std::size_t>(c.n, 1));
       j["cells"].push_back({{"method", "reference_vs_gpu_flat"}, {"bv", c.bv}, {"n", c.n}, {"visible_fraction", c.visible_fraction},
                             {"cpu_ns_per_object", c.cpu_ns / dn}, {"gpu_ns_per_object", c.gpu_ns / dn},
+                            {"gpu_ordered_ns_per_object", c.gpu_ordered_ns / dn}, {"gpu_ordered_draws_ns_per_object", c.gpu_draws_ns / dn},
                             {"gpu_wall_ns_per_object", c.gpu_wall_ns / dn}, {"agree", c.agree}, {"note", c.note}});
     }
     std::ofstream(json_path) << j.dump(2) << "\n";

@@ -128,8 +128,8 @@ int main(int argc, char** argv) try {
   std::vector<Classification> cpu(boxes.size());
   const reference::CullCounts counts = reference::classify_all(std::span<const Aabb>(boxes), frustum, cpu);
   const gpu::ViewResult& view = result.views[0];
-  std::printf("engine_example: %zu objects on %s; GPU: %u visible, %zu draws; CPU reference: %u visible\n", boxes.size(),
-              ctx.info().name.c_str(), view.counts.visible, view.draws.size(), counts.visible);
+  std::printf("engine_example: %zu objects on %s; GPU: %zu visible, %zu draws; CPU reference: %zu visible\n", boxes.size(),
+              ctx.info().name.c_str(), std::size_t(view.counts.visible), view.draws.size(), std::size_t(counts.visible));
   if (view.classes != cpu || view.draws.size() != counts.visible) {
     std::fprintf(stderr, "engine_example: GPU and CPU disagree\n");
     return 1;
