@@ -56,11 +56,15 @@ struct EngineDevice {
         if ((families[f].queueFlags & VK_QUEUE_GRAPHICS_BIT) && (families[f].queueFlags & VK_QUEUE_COMPUTE_BIT)) physical = pd, family = f;
       if (physical) break;
     }
-    if (!physical) throw std::runtime_error("no Vulkan device with a graphics + compute queue");
+    if (!physical) {
+      vkDestroyInstance(instance, nullptr);
+      throw std::runtime_error("no Vulkan device with a graphics + compute queue");
+    }
     VkPhysicalDeviceVulkan12Features f12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
     f12.drawIndirectCount = VK_TRUE;
     VkPhysicalDeviceFeatures2 f2{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2, &f12, {}};
     f2.features.multiDrawIndirect = VK_TRUE;
+    f2.features.drawIndirectFirstInstance = VK_TRUE;  // draws carry the object id as firstInstance
     const float priority = 1.0f;
     VkDeviceQueueCreateInfo qi{VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO};
     qi.queueFamilyIndex = family;
@@ -70,7 +74,10 @@ struct EngineDevice {
     di.pNext = &f2;
     di.queueCreateInfoCount = 1;
     di.pQueueCreateInfos = &qi;
-    check(vkCreateDevice(physical, &di, nullptr, &device), "vkCreateDevice");
+    if (vkCreateDevice(physical, &di, nullptr, &device) != VK_SUCCESS) {
+      vkDestroyInstance(instance, nullptr);  // the destructor does not run for a failed constructor
+      throw std::runtime_error("vkCreateDevice failed");
+    }
     vkGetDeviceQueue(device, family, 0, &queue);
   }
   ~EngineDevice() {

@@ -32,8 +32,9 @@ struct MeshBoundsOptions {
 
 /// The sphere `s` carried by an affine transform: centre transformed, radius scaled by the
 /// largest singular value of the linear part (the ellipsoid's longest semi-axis, so the result
-/// is the smallest sphere about the new centre enclosing the transformed sphere). Computed in
-/// double and rounded outward, including the rounding of the centre to float.
+/// is the smallest sphere about the new centre enclosing the transformed sphere, here widened
+/// by 1e-6 relative as a margin for the eigenvalue computation). Computed in double and
+/// rounded outward, including the rounding of the centre to float.
 Sphere transform_sphere(const Sphere& s, const glm::mat4& m);
 
 class MeshBounds {

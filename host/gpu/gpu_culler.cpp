@@ -245,6 +245,16 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, bool timestamps) {
   const CullOptions& options = last_options_;
   const std::uint64_t objects_per_dispatch = std::uint64_t(max_groups_) * group_size_;
 
+  // Earlier work in the same command buffer or queue may still read the outputs (indirect
+  // draws, shaders, copies): finish those reads before they are overwritten.
+  const VkPipelineStageFlags graphics_stages =
+      (ctx_.queue_flags() & VK_QUEUE_GRAPHICS_BIT) ? VkPipelineStageFlags(VK_PIPELINE_STAGE_VERTEX_SHADER_BIT) : 0;
+  const VkMemoryBarrier in_barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, 0, 0};  // execution dependency (WAR)
+  vkCmdPipelineBarrier(cmd,
+                       VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT |
+                           graphics_stages,
+                       VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &in_barrier, 0, nullptr, 0,
+                       nullptr);
   vkCmdFillBuffer(cmd, counters_.handle(), 0, view_count * sizeof(ViewCounters), 0);
   const VkMemoryBarrier clear_barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, VK_ACCESS_TRANSFER_WRITE_BIT,
                                       VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT};
@@ -294,8 +304,9 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, bool timestamps) {
   const VkMemoryBarrier out_barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, VK_ACCESS_SHADER_WRITE_BIT,
                                     VK_ACCESS_INDIRECT_COMMAND_READ_BIT | VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_HOST_READ_BIT};
   vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
-                       VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_HOST_BIT, 0, 1,
-                       &out_barrier, 0, nullptr, 0, nullptr);
+                       VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_HOST_BIT |
+                           graphics_stages,
+                       0, 1, &out_barrier, 0, nullptr, 0, nullptr);
 }
 
 void GpuCuller::record(VkCommandBuffer cmd, std::span<const Frustum> views, const CullOptions& options) {

@@ -109,9 +109,13 @@ class GpuCuller {
   /// The engine path: records the whole pass (counter reset, dispatches, barriers) into the
   /// caller's command buffer, which must be recording, outside a render pass, for a queue of
   /// the context's queue family. Nothing is submitted. The views are written to a host-visible
-  /// buffer now, so one GpuCuller serves one pass in flight: use one per frame in flight. The
-  /// recording ends with a barrier that makes draw_buffer() and counter_buffer() ready for
-  /// vkCmdDrawIndexedIndirectCount (DRAW_INDIRECT stage), later compute shaders and the host.
+  /// buffer now and buffers and descriptors may be (re)allocated, so one GpuCuller serves one
+  /// recorded pass at a time: record again (or cull, or upload) only after the submission of
+  /// the previous recording has completed; use one GpuCuller per frame in flight. The
+  /// recording starts with a barrier after earlier readers of the outputs (indirect draws,
+  /// shaders, transfers) and ends with one that makes draw_buffer() and counter_buffer() ready
+  /// for vkCmdDrawIndexedIndirectCount (DRAW_INDIRECT stage), vertex shaders (on graphics
+  /// queues, e.g. reading DrawCommand::object_id), later compute shaders and the host.
   /// Pipelines are built here (not during recording's hot path later). After the caller's
   /// submission has completed, read_results() returns what cull() would have (no timings).
   void record(VkCommandBuffer cmd, std::span<const Frustum> views, const CullOptions& options = {});

@@ -49,7 +49,7 @@ VkShaderModule shader_module(VkDevice dev, const std::uint32_t* code, std::size_
 
 Renderer::Renderer(const vk::Context& ctx, const Scene& scene, const RendererConfig& config) : ctx_(ctx), config_(config) {
   if (!ctx.draw_indirect_count())
-    throw vk::Error("the renderer needs drawIndirectCount and multiDrawIndirect, which " + ctx.info().name +
+    throw vk::Error("the renderer needs drawIndirectCount, multiDrawIndirect and drawIndirectFirstInstance, which " + ctx.info().name +
                     " does not offer (or which the borrowed device did not enable)");
   if (!(ctx.queue_flags() & VK_QUEUE_GRAPHICS_BIT))
     throw vk::Error("the renderer needs a queue with graphics and compute; " + ctx.info().name + "'s chosen queue has no graphics");
@@ -101,6 +101,9 @@ Renderer::Renderer(const vk::Context& ctx, const Scene& scene, const RendererCon
     upload(objects_, objects.data(), objects.size() * sizeof(RenderObject), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "render object buffer");
     upload(all_draws_, templates_.data(), templates_.size() * sizeof(DrawCommand), VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT,
            "unculled draw buffer");
+    if (n > ctx_.properties().limits.maxDrawIndirectCount)
+      throw std::length_error(std::to_string(n) + " objects are more draws than one indirect draw call may issue on " + ctx_.info().name +
+                              " (maxDrawIndirectCount " + std::to_string(ctx_.properties().limits.maxDrawIndirectCount) + ")");
     readback_ = vk::Buffer(ctx_, VkDeviceSize(config_.width) * config_.height * 4, VK_BUFFER_USAGE_TRANSFER_DST_BIT, "image readback buffer");
 
     // ---- the culling pass on the same device ----
@@ -402,15 +405,13 @@ Image Renderer::render(const Camera& camera, bool cull, FrameStats* stats) {
   vkCmdPushConstants(cmd_, pipeline_layout_, VK_SHADER_STAGE_VERTEX_BIT, 0, sizeof(params), &params);
   if (stats_pool_) vkCmdBeginQuery(cmd_, stats_pool_, 0, 0);
   if (n > 0) {
-    const std::uint32_t max_draws = std::min<std::uint32_t>(ctx_.properties().limits.maxDrawIndirectCount, std::uint32_t(n));
+    // n <= maxDrawIndirectCount (checked at construction): one call either way. The culled
+    // count (view 0's visible_count) cannot exceed the capacity n: maxDrawCount = n.
     if (cull) {
-      // The count (view 0's visible_count) may not exceed the capacity (n): maxDrawCount = n.
-      vkCmdDrawIndexedIndirectCount(cmd_, culler_->draw_buffer().handle(), 0, culler_->counter_buffer().handle(), 0, max_draws,
+      vkCmdDrawIndexedIndirectCount(cmd_, culler_->draw_buffer().handle(), 0, culler_->counter_buffer().handle(), 0, std::uint32_t(n),
                                     sizeof(DrawCommand));
     } else {
-      for (std::size_t first = 0; first < n; first += max_draws)
-        vkCmdDrawIndexedIndirect(cmd_, all_draws_.handle(), first * sizeof(DrawCommand),
-                                 std::uint32_t(std::min<std::size_t>(max_draws, n - first)), sizeof(DrawCommand));
+      vkCmdDrawIndexedIndirect(cmd_, all_draws_.handle(), 0, std::uint32_t(n), sizeof(DrawCommand));
     }
   }
   if (stats_pool_) vkCmdEndQuery(cmd_, stats_pool_, 0);

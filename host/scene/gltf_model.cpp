@@ -1,8 +1,7 @@
-// tinygltf's implementation lives in this file; the switches must precede every include of it.
+// tinygltf's implementation lives in this file. Its switches (TINYGLTF_NO_STB_IMAGE,
+// _NO_STB_IMAGE_WRITE, _NO_EXTERNAL_IMAGE) are compile definitions of cullpipe_scene, so every
+// file that includes tiny_gltf.h sees the same class definitions.
 #define TINYGLTF_IMPLEMENTATION
-#define TINYGLTF_NO_STB_IMAGE
-#define TINYGLTF_NO_STB_IMAGE_WRITE
-#define TINYGLTF_NO_EXTERNAL_IMAGE
 #include "scene/gltf_model.hpp"
 
 #include <cctype>

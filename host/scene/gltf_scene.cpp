@@ -1,6 +1,7 @@
 #include "scene/gltf_scene.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <cmath>
 #include <cstring>
@@ -11,6 +12,7 @@
 #include <utility>
 
 #include "bounds/points.hpp"
+#include "scene/generators.hpp"
 #include "scene/gltf_model.hpp"
 
 namespace cullpipe {
@@ -196,9 +198,13 @@ GltfScene load_gltf_scene(const std::string& path, const GltfSceneOptions& optio
     std::shared_ptr<const bounds::MeshBounds> bounds;
     std::shared_ptr<const TriangleMesh> triangles;
   };
-  std::map<std::pair<std::size_t, std::size_t>, Primitive> cache;
+  // Keyed by what defines the geometry (POSITION accessor, index accessor, mode), so meshes
+  // that share accessors share the work and the memory.
+  std::map<std::array<int, 3>, Primitive> cache;
   auto primitive = [&](std::size_t m, std::size_t p) -> const Primitive& {
-    Primitive& slot = cache[{m, p}];
+    const tinygltf::Primitive& source = model.meshes[m].primitives[p];
+    const auto pos_it = source.attributes.find("POSITION");
+    Primitive& slot = cache[{pos_it == source.attributes.end() ? -1 : pos_it->second, source.indices, source.mode}];
     if (!slot.bounds) {
       const std::string where = file + idx("meshes", m) + ".primitives[" + std::to_string(p) + "]: ";
       gltf::Positions pos = gltf::read_positions(model, m, p, where);
@@ -251,10 +257,13 @@ GltfScene load_gltf_scene(const std::string& path, const GltfSceneOptions& optio
       const double det = glm::determinant(glm::dmat3(world));
       for (std::size_t p = 0; p < model.meshes[m].primitives.size(); ++p) {
         const Primitive& prim = primitive(m, p);
-        if (!(std::abs(det) > 0.0)) {  // scale 0: the instance draws nothing
+        if (!(std::abs(det) > 0.0) || glm::determinant(glm::mat3(glm::mat4(world))) == 0.0f) {  // scale 0: draws nothing
           ++out.zero_scale_instances;
           continue;
         }
+        if (out.scene.objects.size() >= kMaxSceneObjects)
+          throw InputError(file + "has more than " + std::to_string(kMaxSceneObjects) +
+                           " mesh primitive instances (the most a scene may hold)");
         SceneObject o;
         o.world = glm::mat4(world);
         o.local_bounds = prim.bounds->local_aabb();

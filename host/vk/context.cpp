@@ -243,8 +243,9 @@ Context::Context(const ContextOptions& options) : on_message_(options.on_message
     enable12.drawIndirectCount = f12.drawIndirectCount;
     VkPhysicalDeviceFeatures2 enable{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2, &enable12, {}};
     enable.features.multiDrawIndirect = f2.features.multiDrawIndirect;
+    enable.features.drawIndirectFirstInstance = f2.features.drawIndirectFirstInstance;
     enable.features.pipelineStatisticsQuery = f2.features.pipelineStatisticsQuery;
-    draw_indirect_count_ = f12.drawIndirectCount && f2.features.multiDrawIndirect;
+    draw_indirect_count_ = f12.drawIndirectCount && f2.features.multiDrawIndirect && f2.features.drawIndirectFirstInstance;
     pipeline_statistics_ = f2.features.pipelineStatisticsQuery;
 
     const float priority = 1.0f;

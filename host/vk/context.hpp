@@ -34,7 +34,8 @@ struct ExternalDevice {
   VkDevice device = VK_NULL_HANDLE;
   VkQueue queue = VK_NULL_HANDLE;
   std::uint32_t queue_family = 0;
-  /// The caller enabled drawIndirectCount and multiDrawIndirect (needed by render::Renderer).
+  /// The caller enabled drawIndirectCount, multiDrawIndirect and drawIndirectFirstInstance
+  /// (needed by render::Renderer, whose draws carry the object id as firstInstance).
   bool draw_indirect_count = false;
   /// The caller enabled pipelineStatisticsQuery (the renderer then counts triangles drawn).
   bool pipeline_statistics = false;
@@ -79,7 +80,8 @@ class Context {
 
   /// The queue family's flags (VK_QUEUE_GRAPHICS_BIT etc.).
   VkQueueFlags queue_flags() const { return queue_flags_; }
-  /// drawIndirectCount and multiDrawIndirect are enabled (own devices that support them).
+  /// drawIndirectCount, multiDrawIndirect and drawIndirectFirstInstance are enabled (own
+  /// devices that support them).
   bool draw_indirect_count() const { return draw_indirect_count_; }
   /// pipelineStatisticsQuery is enabled (own devices that support it).
   bool pipeline_statistics() const { return pipeline_statistics_; }
