@@ -428,6 +428,38 @@ TEST(GltfScene, OrthographicAndPerspectiveCameras) {
   EXPECT_EQ(load_error("badcam.gltf", bad, o), "badcam.gltf: cameras[0] (\"persp\") yfov must be between 0 and pi");
 }
 
+// Moving objects: each frame's world AABBs by every update method enclose the exact ones, and
+// hill climbing kept from frame to frame (climb_state) gives the same boxes as starting over.
+TEST(GltfScene, MovingObjectsKeepTheirAabbsByTheChosenMethod) {
+  if (!fs::exists(kScenes / "CesiumMilkTruck" / "CesiumMilkTruck.gltf")) GTEST_SKIP() << "CesiumMilkTruck not present";
+  Scene scene = load_gltf_scene((kScenes / "CesiumMilkTruck" / "CesiumMilkTruck.gltf").string()).scene;
+  const std::vector<glm::mat4> base = [&] {
+    std::vector<glm::mat4> w;
+    for (const SceneObject& o : scene.objects) w.push_back(o.world);
+    return w;
+  }();
+  std::vector<bounds::AabbTracker::Extremes> climb_state;
+  for (int frame = 0; frame < 40; ++frame) {
+    const glm::mat4 spin = glm::mat4(glm::mat3_cast(glm::angleAxis(0.05f * float(frame), glm::normalize(glm::vec3(0.3f, 1.0f, 0.2f)))));
+    for (std::size_t i = 0; i < scene.objects.size(); ++i) scene.objects[i].world = spin * base[i];
+    const std::vector<Aabb> exact = world_aabbs(scene, bounds::AabbUpdate::Recompute);
+    const std::vector<Aabb> kept = world_aabbs(scene, bounds::AabbUpdate::HillClimb, &climb_state);
+    const std::vector<Aabb> fresh = world_aabbs(scene, bounds::AabbUpdate::HillClimb);
+    const std::vector<Aabb> hull = world_aabbs(scene, bounds::AabbUpdate::HullRecompute);
+    ASSERT_EQ(climb_state.size(), scene.objects.size());
+    for (std::size_t i = 0; i < exact.size(); ++i) {
+      EXPECT_EQ(kept[i], fresh[i]) << "frame " << frame << " object " << i;
+      const float slack = 1e-9f * (glm::length(exact[i].extent()) + glm::length(exact[i].center()));
+      for (int k = 0; k < 3; ++k) {
+        EXPECT_LE(kept[i].min[k], exact[i].min[k] + slack);
+        EXPECT_GE(kept[i].max[k], exact[i].max[k] - slack);
+        EXPECT_LE(hull[i].min[k], exact[i].min[k] + slack);
+        EXPECT_GE(hull[i].max[k], exact[i].max[k] - slack);
+      }
+    }
+  }
+}
+
 TEST(Replicate, CopiesShareMeshesAndKeepTheirOrigin) {
   const json nodes = json::array({{{"mesh", 0}}});
   const GltfScene g = load_gltf_scene(write_temp("one.gltf", tetra_gltf(nodes, {0}).dump()));
