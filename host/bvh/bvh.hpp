@@ -1,0 +1,91 @@
+#pragma once
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "geom/aabb.hpp"
+#include "geom/classification.hpp"
+#include "geom/frustum.hpp"
+
+/// Bounding volume hierarchies over object AABBs (issue 4, first part): the binned-SAH
+/// top-down builder, quality metrics, validation, the depth-first flattening with skip
+/// indices, and the scalar hierarchical traversal that is the reference for GPU traversal.
+namespace cullpipe::bvh {
+
+inline constexpr std::uint32_t kNone = 0xffffffffu;
+
+/// One node of a binary tree. A leaf holds objects [first, first + count) of Tree::objects;
+/// an inner node has two children.
+struct Node {
+  Aabb box;
+  std::uint32_t left = kNone;
+  std::uint32_t right = kNone;
+  std::uint32_t first = 0;
+  std::uint32_t count = 0;
+  bool leaf() const { return left == kNone; }
+  bool operator==(const Node&) const = default;
+};
+
+/// A plain tree value: nodes (root first) and the object order its leaves refer to.
+struct Tree {
+  std::vector<Node> nodes;
+  std::vector<std::uint32_t> objects;  ///< object ids; each leaf owns a contiguous range
+  bool operator==(const Tree&) const = default;
+};
+
+struct TopDownOptions {
+  std::uint32_t max_leaf_size = 4;  ///< a node with at most this many objects becomes a leaf
+  std::uint32_t bins = 16;          ///< SAH candidates per axis (centroid bins)
+};
+
+/// Top-down build: split along each axis at the best of `bins` evenly spaced centroid bins by
+/// the surface area heuristic (cost = traversal 1 + sum over children of area ratio x objects),
+/// or make a leaf when no split beats the leaf cost or the node is small. Objects with equal
+/// centroids are split by median. O(n log n). Boxes must be valid (min <= max).
+Tree build_binned_sah(std::span<const Aabb> boxes, const TopDownOptions& options = {});
+
+/// Quality of a tree.
+struct Metrics {
+  double sah_cost = 0.0;       ///< sum over inner nodes of area/root area + over leaves of area/root area x count
+  std::size_t nodes = 0, leaves = 0, depth = 0;
+  std::size_t max_leaf_size = 0;
+};
+Metrics metrics(const Tree& tree);
+
+/// "" when the tree is valid for `boxes`: every object in exactly one leaf, every node box
+/// encloses its children's boxes and its objects' boxes; else what is wrong and where.
+std::string check_tree(const Tree& tree, std::span<const Aabb> boxes);
+
+/// The tree in depth-first order: a node's first child follows it; `skip` is the index of the
+/// node after its subtree; every subtree's objects are the contiguous range [first, first +
+/// count) of `objects` (so an INSIDE subtree is accepted as one range).
+struct FlatNode {
+  Aabb box;
+  std::uint32_t skip = 0;
+  std::uint32_t first = 0;
+  std::uint32_t count = 0;
+  bool leaf = false;
+  bool operator==(const FlatNode&) const = default;
+};
+struct FlatTree {
+  std::vector<FlatNode> nodes;
+  std::vector<std::uint32_t> objects;
+};
+FlatTree flatten(const Tree& tree);
+
+/// The scalar hierarchical cull (the reference for GPU traversal): each node box is tested
+/// with the p/n-vertex test against the planes its parent straddles (plane masking, Assarsson
+/// & Moller 2000); OUTSIDE drops the subtree, INSIDE accepts its object range without tests,
+/// INTERSECTING descends; leaf objects are tested against the remaining planes. Because float
+/// sums and products are monotone, an object inside its node's box gets the same class as
+/// flat culling gives it.
+struct HierarchicalResult {
+  std::vector<Classification> classes;  ///< per object id
+  std::size_t node_tests = 0;
+  std::size_t object_tests = 0;
+  std::size_t visible = 0, inside = 0;
+};
+HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Aabb> boxes, const Frustum& frustum);
+
+}  // namespace cullpipe::bvh

@@ -1,0 +1,163 @@
+// host/bvh: the binned-SAH builder, validation, flattening and the scalar hierarchical cull.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <filesystem>
+
+#include "bvh/bvh.hpp"
+#include "cull/reference.hpp"
+#include "scene/generators.hpp"
+#include "scene/gltf_scene.hpp"
+#include "test_util.hpp"
+
+namespace cullpipe {
+namespace {
+
+// Structural checks of a flattened tree: children where the skip indices say, subtree object
+// ranges nested and contiguous, boxes enclosing, every object once.
+void expect_flat_tree_valid(const bvh::FlatTree& f, std::span<const Aabb> boxes) {
+  if (boxes.empty()) {
+    EXPECT_TRUE(f.nodes.empty());
+    return;
+  }
+  ASSERT_EQ(f.objects.size(), boxes.size());
+  std::vector<int> seen(boxes.size(), 0);
+  for (std::uint32_t o : f.objects) ++seen.at(o);
+  for (int s : seen) ASSERT_EQ(s, 1);
+  ASSERT_EQ(f.nodes[0].skip, f.nodes.size());
+  ASSERT_EQ(f.nodes[0].count, boxes.size());
+  for (std::uint32_t i = 0; i < f.nodes.size(); ++i) {
+    const bvh::FlatNode& n = f.nodes[i];
+    ASSERT_GT(n.skip, i);
+    if (n.leaf) {
+      ASSERT_EQ(n.skip, i + 1) << i;
+      for (std::uint32_t k = n.first; k < n.first + n.count; ++k) {
+        const Aabb& b = boxes[f.objects[k]];
+        ASSERT_TRUE(glm::all(glm::lessThanEqual(n.box.min, b.min)) && glm::all(glm::lessThanEqual(b.max, n.box.max))) << i;
+      }
+      continue;
+    }
+    const bvh::FlatNode& a = f.nodes[i + 1];
+    ASSERT_LT(a.skip, n.skip) << i;
+    const bvh::FlatNode& b = f.nodes[a.skip];
+    ASSERT_EQ(b.skip, n.skip) << i;  // exactly two children
+    ASSERT_EQ(a.first, n.first);
+    ASSERT_EQ(b.first, a.first + a.count);
+    ASSERT_EQ(n.count, a.count + b.count);
+    for (const bvh::FlatNode* c : {&a, &b})
+      ASSERT_TRUE(glm::all(glm::lessThanEqual(n.box.min, c->box.min)) && glm::all(glm::lessThanEqual(c->box.max, n.box.max))) << i;
+  }
+}
+
+// The hierarchical cull gives every object exactly the flat reference's class, with fewer
+// tests when much is outside.
+void expect_same_as_flat(const std::vector<Aabb>& boxes, const std::vector<Frustum>& frusta, std::size_t leaf = 4) {
+  const bvh::Tree tree = bvh::build_binned_sah(boxes, {std::uint32_t(leaf), 16});
+  ASSERT_EQ(bvh::check_tree(tree, boxes), "");
+  const bvh::FlatTree flat = bvh::flatten(tree);
+  expect_flat_tree_valid(flat, boxes);
+  for (std::size_t v = 0; v < frusta.size(); ++v) {
+    std::vector<Classification> cpu(boxes.size());
+    const reference::CullCounts counts = reference::classify_all(std::span<const Aabb>(boxes), frusta[v], cpu);
+    const bvh::HierarchicalResult h = bvh::cull_hierarchical(flat, boxes, frusta[v]);
+    ASSERT_EQ(h.classes, cpu) << "view " << v;
+    EXPECT_EQ(h.visible, counts.visible);
+    EXPECT_EQ(h.inside, counts.inside);
+    EXPECT_LE(h.object_tests, boxes.size());
+  }
+}
+
+TEST(Bvh, RandomSetsOfEverySize) {
+  test::Rng rng{5};
+  for (std::size_t n : {0u, 1u, 2u, 3u, 5u, 17u, 100u, 1000u, 20000u}) {
+    SCOPED_TRACE("n = " + std::to_string(n));
+    std::vector<Aabb> boxes(n);
+    for (Aabb& b : boxes) b = test::random_aabb(rng, 40.0f, 3.0f);
+    for (std::size_t leaf : {1u, 4u, 16u}) expect_same_as_flat(boxes, {Frustum::from_view_proj(test::test_view_proj())}, leaf);
+  }
+}
+
+TEST(Bvh, GeneratedScenesAlongCameraPaths) {
+  for (SceneKind kind : {SceneKind::Uniform, SceneKind::Clustered, SceneKind::City}) {
+    SCOPED_TRACE(std::string(to_string(kind)));
+    const Scene scene = generate_scene(kind, 30000, 3);
+    std::vector<Frustum> frusta;
+    for (const Camera& c : camera_path(scene.camera, scene.bounds(), 6)) frusta.push_back(Frustum::from_view_proj(c.view_proj()));
+    const std::vector<Aabb> boxes = world_aabbs(scene);
+    expect_same_as_flat(boxes, frusta);
+    // The hierarchy pays: INSIDE subtrees are accepted whole and OUTSIDE ones dropped, so far
+    // fewer tests than objects (flat culling makes one per object).
+    const bvh::FlatTree flat = bvh::flatten(bvh::build_binned_sah(boxes));
+    const bvh::HierarchicalResult h = bvh::cull_hierarchical(flat, boxes, frusta[0]);
+    std::printf("  %s: %zu of %zu visible, %zu node + %zu object tests\n", std::string(to_string(kind)).c_str(), h.visible,
+                boxes.size(), h.node_tests, h.object_tests);
+    EXPECT_LT(h.node_tests + h.object_tests, boxes.size() / 2) << h.visible;
+  }
+}
+
+TEST(Bvh, DegenerateSetsStayBalanced) {
+  // All boxes identical (equal centroids): the builder halves ranges, so depth is ~log2(n).
+  const std::vector<Aabb> same(1000, Aabb{glm::vec3(-1), glm::vec3(1)});
+  const bvh::Tree t = bvh::build_binned_sah(same);
+  EXPECT_EQ(bvh::check_tree(t, same), "");
+  EXPECT_LE(bvh::metrics(t).depth, 10u);
+  expect_same_as_flat(same, {Frustum::from_view_proj(test::test_view_proj())});
+  // Points on a line, flat boxes, subnormal spreads.
+  std::vector<Aabb> line;
+  for (int i = 0; i < 500; ++i) line.push_back({glm::vec3(float(i), 0, 0), glm::vec3(float(i), 0, 0)});
+  expect_same_as_flat(line, {Frustum::from_view_proj(test::test_view_proj())});
+  std::vector<Aabb> tiny;
+  for (int i = 0; i < 50; ++i) tiny.push_back({glm::vec3(float(i) * 1e-44f), glm::vec3(float(i) * 1e-44f)});
+  EXPECT_EQ(bvh::check_tree(bvh::build_binned_sah(tiny), tiny), "");
+}
+
+TEST(Bvh, MetricsAndDeterminism) {
+  test::Rng rng{8};
+  std::vector<Aabb> boxes(5000);
+  for (Aabb& b : boxes) b = test::random_aabb(rng, 50.0f, 2.0f);
+  const bvh::Tree a = bvh::build_binned_sah(boxes), b = bvh::build_binned_sah(boxes);
+  EXPECT_EQ(a, b);
+  const bvh::Metrics m = bvh::metrics(a);
+  EXPECT_EQ(m.nodes, a.nodes.size());
+  EXPECT_EQ(m.leaves, (m.nodes + 1) / 2);
+  EXPECT_LE(m.max_leaf_size, 4u);
+  EXPECT_GT(m.sah_cost, 1.0);
+  // SAH beats splitting by object id (a spatially meaningless tree) by a wide margin.
+  bvh::Tree naive = bvh::build_binned_sah(std::vector<Aabb>(boxes.size(), Aabb{glm::vec3(0), glm::vec3(1)}));
+  for (bvh::Node& n : naive.nodes) n.box = {glm::vec3(INFINITY), glm::vec3(-INFINITY)};
+  // Refit the id-split tree's boxes bottom-up (children have larger indices than parents).
+  for (std::size_t i = naive.nodes.size(); i-- > 0;) {
+    bvh::Node& n = naive.nodes[i];
+    if (n.leaf()) {
+      for (std::uint32_t k = n.first; k < n.first + n.count; ++k)
+        n.box = {glm::min(n.box.min, boxes[naive.objects[k]].min), glm::max(n.box.max, boxes[naive.objects[k]].max)};
+    } else {
+      n.box = {glm::min(naive.nodes[n.left].box.min, naive.nodes[n.right].box.min),
+               glm::max(naive.nodes[n.left].box.max, naive.nodes[n.right].box.max)};
+    }
+  }
+  EXPECT_EQ(bvh::check_tree(naive, boxes), "");
+  EXPECT_LT(m.sah_cost * 3.0, bvh::metrics(naive).sah_cost);
+  // check_tree finds broken trees.
+  bvh::Tree broken = a;
+  broken.objects[0] = broken.objects[1];
+  EXPECT_NE(bvh::check_tree(broken, boxes), "");
+  broken = a;
+  broken.nodes[1].box.max.x -= 1.0f;
+  EXPECT_NE(bvh::check_tree(broken, boxes), "");
+}
+
+TEST(Bvh, RealGltfScenes) {
+  const std::filesystem::path dir = std::filesystem::path(CULLPIPE_SHARED_DIR) / "scenes";
+  if (!std::filesystem::exists(dir)) GTEST_SKIP() << dir << " not present";
+  for (const char* name : {"VC/VC.gltf", "ReciprocatingSaw/ReciprocatingSaw.gltf", "2CylinderEngine/2CylinderEngine.gltf"}) {
+    SCOPED_TRACE(name);
+    const Scene scene = replicate_scene(load_gltf_scene((dir / name).string()).scene, 50, InstanceLayout::Random, 2);
+    std::vector<Frustum> frusta;
+    for (const Camera& c : camera_path(scene.camera, scene.bounds(), 4)) frusta.push_back(Frustum::from_view_proj(c.view_proj()));
+    expect_same_as_flat(world_aabbs(scene), frusta);
+  }
+}
+
+}  // namespace
+}  // namespace cullpipe
