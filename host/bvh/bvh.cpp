@@ -5,6 +5,8 @@
 #include <cmath>
 #include <numeric>
 
+#include "geom/pn_vertex.hpp"
+
 namespace cullpipe::bvh {
 namespace {
 
@@ -39,13 +41,9 @@ Classification classify_masked(const Aabb& box, const Frustum& frustum, std::uin
   for (std::uint32_t k = 0; k < planes.size(); ++k) {
     if (!(mask & (1u << k))) continue;
     const Plane& plane = planes[k];
-    const glm::vec3& n = plane.normal;
-    const glm::vec3 p_vertex(n.x >= 0.0f ? box.max.x : box.min.x, n.y >= 0.0f ? box.max.y : box.min.y,
-                             n.z >= 0.0f ? box.max.z : box.min.z);
-    const glm::vec3 n_vertex(n.x >= 0.0f ? box.min.x : box.max.x, n.y >= 0.0f ? box.min.y : box.max.y,
-                             n.z >= 0.0f ? box.min.z : box.max.z);
-    if (plane.distance(p_vertex) < 0.0f) return Classification::Outside;
-    if (plane.distance(n_vertex) < 0.0f) straddled |= 1u << k;
+    const PnVertices v = pn_vertices(plane.normal, box);
+    if (plane.distance(v.p) < 0.0f) return Classification::Outside;
+    if (plane.distance(v.n) < 0.0f) straddled |= 1u << k;
   }
   return straddled ? Classification::Intersecting : Classification::Inside;
 }

@@ -1,5 +1,7 @@
 #include "cull/reference.hpp"
 
+#include "geom/pn_vertex.hpp"
+
 #include <cmath>
 #include <stdexcept>
 
@@ -8,13 +10,9 @@ namespace cullpipe::reference {
 Classification classify_pn(const Aabb& box, const Frustum& frustum) {
   bool intersecting = false;
   for (const Plane& plane : frustum.active()) {
-    const glm::vec3& n = plane.normal;
-    const glm::vec3 p_vertex(n.x >= 0.0f ? box.max.x : box.min.x, n.y >= 0.0f ? box.max.y : box.min.y,
-                             n.z >= 0.0f ? box.max.z : box.min.z);
-    const glm::vec3 n_vertex(n.x >= 0.0f ? box.min.x : box.max.x, n.y >= 0.0f ? box.min.y : box.max.y,
-                             n.z >= 0.0f ? box.min.z : box.max.z);
-    if (plane.distance(p_vertex) < 0.0f) return Classification::Outside;
-    if (plane.distance(n_vertex) < 0.0f) intersecting = true;
+    const PnVertices v = pn_vertices(plane.normal, box);
+    if (plane.distance(v.p) < 0.0f) return Classification::Outside;
+    if (plane.distance(v.n) < 0.0f) intersecting = true;
   }
   return intersecting ? Classification::Intersecting : Classification::Inside;
 }

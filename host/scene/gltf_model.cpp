@@ -14,13 +14,6 @@
 namespace cullpipe::gltf {
 namespace {
 
-bool ends_with_ci(const std::string& s, const char* suffix) {
-  const std::size_t n = std::strlen(suffix);
-  if (s.size() < n) return false;
-  for (std::size_t i = 0; i < n; ++i)
-    if (std::tolower(static_cast<unsigned char>(s[s.size() - n + i])) != suffix[i]) return false;
-  return true;
-}
 
 // Loading images is switched off: accept any image without decoding it.
 bool skip_image(tinygltf::Image*, const int, std::string*, std::string*, int, int, const unsigned char*, int, void*) {
@@ -53,6 +46,14 @@ const unsigned char* accessor_data(const tinygltf::Model& model, const tinygltf:
 }
 
 }  // namespace
+
+bool ends_with_ci(const std::string& s, const char* suffix) {
+  const std::size_t n = std::strlen(suffix);
+  if (s.size() < n) return false;
+  for (std::size_t i = 0; i < n; ++i)
+    if (std::tolower(static_cast<unsigned char>(s[s.size() - n + i])) != suffix[i]) return false;
+  return true;
+}
 
 tinygltf::Model load_model(const std::string& path) {
   tinygltf::TinyGLTF loader;

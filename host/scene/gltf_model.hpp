@@ -12,6 +12,9 @@
 
 namespace cullpipe::gltf {
 
+/// True when `path` ends with `suffix` (lower case, e.g. ".glb"), ignoring case.
+bool ends_with_ci(const std::string& path, const char* suffix);
+
 /// Loads a .gltf or .glb (chosen by extension) without decoding images; throws InputError
 /// naming the file when tinygltf cannot read it.
 tinygltf::Model load_model(const std::string& path);

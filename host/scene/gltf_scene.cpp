@@ -110,16 +110,7 @@ Camera gltf_camera(const tinygltf::Camera& cam, const dmat4& world, const std::s
 
 }  // namespace
 
-bool is_gltf_path(const std::string& path) {
-  auto ends = [&](const char* suffix) {
-    const std::size_t n = std::strlen(suffix);
-    if (path.size() < n) return false;
-    for (std::size_t i = 0; i < n; ++i)
-      if (std::tolower(static_cast<unsigned char>(path[path.size() - n + i])) != suffix[i]) return false;
-    return true;
-  };
-  return ends(".gltf") || ends(".glb");
-}
+bool is_gltf_path(const std::string& path) { return gltf::ends_with_ci(path, ".gltf") || gltf::ends_with_ci(path, ".glb"); }
 
 GltfScene load_gltf_scene(const std::string& path, const GltfSceneOptions& options) {
   const tinygltf::Model model = gltf::load_model(path);
