@@ -129,6 +129,84 @@ TEST(Cli, MultiViewDumpRoundTrips) {
     for (std::size_t i = 0; i < 500; ++i) ASSERT_EQ(j["views"][v]["gpu"][i], d["volumes"][i]["classes"][v]);
 }
 
+// Hierarchical culling from the tool: every view agrees with the CPU traversal, the classes
+// equal flat culling's (the dump reads back into `classify`), and test counts are recorded.
+TEST(Cli, RunWithTheBvhAgreesAndDumpsTestCounts) {
+  const fs::path json = temp_dir() / "bvh_summary.json", dump = temp_dir() / "bvh_dump.json";
+  const Result r = cullpipe("run --generate city:4000 --views 3 --validate --cull bvh --builder median --leaf-size 2 --json '" +
+                            json.string() + "' --dump '" + dump.string() + "'");
+  ASSERT_EQ(r.code, 0) << r.out << r.err;
+  EXPECT_EQ(r.err, "");
+  EXPECT_NE(r.out.find("bvh: median"), std::string::npos) << r.out;
+  const auto j = nlohmann::json::parse(slurp(json));
+  EXPECT_EQ(j["cull"], "bvh");
+  EXPECT_EQ(j["builder"], "median");
+  EXPECT_EQ(j["agree"], true);
+  EXPECT_GT(j["bvh"]["nodes"].get<int>(), 1000);
+  for (const auto& v : j["per_view"]) {
+    EXPECT_GT(v["node_tests"].get<int>(), 0);
+    EXPECT_LT(v["object_tests"].get<int>(), 4000);
+  }
+  const auto d = nlohmann::json::parse(slurp(dump));
+  ASSERT_EQ(d["tests"].size(), 3u);
+  EXPECT_EQ(d["tests"][0]["cull"], "bvh");
+  EXPECT_EQ(d["tests"][0]["node_tests"], j["per_view"][0]["node_tests"]);
+  const Result c = cullpipe("classify '" + dump.string() + "' --backend cpu");  // flat reference
+  ASSERT_EQ(c.code, 0) << c.err;
+  const auto flat = nlohmann::json::parse(c.out);
+  for (std::size_t v = 0; v < 3; ++v)
+    for (std::size_t i = 0; i < 4000; i += 7) ASSERT_EQ(flat["views"][v]["cpu"][i], d["volumes"][i]["classes"][v]) << i;
+  // Flat culling records one object test per object and no node tests.
+  const Result f = cullpipe("run --generate city:500 --dump '" + dump.string() + "'");
+  ASSERT_EQ(f.code, 0) << f.err;
+  const auto fd = nlohmann::json::parse(slurp(dump));
+  EXPECT_EQ(fd["tests"][0]["cull"], "flat");
+  EXPECT_EQ(fd["tests"][0]["node_tests"], 0);
+  EXPECT_EQ(fd["tests"][0]["object_tests"], 500);
+}
+
+TEST(Cli, BvhCommandReportsEveryBuilder) {
+  const Result list = cullpipe("bvh --list");
+  ASSERT_EQ(list.code, 0) << list.err;
+  for (const char* name : {"binned-sah", "median", "agglomerative-local", "insertion-bnb", "top-down:"})
+    EXPECT_NE(list.out.find(name), std::string::npos) << name;
+  const fs::path json = temp_dir() / "bvh_builders.json";
+  const Result r = cullpipe("bvh --generate clustered:1500 --builder all --json '" + json.string() + "'");
+  ASSERT_EQ(r.code, 0) << r.out << r.err;
+  const auto j = nlohmann::json::parse(slurp(json));
+  EXPECT_EQ(j["objects"], 1500);
+  std::set<std::string> names;
+  for (const auto& b : j["builders"]) {
+    names.insert(b["builder"].get<std::string>());
+    EXPECT_GT(b["sah_cost"].get<double>(), 1.0) << b["builder"];
+    EXPECT_LE(b["max_leaf_size"].get<int>(), 4) << b["builder"];
+    EXPECT_GE(b["build_ns"].get<double>(), 0.0);
+  }
+  EXPECT_GE(names.size(), 15u);
+  EXPECT_TRUE(names.count("agglomerative-brute"));  // 1500 objects: within its limit
+  const Result one = cullpipe("bvh --generate uniform:3000 --builder top-down:axis=pca,split=median,cost=sah insertion-greedy+rotations");
+  ASSERT_EQ(one.code, 0) << one.err;
+  EXPECT_NE(one.out.find("insertion-greedy+rotations"), std::string::npos) << one.out;
+}
+
+TEST(Cli, BadBvhOptionsAreClearErrors) {
+  Result r = cullpipe("bvh --generate uniform:100 --builder no-such-builder");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("no-such-builder"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("binned-sah"), std::string::npos) << "lists the known builders: " << r.err;
+  r = cullpipe("run --generate uniform:100 --cull bvh --bv sphere");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("--bv aabb"), std::string::npos) << r.err;
+  r = cullpipe("run --generate uniform:100 --cull bvh --builder top-down:axis=sideways");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("sideways"), std::string::npos) << r.err;
+  r = cullpipe("run --generate uniform:100 --cull octree");
+  EXPECT_EQ(r.code, 2);
+  // No Vulkan: the CPU hierarchical traversal still runs.
+  r = cullpipe("run --generate uniform:1000 --cull bvh --backend cpu", kNoVulkan);
+  EXPECT_EQ(r.code, 0) << r.err;
+}
+
 TEST(Cli, BadInputIsAClearErrorNotACrash) {
   const fs::path bad = temp_dir() / "bad.json";
   auto write = [&](const std::string& text) { std::ofstream(bad) << text; };

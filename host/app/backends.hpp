@@ -11,7 +11,11 @@
 #include "app/commands.hpp"
 #include "cull/compare.hpp"
 #include "cull/reference.hpp"
+#include "bvh/builders.hpp"
+#include "bvh/bvh.hpp"
+#include "gpu/bvh_culler.hpp"
 #include "gpu/gpu_culler.hpp"
+#include "scene/scene.hpp"
 #include "vk/check.hpp"
 #include "vk/context.hpp"
 
@@ -28,6 +32,9 @@ struct BackendResults {
   double gpu_wall_ns = 0.0;  ///< all views, including submission and readback
   std::size_t mismatches = 0;
   std::vector<std::string> mismatch_reports;  ///< the first few, described in full
+  /// Per view: node boxes and objects tested (the CPU's counts when it ran, else the GPU's);
+  /// flat culling tests no nodes and every object.
+  std::vector<std::size_t> node_tests, object_tests;
 };
 
 /// Lazily created Vulkan context + culler, shared by the calls of one command.
@@ -35,16 +42,24 @@ struct GpuSession {
   DeviceOptions options;
   std::unique_ptr<vk::Context> context;
   std::unique_ptr<gpu::GpuCuller> culler;
+  std::unique_ptr<gpu::BvhCuller> bvh_culler;
 
-  gpu::GpuCuller& get() {
-    if (!culler) {
+  vk::Context& device() {
+    if (!context) {
       vk::ContextOptions o;
       o.validation = options.validation;
       o.device_filter = options.device;
       context = std::make_unique<vk::Context>(o);
-      culler = std::make_unique<gpu::GpuCuller>(*context);
     }
+    return *context;
+  }
+  gpu::GpuCuller& get() {
+    if (!culler) culler = std::make_unique<gpu::GpuCuller>(device());
     return *culler;
+  }
+  gpu::BvhCuller& bvh() {
+    if (!bvh_culler) bvh_culler = std::make_unique<gpu::BvhCuller>(device());
+    return *bvh_culler;
   }
   /// Throws vk::Error when validation reported anything.
   void check_validation() const {
@@ -52,6 +67,87 @@ struct GpuSession {
       throw vk::Error(std::to_string(context->validation_message_count()) + " Vulkan validation message(s) reported");
   }
 };
+
+/// A tree built for the command line: flattened, measured and timed.
+struct BuiltBvh {
+  bvh::FlatTree flat;
+  bvh::Metrics metrics;
+  double build_ns = 0.0;
+};
+
+/// Builds with the named builder (bvh::build); an unknown name or a bad leaf size is an InputError.
+inline BuiltBvh build_bvh(const std::string& builder, std::span<const Aabb> boxes, std::uint32_t leaf_size) {
+  if (leaf_size == 0) throw InputError("--leaf-size must be at least 1");
+  bvh::BuildOptions options;
+  options.max_leaf_size = leaf_size;
+  BuiltBvh built;
+  const auto start = std::chrono::steady_clock::now();
+  bvh::Tree tree;
+  try {
+    tree = bvh::build(builder, boxes, options);
+  } catch (const std::invalid_argument& e) {
+    throw InputError(std::string("--builder: ") + e.what());
+  }
+  built.build_ns = double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());
+  built.metrics = bvh::metrics(tree);
+  built.flat = bvh::flatten(tree);
+  return built;
+}
+
+/// Appends one GPU pass's views to `r`.
+inline void take_gpu_result(BackendResults& r, gpu::CullResult& g) {
+  r.gpu_ns = g.timings.gpu_ns;
+  r.gpu_wall_ns = g.timings.wall_ns;
+  for (gpu::ViewResult& view : g.views) {
+    r.gpu.push_back(std::move(view.classes));
+    r.gpu_counts.push_back(view.counts);
+    r.gpu_visible_ids.push_back(std::move(view.visible_ids));
+    r.gpu_overflow |= view.overflow;
+  }
+}
+
+/// Compares every view of `r` (both backends ran) object by object.
+template <class Volume>
+void compare_backends(BackendResults& r, std::span<const Volume> volumes, std::span<const Frustum> frusta,
+                      std::span<const std::size_t> object_ids, std::size_t max_reports) {
+  for (std::size_t v = 0; v < frusta.size(); ++v) {
+    Agreement a = check_agreement<Volume>(volumes, frusta[v], r.cpu[v], r.cpu_counts[v], r.gpu[v], r.gpu_counts[v],
+                                          r.gpu_visible_ids[v], volumes.size(), max_reports, object_ids);
+    r.mismatches += a.mismatches;
+    for (std::string& m : a.reports)
+      if (r.mismatch_reports.size() < max_reports) r.mismatch_reports.push_back("view " + std::to_string(v) + ", " + m);
+  }
+}
+
+/// Hierarchical culling of `boxes` through `tree`: the scalar traversal (bvh::cull_hierarchical)
+/// on the CPU, BvhCuller on the GPU, compared object by object.
+inline BackendResults cull_bvh_on_backends(const bvh::FlatTree& tree, std::span<const Aabb> boxes, std::span<const Frustum> frusta,
+                                           Backend backend, GpuSession& session, bool warm_up, std::size_t max_reports = 10) {
+  BackendResults r;
+  if (backend != Backend::Gpu) {
+    const auto start = std::chrono::steady_clock::now();
+    for (const Frustum& f : frusta) {
+      bvh::HierarchicalResult h = bvh::cull_hierarchical(tree, boxes, f);
+      r.cpu_counts.push_back({h.visible, h.inside, h.visible - h.inside});
+      r.node_tests.push_back(h.node_tests);
+      r.object_tests.push_back(h.object_tests);
+      r.cpu.push_back(std::move(h.classes));
+    }
+    r.cpu_ns = double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());
+  }
+  if (backend != Backend::Cpu) {
+    gpu::BvhCuller& culler = session.bvh();
+    culler.upload(tree, boxes);
+    if (warm_up) culler.cull(frusta, {false, false, 0});  // the first dispatch of each pipeline compiles it (lavapipe)
+    gpu::CullResult g = culler.cull(frusta);
+    session.check_validation();
+    if (r.node_tests.empty())
+      for (const gpu::ViewResult& view : g.views) r.node_tests.push_back(view.node_tests), r.object_tests.push_back(view.object_tests);
+    take_gpu_result(r, g);
+  }
+  if (backend == Backend::Both) compare_backends<Aabb>(r, boxes, frusta, {}, max_reports);
+  return r;
+}
 
 template <class Volume>
 BackendResults cull_on_backends(std::span<const Volume> volumes, std::span<const Frustum> frusta, Backend backend,
@@ -70,24 +166,11 @@ BackendResults cull_on_backends(std::span<const Volume> volumes, std::span<const
     if (warm_up) culler.cull(frusta, {false, false, 0});  // the first dispatch compiles the pipeline (lavapipe)
     gpu::CullResult g = culler.cull(frusta);
     session.check_validation();
-    r.gpu_ns = g.timings.gpu_ns;
-    r.gpu_wall_ns = g.timings.wall_ns;
-    for (gpu::ViewResult& view : g.views) {
-      r.gpu.push_back(std::move(view.classes));
-      r.gpu_counts.push_back(view.counts);
-      r.gpu_visible_ids.push_back(std::move(view.visible_ids));
-      r.gpu_overflow |= view.overflow;
-    }
+    take_gpu_result(r, g);
   }
-  if (backend == Backend::Both) {
-    for (std::size_t v = 0; v < frusta.size(); ++v) {
-      Agreement a = check_agreement<Volume>(volumes, frusta[v], r.cpu[v], r.cpu_counts[v], r.gpu[v], r.gpu_counts[v],
-                                            r.gpu_visible_ids[v], volumes.size(), max_reports, object_ids);
-      r.mismatches += a.mismatches;
-      for (std::string& m : a.reports)
-        if (r.mismatch_reports.size() < max_reports) r.mismatch_reports.push_back("view " + std::to_string(v) + ", " + m);
-    }
-  }
+  if (backend == Backend::Both) compare_backends<Volume>(r, volumes, frusta, object_ids, max_reports);
+  r.node_tests.assign(frusta.size(), 0);
+  r.object_tests.assign(frusta.size(), volumes.size());
   return r;
 }
 

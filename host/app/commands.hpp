@@ -2,6 +2,7 @@
 #include <cstdint>
 #include <iosfwd>
 #include <string>
+#include <vector>
 
 namespace cullpipe::app {
 
@@ -39,6 +40,9 @@ struct SceneOptions {
 
 struct RunOptions : SceneOptions {
   std::string bv = "aabb";  ///< aabb | obb | sphere
+  std::string cull = "flat";            ///< flat (every object) | bvh (hierarchical, AABBs)
+  std::string builder = "binned-sah";   ///< --cull bvh: builder name (bvh::builders())
+  std::uint32_t leaf_size = 4;          ///< --cull bvh: most objects per leaf
   Backend backend = Backend::Both;
   std::size_t views = 1;    ///< views along the camera path around the scene
   std::string json_path;    ///< summary as JSON
@@ -56,6 +60,13 @@ struct RenderOptions : SceneOptions {
   std::string out_path;           ///< PNG
   std::string top_down_path;      ///< optional top-down debug PNG
   DeviceOptions device;
+};
+
+struct BvhOptions : SceneOptions {
+  std::vector<std::string> builders{"binned-sah"};  ///< names (bvh::builders()), or "all"
+  std::uint32_t leaf_size = 4;
+  std::size_t repeats = 1;  ///< builds per builder; the median time is reported
+  std::string json_path;
 };
 
 struct ClassifyOptions {
@@ -84,6 +95,9 @@ int generate_command(const GenerateOptions& options, std::ostream& out, std::ost
 int devices_command(std::ostream& out, std::ostream& err);
 int bounds_command(const BoundsOptions& options, std::ostream& out, std::ostream& err);
 int render_command(const RenderOptions& options, std::ostream& out, std::ostream& err);
+int bvh_command(const BvhOptions& options, std::ostream& out, std::ostream& err);
+/// Every builder name with its description, one per line, plus the parametric top-down form.
+void list_bvh_builders(std::ostream& out);
 
 /// The default scene shipped in scenes/: found next to the source tree the tool was built
 /// from, or under <prefix>/share/cullpipe/scenes relative to the executable.

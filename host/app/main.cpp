@@ -41,6 +41,9 @@ int main(int argc, char** argv) {
   CLI::App* run_cmd = app.add_subcommand("run", "Cull a scene on the GPU and/or the CPU and compare, view by view");
   add_scene_options(run_cmd, run);
   run_cmd->add_option("--bv", run.bv, "Bounding volume: aabb | obb | sphere")->capture_default_str()->check(CLI::IsMember({"aabb", "obb", "sphere"}));
+  run_cmd->add_option("--cull", run.cull, "flat (test every object) | bvh (hierarchical: AABBs, INSIDE subtrees accepted whole)")->capture_default_str()->check(CLI::IsMember({"flat", "bvh"}));
+  run_cmd->add_option("--builder", run.builder, "--cull bvh: BVH builder (see `cullpipe bvh --list`)")->capture_default_str();
+  run_cmd->add_option("--leaf-size", run.leaf_size, "--cull bvh: most objects per leaf")->capture_default_str()->check(CLI::Range(1u, 1024u));
   run_cmd->add_option("--backend", run.backend, "gpu | cpu | both (both compares them)")->transform(CLI::CheckedTransformer(kBackends))->default_str("both");
   run_cmd->add_option("--views", run.views, "Number of views on a camera path around the scene")->capture_default_str()->check(CLI::PositiveNumber);
   run_cmd->add_option("--json", run.json_path, "Write a summary as JSON");
@@ -60,6 +63,16 @@ int main(int argc, char** argv) {
   render_cmd->add_option("--width", render.width, "Image width")->capture_default_str()->check(CLI::Range(1u, 16384u));
   render_cmd->add_option("--height", render.height, "Image height")->capture_default_str()->check(CLI::Range(1u, 16384u));
   add_device_options(render_cmd, render.device);
+
+  BvhOptions bvh;
+  bool list_builders = false;
+  CLI::App* bvh_cmd = app.add_subcommand("bvh", "Build the scene's BVH with one or more builders and print quality and build time");
+  add_scene_options(bvh_cmd, bvh);
+  bvh_cmd->add_option("--builder", bvh.builders, "Builder name(s), or all; see --list")->capture_default_str();
+  bvh_cmd->add_option("--leaf-size", bvh.leaf_size, "Most objects per leaf")->capture_default_str()->check(CLI::Range(1u, 1024u));
+  bvh_cmd->add_option("--repeats", bvh.repeats, "Builds per builder; the median time is reported")->capture_default_str()->check(CLI::PositiveNumber);
+  bvh_cmd->add_option("--json", bvh.json_path, "Write every builder's metrics as JSON");
+  bvh_cmd->add_flag("--list", list_builders, "List the builders and exit");
 
   ClassifyOptions classify;
   CLI::App* classify_cmd = app.add_subcommand("classify", "Classify volumes against frusta given in a JSON file (- for stdin)");
@@ -93,5 +106,12 @@ int main(int argc, char** argv) {
   if (*devices_cmd) return devices_command(std::cout, std::cerr);
   if (*bounds_cmd) return bounds_command(bounds, std::cout, std::cerr);
   if (*render_cmd) return render_command(render, std::cout, std::cerr);
+  if (*bvh_cmd) {
+    if (list_builders) {
+      list_bvh_builders(std::cout);
+      return kExitOk;
+    }
+    return bvh_command(bvh, std::cout, std::cerr);
+  }
   return run_command(run, std::cout, std::cerr);
 }

@@ -34,6 +34,12 @@ std::string pad(const std::string& s, std::size_t width) {
   return s.size() >= width ? s : std::string(width - s.size(), ' ') + s;
 }
 
+std::string format_fixed(double value, int digits) {
+  char buf[48];
+  std::snprintf(buf, sizeof buf, "%.*f", digits, value);
+  return buf;
+}
+
 // Culls one kind of volume; with a dump path, also keeps the volumes for the dump.
 template <class Volume>
 BackendResults cull_kind(const std::vector<Volume>& volumes, std::span<const Frustum> frusta, const RunOptions& o,
@@ -63,6 +69,10 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
     const auto bv = parse_bv_kind(o.bv);
     if (!bv) throw InputError("--bv " + o.bv + ": expected aabb, obb or sphere");
     if (o.views == 0) throw InputError("--views must be at least 1");
+    if (o.cull != "flat" && o.cull != "bvh") throw InputError("--cull " + o.cull + ": expected flat or bvh");
+    const bool hierarchical = o.cull == "bvh";
+    if (hierarchical && *bv != BvKind::Aabb)
+      throw InputError("--cull bvh culls objects by their AABBs: use --bv aabb (OBBs and spheres are culled flat)");
 
     LoadedScene loaded = load_scene_source(o);
     const Scene& scene = loaded.scene;
@@ -84,8 +94,18 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
     GpuSession session{o.device, nullptr, nullptr};
     BackendResults r;
     std::vector<cullpipe::Volume> dump_volumes;
+    BuiltBvh built;
     switch (*bv) {
-      case BvKind::Aabb: r = cull_kind(world_aabbs(scene, loaded.aabb_update), frusta, o, session, dump_volumes); break;
+      case BvKind::Aabb:
+        if (hierarchical) {
+          const std::vector<Aabb> boxes = world_aabbs(scene, loaded.aabb_update);
+          built = build_bvh(o.builder, boxes, o.leaf_size);
+          r = cull_bvh_on_backends(built.flat, boxes, frusta, o.backend, session, /*warm_up=*/true);
+          if (!o.dump_path.empty()) dump_volumes.assign(boxes.begin(), boxes.end());
+        } else {
+          r = cull_kind(world_aabbs(scene, loaded.aabb_update), frusta, o, session, dump_volumes);
+        }
+        break;
       case BvKind::Obb: r = cull_kind(world_obbs(scene), frusta, o, session, dump_volumes); break;
       case BvKind::Sphere: r = cull_kind(world_spheres(scene), frusta, o, session, dump_volumes); break;
     }
@@ -102,19 +122,26 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
       if (zero_scale) out << "; " << zero_scale << " zero-scale instances skipped";
       out << "\n";
     }
-    out << "  scene loaded in " << format_ms(load_ns) << " ms\n\n";
-    out << "  view  objects  visible   inside  intersecting  outside\n";
+    out << "  scene loaded in " << format_ms(load_ns) << " ms\n";
+    if (hierarchical)
+      out << "  bvh: " << o.builder << ", leaves of <= " << o.leaf_size << ", " << built.metrics.nodes << " nodes, depth "
+          << built.metrics.depth << ", SAH cost " << format_fixed(built.metrics.sah_cost, 2) << ", built in "
+          << format_ms(built.build_ns) << " ms\n";
+    out << "\n  view  objects  visible   inside  intersecting  outside  node tests  object tests\n";
     const std::size_t shown = std::min<std::size_t>(frusta.size(), 16);
     for (std::size_t v = 0; v < shown; ++v) {
       const auto& c = counts[v];
       out << pad(std::to_string(v), 6) << pad(std::to_string(n), 9) << pad(std::to_string(c.visible), 9)
           << pad(std::to_string(c.inside), 9) << pad(std::to_string(c.intersecting), 14)
-          << pad(std::to_string(n - c.visible), 9) << "\n";
+          << pad(std::to_string(n - c.visible), 9) << pad(std::to_string(r.node_tests[v]), 12)
+          << pad(std::to_string(r.object_tests[v]), 14) << "\n";
     }
     if (shown < frusta.size()) out << "  ... " << frusta.size() - shown << " more views\n";
     out << "\n";
     const double object_views = double(std::max<std::size_t>(n * frusta.size(), 1));
-    if (have_cpu)
+    if (have_cpu && hierarchical)
+      out << "  cpu hierarchical reference: " << format_ms(r.cpu_ns) << " ms\n";
+    else if (have_cpu)
       out << "  cpu reference: " << format_ms(r.cpu_ns) << " ms (" << format_ms(r.cpu_ns / object_views * 1e6)
           << " ns per object-view)\n";
     if (have_gpu)
@@ -134,6 +161,16 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
       j["source"] = source;
       j["objects"] = n;
       j["bv"] = o.bv;
+      j["cull"] = o.cull;
+      if (hierarchical) {
+        j["builder"] = o.builder;
+        j["leaf_size"] = o.leaf_size;
+        j["build_ns"] = built.build_ns;
+        j["bvh"] = {{"nodes", built.metrics.nodes},
+                    {"leaves", built.metrics.leaves},
+                    {"depth", built.metrics.depth},
+                    {"sah_cost", built.metrics.sah_cost}};
+      }
       j["views"] = frusta.size();
       j["backend"] = o.backend == Backend::Both ? "both" : o.backend == Backend::Gpu ? "gpu" : "cpu";
       if (session.context) {
@@ -148,13 +185,18 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
       j["mismatches"] = r.mismatches;
       j["agree"] = have_cpu && have_gpu ? nlohmann::json(r.mismatches == 0) : nlohmann::json(nullptr);
       nlohmann::json per_view = nlohmann::json::array();
-      for (const auto& c : counts)
-        per_view.push_back({{"visible", c.visible}, {"inside", c.inside}, {"intersecting", c.intersecting}});
+      for (std::size_t v = 0; v < counts.size(); ++v)
+        per_view.push_back({{"visible", counts[v].visible},
+                            {"inside", counts[v].inside},
+                            {"intersecting", counts[v].intersecting},
+                            {"node_tests", r.node_tests[v]},
+                            {"object_tests", r.object_tests[v]}});
       j["per_view"] = per_view;
       json_util::write_file_atomic(o.json_path, j.dump(2) + "\n");
     }
     if (!o.dump_path.empty()) {
-      CullCase c{frusta, frusta.size() > 1, std::move(dump_volumes), {}};
+      CullCase c{frusta, frusta.size() > 1, std::move(dump_volumes), {}, {}};
+      for (std::size_t v = 0; v < frusta.size(); ++v) c.tests.push_back({o.cull, r.node_tests[v], r.object_tests[v]});
       if (from_gltf) {
         // Where each object came from, and all its world-space volumes.
         const std::vector<Aabb> aabbs = world_aabbs(scene, loaded.aabb_update);

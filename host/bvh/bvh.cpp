@@ -2,25 +2,17 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
-#include <numeric>
+#include <memory>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include "geom/pn_vertex.hpp"
 
 namespace cullpipe::bvh {
 namespace {
-
-Aabb empty_box() { return {glm::vec3(INFINITY), glm::vec3(-INFINITY)}; }
-
-void grow(Aabb& a, const Aabb& b) {
-  a.min = glm::min(a.min, b.min);
-  a.max = glm::max(a.max, b.max);
-}
-
-void grow(Aabb& a, const glm::vec3& p) {
-  a.min = glm::min(a.min, p);
-  a.max = glm::max(a.max, p);
-}
 
 // Half the surface area, in double (only ratios matter).
 double half_area(const Aabb& b) {
@@ -48,99 +40,286 @@ Classification classify_masked(const Aabb& box, const Frustum& frustum, std::uin
   return straddled ? Classification::Intersecting : Classification::Inside;
 }
 
+// The binned builder's working types. Four floats, the fourth unused by the box maths: a box
+// corner in one SIMD register where there is SSE2 (every x86-64), plain loops elsewhere;
+// both give the same results.
+struct alignas(16) Lanes {
+  float v[4];
+};
+
+// One object as the binned builder works on it: its box, with +infinity in the fourth lane of
+// `lo` (see add_to_bin) and its id in the fourth lane of `hi` (never used as a number). Kept
+// in tree order, so each pass over a node reads memory sequentially instead of gathering by
+// id. 32 bytes.
+struct BinRef {
+  Lanes lo, hi;
+  std::uint32_t id() const { return std::bit_cast<std::uint32_t>(hi.v[3]); }
+};
+
+#if defined(__SSE2__)
+inline void lanes_min(Lanes& a, const Lanes& b) { _mm_store_ps(a.v, _mm_min_ps(_mm_load_ps(b.v), _mm_load_ps(a.v))); }
+inline void lanes_max(Lanes& a, const Lanes& b) { _mm_store_ps(a.v, _mm_max_ps(_mm_load_ps(b.v), _mm_load_ps(a.v))); }
+// (lo + hi) * 0.5 per axis, as Aabb::center(); fourth lane 0.
+inline Lanes centroid(const BinRef& r) {
+  const __m128 xyz = _mm_castsi128_ps(_mm_set_epi32(0, -1, -1, -1));
+  Lanes c;
+  _mm_store_ps(c.v, _mm_mul_ps(_mm_add_ps(_mm_and_ps(_mm_load_ps(r.lo.v), xyz), _mm_and_ps(_mm_load_ps(r.hi.v), xyz)),
+                               _mm_set1_ps(0.5f)));
+  return c;
+}
+// Grows the bin box [lo, hi] by r and adds 1 to the object count the bin keeps in the
+// fourth lane of lo, as an integer: min(count, +infinity) leaves it as it is (a count is a
+// small non-NaN bit pattern), then an integer add counts the object.
+inline void add_to_bin(Lanes& lo, Lanes& hi, const BinRef& r) {
+  const __m128 m = _mm_min_ps(_mm_load_ps(r.lo.v), _mm_load_ps(lo.v));
+  _mm_store_ps(lo.v, _mm_castsi128_ps(_mm_add_epi32(_mm_castps_si128(m), _mm_set_epi32(1, 0, 0, 0))));
+  lanes_max(hi, r.hi);
+}
+// Per axis k < 3: bin index uint32(min((c - lo) * scale, last)); NaN goes to `last`.
+inline void bin_indices(const Lanes& c, const Lanes& lo, const Lanes& scale, const Lanes& last, std::uint32_t out[4]) {
+  const __m128 x = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(c.v), _mm_load_ps(lo.v)), _mm_load_ps(scale.v));
+  _mm_storeu_si128(reinterpret_cast<__m128i*>(out), _mm_cvttps_epi32(_mm_min_ps(x, _mm_load_ps(last.v))));
+}
+#else
+inline void lanes_min(Lanes& a, const Lanes& b) {
+  for (int k = 0; k < 4; ++k) a.v[k] = b.v[k] < a.v[k] ? b.v[k] : a.v[k];
+}
+inline void lanes_max(Lanes& a, const Lanes& b) {
+  for (int k = 0; k < 4; ++k) a.v[k] = a.v[k] < b.v[k] ? b.v[k] : a.v[k];
+}
+inline Lanes centroid(const BinRef& r) {
+  return {{(r.lo.v[0] + r.hi.v[0]) * 0.5f, (r.lo.v[1] + r.hi.v[1]) * 0.5f, (r.lo.v[2] + r.hi.v[2]) * 0.5f, 0.0f}};
+}
+inline void add_to_bin(Lanes& lo, Lanes& hi, const BinRef& r) {
+  const float count = std::bit_cast<float>(std::bit_cast<std::uint32_t>(lo.v[3]) + 1u);
+  lanes_min(lo, r.lo);
+  lanes_max(hi, r.hi);
+  lo.v[3] = count;
+}
+inline void bin_indices(const Lanes& c, const Lanes& lo, const Lanes& scale, const Lanes& last, std::uint32_t out[4]) {
+  for (int k = 0; k < 3; ++k) {
+    const float x = (c.v[k] - lo.v[k]) * scale.v[k];
+    out[k] = std::uint32_t(x < last.v[k] ? x : last.v[k]);
+  }
+}
+#endif
+// The bin of one axis, exactly as bin_indices computes it.
+inline std::uint32_t bin_index(const BinRef& r, int axis, float lo, float scale, float last) {
+  const float x = ((r.lo.v[axis] + r.hi.v[axis]) * 0.5f - lo) * scale;
+  return std::uint32_t(x < last ? x : last);
+}
+
+// A box as two corners of Lanes; starts empty.
+struct LaneBox {
+  Lanes lo{{INFINITY, INFINITY, INFINITY, 0.0f}}, hi{{-INFINITY, -INFINITY, -INFINITY, 0.0f}};
+  void grow(const Lanes& min, const Lanes& max) {
+    lanes_min(lo, min);
+    lanes_max(hi, max);
+  }
+  void grow(const LaneBox& b) { grow(b.lo, b.hi); }
+  std::uint32_t bin_count() const { return std::bit_cast<std::uint32_t>(lo.v[3]); }  // see add_to_bin
+  Aabb box() const { return {{lo.v[0], lo.v[1], lo.v[2]}, {hi.v[0], hi.v[1], hi.v[2]}}; }
+  // half_area(box()) for a non-empty box: the same operations in the same order.
+  double half_area() const {
+#if defined(__SSE2__)
+    const __m128 l = _mm_load_ps(lo.v), h = _mm_load_ps(hi.v);
+    const __m128d exy = _mm_sub_pd(_mm_cvtps_pd(h), _mm_cvtps_pd(l));
+    // Only the z lanes are converted (the fourth lanes hold ids and counts, not numbers).
+    const __m128d ezw = _mm_sub_pd(_mm_cvtss_sd(_mm_setzero_pd(), _mm_movehl_ps(h, h)),
+                                   _mm_cvtss_sd(_mm_setzero_pd(), _mm_movehl_ps(l, l)));
+    const __m128d p = _mm_mul_pd(exy, _mm_shuffle_pd(exy, ezw, 1));  // (ex * ey, ey * ez)
+    return _mm_cvtsd_f64(_mm_add_sd(_mm_add_sd(p, _mm_unpackhi_pd(p, p)), _mm_mul_sd(ezw, exy)));
+#else
+    const double ex = double(hi.v[0]) - double(lo.v[0]), ey = double(hi.v[1]) - double(lo.v[1]),
+                 ez = double(hi.v[2]) - double(lo.v[2]);
+    return ex * ey + ey * ez + ez * ex;
+#endif
+  }
+};
+
+// The box and the centroid box of objects [0, count).
+void bounds_of(const BinRef* refs, std::uint32_t count, LaneBox& box, LaneBox& centroids) {
+  for (std::uint32_t i = 0; i < count; ++i) {
+    box.grow(refs[i].lo, refs[i].hi);
+    const Lanes c = centroid(refs[i]);
+    centroids.grow(c, c);
+  }
+}
+
 }  // namespace
 
+// Implementation notes (the tree is fixed by the description in bvh.hpp; these only make it
+// fast): objects are copied once into 32-byte BinRef records, and a split moves its node's
+// records into the other of two buffers (stable, branch-free), so every pass reads memory in
+// order; one pass per node bins all three axes at once; the children's boxes are unions of
+// the chosen bins and their centroid boxes are gathered while the records move, so no node
+// is scanned again to find its bounds; the SAH sweep visits only non-empty bins (an empty bin
+// repeats the cost of the split before it, which is tried first and kept on ties).
 Tree build_binned_sah(std::span<const Aabb> boxes, const TopDownOptions& options) {
   Tree tree;
   const std::size_t n = boxes.size();
   if (n == 0) return tree;
   const std::uint32_t max_leaf = std::max<std::uint32_t>(options.max_leaf_size, 1);
   const std::uint32_t bins = std::clamp<std::uint32_t>(options.bins, 2, 256);
+  // Two buffers of records, left uninitialised (they are written before they are read).
+  std::unique_ptr<BinRef[]> buffer[2] = {std::unique_ptr<BinRef[]>(new BinRef[n]),
+                                         std::unique_ptr<BinRef[]>(n > max_leaf ? new BinRef[n] : nullptr)};
+  LaneBox root_box, root_centroids;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Aabb& b = boxes[i];
+    BinRef& r = buffer[0][i];
+    r = {{{b.min.x, b.min.y, b.min.z, INFINITY}},
+         {{b.max.x, b.max.y, b.max.z, std::bit_cast<float>(std::uint32_t(i))}}};
+    root_box.grow(r.lo, r.hi);
+    const Lanes c = centroid(r);
+    root_centroids.grow(c, c);
+  }
   tree.objects.resize(n);
-  std::iota(tree.objects.begin(), tree.objects.end(), 0u);
-  std::vector<glm::vec3> centroid(n);
-  for (std::size_t i = 0; i < n; ++i) centroid[i] = boxes[i].center();
 
   struct Task {
     std::uint32_t node, first, count;
+    std::uint32_t buffer;  // which buffer holds the node's records
+    LaneBox centroids;     // the box of the node's centroids (its box is in tree.nodes)
   };
+  tree.nodes.reserve(2 * n);  // at most 2n - 1; pages never touched cost nothing
   tree.nodes.emplace_back();
-  std::vector<Task> stack{{0, 0, std::uint32_t(n)}};
-  struct Bin {
-    Aabb box;
-    std::uint32_t count;
+  tree.nodes[0].box = root_box.box();
+  std::vector<Task> stack;
+  // A node of at most max_leaf objects becomes a leaf at once; others wait on the stack.
+  const auto add = [&](std::uint32_t node, std::uint32_t first, std::uint32_t count, std::uint32_t in,
+                       const LaneBox& centroids) {
+    if (count > max_leaf) {
+      stack.push_back({node, first, count, in, centroids});
+      return;
+    }
+    tree.nodes[node].first = first;
+    tree.nodes[node].count = count;
+    const BinRef* objs = buffer[in].get() + first;
+    for (std::uint32_t i = 0; i < count; ++i) tree.objects[first + i] = objs[i].id();
   };
-  std::vector<Bin> bin(bins);
+  add(0, 0, std::uint32_t(n), 0, root_centroids);
+  // Bins of axis a are bin[a * bins, (a + 1) * bins), each a box and an object count (see
+  // add_to_bin); all empty between nodes.
+  std::vector<LaneBox> bin(3 * std::size_t(bins));
+  std::vector<std::uint32_t> used(3 * std::size_t(bins));  // non-empty bins per axis, ascending
+  std::uint32_t used_count[3];
   std::vector<double> right_area(bins);
   std::vector<std::uint32_t> right_count(bins);
+  const float last_bin = float(bins - 1);
   while (!stack.empty()) {
     const Task task = stack.back();
     stack.pop_back();
-    std::uint32_t* objs = tree.objects.data() + task.first;
-    Aabb box = empty_box(), cbox = empty_box();
+    BinRef* objs = buffer[task.buffer].get() + task.first;
+    // Bin the centroids along all three axes in one pass; a flat axis (zero or subnormal
+    // extent) is binned with scale 0 (everything in bin 0) and not considered.
+    Lanes lo{{0, 0, 0, 0}}, scale{{0, 0, 0, 0}}, last{{last_bin, last_bin, last_bin, 0}};
+    bool usable[3];
+    for (int axis = 0; axis < 3; ++axis) {
+      lo.v[axis] = task.centroids.lo.v[axis];
+      const float extent = task.centroids.hi.v[axis] - lo.v[axis];
+      scale.v[axis] = float(bins) / extent;
+      usable[axis] = extent > 0.0f && std::isfinite(extent) && std::isfinite(scale.v[axis]);
+      if (!usable[axis]) scale.v[axis] = 0.0f;
+    }
     for (std::uint32_t i = 0; i < task.count; ++i) {
-      grow(box, boxes[objs[i]]);
-      grow(cbox, centroid[objs[i]]);
+      const BinRef& r = objs[i];
+      std::uint32_t index[4];
+      bin_indices(centroid(r), lo, scale, last, index);
+      for (int axis = 0; axis < 3; ++axis) {
+        LaneBox& target = bin[std::size_t(axis) * bins + index[axis]];
+        add_to_bin(target.lo, target.hi, r);
+      }
     }
-    tree.nodes[task.node].box = box;
-    if (task.count <= max_leaf) {
-      tree.nodes[task.node].first = task.first;
-      tree.nodes[task.node].count = task.count;
-      continue;
+    for (int axis = 0; axis < 3; ++axis) {
+      std::uint32_t* list = used.data() + std::size_t(axis) * bins;
+      std::uint32_t k = 0;
+      for (std::uint32_t b = 0; b < bins; ++b) {  // branch-free: which bins are used is random
+        list[k] = b;
+        k += bin[std::size_t(axis) * bins + b].bin_count() != 0;
+      }
+      used_count[axis] = k;
     }
-    // Best binned SAH split over the three axes.
+    // Best binned SAH split over the three axes: bins [0, best_split] go left.
     double best_cost = INFINITY;
     int best_axis = -1;
-    std::uint32_t best_split = 0;  // bins [0, best_split] go left
+    std::uint32_t best_split = 0;
     for (int axis = 0; axis < 3; ++axis) {
-      const float lo = cbox.min[axis], extent = cbox.max[axis] - cbox.min[axis];
-      if (!(extent > 0.0f)) continue;
-      const float scale = float(bins) / extent;
-      if (!std::isfinite(scale)) continue;  // a subnormal extent: treat the axis as flat
-      for (Bin& b : bin) b = {empty_box(), 0};
-      for (std::uint32_t i = 0; i < task.count; ++i) {
-        const std::uint32_t b = std::min(bins - 1, std::uint32_t((centroid[objs[i]][axis] - lo) * scale));
-        grow(bin[b].box, boxes[objs[i]]);
-        ++bin[b].count;
-      }
-      Aabb acc = empty_box();
+      if (!usable[axis]) continue;
+      const LaneBox* axis_bin = bin.data() + std::size_t(axis) * bins;
+      const std::uint32_t* list = used.data() + std::size_t(axis) * bins;
+      const std::uint32_t k = used_count[axis];
+      // right_area[j] / right_count[j]: the union of used bins list[j..k-1].
+      LaneBox acc;
       std::uint32_t cnt = 0;
-      for (std::uint32_t b = bins - 1; b > 0; --b) {
-        grow(acc, bin[b].box);
-        cnt += bin[b].count;
-        right_area[b] = half_area(acc);
-        right_count[b] = cnt;
+      for (std::uint32_t j = k; j-- > 1;) {
+        acc.grow(axis_bin[list[j]]);
+        cnt += axis_bin[list[j]].bin_count();
+        right_area[j] = acc.half_area();
+        right_count[j] = cnt;
       }
-      acc = empty_box();
+      acc = LaneBox{};
       cnt = 0;
-      for (std::uint32_t b = 0; b + 1 < bins; ++b) {
-        grow(acc, bin[b].box);
-        cnt += bin[b].count;
-        if (cnt == 0 || right_count[b + 1] == 0) continue;
-        const double cost = half_area(acc) * cnt + right_area[b + 1] * right_count[b + 1];
-        if (cost < best_cost) best_cost = cost, best_axis = axis, best_split = b;
+      for (std::uint32_t j = 0; j + 1 < k; ++j) {
+        acc.grow(axis_bin[list[j]]);
+        cnt += axis_bin[list[j]].bin_count();
+        const double cost = acc.half_area() * cnt + right_area[j + 1] * right_count[j + 1];
+        if (cost < best_cost) best_cost = cost, best_axis = axis, best_split = list[j];
       }
     }
-    std::uint32_t mid = 0;
+    std::uint32_t mid = 0, child_buffer = task.buffer;
+    LaneBox left_box, right_box, left_centroids, right_centroids;
     if (best_axis >= 0) {
       const int axis = best_axis;
-      const float lo = cbox.min[axis], scale = float(bins) / (cbox.max[axis] - cbox.min[axis]);
-      std::uint32_t* m = std::partition(objs, objs + task.count, [&](std::uint32_t o) {
-        return std::min(bins - 1, std::uint32_t((centroid[o][axis] - lo) * scale)) <= best_split;
-      });
-      mid = std::uint32_t(m - objs);
+      const LaneBox* axis_bin = bin.data() + std::size_t(axis) * bins;
+      const std::uint32_t* list = used.data() + std::size_t(axis) * bins;
+      for (std::uint32_t j = 0; j < used_count[axis]; ++j) {
+        const std::uint32_t b = list[j];
+        if (b <= best_split) mid += axis_bin[b].bin_count();
+        (b <= best_split ? left_box : right_box).grow(axis_bin[b]);
+      }
+      // Stable partition into the other buffer, bins [0, best_split] to the front, gathering
+      // each side's centroid box on the way.
+      child_buffer = 1 - task.buffer;
+      BinRef* out = buffer[child_buffer].get() + task.first;
+      const float axis_lo = lo.v[axis], axis_scale = scale.v[axis];
+      LaneBox left_side, right_side;
+      std::uint32_t l = 0, r = mid;
+      for (std::uint32_t i = 0; i < task.count; ++i) {
+        const BinRef& ref = objs[i];
+        const std::uint32_t go_left = bin_index(ref, axis, axis_lo, axis_scale, last_bin) <= best_split;
+        const std::uint32_t at = r + (l - r) * go_left;  // l or r, without a branch to mispredict
+        out[at] = ref;
+        const Lanes c = centroid(ref);
+        (go_left ? left_side : right_side).grow(c, c);
+        l += go_left;
+        r += go_left ^ 1u;
+      }
+      left_centroids = left_side;
+      right_centroids = right_side;
     }
+    // Empty the bins for the next node.
+    for (int axis = 0; axis < 3; ++axis)
+      for (std::uint32_t j = 0; j < used_count[axis]; ++j) {
+        const std::size_t b = std::size_t(axis) * bins + used[std::size_t(axis) * bins + j];
+        bin[b] = LaneBox{};
+      }
     if (mid == 0 || mid == task.count) {  // equal centroids: split the range in half (by id, deterministic)
       mid = task.count / 2;
-      std::sort(objs, objs + task.count);
+      child_buffer = task.buffer;
+      std::sort(objs, objs + task.count, [](const BinRef& x, const BinRef& y) { return x.id() < y.id(); });
+      left_box = right_box = left_centroids = right_centroids = LaneBox{};
+      bounds_of(objs, mid, left_box, left_centroids);
+      bounds_of(objs + mid, task.count - mid, right_box, right_centroids);
     }
     const std::uint32_t left = std::uint32_t(tree.nodes.size());
     tree.nodes.emplace_back();
     tree.nodes.emplace_back();
     tree.nodes[task.node].left = left;
     tree.nodes[task.node].right = left + 1;
-    stack.push_back({left + 1, task.first + mid, task.count - mid});
-    stack.push_back({left, task.first, mid});
+    tree.nodes[left].box = left_box.box();
+    tree.nodes[left + 1].box = right_box.box();
+    add(left + 1, task.first + mid, task.count - mid, child_buffer, right_centroids);
+    add(left, task.first, mid, child_buffer, left_centroids);
   }
   return tree;
 }

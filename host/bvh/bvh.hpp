@@ -40,8 +40,8 @@ struct TopDownOptions {
 };
 
 /// Top-down build: split along each axis at the best of `bins` evenly spaced centroid bins by
-/// the surface area heuristic (cost = traversal 1 + sum over children of area ratio x objects),
-/// or make a leaf when no split beats the leaf cost or the node is small. Objects with equal
+/// the surface area heuristic (cost = traversal 1 + sum over children of area ratio x objects);
+/// a node becomes a leaf exactly when it holds <= max_leaf_size objects. Objects with equal
 /// centroids are split by median. O(n log n). Boxes must be valid (min <= max).
 Tree build_binned_sah(std::span<const Aabb> boxes, const TopDownOptions& options = {});
 

@@ -19,6 +19,10 @@
 
 namespace cullpipe::gpu {
 
+namespace detail {
+class PassResources;
+}
+
 /// One view's result of a GPU culling pass.
 struct ViewResult {
   std::vector<Classification> classes;     ///< per object, in object order
@@ -30,6 +34,10 @@ struct ViewResult {
   std::vector<DrawCommand> draws;
   reference::CullCounts counts;            ///< as counted by the GPU
   bool overflow = false;                   ///< more visible objects than the list could hold
+  /// Work done: hierarchical passes count node boxes tested and objects tested in
+  /// INTERSECTING leaves; a flat pass tests no nodes and every object.
+  std::size_t node_tests = 0;
+  std::size_t object_tests = 0;
 };
 
 /// Times of one pass. gpu_ns: between timestamps around the dispatches (0 when the queue has
@@ -130,11 +138,9 @@ class GpuCuller {
   void upload_words(BvKind kind, const void* data, std::size_t count, std::size_t bytes_per_object);
   void ensure_outputs(std::size_t view_count, std::size_t visible_capacity, bool draws);
   void prepare(std::span<const Frustum> views, const CullOptions& options);
-  void record_passes(VkCommandBuffer cmd, bool timestamps);
+  void record_passes(VkCommandBuffer cmd, VkQueryPool timestamps);
   const vk::ComputePipeline& pipeline(int shader, std::uint32_t kind, bool ordered, bool draws);
   void update_descriptors();
-  void setup(const GpuCullerConfig& config);
-  void release();
 
   const vk::Context& ctx_;
   std::uint32_t group_size_ = FLAT_CULL_GROUP_SIZE;
@@ -149,10 +155,7 @@ class GpuCuller {
   std::size_t last_capacity_ = 0;
   std::size_t last_view_count_ = 0;
   CullOptions last_options_;
-  VkDescriptorPool descriptor_pool_ = VK_NULL_HANDLE;
-  VkDescriptorSet descriptor_set_ = VK_NULL_HANDLE;
-  VkCommandBuffer cmd_ = VK_NULL_HANDLE;
-  VkQueryPool query_pool_ = VK_NULL_HANDLE;
+  std::unique_ptr<detail::PassResources> resources_;  // descriptor set, command buffer, timestamps
   bool descriptors_dirty_ = true;
 };
 

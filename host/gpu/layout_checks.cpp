@@ -36,7 +36,33 @@ static_assert(offsetof(FlatCullParams, visible_capacity) == 12);
 static_assert(sizeof(ViewCounters) == 16);
 static_assert(offsetof(ViewCounters, visible_count) == 0);
 static_assert(offsetof(ViewCounters, inside_count) == 4);
-static_assert(offsetof(ViewCounters, reserved0) == 8);
+static_assert(offsetof(ViewCounters, node_tests) == 8);
+static_assert(offsetof(ViewCounters, object_tests) == 12);
+
+static_assert(sizeof(GpuBvhNode) == 48);
+static_assert(offsetof(GpuBvhNode, box_min) == 0);
+static_assert(offsetof(GpuBvhNode, first) == 12);
+static_assert(offsetof(GpuBvhNode, box_max) == 16);
+static_assert(offsetof(GpuBvhNode, count) == 28);
+static_assert(offsetof(GpuBvhNode, skip) == 32);
+static_assert(offsetof(GpuBvhNode, second_child) == 36);
+static_assert(offsetof(GpuBvhNode, leaf) == 40);
+static_assert(sizeof(BvhWorkItem) == 8 && offsetof(BvhWorkItem, view_mask) == 4);
+static_assert(sizeof(BvhRange) == 16 && offsetof(BvhRange, view) == 8);
+static_assert(sizeof(BvhDispatch) == 16);
+static_assert(offsetof(BvhDispatch, x) == offsetof(VkDispatchIndirectCommand, x));
+static_assert(offsetof(BvhDispatch, y) == offsetof(VkDispatchIndirectCommand, y));
+static_assert(offsetof(BvhDispatch, z) == offsetof(VkDispatchIndirectCommand, z));
+static_assert(sizeof(BvhTraversal) == 80);
+static_assert(offsetof(BvhTraversal, range_count) == 8 && offsetof(BvhTraversal, test_count) == 12);
+static_assert(offsetof(BvhTraversal, overflow) == 16);
+static_assert(offsetof(BvhTraversal, level) == 32);
+static_assert(offsetof(BvhTraversal, accept) == 48);
+static_assert(offsetof(BvhTraversal, test) == 64);
+static_assert(sizeof(BvhCullParams) == 48);
+static_assert(offsetof(BvhCullParams, level) == 28);
+static_assert(offsetof(BvhCullParams, max_groups_x) == 32);
+static_assert(MAX_FRUSTUM_PLANES <= BVH_MASK_BITS, "plane masks must fit their bits");
 
 // DrawCommand starts with exactly VkDrawIndexedIndirectCommand.
 static_assert(sizeof(DrawCommand) == 24);

@@ -40,6 +40,12 @@ struct CullCase {
   bool multi_view = false;  ///< written as "frusta" rather than "frustum"
   std::vector<Volume> volumes;
   std::vector<Object> objects;  ///< empty, or one per volume (written only)
+  /// Work done per view (written only, as "tests": [{"view", "cull", "node_tests", "object_tests"}]).
+  struct Tests {
+    std::string cull;  ///< "flat" or "bvh"
+    std::size_t node_tests = 0, object_tests = 0;
+  };
+  std::vector<Tests> tests;
 };
 
 /// Parses a cull case; throws InputError naming `source` and the JSON path of what is wrong

@@ -7,8 +7,10 @@
 #ifdef __cplusplus
 #include <cstdint>
 #include <glm/mat4x4.hpp>
+#include <glm/vec3.hpp>
 #include <glm/vec4.hpp>
 namespace cullpipe::gpu {
+using vec3 = glm::vec3;
 using vec4 = glm::vec4;
 using mat4 = glm::mat4;
 using uint = std::uint32_t;
@@ -107,9 +109,109 @@ struct DrawCommand {
 struct ViewCounters {
   uint visible_count;  // visible objects found; may exceed visible_capacity (overflow)
   uint inside_count;   // of which INSIDE
+  uint node_tests;     // hierarchical pass: BVH node boxes tested (flat pass: 0)
+  uint object_tests;   // hierarchical pass: objects tested in INTERSECTING leaves (flat pass: 0)
+};
+
+// ---- hierarchical culling (shaders/cull_bvh.comp) ----
+// The BVH is stored depth first (host/bvh flatten): a node's first child follows it, `skip`
+// is the index of the node after its subtree, and every subtree's objects are the range
+// [first, first + count) of the object-order buffer.
+
+// Invocations per workgroup of the hierarchical passes, and objects per accepted-range chunk
+// (one workgroup per chunk).
+CP_CONST BVH_CULL_GROUP_SIZE = 64u;
+
+// Tree levels one LEVEL dispatch covers: an item's node and, when it is INTERSECTING, its
+// children (fewer dispatches; each node is still tested once).
+CP_CONST BVH_LEVELS_PER_DISPATCH = 2u;
+
+// Passes of cull_bvh.comp, selected by specialization constant 0.
+CP_CONST BVH_PASS_SEED = 0u;    // one root work item per view, counters reset
+CP_CONST BVH_PASS_LEVEL = 1u;   // test one level's work items, queue the next level; the last
+                                // workgroup to finish writes the next level's dispatch arguments
+CP_CONST BVH_PASS_FINISH = 2u;  // dispatch arguments for the accept and test passes
+CP_CONST BVH_PASS_ACCEPT = 3u;  // INSIDE ranges: every object INSIDE, no tests
+CP_CONST BVH_PASS_TEST = 4u;    // objects of INTERSECTING leaves, tested on the straddled planes
+CP_CONST BVH_PASS_COUNT = 5u;
+
+// Plane masks (Assarsson & Moller 2000) take the low 8 bits of a work item's view_mask.
+CP_CONST BVH_MASK_BITS = 8u;
+
+struct GpuBvhNode {
+  vec3 box_min;
+  uint first;         // first object (index into the object-order buffer) of the subtree
+  vec3 box_max;
+  uint count;         // objects in the subtree
+  uint skip;          // node after this subtree
+  uint second_child;  // inner node: index of its second child (its first is this index + 1)
+  uint leaf;          // 1 for a leaf
+  uint reserved;
+};
+
+// A node (level queues) or an object slot (test list) with its view and plane mask:
+// view_mask = view << BVH_MASK_BITS | planes still to test.
+struct BvhWorkItem {
+  uint index;
+  uint view_mask;
+};
+
+// BVH_CULL_GROUP_SIZE objects of an INSIDE subtree, accepted by one workgroup.
+struct BvhRange {
+  uint first;  // index into the object-order buffer
+  uint count;
+  uint view;
+  uint reserved;
+};
+
+// Indirect dispatch arguments (x, y, z = VkDispatchIndirectCommand) and the items they cover.
+struct BvhDispatch {
+  uint x;
+  uint y;
+  uint z;
+  uint items;
+};
+
+// Queue state of one hierarchical pass, written only by the GPU.
+struct BvhTraversal {
+  uint queue_count[2];  // work items in each half of the level queue (ping-pong by level parity)
+  uint range_count;     // accepted chunks
+  uint test_count;      // object tests queued
+  uint overflow;        // nonzero when a queue was too small (never, with the host's capacities)
+  uint groups_done;     // workgroups of the running level that have finished
   uint reserved0;
   uint reserved1;
+  BvhDispatch level;    // arguments of the next level's dispatch
+  BvhDispatch accept;   // arguments of the accept pass
+  BvhDispatch test;     // arguments of the test pass
 };
+
+// Push constants of every hierarchical pass.
+struct BvhCullParams {
+  uint object_count;
+  uint node_count;
+  uint view_count;
+  uint visible_capacity;  // per view
+  uint queue_capacity;    // work items per half of the level queue
+  uint range_capacity;    // accepted chunks
+  uint test_capacity;     // object tests
+  uint level;             // LEVEL: which LEVEL dispatch this is (its input queue half = level & 1)
+  uint max_groups_x;      // maxComputeWorkGroupCount[0]: larger dispatches fold into y
+  uint reserved0;
+  uint reserved1;
+  uint reserved2;
+};
+
+// Storage-buffer bindings of the hierarchical passes (set 0). 0..6 mean what they mean for
+// the flat pass, except that BINDING_BOUNDS holds the GpuAabb of each object in tree order (the
+// order of BVH_BINDING_OBJECTS), so a leaf's boxes are read together.
+CP_CONST BVH_BINDING_NODES = 7u;      // GpuBvhNode, depth first
+CP_CONST BVH_BINDING_OBJECTS = 8u;    // object ids in tree order
+CP_CONST BVH_BINDING_QUEUE = 9u;      // BvhWorkItem: two halves of queue_capacity
+CP_CONST BVH_BINDING_RANGES = 10u;    // BvhRange
+CP_CONST BVH_BINDING_TESTS = 11u;     // BvhWorkItem (index = object slot)
+CP_CONST BVH_BINDING_TRAVERSAL = 12u; // BvhTraversal (also the indirect dispatch buffer)
+CP_CONST BVH_BINDING_COUNT = 13u;
 
 // ---- host/render: the headless rasteriser that draws the culled objects ----
 

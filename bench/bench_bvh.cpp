@@ -1,0 +1,248 @@
+// bench_bvh: BVH builders and hierarchical culling, measured in one run, medians of repeats.
+//
+// Part "build": for each builder and object count, the median build time (one thread),
+// objects per second and the tree's SAH cost, also as a ratio to binned SAH's cost.
+// Part "cull": flat against hierarchical culling of the same objects, on the CPU (scalar
+// reference vs scalar traversal) and on the GPU (flat pass vs hierarchical passes, timestamps),
+// with the camera's field of view chosen so that about 1%, 10%, 50%, ... of the objects are
+// visible. Every hierarchical answer is checked: CPU traversal == flat reference, GPU == CPU.
+//
+// usage: bench_bvh [--part build|cull|all] [--sizes 1000,...] [--builders a,b|all]
+//                  [--cull-size N] [--fractions 0.01,0.1,0.5] [--repeats R] [--device NAME] [--json FILE]
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "bvh/builders.hpp"
+#include "bvh/bvh.hpp"
+#include "cull/reference.hpp"
+#include "gpu/bvh_culler.hpp"
+#include "gpu/gpu_culler.hpp"
+#include "scene/generators.hpp"
+#include "vk/context.hpp"
+
+using namespace cullpipe;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const std::size_t n = v.size();
+  return n == 0 ? 0.0 : n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+double since(Clock::time_point t0) { return double(std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - t0).count()); }
+
+std::vector<std::string> split(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream in(s);
+  for (std::string item; std::getline(in, item, ',');)
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+// Largest n each builder is run at (quadratic and cubic builders are oracles, not tools).
+std::size_t size_limit(const std::string& builder) {
+  if (builder == "agglomerative-brute") return 1000;
+  if (builder == "agglomerative-pq") return 20000;
+  return SIZE_MAX;
+}
+
+nlohmann::json bench_builders(const std::vector<std::size_t>& sizes, std::vector<std::string> builders, int repeats_override) {
+  if (builders.empty() || (builders.size() == 1 && builders[0] == "all")) {
+    builders.clear();
+    for (const bvh::BuilderInfo& b : bvh::builders()) builders.emplace_back(b.name);
+  }
+  std::printf("BVH builders: uniform random scene, leaves of <= 4, one thread, median build time\n\n");
+  std::printf("%-26s %9s %8s %11s %9s %10s %11s\n", "builder", "N", "repeats", "build ms", "Mobj/s", "SAH cost", "SAH/binned");
+  nlohmann::json cells = nlohmann::json::array();
+  for (std::size_t n : sizes) {
+    const std::vector<Aabb> boxes = world_aabbs(generate_scene(SceneKind::Uniform, n, 7));
+    double binned_cost = 0.0;
+    for (const std::string& name : builders) {
+      if (n > size_limit(name)) continue;
+      const int reps = repeats_override > 0 ? repeats_override : int(std::clamp<std::size_t>(2'000'000 / std::max<std::size_t>(n, 1), 3, 25));
+      std::vector<double> times;
+      bvh::Tree tree;
+      for (int r = 0; r < reps; ++r) {
+        const auto t0 = Clock::now();
+        tree = bvh::build(name, boxes);
+        times.push_back(since(t0));
+      }
+      if (const std::string why = bvh::check_tree(tree, boxes); !why.empty()) {
+        std::fprintf(stderr, "bench_bvh: %s built an invalid tree at n = %zu: %s\n", name.c_str(), n, why.c_str());
+        std::exit(1);
+      }
+      const double t = median(times), cost = bvh::metrics(tree).sah_cost;
+      if (name == "binned-sah") binned_cost = cost;
+      const double ratio = binned_cost > 0 ? cost / binned_cost : 0.0;
+      std::printf("%-26s %9zu %8d %11.2f %9.2f %10.2f %11.3f\n", name.c_str(), n, reps, t / 1e6, double(n) / t * 1e3, cost, ratio);
+      std::fflush(stdout);
+      cells.push_back({{"builder", name}, {"n", n}, {"build_ns", t}, {"objects_per_s", double(n) / t * 1e9}, {"sah_cost", cost},
+                       {"sah_over_binned", ratio}});
+    }
+    std::printf("\n");
+  }
+  return cells;
+}
+
+// A camera looking at the centre of the scene from outside, with a field of view chosen by
+// bisection so that about `fraction` of the objects are visible.
+Frustum frustum_for_fraction(const bvh::FlatTree& flat, const std::vector<Aabb>& boxes, const Aabb& bounds, double fraction,
+                             double& achieved) {
+  Camera cam = framing_camera(bounds);
+  cam.aspect = 1.0f;
+  double lo = 0.001, hi = 179.0;  // degrees
+  Frustum best = Frustum::from_view_proj(cam.view_proj());
+  double best_error = INFINITY;
+  for (int step = 0; step < 40; ++step) {
+    const double mid = 0.5 * (lo + hi);
+    cam.fov_y_degrees = float(mid);
+    const Frustum f = Frustum::from_view_proj(cam.view_proj());
+    const double visible = double(bvh::cull_hierarchical(flat, boxes, f).visible) / double(boxes.size());
+    if (std::abs(visible - fraction) < best_error) best_error = std::abs(visible - fraction), best = f, achieved = visible;
+    if (visible < fraction) lo = mid;
+    else hi = mid;
+    if (best_error < fraction * 0.02) break;
+  }
+  return best;
+}
+
+nlohmann::json bench_cull(std::size_t n, const std::vector<double>& fractions, int repeats_override, const std::string& device,
+                          bool& all_agree) {
+  vk::ContextOptions options;
+  options.device_filter = device;
+  vk::Context ctx(options);
+  gpu::GpuCuller flat_culler(ctx);
+  gpu::BvhCuller bvh_culler(ctx);
+  const Scene scene = generate_scene(SceneKind::Uniform, n, 11);
+  const std::vector<Aabb> boxes = world_aabbs(scene);
+  const auto t0 = Clock::now();
+  const bvh::FlatTree flat = bvh::flatten(bvh::build_binned_sah(boxes));
+  const double build_ns = since(t0);
+  flat_culler.upload(std::span<const Aabb>(boxes));
+  bvh_culler.upload(flat, boxes);
+  std::printf("Hierarchical vs flat culling: %zu uniform random AABBs, binned-SAH tree (%zu nodes, built in %.0f ms)\n", n,
+              flat.nodes.size(), build_ns / 1e6);
+  std::printf("gpu: %s, %s\n\n", ctx.info().name.c_str(), ctx.info().driver.c_str());
+  std::printf("%8s %8s %12s %12s %7s %12s %12s %7s %11s %11s %6s\n", "target", "visible", "cpu flat ms", "cpu bvh ms", "cpu x",
+              "gpu flat ms", "gpu bvh ms", "gpu x", "node tests", "obj tests", "agree");
+  nlohmann::json cells = nlohmann::json::array();
+  const int reps = repeats_override > 0 ? repeats_override : 7;
+  for (double fraction : fractions) {
+    double achieved = 0.0;
+    const Frustum f = frustum_for_fraction(flat, boxes, scene.bounds(), fraction, achieved);
+    const Frustum views[1] = {f};
+    std::vector<Classification> ref(boxes.size());
+    std::vector<double> cpu_flat, cpu_bvh, gpu_flat, gpu_bvh;
+    bvh::HierarchicalResult h;
+    reference::CullCounts counts;
+    const gpu::CullOptions counters_only{false, false, 0};
+    flat_culler.cull(views, counters_only);  // warm-up: pipelines compile on first use
+    bvh_culler.cull(views, counters_only);
+    for (int r = 0; r < reps; ++r) {  // interleaved, so drift hits all alike
+      auto t = Clock::now();
+      counts = reference::classify_all(std::span<const Aabb>(boxes), f, ref);
+      cpu_flat.push_back(since(t));
+      t = Clock::now();
+      h = bvh::cull_hierarchical(flat, boxes, f);
+      cpu_bvh.push_back(since(t));
+      gpu_flat.push_back(flat_culler.cull(views, counters_only).timings.gpu_ns);
+      gpu_bvh.push_back(bvh_culler.cull(views, counters_only).timings.gpu_ns);
+    }
+    const gpu::CullResult g = bvh_culler.cull(views);
+    const bool agree = h.classes == ref && g.views[0].classes == h.classes && g.views[0].node_tests == h.node_tests &&
+                       g.views[0].object_tests == h.object_tests && g.views[0].counts == counts;
+    all_agree &= agree;
+    const double cf = median(cpu_flat), cb = median(cpu_bvh), gf = median(gpu_flat), gb = median(gpu_bvh);
+    std::printf("%7.1f%% %7.1f%% %12.3f %12.3f %7.2f %12.3f %12.3f %7.2f %11zu %11zu %6s\n", 100 * fraction, 100 * achieved, cf / 1e6,
+                cb / 1e6, cf / cb, gf / 1e6, gb / 1e6, gf / std::max(gb, 1.0), h.node_tests, h.object_tests, agree ? "yes" : "NO");
+    std::fflush(stdout);
+    cells.push_back({{"target_fraction", fraction}, {"visible_fraction", achieved}, {"cpu_flat_ns", cf}, {"cpu_bvh_ns", cb},
+                     {"gpu_flat_ns", gf}, {"gpu_bvh_ns", gb}, {"node_tests", h.node_tests}, {"object_tests", h.object_tests},
+                     {"agree", agree}});
+  }
+  return cells;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string part = "all", device, json_path;
+  std::vector<std::size_t> sizes = {1000, 10000, 100000, 1000000};
+  std::vector<std::string> builders = {"all"};
+  std::vector<double> fractions = {0.01, 0.1, 0.5};
+  std::size_t cull_size = 1000000;
+  int repeats = 0;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "bench_bvh: %s needs a value\n", a.c_str());
+        std::exit(2);
+      }
+      return argv[++i];
+    };
+    auto count = [&](const std::string& s) {
+      char* end = nullptr;
+      const double v = std::strtod(s.c_str(), &end);
+      if (*end != '\0' || !(v >= 1) || v > 1e8) {
+        std::fprintf(stderr, "bench_bvh: '%s' is not a count\n", s.c_str());
+        std::exit(2);
+      }
+      return std::size_t(v);
+    };
+    if (a == "--part") {
+      part = value();
+    } else if (a == "--sizes") {
+      sizes.clear();
+      for (const std::string& s : split(value())) sizes.push_back(count(s));
+    } else if (a == "--builders") {
+      builders = split(value());
+    } else if (a == "--cull-size") {
+      cull_size = count(value());
+    } else if (a == "--fractions") {
+      fractions.clear();
+      for (const std::string& s : split(value())) fractions.push_back(std::strtod(s.c_str(), nullptr));
+    } else if (a == "--repeats") {
+      repeats = std::atoi(value().c_str());
+    } else if (a == "--device") {
+      device = value();
+    } else if (a == "--json") {
+      json_path = value();
+    } else {
+      std::fprintf(stderr,
+                   "usage: bench_bvh [--part build|cull|all] [--sizes N,..] [--builders a,b|all] [--cull-size N] "
+                   "[--fractions f,..] [--repeats R] [--device NAME] [--json FILE]\n");
+      return a == "--help" ? 0 : 2;
+    }
+  }
+  if (part != "build" && part != "cull" && part != "all") {
+    std::fprintf(stderr, "bench_bvh: --part must be build, cull or all\n");
+    return 2;
+  }
+  nlohmann::json j;
+  bool all_agree = true;
+  try {
+    if (part != "cull") j["build"] = bench_builders(sizes, builders, repeats);
+    if (part != "build") j["cull"] = bench_cull(cull_size, fractions, repeats, device, all_agree);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_bvh: %s\n", e.what());
+    return 1;
+  }
+  if (!json_path.empty()) std::ofstream(json_path) << j.dump(2) << "\n";
+  if (!all_agree) {
+    std::fprintf(stderr, "bench_bvh: hierarchical and flat culling disagree in at least one cell\n");
+    return 1;
+  }
+  return 0;
+}

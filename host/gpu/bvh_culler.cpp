@@ -1,0 +1,263 @@
+#include "gpu/bvh_culler.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+#include <stdexcept>
+#include <string>
+
+#include "geom/validate.hpp"
+#include "gpu/pass_support.hpp"
+#include "vk/check.hpp"
+
+// SPIR-V compiled from shaders/cull_bvh.comp at build time (glslangValidator --vn).
+#include "cull_bvh.spv.h"
+
+namespace cullpipe::gpu {
+namespace {
+
+constexpr VkBufferUsageFlags kStorage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
+
+}  // namespace
+
+BvhCuller::BvhCuller(const vk::Context& ctx) : ctx_(ctx) {
+  const VkPhysicalDeviceLimits& limits = ctx_.properties().limits;
+  if (limits.maxComputeWorkGroupSize[0] < BVH_CULL_GROUP_SIZE || limits.maxComputeWorkGroupInvocations < BVH_CULL_GROUP_SIZE)
+    throw vk::Error("hierarchical culling needs workgroups of " + std::to_string(BVH_CULL_GROUP_SIZE) + " invocations; " +
+                    ctx_.info().name + " allows " + std::to_string(limits.maxComputeWorkGroupInvocations));
+  if (limits.maxPerStageDescriptorStorageBuffers < BVH_BINDING_COUNT)
+    throw vk::Error("hierarchical culling needs " + std::to_string(BVH_BINDING_COUNT) + " storage buffers per stage; " +
+                    ctx_.info().name + " allows " + std::to_string(limits.maxPerStageDescriptorStorageBuffers));
+  resources_ = std::make_unique<detail::PassResources>(ctx_, pipeline(BVH_PASS_LEVEL, false).set_layout(), BVH_BINDING_COUNT);
+}
+
+BvhCuller::~BvhCuller() = default;
+
+const vk::ComputePipeline& BvhCuller::pipeline(std::uint32_t pass, bool draws) {
+  if (pass != BVH_PASS_ACCEPT && pass != BVH_PASS_TEST) draws = false;
+  std::unique_ptr<vk::ComputePipeline>& slot = pipelines_[pass][draws];
+  if (slot) return *slot;
+  static const char* names[BVH_PASS_COUNT] = {"seed", "level", "finish", "accept", "test"};
+  const std::string name = std::string("hierarchical cull (") + names[pass] + (draws ? ", draws" : "") + ")";
+  // Specialization constants: 0 pass, 1 group size, 2 unused, 3 draws.
+  const std::uint32_t spec[4] = {pass, group_size_, 0u, draws ? 1u : 0u};
+  slot = std::make_unique<vk::ComputePipeline>(
+      ctx_, vk::ComputePipelineDesc{std::span<const std::uint32_t>(cullpipe_cull_bvh_spv),
+                                    BVH_BINDING_COUNT, sizeof(BvhCullParams), spec, name.c_str()});
+  return *slot;
+}
+
+void BvhCuller::upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes) {
+  const std::size_t n = boxes.size(), nodes = tree.nodes.size();
+  auto bad = [&](const std::string& what) { throw std::invalid_argument("BvhCuller::upload: " + what); };
+  if (tree.objects.size() != n)
+    bad("the tree orders " + std::to_string(tree.objects.size()) + " objects, but " + std::to_string(n) + " boxes were given");
+  if ((nodes == 0) != (n == 0)) bad(nodes ? "a tree over no objects must have no nodes" : "no nodes for " + std::to_string(n) + " objects");
+  if (nodes >= std::size_t(UINT32_MAX) || n >= std::size_t(UINT32_MAX)) bad("too many nodes or objects for 32-bit indices");
+  std::vector<char> seen(n, 0);
+  for (std::uint32_t o : tree.objects) {
+    if (o >= n) bad("object id " + std::to_string(o) + " out of range (" + std::to_string(n) + " objects)");
+    if (seen[o]++) bad("object id " + std::to_string(o) + " appears twice");
+  }
+  // Depth of every node (children follow their parent in depth-first order) and link checks.
+  std::vector<std::uint32_t> depth(nodes, 0);
+  std::vector<GpuBvhNode> packed(nodes);
+  if (nodes) depth[0] = 1;
+  for (std::size_t i = 0; i < nodes; ++i) {
+    const bvh::FlatNode& node = tree.nodes[i];
+    const std::string at = "node " + std::to_string(i) + ": ";
+    if (depth[i] == 0) bad(at + "not reachable from the root in depth-first order");
+    if (node.skip <= i || node.skip > nodes) bad(at + "skip index " + std::to_string(node.skip) + " out of range");
+    if (std::size_t(node.first) + node.count > n) bad(at + "object range past the object list");
+    if (const std::string why = invalid_reason(node.box); !why.empty()) bad(at + "invalid box: " + why);
+    std::uint32_t second = bvh::kNone;
+    if (node.leaf) {
+      if (node.skip != i + 1) bad(at + "leaf whose skip is not the next node");
+    } else {
+      if (i + 1 >= node.skip) bad(at + "inner node without children");
+      second = tree.nodes[i + 1].skip;
+      if (second <= i + 1 || second >= node.skip) bad(at + "second child " + std::to_string(second) + " out of range");
+      depth[i + 1] = depth[second] = depth[i] + 1;
+    }
+    packed[i] = {node.box.min, node.first, node.box.max, node.count, node.skip, second, node.leaf ? 1u : 0u, 0u};
+  }
+  std::uint32_t levels = 0;
+  std::vector<std::size_t> width;
+  for (std::uint32_t d : depth) {
+    levels = std::max(levels, d);
+    if (width.size() < d) width.resize(d, 0);
+    ++width[d - 1];
+  }
+
+  const VkDeviceSize box_bytes = VkDeviceSize(n) * sizeof(GpuAabb), node_bytes = VkDeviceSize(nodes) * sizeof(GpuBvhNode);
+  detail::check_storage_range(ctx_, box_bytes, std::to_string(n) + " object boxes");
+  detail::check_storage_range(ctx_, node_bytes, std::to_string(nodes) + " BVH nodes");
+  object_count_ = node_count_ = 0;  // stay 0 if an allocation below fails
+  bool& dirty = descriptors_dirty_;
+  detail::ensure_buffer(ctx_, bounds_, box_bytes, kStorage, "object box buffer", dirty);
+  detail::ensure_buffer(ctx_, nodes_, node_bytes, kStorage, "BVH node buffer", dirty);
+  detail::ensure_buffer(ctx_, objects_, VkDeviceSize(n) * sizeof(std::uint32_t), kStorage, "BVH object order buffer", dirty);
+  auto gpu_boxes = bounds_.as<GpuAabb>();
+  for (std::size_t i = 0; i < n; ++i) gpu_boxes[i] = pack(boxes[tree.objects[i]]);  // tree order
+  if (nodes) std::memcpy(nodes_.data(), packed.data(), node_bytes);
+  if (n) std::memcpy(objects_.data(), tree.objects.data(), n * sizeof(std::uint32_t));
+  object_count_ = n;
+  node_count_ = nodes;
+  levels_ = levels;
+  widest_level_ = width.empty() ? 0 : *std::max_element(width.begin(), width.end());
+}
+
+void BvhCuller::upload_draws(std::span<const DrawCommand> templates) {
+  const VkDeviceSize bytes = VkDeviceSize(templates.size()) * sizeof(DrawCommand);
+  detail::check_storage_range(ctx_, bytes, std::to_string(templates.size()) + " draw templates");
+  template_count_ = 0;
+  detail::ensure_buffer(ctx_, templates_, bytes, kStorage, "draw template buffer", descriptors_dirty_);
+  if (bytes) std::memcpy(templates_.data(), templates.data(), bytes);
+  template_count_ = templates.size();
+}
+
+void BvhCuller::update_descriptors() {
+  if (!descriptors_dirty_) return;
+  static_assert(BINDING_BOUNDS == 0 && BINDING_CLASSES == 1 && BINDING_VISIBLE == 2 && BINDING_COUNTERS == 3 &&
+                BINDING_VIEWS == 4 && BINDING_DRAW_TEMPLATES == 5 && BINDING_DRAWS == 6 && BVH_BINDING_NODES == 7 &&
+                BVH_BINDING_OBJECTS == 8 && BVH_BINDING_QUEUE == 9 && BVH_BINDING_RANGES == 10 && BVH_BINDING_TESTS == 11 &&
+                BVH_BINDING_TRAVERSAL == 12 && BVH_BINDING_COUNT == 13);
+  const vk::Buffer* const buffers[BVH_BINDING_COUNT] = {&bounds_, &classes_, &visible_, &counters_, &views_,
+                                                        &templates_, &draws_, &nodes_, &objects_, &queue_,
+                                                        &ranges_, &tests_, &traversal_};
+  resources_->write(buffers);
+  descriptors_dirty_ = false;
+}
+
+void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& options) {
+  if (options.ordered)
+    throw std::invalid_argument("hierarchical culling writes visible ids in arrival order; CullOptions::ordered is not supported");
+  if (options.draws && template_count_ != object_count_)
+    throw std::invalid_argument("draw commands requested, but " + std::to_string(template_count_) + " draw templates were uploaded for " +
+                                std::to_string(object_count_) + " objects (call upload_draws)");
+  const std::size_t v = views.size();
+  if (v >= (std::size_t(1) << (32 - BVH_MASK_BITS))) throw std::length_error(std::to_string(v) + " views are too many for one pass");
+  for (const Frustum& f : views)
+    if (f.plane_count > MAX_FRUSTUM_PLANES) throw std::invalid_argument("a frustum has more than 6 planes");
+  const std::size_t capacity = options.visible_capacity ? options.visible_capacity : object_count_;
+  // Work-queue capacities that cannot overflow: a level holds at most its nodes per view; the
+  // accepted subtrees of a view are disjoint, so their full chunks number at most objects /
+  // group size; each object is in the test list at most once per view.
+  queue_capacity_ = v * widest_level_;
+  range_capacity_ = v * (object_count_ / group_size_ + 1);
+  test_capacity_ = v * object_count_;
+  const std::string views_x = std::to_string(v) + " views x ";
+  auto check = [&](VkDeviceSize bytes, const std::string& what) { detail::check_storage_range(ctx_, bytes, what); };
+  const VkDeviceSize outputs = VkDeviceSize(object_count_) * v * sizeof(std::uint32_t);
+  const VkDeviceSize visible = VkDeviceSize(capacity) * v * sizeof(std::uint32_t);
+  const VkDeviceSize draw_bytes = options.draws ? VkDeviceSize(capacity) * v * sizeof(DrawCommand) : 0;
+  const VkDeviceSize queue_bytes = 2 * VkDeviceSize(queue_capacity_) * sizeof(BvhWorkItem);
+  const VkDeviceSize range_bytes = VkDeviceSize(range_capacity_) * sizeof(BvhRange);
+  const VkDeviceSize test_bytes = VkDeviceSize(test_capacity_) * sizeof(BvhWorkItem);
+  check(outputs, views_x + std::to_string(object_count_) + " objects of output");
+  check(visible, views_x + std::to_string(capacity) + " visible ids");
+  check(draw_bytes, views_x + std::to_string(capacity) + " draw commands");
+  check(queue_bytes, views_x + std::to_string(widest_level_) + " nodes of one BVH level (work queue)");
+  check(range_bytes, views_x + "accepted ranges");
+  check(test_bytes, views_x + std::to_string(object_count_) + " object tests (work queue)");
+  bool& dirty = descriptors_dirty_;
+  detail::ensure_buffer(ctx_, bounds_, 0, kStorage, "object box buffer", dirty);
+  detail::ensure_buffer(ctx_, nodes_, 0, kStorage, "BVH node buffer", dirty);
+  detail::ensure_buffer(ctx_, objects_, 0, kStorage, "BVH object order buffer", dirty);
+  detail::ensure_buffer(ctx_, templates_, 0, kStorage, "draw template buffer", dirty);
+  detail::ensure_buffer(ctx_, classes_, outputs, kStorage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, "classification buffer", dirty);
+  detail::ensure_buffer(ctx_, visible_, visible, kStorage, "visible-id buffer", dirty);
+  detail::ensure_buffer(ctx_, counters_, v * sizeof(ViewCounters),
+                        kStorage | VK_BUFFER_USAGE_TRANSFER_DST_BIT | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "counter buffer", dirty);
+  detail::ensure_buffer(ctx_, views_, v * sizeof(GpuFrustum), kStorage, "view buffer", dirty);
+  detail::ensure_buffer(ctx_, draws_, draw_bytes, kStorage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "draw buffer", dirty);
+  detail::ensure_buffer(ctx_, queue_, queue_bytes, kStorage, "BVH level queue", dirty);
+  detail::ensure_buffer(ctx_, ranges_, range_bytes, kStorage, "BVH accepted-range list", dirty);
+  detail::ensure_buffer(ctx_, tests_, test_bytes, kStorage, "BVH object-test list", dirty);
+  detail::ensure_buffer(ctx_, traversal_, sizeof(BvhTraversal), kStorage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT,
+                        "BVH traversal state", dirty);
+  update_descriptors();
+  auto gpu_views = views_.as<GpuFrustum>();
+  for (std::size_t i = 0; i < v; ++i) gpu_views[i] = pack(views[i]);
+  last_capacity_ = capacity;
+  last_view_count_ = v;
+  last_options_ = options;
+  for (std::uint32_t pass = BVH_PASS_SEED; pass <= BVH_PASS_TEST; ++pass) pipeline(pass, options.draws);
+}
+
+void BvhCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
+  const std::size_t view_count = last_view_count_;
+  detail::record_entry_barrier(ctx_, cmd);
+  vkCmdFillBuffer(cmd, counters_.handle(), 0, view_count * sizeof(ViewCounters), 0);
+  // Objects no pass reaches are OUTSIDE; without class readback the buffer is left as is.
+  if (object_count_ && last_options_.classes) vkCmdFillBuffer(cmd, classes_.handle(), 0, VkDeviceSize(object_count_) * view_count * 4, CLASS_OUTSIDE);
+  detail::record_transfer_to_compute(cmd);
+  if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, timestamps, 0);
+
+  BvhCullParams params{};
+  params.object_count = std::uint32_t(object_count_);
+  params.node_count = std::uint32_t(node_count_);
+  params.view_count = std::uint32_t(view_count);
+  params.visible_capacity = std::uint32_t(last_capacity_);
+  params.queue_capacity = std::uint32_t(queue_capacity_);
+  params.range_capacity = std::uint32_t(range_capacity_);
+  params.test_capacity = std::uint32_t(test_capacity_);
+  params.max_groups_x = ctx_.properties().limits.maxComputeWorkGroupCount[0];
+  const bool draws = last_options_.draws;
+  VkDescriptorSet set = resources_->set();
+  auto bind = [&](std::uint32_t pass) {
+    const vk::ComputePipeline& pipe = pipeline(pass, draws);
+    vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.pipeline());
+    vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.layout(), 0, 1, &set, 0, nullptr);
+    vkCmdPushConstants(cmd, pipe.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
+  };
+  // Every barrier also covers indirect-argument reads: validation counts each writable buffer
+  // bound to a dispatch (the traversal state among them) as written by it.
+  auto barrier = [&] { detail::record_compute_to_compute(cmd, true); };
+  VkBuffer state = traversal_.handle();
+  bind(BVH_PASS_SEED);
+  vkCmdDispatch(cmd, 1, 1, 1);
+  for (std::uint32_t level = 0; level * BVH_LEVELS_PER_DISPATCH < levels_; ++level) {
+    params.level = level;
+    barrier();
+    bind(BVH_PASS_LEVEL);
+    vkCmdDispatchIndirect(cmd, state, offsetof(BvhTraversal, level));
+  }
+  barrier();
+  bind(BVH_PASS_FINISH);
+  vkCmdDispatch(cmd, 1, 1, 1);
+  barrier();
+  bind(BVH_PASS_ACCEPT);
+  vkCmdDispatchIndirect(cmd, state, offsetof(BvhTraversal, accept));
+  barrier();  // both passes write classes, ids and counters
+  bind(BVH_PASS_TEST);
+  vkCmdDispatchIndirect(cmd, state, offsetof(BvhTraversal, test));
+  if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps, 1);
+  detail::record_exit_barrier(ctx_, cmd);
+}
+
+void BvhCuller::record(VkCommandBuffer cmd, std::span<const Frustum> views, const CullOptions& options) {
+  if (views.empty()) throw std::invalid_argument("BvhCuller::record: no views");
+  prepare(views, options);
+  record_passes(cmd, VK_NULL_HANDLE);
+}
+
+CullResult BvhCuller::read_results() const {
+  if (last_view_count_ && traversal_.as<const BvhTraversal>()[0].overflow)
+    throw std::runtime_error("hierarchical culling: a GPU work queue overflowed (a bug in cullpipe; please report it)");
+  return detail::read_outputs({counters_, classes_, visible_, draws_}, object_count_, last_view_count_, last_capacity_,
+                              last_options_);
+}
+
+CullResult BvhCuller::cull(std::span<const Frustum> views, const CullOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  if (views.empty()) return {};
+  prepare(views, options);
+  const double gpu_ns = resources_->run([&](VkCommandBuffer cmd, VkQueryPool timestamps) { record_passes(cmd, timestamps); });
+  CullResult result = read_results();
+  result.timings.gpu_ns = gpu_ns;
+  result.timings.wall_ns = double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());
+  return result;
+}
+
+}  // namespace cullpipe::gpu

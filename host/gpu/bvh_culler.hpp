@@ -1,0 +1,82 @@
+#pragma once
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "bvh/bvh.hpp"
+#include "geom/aabb.hpp"
+#include "geom/frustum.hpp"
+#include "gpu/gpu_culler.hpp"
+#include "gpu/layout.hpp"
+#include "vk/buffer.hpp"
+#include "vk/compute_pipeline.hpp"
+#include "vk/context.hpp"
+
+namespace cullpipe::gpu {
+
+/// Hierarchical frustum culling of a flattened BVH on a Vulkan device (shaders/cull_bvh.comp):
+/// one indirect dispatch per tree level over a queue of (node, view, plane mask) items, so
+/// each node box is tested once per view, in parallel; OUTSIDE drops a subtree, INSIDE
+/// accepts its object range with no further tests, INTERSECTING descends; objects of
+/// INTERSECTING leaves are tested on the planes the leaf straddles. Any number of views per
+/// pass, each with its own outputs. Classes and test counts equal bvh::cull_hierarchical bit
+/// for bit; the visible set equals flat culling's. Objects are AABBs. Visible ids and draws
+/// come in GPU arrival order (CullOptions::ordered is not supported). Not thread-safe.
+class BvhCuller {
+ public:
+  explicit BvhCuller(const vk::Context& ctx);
+  ~BvhCuller();
+  BvhCuller(const BvhCuller&) = delete;
+  BvhCuller& operator=(const BvhCuller&) = delete;
+
+  /// Uploads a flattened tree over `boxes` (tree.objects holds each id once), replacing any
+  /// earlier upload; call again after a refit. Throws std::invalid_argument when the tree is
+  /// not a tree over these boxes (ids out of range or repeated, ranges or links out of
+  /// bounds), std::length_error when a buffer would exceed maxStorageBufferRange.
+  void upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes);
+
+  /// One draw template per object, by object id (see GpuCuller::upload_draws).
+  void upload_draws(std::span<const DrawCommand> templates);
+
+  /// Culls against every view in one submission and waits (see GpuCuller::cull).
+  CullResult cull(std::span<const Frustum> views, const CullOptions& options = {});
+  /// Records the pass into the caller's command buffer (see GpuCuller::record for the rules).
+  void record(VkCommandBuffer cmd, std::span<const Frustum> views, const CullOptions& options = {});
+  /// The results of the last recorded pass, once its submission has completed. Throws
+  /// std::runtime_error if the GPU reported a work-queue overflow (a bug, never expected).
+  CullResult read_results() const;
+
+  /// Output buffers of the last pass, laid out as GpuCuller's.
+  const vk::Buffer& draw_buffer() const { return draws_; }
+  const vk::Buffer& counter_buffer() const { return counters_; }
+  std::size_t last_visible_capacity() const { return last_capacity_; }
+
+  std::size_t object_count() const { return object_count_; }
+  std::size_t node_count() const { return node_count_; }
+  /// Levels of the tree; the traversal makes one indirect dispatch per BVH_LEVELS_PER_DISPATCH of them.
+  std::uint32_t levels() const { return levels_; }
+
+ private:
+  void prepare(std::span<const Frustum> views, const CullOptions& options);
+  void record_passes(VkCommandBuffer cmd, VkQueryPool timestamps);
+  const vk::ComputePipeline& pipeline(std::uint32_t pass, bool draws);
+  void update_descriptors();
+
+  const vk::Context& ctx_;
+  std::uint32_t group_size_ = BVH_CULL_GROUP_SIZE;
+  std::unique_ptr<vk::ComputePipeline> pipelines_[BVH_PASS_COUNT][2];  // [pass][draws]
+  std::unique_ptr<detail::PassResources> resources_;
+  vk::Buffer bounds_, classes_, visible_, counters_, views_, templates_, draws_;
+  vk::Buffer nodes_, objects_, queue_, ranges_, tests_, traversal_;
+  std::size_t object_count_ = 0, node_count_ = 0, template_count_ = 0;
+  std::uint32_t levels_ = 0;
+  std::size_t widest_level_ = 0;  // most nodes on one level
+  std::size_t queue_capacity_ = 0, range_capacity_ = 0, test_capacity_ = 0;
+  std::size_t last_capacity_ = 0, last_view_count_ = 0;
+  CullOptions last_options_;
+  bool descriptors_dirty_ = true;
+};
+
+}  // namespace cullpipe::gpu

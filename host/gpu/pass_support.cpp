@@ -1,0 +1,190 @@
+#include "gpu/pass_support.hpp"
+
+#include <algorithm>
+#include <stdexcept>
+#include <vector>
+
+#include "vk/check.hpp"
+
+namespace cullpipe::gpu::detail {
+namespace {
+
+constexpr VkDeviceSize kMinBufferSize = 16;
+
+std::string mib(VkDeviceSize bytes) { return std::to_string(bytes / (1024 * 1024)) + " MiB"; }
+
+VkPipelineStageFlags graphics_stages(const vk::Context& ctx) {
+  return (ctx.queue_flags() & VK_QUEUE_GRAPHICS_BIT) ? VkPipelineStageFlags(VK_PIPELINE_STAGE_VERTEX_SHADER_BIT) : 0;
+}
+
+}  // namespace
+
+void check_storage_range(const vk::Context& ctx, VkDeviceSize bytes, const std::string& what) {
+  const VkDeviceSize limit = ctx.properties().limits.maxStorageBufferRange;
+  if (bytes > limit)
+    throw std::length_error(what + " needs " + std::to_string(bytes) + " bytes (" + mib(bytes) +
+                            "), more than one storage buffer can hold on " + ctx.info().name + " (maxStorageBufferRange " +
+                            std::to_string(limit) + " bytes, " + mib(limit) + ")");
+}
+
+void ensure_buffer(const vk::Context& ctx, vk::Buffer& buffer, VkDeviceSize bytes, VkBufferUsageFlags usage,
+                   const char* what, bool& dirty) {
+  bytes = std::max(bytes, kMinBufferSize);
+  if (buffer && buffer.size() >= bytes) return;
+  dirty = true;
+  buffer = vk::Buffer();  // free first, so peak memory is not old + new
+  buffer = vk::Buffer(ctx, bytes, usage, what);
+}
+
+void record_entry_barrier(const vk::Context& ctx, VkCommandBuffer cmd) {
+  const VkMemoryBarrier barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, 0, 0};  // execution dependency (WAR)
+  vkCmdPipelineBarrier(cmd,
+                       VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT |
+                           graphics_stages(ctx),
+                       VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &barrier, 0, nullptr, 0,
+                       nullptr);
+}
+
+void record_exit_barrier(const vk::Context& ctx, VkCommandBuffer cmd) {
+  const VkMemoryBarrier barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, VK_ACCESS_SHADER_WRITE_BIT,
+                                VK_ACCESS_INDIRECT_COMMAND_READ_BIT | VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_HOST_READ_BIT};
+  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+                       VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_HOST_BIT |
+                           graphics_stages(ctx),
+                       0, 1, &barrier, 0, nullptr, 0, nullptr);
+}
+
+void record_transfer_to_compute(VkCommandBuffer cmd) {
+  const VkMemoryBarrier barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, VK_ACCESS_TRANSFER_WRITE_BIT,
+                                VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT};
+  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &barrier, 0, nullptr, 0,
+                       nullptr);
+}
+
+void record_compute_to_compute(VkCommandBuffer cmd, bool indirect) {
+  VkMemoryBarrier barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT,
+                          VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT};
+  VkPipelineStageFlags dst = VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT;
+  if (indirect) {
+    barrier.dstAccessMask |= VK_ACCESS_INDIRECT_COMMAND_READ_BIT;
+    dst |= VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT;
+  }
+  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, dst, 0, 1, &barrier, 0, nullptr, 0, nullptr);
+}
+
+CullResult read_outputs(const OutputBuffers& buffers, std::size_t object_count, std::size_t view_count, std::size_t capacity,
+                        const CullOptions& options) {
+  CullResult result;
+  result.views.resize(view_count);
+  if (view_count == 0) return result;
+  const auto counters = buffers.counters.as<const ViewCounters>();
+  for (std::size_t v = 0; v < view_count; ++v) {
+    ViewResult& out = result.views[v];
+    const ViewCounters& c = counters[v];
+    out.counts = {c.visible_count, c.inside_count, c.visible_count - c.inside_count};
+    out.overflow = c.visible_count > capacity;
+    out.node_tests = c.node_tests;
+    out.object_tests = c.object_tests;
+    const std::size_t listed = std::min<std::size_t>(c.visible_count, capacity);
+    if (options.classes) {
+      out.classes.resize(object_count);
+      const std::uint32_t* src = buffers.classes.as<const std::uint32_t>().data() + v * object_count;
+      for (std::size_t i = 0; i < object_count; ++i) out.classes[i] = static_cast<Classification>(src[i]);
+    }
+    if (options.visible_ids) {
+      const std::uint32_t* src = buffers.visible.as<const std::uint32_t>().data() + v * capacity;
+      out.visible_ids.assign(src, src + listed);
+    }
+    if (options.draws) {
+      const DrawCommand* src = buffers.draws.as<const DrawCommand>().data() + v * capacity;
+      out.draws.assign(src, src + listed);
+    }
+  }
+  return result;
+}
+
+PassResources::PassResources(const vk::Context& ctx, VkDescriptorSetLayout layout, std::uint32_t binding_count)
+    : ctx_(ctx), binding_count_(binding_count) {
+  try {
+    VkDevice dev = ctx_.device();
+    VkDescriptorPoolSize pool_size{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, binding_count};
+    VkDescriptorPoolCreateInfo pool_info{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
+    pool_info.maxSets = 1;
+    pool_info.poolSizeCount = 1;
+    pool_info.pPoolSizes = &pool_size;
+    CULLPIPE_VK_CHECK(vkCreateDescriptorPool(dev, &pool_info, nullptr, &pool_));
+    VkDescriptorSetAllocateInfo set_info{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO};
+    set_info.descriptorPool = pool_;
+    set_info.descriptorSetCount = 1;
+    set_info.pSetLayouts = &layout;
+    CULLPIPE_VK_CHECK(vkAllocateDescriptorSets(dev, &set_info, &set_));
+
+    VkCommandBufferAllocateInfo cmd_info{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
+    cmd_info.commandPool = ctx_.command_pool();
+    cmd_info.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+    cmd_info.commandBufferCount = 1;
+    CULLPIPE_VK_CHECK(vkAllocateCommandBuffers(dev, &cmd_info, &cmd_));
+
+    if (ctx_.timestamp_period_ns() > 0.0) {
+      VkQueryPoolCreateInfo query_info{VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO};
+      query_info.queryType = VK_QUERY_TYPE_TIMESTAMP;
+      query_info.queryCount = 2;
+      CULLPIPE_VK_CHECK(vkCreateQueryPool(dev, &query_info, nullptr, &query_pool_));
+    }
+  } catch (...) {
+    release();
+    throw;
+  }
+}
+
+PassResources::~PassResources() { release(); }
+
+void PassResources::release() {
+  VkDevice dev = ctx_.device();
+  // Our own passes are waited for in run(); on a borrowed device, the caller must not destroy
+  // the owner while a command buffer it recorded into is pending (and we do not stall the
+  // caller's queues).
+  if (ctx_.owns_device()) vkDeviceWaitIdle(dev);
+  if (query_pool_) vkDestroyQueryPool(dev, query_pool_, nullptr);
+  if (cmd_) vkFreeCommandBuffers(dev, ctx_.command_pool(), 1, &cmd_);
+  if (pool_) vkDestroyDescriptorPool(dev, pool_, nullptr);
+  query_pool_ = VK_NULL_HANDLE;
+  cmd_ = VK_NULL_HANDLE;
+  pool_ = VK_NULL_HANDLE;
+}
+
+void PassResources::write(std::span<const vk::Buffer* const> buffers) {
+  std::vector<VkDescriptorBufferInfo> infos(binding_count_);
+  std::vector<VkWriteDescriptorSet> writes(binding_count_);
+  if (buffers.size() != binding_count_) throw std::logic_error("PassResources::write: one buffer per binding");
+  for (std::uint32_t b = 0; b < binding_count_; ++b) {
+    infos[b] = {buffers[b]->handle(), 0, VK_WHOLE_SIZE};
+    writes[b] = {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
+    writes[b].dstSet = set_;
+    writes[b].dstBinding = b;
+    writes[b].descriptorCount = 1;
+    writes[b].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+    writes[b].pBufferInfo = &infos[b];
+  }
+  vkUpdateDescriptorSets(ctx_.device(), binding_count_, writes.data(), 0, nullptr);
+}
+
+double PassResources::run(const std::function<void(VkCommandBuffer, VkQueryPool)>& record) {
+  CULLPIPE_VK_CHECK(vkResetCommandBuffer(cmd_, 0));
+  VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+  begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+  CULLPIPE_VK_CHECK(vkBeginCommandBuffer(cmd_, &begin));
+  if (query_pool_) vkCmdResetQueryPool(cmd_, query_pool_, 0, 2);
+  record(cmd_, query_pool_);
+  CULLPIPE_VK_CHECK(vkEndCommandBuffer(cmd_));
+  ctx_.submit_and_wait(cmd_);
+  if (!query_pool_) return 0.0;
+  std::uint64_t stamps[2] = {0, 0};
+  CULLPIPE_VK_CHECK(vkGetQueryPoolResults(ctx_.device(), query_pool_, 0, 2, sizeof(stamps), stamps, sizeof(std::uint64_t),
+                                          VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT));
+  const std::uint32_t bits = ctx_.timestamp_valid_bits();
+  const std::uint64_t mask = bits >= 64 ? ~0ull : (1ull << bits) - 1;
+  return double((stamps[1] - stamps[0]) & mask) * ctx_.timestamp_period_ns();
+}
+
+}  // namespace cullpipe::gpu::detail

@@ -1,0 +1,78 @@
+#pragma once
+// What every culling pass (flat and hierarchical) needs besides its shaders: storage-range
+// checks, growable buffers, one descriptor set, a command buffer with timestamps, and the
+// barriers at the start and end of a recorded pass. Internal to host/gpu.
+#include <vulkan/vulkan.h>
+
+#include <functional>
+#include <span>
+#include <string>
+
+#include "gpu/gpu_culler.hpp"
+#include "vk/buffer.hpp"
+#include "vk/context.hpp"
+
+namespace cullpipe::gpu::detail {
+
+/// Throws std::length_error naming `what`, its size and the device limit when `bytes` exceed
+/// one storage buffer (maxStorageBufferRange).
+void check_storage_range(const vk::Context& ctx, VkDeviceSize bytes, const std::string& what);
+
+/// Grows `buffer` to at least `bytes` (never shrinks). Sets `dirty` (descriptors must be
+/// rewritten) before the old buffer is freed, so a failed allocation cannot leave a descriptor
+/// pointing at a destroyed buffer.
+void ensure_buffer(const vk::Context& ctx, vk::Buffer& buffer, VkDeviceSize bytes, VkBufferUsageFlags usage,
+                   const char* what, bool& dirty);
+
+/// Before a recorded pass: earlier work in the same command buffer or queue may still read its
+/// outputs (indirect draws, vertex and compute shaders, copies); finish those reads first.
+void record_entry_barrier(const vk::Context& ctx, VkCommandBuffer cmd);
+/// After a pass: its writes become visible to indirect draws, vertex shaders (graphics
+/// queues), later compute shaders and the host.
+void record_exit_barrier(const vk::Context& ctx, VkCommandBuffer cmd);
+/// Transfer writes (fills) before compute reads and writes.
+void record_transfer_to_compute(VkCommandBuffer cmd);
+/// Compute writes before compute reads and writes, and, with `indirect`, before indirect
+/// dispatch arguments are read.
+void record_compute_to_compute(VkCommandBuffer cmd, bool indirect = false);
+
+/// The output buffers of a pass, as both culling shaders write them (see cull_types.h).
+struct OutputBuffers {
+  const vk::Buffer& counters;  ///< ViewCounters per view
+  const vk::Buffer& classes;   ///< uint per view and object
+  const vk::Buffer& visible;   ///< visible ids, `capacity` per view
+  const vk::Buffer& draws;     ///< DrawCommand, `capacity` per view
+};
+/// Reads a completed pass's outputs back as the options ask (counts and test counts always).
+CullResult read_outputs(const OutputBuffers& buffers, std::size_t object_count, std::size_t view_count, std::size_t capacity,
+                        const CullOptions& options);
+
+/// One descriptor set of storage buffers, a command buffer and a two-entry timestamp pool.
+class PassResources {
+ public:
+  PassResources(const vk::Context& ctx, VkDescriptorSetLayout layout, std::uint32_t binding_count);
+  ~PassResources();
+  PassResources(const PassResources&) = delete;
+  PassResources& operator=(const PassResources&) = delete;
+
+  VkDescriptorSet set() const { return set_; }
+  /// Binding i of the set = the whole of buffers[i].
+  void write(std::span<const vk::Buffer* const> buffers);
+
+  /// Records with `record(cmd, query_pool)` (query_pool is VK_NULL_HANDLE without timestamps;
+  /// else the recorder writes timestamps 0 and 1 around its work), submits, waits, and
+  /// returns the nanoseconds between the timestamps (0 without).
+  double run(const std::function<void(VkCommandBuffer, VkQueryPool)>& record);
+
+ private:
+  void release();
+
+  const vk::Context& ctx_;
+  std::uint32_t binding_count_;
+  VkDescriptorPool pool_ = VK_NULL_HANDLE;
+  VkDescriptorSet set_ = VK_NULL_HANDLE;
+  VkCommandBuffer cmd_ = VK_NULL_HANDLE;
+  VkQueryPool query_pool_ = VK_NULL_HANDLE;
+};
+
+}  // namespace cullpipe::gpu::detail

@@ -1,0 +1,343 @@
+#version 460
+// Hierarchical frustum culling of a depth-first BVH, breadth first and in parallel: every
+// level of the tree is one indirect dispatch over a queue of (node, view, plane mask) work
+// items, so each node box is tested once per view, by its own invocation.
+//
+//   SEED    one root item per view (all planes), queue state reset
+//   LEVEL   test each item's node on the planes its parent straddles (plane masking,
+//           Assarsson & Moller 2000): OUTSIDE drops the subtree; INSIDE queues its object
+//           range as chunks to accept without tests; INTERSECTING queues both children
+//           with the planes this node straddles, or, at a leaf, one test per object. The
+//           last workgroup to finish (a counter, as in AMD FidelityFX SPD) writes the
+//           indirect arguments of the next level, so a level costs one dispatch
+//   FINISH  indirect arguments for ACCEPT and TEST
+//   ACCEPT  every object of an accepted chunk is INSIDE
+//   TEST    each object of an INTERSECTING leaf is tested on the straddled planes
+// An INSIDE subtree's object range is split so that no invocation idles on a small subtree:
+// full chunks of the workgroup size go to ACCEPT (one workgroup each), the rest to the dense
+// TEST list with an empty plane mask (accepted there without a test). (A variant with one
+// range entry per subtree, ordered by a 64-bit atomic and searched per object, measured
+// slower on lavapipe at every visible fraction.)
+// The host records SEED, then LEVEL once per tree level, then FINISH, ACCEPT and TEST, with
+// barriers between. The result equals host/bvh cull_hierarchical bit for bit: same
+// p/n-vertex test, distances as ((n.x*p.x + n.y*p.y) + n.z*p.z) + d marked `precise`, same
+// masks, and the same counts of node and object tests.
+#extension GL_GOOGLE_include_directive : require
+#extension GL_KHR_shader_subgroup_basic : require
+#extension GL_KHR_shader_subgroup_ballot : require
+#extension GL_KHR_shader_subgroup_vote : require
+#extension GL_KHR_shader_subgroup_arithmetic : require
+#extension GL_KHR_shader_subgroup_shuffle : require
+#extension GL_EXT_control_flow_attributes : require
+
+#include "shared/cull_types.h"
+
+layout(local_size_x_id = 1) in;  // = BVH_CULL_GROUP_SIZE, set by the host
+layout(constant_id = 0) const uint PASS = BVH_PASS_LEVEL;
+layout(constant_id = 3) const uint WRITE_DRAWS = 0;  // ACCEPT / TEST: also write draw commands
+
+layout(std430, set = 0, binding = BINDING_BOUNDS) readonly buffer Bounds { GpuAabb boxes[]; };  // in tree order
+layout(std430, set = 0, binding = BINDING_CLASSES) writeonly buffer Classes { uint classes[]; };
+layout(std430, set = 0, binding = BINDING_VISIBLE) writeonly buffer Visible { uint visible_ids[]; };
+layout(std430, set = 0, binding = BINDING_COUNTERS) buffer Counters { ViewCounters counters[]; };
+layout(std430, set = 0, binding = BINDING_VIEWS) readonly buffer Views { GpuFrustum views[]; };
+layout(std430, set = 0, binding = BINDING_DRAW_TEMPLATES) readonly buffer DrawTemplates { DrawCommand templates[]; };
+layout(std430, set = 0, binding = BINDING_DRAWS) writeonly buffer Draws { DrawCommand draws[]; };
+layout(std430, set = 0, binding = BVH_BINDING_NODES) readonly buffer Nodes { GpuBvhNode nodes[]; };
+layout(std430, set = 0, binding = BVH_BINDING_OBJECTS) readonly buffer Objects { uint object_ids[]; };
+layout(std430, set = 0, binding = BVH_BINDING_QUEUE) buffer Queue { BvhWorkItem queue[]; };
+layout(std430, set = 0, binding = BVH_BINDING_RANGES) buffer Ranges { BvhRange ranges[]; };
+layout(std430, set = 0, binding = BVH_BINDING_TESTS) buffer Tests { BvhWorkItem tests[]; };
+layout(std430, set = 0, binding = BVH_BINDING_TRAVERSAL) buffer Traversal { BvhTraversal state; };
+
+layout(push_constant, std430) uniform Push { BvhCullParams params; };
+
+const uint MASK = (1u << BVH_MASK_BITS) - 1u;
+
+float plane_distance(vec4 plane, vec3 p) {
+  precise float s = plane.x * p.x + plane.y * p.y + plane.z * p.z + plane.w;
+  return s;
+}
+
+// This invocation's view: its planes, loaded once (load_view) into registers.
+uint view_plane_count;
+vec4 view_planes[MAX_FRUSTUM_PLANES];
+
+// Loads the planes of `view`. Called in uniform control flow: when the whole subgroup is on
+// one view (the usual case) the loads use a subgroup-uniform index (one load, not a gather
+// per lane).
+void load_view(uint view) {
+  uint first_view = subgroupBroadcastFirst(view);
+  uint v = subgroupAllEqual(view) ? first_view : view;
+  view_plane_count = min(views[v].plane_count, MAX_FRUSTUM_PLANES);
+  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = views[v].planes[k];
+}
+
+// The p/n-vertex test of a box on the loaded view's planes in `mask`; `straddled` receives
+// the planes whose n-vertex is behind (meaningful unless OUTSIDE), as in host/bvh
+// classify_masked. Branch-free over a fixed trip count.
+uint classify_masked(vec3 lo, vec3 hi, uint mask, out uint straddled) {
+  bool outside = false;
+  straddled = 0u;
+  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) {
+    vec4 plane = view_planes[k];
+    vec3 p_vertex = vec3(plane.x >= 0.0 ? hi.x : lo.x, plane.y >= 0.0 ? hi.y : lo.y, plane.z >= 0.0 ? hi.z : lo.z);
+    vec3 n_vertex = vec3(plane.x >= 0.0 ? lo.x : hi.x, plane.y >= 0.0 ? lo.y : hi.y, plane.z >= 0.0 ? lo.z : hi.z);
+    bool tested = k < view_plane_count && (mask & (1u << k)) != 0u;
+    outside = outside || (tested && plane_distance(plane, p_vertex) < 0.0);
+    if (tested && plane_distance(plane, n_vertex) < 0.0) straddled |= 1u << k;
+  }
+  return outside ? CLASS_OUTSIDE : straddled != 0u ? CLASS_INTERSECTING : CLASS_INSIDE;
+}
+
+// Dispatches larger than max_groups_x workgroups fold into y.
+uint flat_group() { return gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x; }
+
+BvhDispatch dispatch_for(uint groups, uint items) {
+  uint x = min(groups, params.max_groups_x);
+  uint y = x == 0u ? 1u : (groups + x - 1u) / x;
+  return BvhDispatch(x, y, 1u, items);
+}
+
+void note_overflow() { atomicOr(state.overflow, 1u); }
+
+// Writes a visible object's outputs: class, list slot, draw.
+void emit_visible(uint view, uint object, uint slot, uint c) {
+  classes[view * params.object_count + object] = c;
+  if (slot < params.visible_capacity) {
+    visible_ids[view * params.visible_capacity + slot] = object;
+    if (WRITE_DRAWS != 0) {
+      DrawCommand d = templates[object];
+      d.object_id = object;
+      draws[view * params.visible_capacity + slot] = d;
+    }
+  }
+}
+
+void seed() {
+  // One workgroup: item v = the root of view v with all its planes.
+  uint roots = params.node_count == 0u ? 0u : params.view_count;
+  for (uint v = gl_LocalInvocationIndex; v < roots; v += gl_WorkGroupSize.x) {
+    uint plane_count = min(views[v].plane_count, MAX_FRUSTUM_PLANES);
+    queue[v] = BvhWorkItem(0u, (v << BVH_MASK_BITS) | ((1u << plane_count) - 1u));
+  }
+  if (gl_LocalInvocationIndex == 0u) {
+    state.queue_count[0] = roots;
+    state.queue_count[1] = 0u;
+    state.range_count = 0u;
+    state.test_count = 0u;
+    state.level = dispatch_for((roots + gl_WorkGroupSize.x - 1u) / gl_WorkGroupSize.x, roots);
+    state.accept = BvhDispatch(0u, 1u, 1u, 0u);
+    state.test = BvhDispatch(0u, 1u, 1u, 0u);
+    state.overflow = 0u;
+    state.groups_done = 0u;
+  }
+}
+
+// Reserves `n` consecutive entries per invocation with one atomic per subgroup on COUNTER;
+// returns this invocation's first entry. Called in uniform control flow.
+#define SUBGROUP_APPEND(COUNTER, n, result)                                      \
+  {                                                                             \
+    uint n_ = (n), total_ = subgroupAdd(n_), base_ = 0u;                        \
+    if (subgroupElect() && total_ > 0u) base_ = atomicAdd(COUNTER, total_);     \
+    result = subgroupBroadcastFirst(base_) + subgroupExclusiveAdd(n_);          \
+  }
+
+// Adds `n` to a per-view counter: one atomic per subgroup when the subgroup is on one view.
+#define VIEW_COUNTER_ADD(FIELD, view, n)                                         \
+  {                                                                             \
+    uint n_ = (n);                                                              \
+    if (subgroupAllEqual(view)) {                                               \
+      uint total_ = subgroupAdd(n_);                                            \
+      if (subgroupElect() && total_ > 0u) atomicAdd(counters[view].FIELD, total_); \
+    } else if (n_ > 0u) {                                                       \
+      atomicAdd(counters[view].FIELD, n_);                                      \
+    }                                                                           \
+  }
+
+// Tests one node per invocation (when `has_node`) on the planes in `mask`, counts the test,
+// and appends what the node asks for except its children: INTERSECTING leaf: a test of each
+// object on the planes it straddles; INSIDE: its object range, as full chunks for ACCEPT (one
+// full workgroup each) and the remainder in the dense TEST list with an empty plane mask
+// (accepted there without a test), so no workgroup runs mostly idle on a small subtree.
+// Returns whether the node is an INTERSECTING inner node (its children must be visited, with
+// `straddled`), and its second child. Called in uniform control flow.
+bool test_node(bool has_node, uint index, uint view, uint mask, out uint straddled, out uint second_child) {
+  uint c = CLASS_OUTSIDE;
+  straddled = 0u;
+  GpuBvhNode node;
+  node.first = 0u;
+  node.count = 0u;
+  node.leaf = 1u;
+  node.second_child = 0u;
+  if (has_node) {
+    node = nodes[index];
+    c = classify_masked(node.box_min, node.box_max, mask, straddled);
+  }
+  second_child = node.second_child;
+  uint tests_wanted = 0u, full = 0u, object_tests = 0u;
+  if (c == CLASS_INTERSECTING && node.leaf != 0u) {
+    tests_wanted = object_tests = node.count;
+  } else if (c == CLASS_INSIDE) {
+    full = node.count / gl_WorkGroupSize.x;
+    tests_wanted = node.count - full * gl_WorkGroupSize.x;
+  }
+  VIEW_COUNTER_ADD(node_tests, view, has_node ? 1u : 0u)
+  VIEW_COUNTER_ADD(object_tests, view, object_tests)
+  uint test_base, range_base;
+  SUBGROUP_APPEND(state.test_count, tests_wanted, test_base)
+  SUBGROUP_APPEND(state.range_count, full, range_base)
+  if (test_base + tests_wanted > params.test_capacity || range_base + full > params.range_capacity) {
+    note_overflow();  // writes nothing (stays in uniform control flow)
+    tests_wanted = full = 0u;
+  }
+  // Test entries and chunks are written by the whole subgroup, lane by lane: a lane with many
+  // (an INSIDE subtree's remainder, a large accepted range) does not keep the others idle.
+  uint view_mask = (view << BVH_MASK_BITS) | (c == CLASS_INSIDE ? 0u : straddled);
+  uint first_test = node.first + full * gl_WorkGroupSize.x;
+  uvec4 writers = subgroupBallot(tests_wanted + full != 0u);
+  for (uint w = subgroupBallotBitCount(writers); w > 0u; --w) {
+    uint lane = subgroupBallotFindLSB(writers);
+    writers[lane / 32u] &= ~(1u << (lane % 32u));
+    uint n_tests = subgroupShuffle(tests_wanted, lane), n_full = subgroupShuffle(full, lane);
+    uint lane_test_base = subgroupShuffle(test_base, lane), lane_first_test = subgroupShuffle(first_test, lane);
+    uint lane_view_mask = subgroupShuffle(view_mask, lane);
+    for (uint k = gl_SubgroupInvocationID; k < n_tests; k += gl_SubgroupSize)
+      tests[lane_test_base + k] = BvhWorkItem(lane_first_test + k, lane_view_mask);
+    uint lane_range_base = subgroupShuffle(range_base, lane), lane_first = subgroupShuffle(node.first, lane);
+    for (uint k = gl_SubgroupInvocationID; k < n_full; k += gl_SubgroupSize)
+      ranges[lane_range_base + k] = BvhRange(lane_first + k * gl_WorkGroupSize.x, gl_WorkGroupSize.x, lane_view_mask >> BVH_MASK_BITS, 0u);
+  }
+  return c == CLASS_INTERSECTING && node.leaf == 0u;
+}
+
+// Queues the children of the nodes that asked (`pair` holds their first child and second
+// child; both get `mask`), one atomic per subgroup.
+void push_children(bool wanted, uvec2 pair, uint view, uint mask, uint half_out) {
+  uint base;
+  SUBGROUP_APPEND(state.queue_count[half_out], wanted ? 2u : 0u, base)
+  if (!wanted) return;
+  if (base + 2u > params.queue_capacity) {
+    note_overflow();
+    return;
+  }
+  uint view_mask = (view << BVH_MASK_BITS) | mask;
+  queue[half_out * params.queue_capacity + base] = BvhWorkItem(pair.x, view_mask);
+  queue[half_out * params.queue_capacity + base + 1u] = BvhWorkItem(pair.y, view_mask);
+}
+
+// BVH_LEVELS_PER_DISPATCH (2) tree levels per dispatch: each invocation tests its item's node
+// and, when that node is INTERSECTING, both its children; grandchildren are queued.
+void visit(bool has_item, uint i, uint half_out) {
+  uint view = 0u, index = 0u, mask = 0u;
+  if (has_item) {
+    BvhWorkItem item = queue[(half_out ^ 1u) * params.queue_capacity + i];
+    view = item.view_mask >> BVH_MASK_BITS;
+    index = item.index;
+    mask = item.view_mask & MASK;
+  }
+  load_view(view);
+  uint straddled, second;
+  bool descend = test_node(has_item, index, view, mask, straddled, second);
+  uint straddled_a, second_a, straddled_b, second_b;
+  bool descend_a = test_node(descend, index + 1u, view, straddled, straddled_a, second_a);
+  bool descend_b = test_node(descend, second, view, straddled, straddled_b, second_b);
+  push_children(descend_a, uvec2(index + 2u, second_a), view, straddled_a, half_out);
+  push_children(descend_b, uvec2(second + 1u, second_b), view, straddled_b, half_out);
+}
+
+shared bool last_group;
+
+void level() {
+  uint i = flat_group() * gl_WorkGroupSize.x + gl_LocalInvocationIndex;
+  uint half_in = params.level & 1u, half_out = half_in ^ 1u;
+  visit(i < state.level.items, i, half_out);
+  // The last workgroup to finish prepares the next level: every workgroup's queue updates are
+  // made visible before it counts itself done.
+  memoryBarrierBuffer();
+  barrier();
+  if (gl_LocalInvocationIndex == 0u)
+    last_group = atomicAdd(state.groups_done, 1u) == gl_NumWorkGroups.x * gl_NumWorkGroups.y - 1u;
+  barrier();
+  if (last_group && gl_LocalInvocationIndex == 0u) {
+    memoryBarrierBuffer();
+    // This level's output half becomes the next input; its input half is emptied for the
+    // next level's output.
+    uint items = min(atomicOr(state.queue_count[half_out], 0u), params.queue_capacity);
+    state.level = dispatch_for((items + gl_WorkGroupSize.x - 1u) / gl_WorkGroupSize.x, items);
+    state.queue_count[half_in] = 0u;
+    state.groups_done = 0u;
+  }
+}
+
+void finish() {
+  if (gl_LocalInvocationIndex != 0u) return;
+  uint chunks = min(state.range_count, params.range_capacity);
+  state.accept = dispatch_for(chunks, chunks);
+  uint objects = min(state.test_count, params.test_capacity);
+  state.test = dispatch_for((objects + gl_WorkGroupSize.x - 1u) / gl_WorkGroupSize.x, objects);
+  // A level queue left non-empty means the tree is deeper than the levels recorded.
+  if (state.level.items != 0u) note_overflow();
+}
+
+void accept() {
+  // One workgroup per chunk; every invocation of the workgroup has the same view.
+  uint chunk = flat_group();
+  if (chunk >= state.accept.items) return;  // uniform across the workgroup
+  BvhRange range = ranges[chunk];
+  bool in_chunk = gl_LocalInvocationIndex < range.count;
+  uvec4 ballot = subgroupBallot(in_chunk);
+  uint total = subgroupBallotBitCount(ballot);
+  uint base = 0u;
+  if (subgroupElect() && total > 0u) {
+    base = atomicAdd(counters[range.view].visible_count, total);
+    atomicAdd(counters[range.view].inside_count, total);
+  }
+  base = subgroupBroadcastFirst(base);
+  if (in_chunk) {
+    uint object = object_ids[range.first + gl_LocalInvocationIndex];
+    emit_visible(range.view, object, base + subgroupBallotExclusiveBitCount(ballot), CLASS_INSIDE);
+  }
+}
+
+
+void test() {
+  uint i = flat_group() * gl_WorkGroupSize.x + gl_LocalInvocationIndex;
+  bool in_list = i < state.test.items;
+  BvhWorkItem item = BvhWorkItem(0u, 0u);
+  if (in_list) item = tests[i];
+  uint view = item.view_mask >> BVH_MASK_BITS, object = 0u, c = CLASS_OUTSIDE;
+  load_view(view);
+  if (in_list) {
+    object = object_ids[item.index];
+    uint mask = item.view_mask & MASK, unused;
+    // An empty mask: an object of an INSIDE subtree, accepted without a test.
+    c = mask == 0u ? CLASS_INSIDE : classify_masked(boxes[item.index].min_corner.xyz, boxes[item.index].max_corner.xyz, mask, unused);
+    classes[view * params.object_count + object] = c;
+  }
+  bool visible = c != CLASS_OUTSIDE;
+  if (subgroupAllEqual(view)) {  // the usual case: one atomic per subgroup
+    uvec4 ballot = subgroupBallot(visible);
+    uint total = subgroupBallotBitCount(ballot);
+    uint inside_total = subgroupBallotBitCount(subgroupBallot(c == CLASS_INSIDE));
+    uint base = 0u;
+    if (subgroupElect() && total > 0u) {
+      base = atomicAdd(counters[view].visible_count, total);
+      atomicAdd(counters[view].inside_count, inside_total);
+    }
+    base = subgroupBroadcastFirst(base);
+    if (visible) emit_visible(view, object, base + subgroupBallotExclusiveBitCount(ballot), c);
+  } else if (visible) {
+    uint slot = atomicAdd(counters[view].visible_count, 1u);
+    if (c == CLASS_INSIDE) atomicAdd(counters[view].inside_count, 1u);
+    emit_visible(view, object, slot, c);
+  }
+}
+
+void main() {
+  if (PASS == BVH_PASS_SEED) seed();
+  else if (PASS == BVH_PASS_LEVEL) level();
+  else if (PASS == BVH_PASS_FINISH) finish();
+  else if (PASS == BVH_PASS_ACCEPT) accept();
+  else test();
+}

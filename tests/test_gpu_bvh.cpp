@@ -1,0 +1,281 @@
+// Hierarchical culling on the GPU (shaders/cull_bvh.comp) against the scalar CPU traversal
+// (bvh::cull_hierarchical) bit for bit, and against flat culling object by object, on the
+// Vulkan device chosen by CULLPIPE_DEVICE with validation (including synchronization
+// validation) on: any message fails.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstring>
+#include <filesystem>
+#include <memory>
+
+#include "bvh/builders.hpp"
+#include "bvh/bvh.hpp"
+#include "cull/compare.hpp"
+#include "cull/reference.hpp"
+#include "gpu/bvh_culler.hpp"
+#include "scene/generators.hpp"
+#include "scene/gltf_scene.hpp"
+#include "test_util.hpp"
+#include "vk/check.hpp"
+
+namespace cullpipe {
+namespace {
+
+class GpuBvhEnvironment : public ::testing::Environment {
+ public:
+  static inline std::unique_ptr<vk::Context> context;
+  static inline std::unique_ptr<gpu::BvhCuller> culler;
+  void SetUp() override {
+    vk::ContextOptions options;
+    options.validation = true;
+    options.on_message = [](std::string_view m) { ADD_FAILURE() << m; };
+    context = std::make_unique<vk::Context>(options);
+    culler = std::make_unique<gpu::BvhCuller>(*context);
+    std::printf("device: %s (%s)\n", context->info().name.c_str(), context->info().driver.c_str());
+  }
+  void TearDown() override {
+    culler.reset();
+    context.reset();
+  }
+};
+const auto* const kEnvironment = ::testing::AddGlobalTestEnvironment(new GpuBvhEnvironment);
+
+class GpuBvh : public ::testing::Test {
+ protected:
+  gpu::BvhCuller& culler() { return *GpuBvhEnvironment::culler; }
+  void TearDown() override { EXPECT_EQ(GpuBvhEnvironment::context->validation_message_count(), 0u); }
+};
+
+// Culls `boxes` through `flat` on the GPU, all views in one pass, and checks every view: the
+// classes equal the CPU hierarchical traversal's object by object (and flat culling's), the
+// counters and the node/object test counts equal the CPU's, and the visible list holds each
+// visible object exactly once. A mismatch prints the object, the planes and both answers.
+gpu::CullResult expect_agreement(gpu::BvhCuller& culler, const bvh::FlatTree& flat, const std::vector<Aabb>& boxes,
+                                 const std::vector<Frustum>& frusta, const gpu::CullOptions& options = {}) {
+  culler.upload(flat, boxes);
+  gpu::CullResult result = culler.cull(frusta, options);
+  EXPECT_EQ(result.views.size(), frusta.size());
+  const std::size_t capacity = options.visible_capacity ? options.visible_capacity : boxes.size();
+  for (std::size_t v = 0; v < frusta.size() && v < result.views.size(); ++v) {
+    const bvh::HierarchicalResult cpu = bvh::cull_hierarchical(flat, boxes, frusta[v]);
+    std::vector<Classification> flat_classes(boxes.size());
+    const reference::CullCounts counts = reference::classify_all(std::span<const Aabb>(boxes), frusta[v], flat_classes);
+    EXPECT_EQ(cpu.classes, flat_classes) << "CPU hierarchical vs flat, view " << v;
+    const gpu::ViewResult& g = result.views[v];
+    const Agreement a = check_agreement<Aabb>(boxes, frusta[v], cpu.classes, counts, g.classes, g.counts, g.visible_ids, capacity);
+    EXPECT_TRUE(a.ok()) << a.mismatches << " mismatches in view " << v << "; first: " << (a.reports.empty() ? "" : a.reports[0]);
+    EXPECT_EQ(g.node_tests, cpu.node_tests) << "view " << v;
+    EXPECT_EQ(g.object_tests, cpu.object_tests) << "view " << v;
+    EXPECT_EQ(g.overflow, counts.visible > capacity) << "view " << v;
+  }
+  return result;
+}
+
+bvh::FlatTree flat_tree(const std::vector<Aabb>& boxes, std::uint32_t leaf = 4) {
+  return bvh::flatten(bvh::build_binned_sah(boxes, {leaf, 16}));
+}
+
+std::vector<Frustum> test_frusta() {
+  return {Frustum::from_view_proj(test::test_view_proj()), Frustum::from_view_proj(test::test_view_proj(100.0f, 0.5f)),
+          Frustum::from_view_proj(test::test_view_proj(20.0f, 2.0f))};
+}
+
+std::vector<Frustum> path_frusta(const Scene& scene, std::size_t count) {
+  std::vector<Frustum> frusta;
+  for (const Camera& c : camera_path(scene.camera, scene.bounds(), count)) frusta.push_back(Frustum::from_view_proj(c.view_proj()));
+  return frusta;
+}
+
+TEST_F(GpuBvh, RandomSetsEverySizeAndLeafSize) {
+  test::Rng rng{41};
+  for (std::size_t n : {0u, 1u, 2u, 3u, 63u, 64u, 65u, 129u, 1000u, 20000u}) {
+    std::vector<Aabb> boxes(n);
+    for (Aabb& b : boxes) b = test::random_aabb(rng, 40.0f, 3.0f);
+    for (std::uint32_t leaf : {1u, 4u, 16u}) {
+      SCOPED_TRACE("n = " + std::to_string(n) + ", leaf " + std::to_string(leaf));
+      expect_agreement(culler(), flat_tree(boxes, leaf), boxes, test_frusta());
+    }
+  }
+}
+
+TEST_F(GpuBvh, GeneratedScenesManyViewsInOnePass) {
+  for (SceneKind kind : {SceneKind::Uniform, SceneKind::Clustered, SceneKind::City}) {
+    SCOPED_TRACE(std::string(to_string(kind)));
+    const Scene scene = generate_scene(kind, 50000, 9);
+    const std::vector<Aabb> boxes = world_aabbs(scene);
+    const gpu::CullResult r = expect_agreement(culler(), flat_tree(boxes), boxes, path_frusta(scene, 8));
+    // The hierarchy pays: far fewer tests than objects in the first view.
+    ASSERT_FALSE(r.views.empty());
+    std::printf("  %s: %zu of %zu visible, %zu node + %zu object tests on the GPU\n", std::string(to_string(kind)).c_str(),
+                r.views[0].counts.visible, boxes.size(), r.views[0].node_tests, r.views[0].object_tests);
+    EXPECT_LT(r.views[0].node_tests + r.views[0].object_tests, boxes.size() / 2);
+  }
+}
+
+TEST_F(GpuBvh, EveryBuilderAgrees) {
+  const Scene scene = generate_scene(SceneKind::Clustered, 3000, 4);
+  const std::vector<Aabb> boxes = world_aabbs(scene);
+  for (const bvh::BuilderInfo& b : bvh::builders()) {
+    if (b.name == "agglomerative-brute") continue;  // O(n^3): its own tests use small n
+    SCOPED_TRACE(std::string(b.name));
+    const bvh::FlatTree flat = bvh::flatten(bvh::build(b.name, boxes));
+    expect_agreement(culler(), flat, boxes, path_frusta(scene, 4));
+  }
+}
+
+TEST_F(GpuBvh, EverythingInsideEverythingOutsideAndDeepTrees) {
+  // One frustum holds every object (accepted at the root with one node test), one holds none.
+  std::vector<Aabb> boxes;
+  test::Rng rng{3};
+  for (int i = 0; i < 5000; ++i) boxes.push_back(test::random_aabb(rng, 1.0f, 0.2f));
+  for (Aabb& b : boxes) b = {b.min + glm::vec3(0, 0, 5.0f), b.max + glm::vec3(0, 0, 5.0f)};  // around z = 4.5
+  const glm::mat4 view_proj = test::test_view_proj(90.0f, 1.0f);
+  const glm::mat4 away = view_proj * glm::translate(glm::mat4(1.0f), glm::vec3(0, 0, 10.0f));  // all behind the camera
+  const gpu::CullResult r =
+      expect_agreement(culler(), flat_tree(boxes), boxes, {Frustum::from_view_proj(view_proj), Frustum::from_view_proj(away)});
+  ASSERT_EQ(r.views.size(), 2u);
+  EXPECT_EQ(r.views[0].counts.inside, boxes.size());
+  EXPECT_EQ(r.views[0].node_tests, 1u);
+  EXPECT_EQ(r.views[0].object_tests, 0u);
+  EXPECT_EQ(r.views[1].counts.visible, 0u);
+  EXPECT_EQ(r.views[1].node_tests, 1u);
+  // Points on a line with one object per leaf: the tree is deep (many level dispatches).
+  std::vector<Aabb> line;
+  for (int i = 0; i < 3000; ++i) line.push_back({glm::vec3(float(i) * 0.02f - 30.0f, 0, 0), glm::vec3(float(i) * 0.02f - 30.0f, 0.1f, 0)});
+  expect_agreement(culler(), flat_tree(line, 1), line, test_frusta());
+  EXPECT_GE(culler().levels(), 12u);
+  // All boxes identical.
+  const std::vector<Aabb> same(777, Aabb{glm::vec3(-1), glm::vec3(1)});
+  expect_agreement(culler(), flat_tree(same, 2), same, test_frusta());
+}
+
+TEST_F(GpuBvh, DrawsAndVisibleListOverflow) {
+  test::Rng rng{12};
+  std::vector<Aabb> boxes(8000);
+  for (Aabb& b : boxes) b = test::random_aabb(rng, 40.0f, 3.0f);
+  std::vector<gpu::DrawCommand> templates(boxes.size());
+  for (std::uint32_t i = 0; i < templates.size(); ++i) templates[i] = {36, 1, 36 * i, -int(i), i, 0};
+  const bvh::FlatTree flat = flat_tree(boxes);
+  culler().upload(flat, boxes);
+  culler().upload_draws(templates);
+  gpu::CullOptions options;
+  options.draws = true;
+  const gpu::CullResult r = expect_agreement(culler(), flat, boxes, test_frusta(), options);
+  for (const gpu::ViewResult& v : r.views) {
+    ASSERT_EQ(v.draws.size(), v.visible_ids.size());
+    for (std::size_t k = 0; k < v.draws.size(); ++k) {
+      gpu::DrawCommand expected = templates[v.visible_ids[k]];
+      expected.object_id = v.visible_ids[k];
+      ASSERT_EQ(std::memcmp(&v.draws[k], &expected, sizeof expected), 0) << k;
+    }
+  }
+  options.visible_capacity = 100;  // fewer than visible: counted in full, flagged, list full
+  const gpu::CullResult small = expect_agreement(culler(), flat, boxes, test_frusta(), options);
+  for (const gpu::ViewResult& v : small.views) {
+    EXPECT_TRUE(v.overflow);
+    EXPECT_EQ(v.visible_ids.size(), 100u);
+    EXPECT_EQ(v.draws.size(), 100u);
+  }
+}
+
+TEST_F(GpuBvh, RefitAfterMotionStaysExact) {
+  const Scene scene = generate_scene(SceneKind::City, 20000, 2);
+  std::vector<Aabb> boxes = world_aabbs(scene);
+  bvh::FlatTree flat = flat_tree(boxes);
+  const std::vector<Frustum> frusta = path_frusta(scene, 3);
+  test::Rng rng{77};
+  for (int frame = 0; frame < 3; ++frame) {
+    for (Aabb& b : boxes) {
+      const glm::vec3 d = rng.vec3(-2.0f, 2.0f);
+      b = {b.min + d, b.max + d};
+    }
+    bvh::refit(flat, boxes);
+    expect_agreement(culler(), flat, boxes, frusta);
+  }
+}
+
+// The real glTF scenes: every object's world AABB, the scene's own camera path.
+TEST_F(GpuBvh, GltfScenesAgree) {
+  const std::filesystem::path dir = std::filesystem::path(CULLPIPE_SHARED_DIR) / "scenes";
+  if (!std::filesystem::exists(dir)) GTEST_SKIP() << dir << " not present";
+  std::size_t files = 0;
+  for (const auto& sub : std::filesystem::directory_iterator(dir)) {
+    if (!sub.is_directory()) continue;
+    for (const auto& file : std::filesystem::directory_iterator(sub.path())) {
+      if (file.path().extension() != ".gltf") continue;
+      SCOPED_TRACE(file.path().string());
+      ++files;
+      const GltfScene g = load_gltf_scene(file.path().string());
+      const std::vector<Aabb> boxes = world_aabbs(g.scene);
+      expect_agreement(culler(), flat_tree(boxes), boxes, path_frusta(g.scene, 6));
+      const Scene big = replicate_scene(g.scene, 100, InstanceLayout::Random, 5);
+      const std::vector<Aabb> big_boxes = world_aabbs(big);
+      expect_agreement(culler(), flat_tree(big_boxes), big_boxes, path_frusta(big, 4));
+    }
+  }
+  EXPECT_EQ(files, 10u);
+}
+
+TEST_F(GpuBvh, RecordsIntoTheCallersCommandBuffer) {
+  const vk::Context& ctx = *GpuBvhEnvironment::context;
+  const Scene scene = generate_scene(SceneKind::Uniform, 10000, 5);
+  const std::vector<Aabb> boxes = world_aabbs(scene);
+  const bvh::FlatTree flat = flat_tree(boxes);
+  culler().upload(flat, boxes);
+  const std::vector<Frustum> frusta = path_frusta(scene, 2);
+  VkDevice dev = ctx.device();
+  VkCommandPoolCreateInfo pool_info{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
+  pool_info.queueFamilyIndex = ctx.queue_family();
+  VkCommandPool pool = VK_NULL_HANDLE;
+  ASSERT_EQ(vkCreateCommandPool(dev, &pool_info, nullptr, &pool), VK_SUCCESS);
+  VkCommandBufferAllocateInfo alloc{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO, nullptr, pool, VK_COMMAND_BUFFER_LEVEL_PRIMARY, 1};
+  VkCommandBuffer cmd = VK_NULL_HANDLE;
+  ASSERT_EQ(vkAllocateCommandBuffers(dev, &alloc, &cmd), VK_SUCCESS);
+  VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+  ASSERT_EQ(vkBeginCommandBuffer(cmd, &begin), VK_SUCCESS);
+  culler().record(cmd, frusta);
+  ASSERT_EQ(vkEndCommandBuffer(cmd), VK_SUCCESS);
+  ctx.submit_and_wait(cmd);
+  const gpu::CullResult recorded = culler().read_results();
+  ASSERT_EQ(recorded.views.size(), frusta.size());
+  for (std::size_t v = 0; v < frusta.size(); ++v) {
+    const bvh::HierarchicalResult cpu = bvh::cull_hierarchical(flat, boxes, frusta[v]);
+    EXPECT_EQ(recorded.views[v].classes, cpu.classes);
+    EXPECT_EQ(recorded.views[v].node_tests, cpu.node_tests);
+  }
+  vkDestroyCommandPool(dev, pool, nullptr);
+}
+
+TEST_F(GpuBvh, BadTreesAndOptionsAreClearErrors) {
+  std::vector<Aabb> boxes(100, Aabb{glm::vec3(-1), glm::vec3(1)});
+  bvh::FlatTree flat = flat_tree(boxes);
+  std::vector<Aabb> fewer(boxes.begin(), boxes.end() - 1);
+  EXPECT_THROW(culler().upload(flat, fewer), std::invalid_argument);
+  bvh::FlatTree twice = flat;
+  twice.objects[1] = twice.objects[0];
+  EXPECT_THROW(culler().upload(twice, boxes), std::invalid_argument);
+  bvh::FlatTree bad_skip = flat;
+  bad_skip.nodes[0].skip = 0;
+  EXPECT_THROW(culler().upload(bad_skip, boxes), std::invalid_argument);
+  bvh::FlatTree bad_range = flat;
+  bad_range.nodes.back().first = 99;
+  bad_range.nodes.back().count = 5;
+  EXPECT_THROW(culler().upload(bad_range, boxes), std::invalid_argument);
+  bvh::FlatTree bad_box = flat;
+  bad_box.nodes[1].box.min.x = NAN;
+  EXPECT_THROW(culler().upload(bad_box, boxes), std::invalid_argument);
+  culler().upload(flat, boxes);
+  gpu::CullOptions ordered;
+  ordered.ordered = true;
+  EXPECT_THROW(culler().cull(test_frusta(), ordered), std::invalid_argument);
+  gpu::CullOptions draws;
+  draws.draws = true;
+  culler().upload_draws(std::vector<gpu::DrawCommand>(99));
+  EXPECT_THROW(culler().cull(test_frusta(), draws), std::invalid_argument);
+  // And the culler still works after every rejection.
+  expect_agreement(culler(), flat, boxes, test_frusta());
+}
+
+}  // namespace
+}  // namespace cullpipe
