@@ -264,6 +264,7 @@ void level() {
     // This level's output half becomes the next input; its input half is emptied for the
     // next level's output.
     uint items = min(atomicOr(state.queue_count[half_out], 0u), params.queue_capacity);
+    if (atomicOr(state.overflow, 0u) != 0u) items = 0u;  // after an overflow, stop: queues may have holes
     state.level = dispatch_for((items + gl_WorkGroupSize.x - 1u) / gl_WorkGroupSize.x, items);
     state.queue_count[half_in] = 0u;
     state.groups_done = 0u;
@@ -272,12 +273,14 @@ void level() {
 
 void finish() {
   if (gl_LocalInvocationIndex != 0u) return;
-  uint chunks = min(state.range_count, params.range_capacity);
-  state.accept = dispatch_for(chunks, chunks);
-  uint objects = min(state.test_count, params.test_capacity);
-  state.test = dispatch_for((objects + gl_WorkGroupSize.x - 1u) / gl_WorkGroupSize.x, objects);
   // A level queue left non-empty means the tree is deeper than the levels recorded.
   if (state.level.items != 0u) note_overflow();
+  // After an overflow the lists may have holes: run nothing more (the host reports it).
+  bool ok = state.overflow == 0u;
+  uint chunks = ok ? min(state.range_count, params.range_capacity) : 0u;
+  state.accept = dispatch_for(chunks, chunks);
+  uint objects = ok ? min(state.test_count, params.test_capacity) : 0u;
+  state.test = dispatch_for((objects + gl_WorkGroupSize.x - 1u) / gl_WorkGroupSize.x, objects);
 }
 
 void accept() {

@@ -3,6 +3,9 @@
 
 #include <cstdio>
 #include <filesystem>
+#if defined(__SSE2__)
+#include <xmmintrin.h>
+#endif
 
 #include "bvh/bvh.hpp"
 #include "cull/reference.hpp"
@@ -110,6 +113,29 @@ TEST(Bvh, DegenerateSetsStayBalanced) {
   for (int i = 0; i < 50; ++i) tiny.push_back({glm::vec3(float(i) * 1e-44f), glm::vec3(float(i) * 1e-44f)});
   EXPECT_EQ(bvh::check_tree(bvh::build_binned_sah(tiny), tiny), "");
 }
+
+#if defined(__SSE2__)
+// A host that flushes denormals (DAZ/FTZ, e.g. built with -ffast-math, or an engine that sets
+// it) builds the same tree: no integer data goes through float arithmetic.
+TEST(Bvh, BinnedBuildIsUnchangedWhenTheCpuFlushesDenormals) {
+  test::Rng rng{77};
+  std::vector<Aabb> boxes(3000);
+  for (Aabb& b : boxes) b = test::random_aabb(rng, 40.0f, 3.0f);
+  const bvh::Tree normal = bvh::build_binned_sah(boxes);
+  const unsigned csr = _mm_getcsr();
+  _mm_setcsr(csr | 0x8040);  // FTZ | DAZ
+  bvh::Tree flushed;
+  try {
+    flushed = bvh::build_binned_sah(boxes);
+  } catch (...) {
+    _mm_setcsr(csr);
+    throw;
+  }
+  _mm_setcsr(csr);
+  EXPECT_EQ(bvh::check_tree(flushed, boxes), "");
+  EXPECT_EQ(flushed, normal);
+}
+#endif
 
 TEST(Bvh, MetricsAndDeterminism) {
   test::Rng rng{8};

@@ -202,6 +202,13 @@ TEST(Cli, BadBvhOptionsAreClearErrors) {
   EXPECT_NE(r.err.find("sideways"), std::string::npos) << r.err;
   r = cullpipe("run --generate uniform:100 --cull octree");
   EXPECT_EQ(r.code, 2);
+  // The exact O(n^2) agglomerative builder is an oracle: refused on large scenes, up front.
+  r = cullpipe("run --generate uniform:30000 --cull bvh --builder agglomerative-pq");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("oracle"), std::string::npos) << r.err;
+  r = cullpipe("bvh --generate uniform:30000 --builder binned-sah agglomerative-brute");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_EQ(r.out.find("binned-sah  "), std::string::npos) << "nothing built before the error: " << r.out;
   // No Vulkan: the CPU hierarchical traversal still runs.
   r = cullpipe("run --generate uniform:1000 --cull bvh --backend cpu", kNoVulkan);
   EXPECT_EQ(r.code, 0) << r.err;

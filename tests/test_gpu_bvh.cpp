@@ -265,6 +265,21 @@ TEST_F(GpuBvh, BadTreesAndOptionsAreClearErrors) {
   bvh::FlatTree bad_box = flat;
   bad_box.nodes[1].box.min.x = NAN;
   EXPECT_THROW(culler().upload(bad_box, boxes), std::invalid_argument);
+  bvh::FlatTree small_box = flat;  // a node box that does not enclose its children
+  small_box.nodes[0].box.max.x = 0.5f;
+  EXPECT_THROW(culler().upload(small_box, boxes), std::invalid_argument);
+  std::vector<Aabb> nan_boxes = boxes;
+  nan_boxes[3].max.y = NAN;
+  EXPECT_THROW(culler().upload(flat, nan_boxes), std::invalid_argument);
+  // Two leaves that both claim every object: ids and links are in range, but the ranges do
+  // not split the root's (the GPU's queue capacities assume they do).
+  bvh::FlatTree overlapping;
+  overlapping.objects.resize(boxes.size());
+  for (std::uint32_t i = 0; i < boxes.size(); ++i) overlapping.objects[i] = i;
+  const Aabb all{glm::vec3(-1), glm::vec3(1)};
+  const auto n = std::uint32_t(boxes.size());
+  overlapping.nodes = {{all, 3, 0, n, false}, {all, 2, 0, n, true}, {all, 3, 0, n, true}};
+  EXPECT_THROW(culler().upload(overlapping, boxes), std::invalid_argument);
   culler().upload(flat, boxes);
   gpu::CullOptions ordered;
   ordered.ordered = true;
@@ -273,6 +288,13 @@ TEST_F(GpuBvh, BadTreesAndOptionsAreClearErrors) {
   draws.draws = true;
   culler().upload_draws(std::vector<gpu::DrawCommand>(99));
   EXPECT_THROW(culler().cull(test_frusta(), draws), std::invalid_argument);
+  // More views than one buffer holds: a clear length_error before anything is allocated.
+  const std::size_t too_many_views =
+      GpuBvhEnvironment::context->properties().limits.maxStorageBufferRange / sizeof(gpu::GpuFrustum) + 1;
+  if (too_many_views < 5'000'000) {
+    const std::vector<Frustum> views(too_many_views, test_frusta()[0]);
+    EXPECT_THROW(culler().cull(views), std::length_error);
+  }
   // And the culler still works after every rejection.
   expect_agreement(culler(), flat, boxes, test_frusta());
 }

@@ -6,6 +6,7 @@
 #include <optional>
 #include <ostream>
 #include <span>
+#include <string_view>
 #include <vector>
 
 #include "app/commands.hpp"
@@ -75,9 +76,31 @@ struct BuiltBvh {
   double build_ns = 0.0;
 };
 
-/// Builds with the named builder (bvh::build); an unknown name or a bad leaf size is an InputError.
+/// The most objects the tool gives the exact agglomerative builders (oracles: O(n^3) and
+/// O(n^2)); no limit for the others.
+inline std::size_t builder_size_limit(std::string_view builder) {
+  if (builder == "agglomerative-brute") return 2000;
+  if (builder == "agglomerative-pq") return 20000;
+  return SIZE_MAX;
+}
+
+/// Throws InputError unless `builder` names a builder (bvh::build's names).
+inline void check_builder_name(const std::string& builder) {
+  try {
+    bvh::build(builder, std::span<const Aabb>{});
+  } catch (const std::invalid_argument& e) {
+    throw InputError(std::string("--builder: ") + e.what());
+  }
+}
+
+/// Builds with the named builder (bvh::build); an unknown name, a bad leaf size or a scene too
+/// large for an oracle builder is an InputError.
 inline BuiltBvh build_bvh(const std::string& builder, std::span<const Aabb> boxes, std::uint32_t leaf_size) {
   if (leaf_size == 0) throw InputError("--leaf-size must be at least 1");
+  check_builder_name(builder);
+  if (boxes.size() > builder_size_limit(builder))
+    throw InputError("--builder " + builder + " is an exact oracle for at most " + std::to_string(builder_size_limit(builder)) +
+                     " objects; this scene has " + std::to_string(boxes.size()) + " (try agglomerative-local)");
   bvh::BuildOptions options;
   options.max_leaf_size = leaf_size;
   BuiltBvh built;
@@ -141,8 +164,20 @@ inline BackendResults cull_bvh_on_backends(const bvh::FlatTree& tree, std::span<
     if (warm_up) culler.cull(frusta, {false, false, 0});  // the first dispatch of each pipeline compiles it (lavapipe)
     gpu::CullResult g = culler.cull(frusta);
     session.check_validation();
-    if (r.node_tests.empty())
-      for (const gpu::ViewResult& view : g.views) r.node_tests.push_back(view.node_tests), r.object_tests.push_back(view.object_tests);
+    const bool have_cpu_tests = !r.node_tests.empty();
+    for (std::size_t v = 0; v < g.views.size(); ++v) {
+      const gpu::ViewResult& view = g.views[v];
+      if (!have_cpu_tests) {
+        r.node_tests.push_back(view.node_tests);
+        r.object_tests.push_back(view.object_tests);
+      } else if (view.node_tests != r.node_tests[v] || view.object_tests != r.object_tests[v]) {
+        ++r.mismatches;  // the same traversal must make the same tests
+        if (r.mismatch_reports.size() < max_reports)
+          r.mismatch_reports.push_back("view " + std::to_string(v) + ": the GPU made " + std::to_string(view.node_tests) +
+                                       " node and " + std::to_string(view.object_tests) + " object tests, the CPU " +
+                                       std::to_string(r.node_tests[v]) + " and " + std::to_string(r.object_tests[v]));
+      }
+    }
     take_gpu_result(r, g);
   }
   if (backend == Backend::Both) compare_backends<Aabb>(r, boxes, frusta, {}, max_reports);

@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 #include <ostream>
 
+#include "app/backends.hpp"
 #include "app/commands.hpp"
 #include "app/guard.hpp"
 #include "app/scene_source.hpp"
@@ -14,15 +15,6 @@
 
 namespace cullpipe::app {
 namespace {
-
-// `--builder all` leaves out the oracles on scenes too large for them: the brute-force
-// agglomerative builder is O(n^3), the exact priority-queue one O(n^2) (named explicitly,
-// they run at any size).
-std::size_t all_builders_limit(const std::string& name) {
-  if (name == "agglomerative-brute") return 2000;
-  if (name == "agglomerative-pq") return 20000;
-  return SIZE_MAX;
-}
 
 std::string fixed(double value, int digits) {
   char buf[48];
@@ -59,10 +51,15 @@ int bvh_command(const BvhOptions& o, std::ostream& out, std::ostream& err) {
       }
     }
     if (names.empty()) throw InputError("--builder: no builder named");
+    for (const auto& [name, from_all] : names) check_builder_name(name);  // before any work
 
     LoadedScene loaded = load_scene_source(o);
     const std::vector<Aabb> boxes = world_aabbs(loaded.scene, loaded.aabb_update);
     const std::size_t n = boxes.size();
+    for (const auto& [name, from_all] : names)
+      if (!from_all && n > builder_size_limit(name))
+        throw InputError("--builder " + name + " is an exact oracle for at most " + std::to_string(builder_size_limit(name)) +
+                         " objects; this scene has " + std::to_string(n));
     out << "cullpipe bvh: " << (loaded.scene.name.empty() ? loaded.source : loaded.scene.name) << " (" << loaded.source << "), " << n
         << " objects, leaves of <= " << o.leaf_size << ", median of " << o.repeats << (o.repeats == 1 ? " build\n\n" : " builds\n\n");
     out << "  " << left("builder", 26)
@@ -72,9 +69,8 @@ int bvh_command(const BvhOptions& o, std::ostream& out, std::ostream& err) {
     bvh::BuildOptions options;
     options.max_leaf_size = o.leaf_size;
     for (const auto& [name, from_all] : names) {
-      if (from_all && n > all_builders_limit(name)) {
-        out << "  " << left(name, 26) << "  skipped: an oracle, run by `all` on at most " << all_builders_limit(name)
-            << " objects (name it to run it)\n";
+      if (n > builder_size_limit(name)) {  // only from "all": named ones were checked above
+        out << "  " << left(name, 26) << "  skipped: an exact oracle, for at most " << builder_size_limit(name) << " objects\n";
         continue;
       }
       std::vector<double> times;

@@ -57,9 +57,9 @@ const std::array kEntries = {
           build_agglomerative_pq),
     other("agglomerative-local", "bottom-up clustering among Morton-order neighbours (PLOC)",
           build_agglomerative_local),
-    other("insertion-greedy", "insertion in id order, descending to the cheaper child (+rotations)",
+    other("insertion-greedy", "insertion (fixed shuffle), descending to the cheaper child (+rotations)",
           build_insertion_greedy, true),
-    other("insertion-bnb", "insertion in id order, best sibling by branch and bound (+rotations)", build_insertion_bnb,
+    other("insertion-bnb", "insertion (fixed shuffle), best sibling by branch and bound (+rotations)", build_insertion_bnb,
           true),
 };
 

@@ -34,7 +34,8 @@ enum class SplitPosition {
   Mean,          ///< t = mean of p
   ExtentMedian,  ///< t = lo + (hi - lo) / 2, the middle of [lo, hi], the range of p (spatial median)
   Binned,        ///< [lo, hi] cut into `bins` equal bins, bin = min(bins - 1, floor((p - lo) * (bins / (hi - lo))))
-                 ///< (in float on x, y, z, exactly as build_binned_sah; a subnormal extent counts as flat);
+                 ///< (in float on x, y, z, exactly as build_binned_sah; an extent so small that bins / extent
+                 ///< overflows counts as flat);
                  ///< candidates: bins [0, k] left, k = 0 .. bins - 2; the best under the cost (lowest k on ties)
 };
 /// The cost a split is scored by (lower is better). L and R are the children's boxes, |L| and

@@ -5,6 +5,7 @@
 #include <bit>
 #include <cmath>
 #include <memory>
+#include <stdexcept>
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
@@ -68,10 +69,13 @@ inline Lanes centroid(const BinRef& r) {
   return c;
 }
 // Grows the bin box [lo, hi] by r and adds 1 to the object count the bin keeps in the
-// fourth lane of lo, as an integer: min(count, +infinity) leaves it as it is (a count is a
-// small non-NaN bit pattern), then an integer add counts the object.
+// fourth lane of lo, as an integer. The count lane never goes through float arithmetic (a
+// small count is a denormal bit pattern, which a CPU flushing denormals (DAZ) would read as
+// 0): the min is taken on x, y, z only and the count is kept and incremented as an integer.
 inline void add_to_bin(Lanes& lo, Lanes& hi, const BinRef& r) {
-  const __m128 m = _mm_min_ps(_mm_load_ps(r.lo.v), _mm_load_ps(lo.v));
+  const __m128 xyz = _mm_castsi128_ps(_mm_set_epi32(0, -1, -1, -1));
+  const __m128 old = _mm_load_ps(lo.v);
+  const __m128 m = _mm_or_ps(_mm_and_ps(_mm_min_ps(_mm_load_ps(r.lo.v), old), xyz), _mm_andnot_ps(xyz, old));
   _mm_store_ps(lo.v, _mm_castsi128_ps(_mm_add_epi32(_mm_castps_si128(m), _mm_set_epi32(1, 0, 0, 0))));
   lanes_max(hi, r.hi);
 }
@@ -296,6 +300,7 @@ Tree build_binned_sah(std::span<const Aabb> boxes, const TopDownOptions& options
       }
       left_centroids = left_side;
       right_centroids = right_side;
+      if (l != mid || r != task.count) throw std::logic_error("build_binned_sah: bin counts disagree with the partition");
     }
     // Empty the bins for the next node.
     for (int axis = 0; axis < 3; ++axis)

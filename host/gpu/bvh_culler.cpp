@@ -6,6 +6,8 @@
 #include <stdexcept>
 #include <string>
 
+#include <glm/vector_relational.hpp>
+
 #include "geom/validate.hpp"
 #include "gpu/pass_support.hpp"
 #include "vk/check.hpp"
@@ -28,6 +30,15 @@ BvhCuller::BvhCuller(const vk::Context& ctx) : ctx_(ctx) {
   if (limits.maxPerStageDescriptorStorageBuffers < BVH_BINDING_COUNT)
     throw vk::Error("hierarchical culling needs " + std::to_string(BVH_BINDING_COUNT) + " storage buffers per stage; " +
                     ctx_.info().name + " allows " + std::to_string(limits.maxPerStageDescriptorStorageBuffers));
+  VkPhysicalDeviceSubgroupProperties subgroup{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_SUBGROUP_PROPERTIES};
+  VkPhysicalDeviceProperties2 properties{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2, &subgroup, {}};
+  vkGetPhysicalDeviceProperties2(ctx_.physical_device(), &properties);
+  const VkSubgroupFeatureFlags needed = VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_VOTE_BIT |
+                                        VK_SUBGROUP_FEATURE_ARITHMETIC_BIT | VK_SUBGROUP_FEATURE_BALLOT_BIT |
+                                        VK_SUBGROUP_FEATURE_SHUFFLE_BIT;
+  if (!(subgroup.supportedStages & VK_SHADER_STAGE_COMPUTE_BIT) || (subgroup.supportedOperations & needed) != needed)
+    throw vk::Error("hierarchical culling needs subgroup basic, vote, arithmetic, ballot and shuffle operations in compute "
+                    "shaders; " + ctx_.info().name + " lacks some");
   resources_ = std::make_unique<detail::PassResources>(ctx_, pipeline(BVH_PASS_LEVEL, false).set_layout(), BVH_BINDING_COUNT);
 }
 
@@ -59,10 +70,22 @@ void BvhCuller::upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes) {
     if (o >= n) bad("object id " + std::to_string(o) + " out of range (" + std::to_string(n) + " objects)");
     if (seen[o]++) bad("object id " + std::to_string(o) + " appears twice");
   }
-  // Depth of every node (children follow their parent in depth-first order) and link checks.
+  for (std::size_t i = 0; i < n; ++i)
+    if (const std::string why = invalid_reason(boxes[i]); !why.empty()) bad("box " + std::to_string(i) + ": " + why);
+  auto encloses = [](const Aabb& outer, const Aabb& inner) {
+    return glm::all(glm::lessThanEqual(outer.min, inner.min)) && glm::all(glm::lessThanEqual(inner.max, outer.max));
+  };
+  // Depth of every node (children follow their parent in depth-first order) and the layout
+  // flatten() gives, which the GPU's work-queue capacities rely on: the root covers every
+  // object; a node's two children split its object range and end where it ends; boxes enclose
+  // their children and objects.
   std::vector<std::uint32_t> depth(nodes, 0);
   std::vector<GpuBvhNode> packed(nodes);
-  if (nodes) depth[0] = 1;
+  if (nodes) {
+    depth[0] = 1;
+    if (tree.nodes[0].first != 0 || tree.nodes[0].count != n || tree.nodes[0].skip != nodes)
+      bad("the root must cover every object and every node");
+  }
   for (std::size_t i = 0; i < nodes; ++i) {
     const bvh::FlatNode& node = tree.nodes[i];
     const std::string at = "node " + std::to_string(i) + ": ";
@@ -73,10 +96,17 @@ void BvhCuller::upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes) {
     std::uint32_t second = bvh::kNone;
     if (node.leaf) {
       if (node.skip != i + 1) bad(at + "leaf whose skip is not the next node");
+      for (std::uint32_t k = node.first; k < node.first + node.count; ++k)
+        if (!encloses(node.box, boxes[tree.objects[k]])) bad(at + "box does not enclose object " + std::to_string(tree.objects[k]));
     } else {
       if (i + 1 >= node.skip) bad(at + "inner node without children");
       second = tree.nodes[i + 1].skip;
       if (second <= i + 1 || second >= node.skip) bad(at + "second child " + std::to_string(second) + " out of range");
+      const bvh::FlatNode &a = tree.nodes[i + 1], &b = tree.nodes[second];
+      if (b.skip != node.skip) bad(at + "more than two children");
+      if (a.first != node.first || b.first != a.first + a.count || std::size_t(a.count) + b.count != node.count)
+        bad(at + "children's object ranges do not split the node's");
+      if (!encloses(node.box, a.box) || !encloses(node.box, b.box)) bad(at + "box does not enclose its children");
       depth[i + 1] = depth[second] = depth[i] + 1;
     }
     packed[i] = {node.box.min, node.first, node.box.max, node.count, node.skip, second, node.leaf ? 1u : 0u, 0u};
@@ -154,6 +184,8 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   const VkDeviceSize queue_bytes = 2 * VkDeviceSize(queue_capacity_) * sizeof(BvhWorkItem);
   const VkDeviceSize range_bytes = VkDeviceSize(range_capacity_) * sizeof(BvhRange);
   const VkDeviceSize test_bytes = VkDeviceSize(test_capacity_) * sizeof(BvhWorkItem);
+  check(VkDeviceSize(v) * sizeof(GpuFrustum), std::to_string(v) + " views");
+  check(VkDeviceSize(v) * sizeof(ViewCounters), std::to_string(v) + " view counters");
   check(outputs, views_x + std::to_string(object_count_) + " objects of output");
   check(visible, views_x + std::to_string(capacity) + " visible ids");
   check(draw_bytes, views_x + std::to_string(capacity) + " draw commands");

@@ -31,10 +31,11 @@ class BvhCuller {
   BvhCuller(const BvhCuller&) = delete;
   BvhCuller& operator=(const BvhCuller&) = delete;
 
-  /// Uploads a flattened tree over `boxes` (tree.objects holds each id once), replacing any
+  /// Uploads a flattened tree over `boxes` (as bvh::flatten lays it out), replacing any
   /// earlier upload; call again after a refit. Throws std::invalid_argument when the tree is
-  /// not a tree over these boxes (ids out of range or repeated, ranges or links out of
-  /// bounds), std::length_error when a buffer would exceed maxStorageBufferRange.
+  /// not one over these boxes (ids out of range or repeated, links or object ranges not nested
+  /// as flatten nests them, boxes invalid or not enclosing), std::length_error when a buffer
+  /// would exceed maxStorageBufferRange. O(nodes + objects).
   void upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes);
 
   /// One draw template per object, by object id (see GpuCuller::upload_draws).
@@ -67,9 +68,10 @@ class BvhCuller {
   const vk::Context& ctx_;
   std::uint32_t group_size_ = BVH_CULL_GROUP_SIZE;
   std::unique_ptr<vk::ComputePipeline> pipelines_[BVH_PASS_COUNT][2];  // [pass][draws]
-  std::unique_ptr<detail::PassResources> resources_;
   vk::Buffer bounds_, classes_, visible_, counters_, views_, templates_, draws_;
   vk::Buffer nodes_, objects_, queue_, ranges_, tests_, traversal_;
+  // After the buffers: destroyed first, it waits for the device (own devices) before they go.
+  std::unique_ptr<detail::PassResources> resources_;
   std::size_t object_count_ = 0, node_count_ = 0, template_count_ = 0;
   std::uint32_t levels_ = 0;
   std::size_t widest_level_ = 0;  // most nodes on one level

@@ -181,7 +181,10 @@ struct BvhTraversal {
   uint groups_done;     // workgroups of the running level that have finished
   uint reserved0;
   uint reserved1;
-  BvhDispatch level;    // arguments of the next level's dispatch
+  BvhDispatch level;    // arguments of the next LEVEL dispatch, written by the last workgroup
+                        // of the one before (its own arguments were read before it ran, in
+                        // the DRAW_INDIRECT stage); a dispatch of 0 groups leaves them 0
+  uint reserved2[4];
   BvhDispatch accept;   // arguments of the accept pass
   BvhDispatch test;     // arguments of the test pass
 };
