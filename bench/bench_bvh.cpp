@@ -8,7 +8,8 @@
 // visible. Every hierarchical answer is checked: CPU traversal == flat reference, GPU == CPU.
 //
 // usage: bench_bvh [--part build|cull|all] [--sizes 1000,...] [--builders a,b|all]
-//                  [--cull-size N] [--fractions 0.01,0.1,0.5] [--repeats R] [--device NAME] [--json FILE]
+//                  [--cull-size N] [--leaf-size L] [--fractions 0.01,0.1,0.5] [--repeats R] [--device NAME]
+//                  [--json FILE]
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -117,8 +118,8 @@ Frustum frustum_for_fraction(const bvh::FlatTree& flat, const std::vector<Aabb>&
   return best;
 }
 
-nlohmann::json bench_cull(std::size_t n, const std::vector<double>& fractions, int repeats_override, const std::string& device,
-                          bool& all_agree) {
+nlohmann::json bench_cull(std::size_t n, std::uint32_t leaf_size, const std::vector<double>& fractions, int repeats_override,
+                          const std::string& device, bool& all_agree) {
   vk::ContextOptions options;
   options.device_filter = device;
   vk::Context ctx(options);
@@ -127,12 +128,12 @@ nlohmann::json bench_cull(std::size_t n, const std::vector<double>& fractions, i
   const Scene scene = generate_scene(SceneKind::Uniform, n, 11);
   const std::vector<Aabb> boxes = world_aabbs(scene);
   const auto t0 = Clock::now();
-  const bvh::FlatTree flat = bvh::flatten(bvh::build_binned_sah(boxes));
+  const bvh::FlatTree flat = bvh::flatten(bvh::build_binned_sah(boxes, {leaf_size, 16}));
   const double build_ns = since(t0);
   flat_culler.upload(std::span<const Aabb>(boxes));
   bvh_culler.upload(flat, boxes);
-  std::printf("Hierarchical vs flat culling: %zu uniform random AABBs, binned-SAH tree (%zu nodes, built in %.0f ms)\n", n,
-              flat.nodes.size(), build_ns / 1e6);
+  std::printf("Hierarchical vs flat culling: %zu uniform random AABBs, binned-SAH tree, leaves of <= %u (%zu nodes, built in %.0f ms)\n", n,
+              leaf_size, flat.nodes.size(), build_ns / 1e6);
   std::printf("gpu: %s, %s\n\n", ctx.info().name.c_str(), ctx.info().driver.c_str());
   std::printf("%8s %8s %12s %12s %7s %12s %12s %7s %11s %11s %6s\n", "target", "visible", "cpu flat ms", "cpu bvh ms", "cpu x",
               "gpu flat ms", "gpu bvh ms", "gpu x", "node tests", "obj tests", "agree");
@@ -182,6 +183,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> builders = {"all"};
   std::vector<double> fractions = {0.01, 0.1, 0.5};
   std::size_t cull_size = 1000000;
+  std::uint32_t leaf_size = 4;
   int repeats = 0;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -210,6 +212,8 @@ int main(int argc, char** argv) {
       builders = split(value());
     } else if (a == "--cull-size") {
       cull_size = count(value());
+    } else if (a == "--leaf-size") {
+      leaf_size = std::uint32_t(std::max(1, std::atoi(value().c_str())));
     } else if (a == "--fractions") {
       fractions.clear();
       for (const std::string& s : split(value())) fractions.push_back(std::strtod(s.c_str(), nullptr));
@@ -221,7 +225,7 @@ int main(int argc, char** argv) {
       json_path = value();
     } else {
       std::fprintf(stderr,
-                   "usage: bench_bvh [--part build|cull|all] [--sizes N,..] [--builders a,b|all] [--cull-size N] "
+                   "usage: bench_bvh [--part build|cull|all] [--sizes N,..] [--builders a,b|all] [--cull-size N] [--leaf-size L] "
                    "[--fractions f,..] [--repeats R] [--device NAME] [--json FILE]\n");
       return a == "--help" ? 0 : 2;
     }
@@ -234,7 +238,7 @@ int main(int argc, char** argv) {
   bool all_agree = true;
   try {
     if (part != "cull") j["build"] = bench_builders(sizes, builders, repeats);
-    if (part != "build") j["cull"] = bench_cull(cull_size, fractions, repeats, device, all_agree);
+    if (part != "build") j["cull"] = bench_cull(cull_size, leaf_size, fractions, repeats, device, all_agree);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_bvh: %s\n", e.what());
     return 1;

@@ -67,10 +67,14 @@ vec4 view_planes[MAX_FRUSTUM_PLANES];
 // one view (the usual case) the loads use a subgroup-uniform index (one load, not a gather
 // per lane).
 void load_view(uint view) {
-  uint first_view = subgroupBroadcastFirst(view);
-  uint v = subgroupAllEqual(view) ? first_view : view;
-  view_plane_count = min(views[v].plane_count, MAX_FRUSTUM_PLANES);
-  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = views[v].planes[k];
+  if (subgroupAllEqual(view)) {
+    uint v = subgroupBroadcastFirst(view);  // uniform: plain loads
+    view_plane_count = min(views[v].plane_count, MAX_FRUSTUM_PLANES);
+    [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = views[v].planes[k];
+  } else {
+    view_plane_count = min(views[view].plane_count, MAX_FRUSTUM_PLANES);
+    [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = views[view].planes[k];
+  }
 }
 
 // The p/n-vertex test of a box on the loaded view's planes in `mask`; `straddled` receives
@@ -155,14 +159,14 @@ void seed() {
     }                                                                           \
   }
 
-// Tests one node per invocation (when `has_node`) on the planes in `mask`, counts the test,
-// and appends what the node asks for except its children: INTERSECTING leaf: a test of each
+// Tests one node per invocation (when `has_node`) on the planes in `mask`, adds its node and
+// object tests to `tests_made`, and appends what the node asks for except its children: INTERSECTING leaf: a test of each
 // object on the planes it straddles; INSIDE: its object range, as full chunks for ACCEPT (one
 // full workgroup each) and the remainder in the dense TEST list with an empty plane mask
 // (accepted there without a test), so no workgroup runs mostly idle on a small subtree.
 // Returns whether the node is an INTERSECTING inner node (its children must be visited, with
 // `straddled`), and its second child. Called in uniform control flow.
-bool test_node(bool has_node, uint index, uint view, uint mask, out uint straddled, out uint second_child) {
+bool test_node(bool has_node, uint index, uint view, uint mask, out uint straddled, out uint second_child, inout uvec2 tests_made) {
   uint c = CLASS_OUTSIDE;
   straddled = 0u;
   GpuBvhNode node;
@@ -182,8 +186,7 @@ bool test_node(bool has_node, uint index, uint view, uint mask, out uint straddl
     full = node.count / gl_WorkGroupSize.x;
     tests_wanted = node.count - full * gl_WorkGroupSize.x;
   }
-  VIEW_COUNTER_ADD(node_tests, view, has_node ? 1u : 0u)
-  VIEW_COUNTER_ADD(object_tests, view, object_tests)
+  tests_made += uvec2(has_node ? 1u : 0u, object_tests);
   uint test_base, range_base;
   SUBGROUP_APPEND(state.test_count, tests_wanted, test_base)
   SUBGROUP_APPEND(state.range_count, full, range_base)
@@ -238,10 +241,13 @@ void visit(bool has_item, uint i, uint half_out) {
   }
   load_view(view);
   uint straddled, second;
-  bool descend = test_node(has_item, index, view, mask, straddled, second);
+  uvec2 tests_made = uvec2(0u);  // node tests, object tests (counted once per visit)
+  bool descend = test_node(has_item, index, view, mask, straddled, second, tests_made);
   uint straddled_a, second_a, straddled_b, second_b;
-  bool descend_a = test_node(descend, index + 1u, view, straddled, straddled_a, second_a);
-  bool descend_b = test_node(descend, second, view, straddled, straddled_b, second_b);
+  bool descend_a = test_node(descend, index + 1u, view, straddled, straddled_a, second_a, tests_made);
+  bool descend_b = test_node(descend, second, view, straddled, straddled_b, second_b, tests_made);
+  VIEW_COUNTER_ADD(node_tests, view, tests_made.x)
+  VIEW_COUNTER_ADD(object_tests, view, tests_made.y)
   push_children(descend_a, uvec2(index + 2u, second_a), view, straddled_a, half_out);
   push_children(descend_b, uvec2(second + 1u, second_b), view, straddled_b, half_out);
 }
