@@ -54,7 +54,7 @@ const std::string kNoVulkan = "VK_ICD_FILENAMES=/nonexistent/icd.json VK_DRIVER_
 TEST(Cli, HelpListsSubcommands) {
   const Result r = cullpipe("--help");
   EXPECT_EQ(r.code, 0);
-  for (const char* word : {"run", "classify", "generate", "devices"}) EXPECT_NE(r.out.find(word), std::string::npos) << word;
+  for (const char* word : {"run", "classify", "generate", "devices", "render", "bounds", "bvh"}) EXPECT_NE(r.out.find(word), std::string::npos) << word;
 }
 
 TEST(Cli, RunWithNoArgumentsCullsTheDefaultSceneAndAgrees) {
