@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Builds the libFuzzer targets (tests/fuzz) with clang, AddressSanitizer and UBSan into
+# Builds the libFuzzer targets (tests/fuzz) with clang (Debian 12: clang 14 and its runtimes,
+# libclang-rt-14-dev, installed by setup.sh), AddressSanitizer and UBSan into
 # build-fuzz/, and runs each for SECONDS (default 60) seconds from a seed corpus of the
 # project's own files (and ../shared/scenes when present). Fails on any crash, leak, sanitizer
 # report, hang or unexpected exception; the failing input is left in build-fuzz/crashes/.
