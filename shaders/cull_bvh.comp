@@ -1,7 +1,8 @@
 #version 460
 // Hierarchical frustum culling of a depth-first BVH, breadth first and in parallel: every
-// level of the tree is one indirect dispatch over a queue of (node, view, plane mask) work
-// items, so each node box is tested once per view, by its own invocation.
+// BVH_LEVELS_PER_DISPATCH (2) levels of the tree are one indirect dispatch over a queue of
+// (node, view, plane mask) work items; an invocation tests its item's node and, when that is
+// INTERSECTING, both children. Each node box is tested once per view.
 //
 //   SEED    one root item per view (all planes), queue state reset
 //   LEVEL   test each item's node on the planes its parent straddles (plane masking,
@@ -9,7 +10,7 @@
 //           range as chunks to accept without tests; INTERSECTING queues both children
 //           with the planes this node straddles, or, at a leaf, one test per object. The
 //           last workgroup to finish (a counter, as in AMD FidelityFX SPD) writes the
-//           indirect arguments of the next level, so a level costs one dispatch
+//           indirect arguments of the next LEVEL dispatch
 //   FINISH  indirect arguments for ACCEPT and TEST
 //   ACCEPT  every object of an accepted chunk is INSIDE
 //   TEST    each object of an INTERSECTING leaf is tested on the straddled planes
@@ -18,8 +19,8 @@
 // TEST list with an empty plane mask (accepted there without a test). (A variant with one
 // range entry per subtree, ordered by a 64-bit atomic and searched per object, measured
 // slower on lavapipe at every visible fraction.)
-// The host records SEED, then LEVEL once per tree level, then FINISH, ACCEPT and TEST, with
-// barriers between. The result equals host/bvh cull_hierarchical bit for bit: same
+// The host records SEED, then LEVEL once per two tree levels, then FINISH, ACCEPT and TEST,
+// with barriers between. The result equals host/bvh cull_hierarchical bit for bit: same
 // p/n-vertex test, distances as ((n.x*p.x + n.y*p.y) + n.z*p.z) + d marked `precise`, same
 // masks, and the same counts of node and object tests.
 #extension GL_GOOGLE_include_directive : require
