@@ -5,7 +5,9 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <cstring>
+#include <unistd.h>
 #include <filesystem>
 #include <memory>
 
@@ -297,6 +299,49 @@ TEST_F(GpuBvh, BadTreesAndOptionsAreClearErrors) {
   }
   // And the culler still works after every rejection.
   expect_agreement(culler(), flat, boxes, test_frusta());
+}
+
+}  // namespace
+}  // namespace cullpipe
+
+namespace cullpipe {
+namespace {
+
+std::size_t resident_bytes() {
+  std::FILE* f = std::fopen("/proc/self/statm", "r");
+  if (!f) return 0;
+  unsigned long pages = 0, resident = 0;
+  const int got = std::fscanf(f, "%lu %lu", &pages, &resident);
+  std::fclose(f);
+  return got == 2 ? std::size_t(resident) * std::size_t(sysconf(_SC_PAGESIZE)) : 0;
+}
+
+// An engine culls every frame for hours: a thousand passes on one context, flat and
+// hierarchical, alternating view counts and options, must not grow the process's memory, and
+// every pass stays exact.
+TEST_F(GpuBvh, ThousandsOfPassesDoNotGrowMemory) {
+  const Scene scene = generate_scene(SceneKind::City, 5000, 8);
+  const std::vector<Aabb> boxes = world_aabbs(scene);
+  const bvh::FlatTree flat = flat_tree(boxes);
+  const std::vector<Frustum> frusta = path_frusta(scene, 4);
+  gpu::GpuCuller flat_culler(*GpuBvhEnvironment::context);
+  flat_culler.upload(std::span<const Aabb>(boxes));
+  culler().upload(flat, boxes);
+  const bvh::HierarchicalResult expected = bvh::cull_hierarchical(flat, boxes, frusta[1]);
+  auto pass = [&](int i) {
+    const std::span<const Frustum> views(frusta.data(), std::size_t(1 + i % 4));
+    const gpu::CullOptions options{i % 7 == 0, true, std::size_t(i % 3 == 0 ? 100 : 0)};
+    const gpu::CullResult b = culler().cull(views, options), f = flat_culler.cull(views, options);
+    if (views.size() > 1 && (b.views[1].counts.visible != expected.visible || f.views[1].counts.visible != expected.visible))
+      ADD_FAILURE() << "pass " << i << " disagrees";
+  };
+  for (int i = 0; i < 100; ++i) pass(i);  // warm up: pipelines, buffers at their largest
+  const std::size_t before = resident_bytes();
+  for (int i = 0; i < 1000; ++i) pass(i);
+  const std::size_t after = resident_bytes();
+  std::printf("  resident memory: %.1f MiB before, %.1f MiB after 1000 more passes of each culler\n", before / 1048576.0,
+              after / 1048576.0);
+  EXPECT_LT(after, before + 8u * 1024 * 1024) << "memory grows with every pass";
 }
 
 }  // namespace
