@@ -152,6 +152,33 @@ TEST_F(GpuBvh, EverythingInsideEverythingOutsideAndDeepTrees) {
   expect_agreement(culler(), flat_tree(same, 2), same, test_frusta());
 }
 
+// The camera inside objects (a room around the eye, boxes the eye sits in), next to objects
+// of 1e-30 and 1e30 extent: defined answers, never culled when they contain the eye.
+TEST_F(GpuBvh, CameraInsideObjectsAndExtremeSizes) {
+  test::Rng rng{19};
+  std::vector<Aabb> boxes;
+  const glm::vec3 eye(0, 0, 10);  // test_view_proj's eye
+  boxes.push_back({eye - glm::vec3(100.0f), eye + glm::vec3(100.0f)});       // a room around the camera
+  boxes.push_back({eye - glm::vec3(1.0f), eye + glm::vec3(1.0f)});           // the eye in a box past the near plane
+  boxes.push_back({eye - glm::vec3(0.01f), eye + glm::vec3(0.01f)});         // ... in one within the near distance
+  boxes.push_back({glm::vec3(-1e30f), glm::vec3(1e30f)});                    // everything
+  boxes.push_back({glm::vec3(0, 0, 0), glm::vec3(1e-30f)});                  // tiny, in view
+  boxes.push_back({glm::vec3(0, 0, 20), glm::vec3(0, 0, 20) + 1e-30f});      // tiny, behind the camera
+  boxes.push_back({glm::vec3(-1e30f, -1e30f, 1e29f), glm::vec3(1e30f)});      // huge, all behind the camera
+  for (int i = 0; i < 3000; ++i) boxes.push_back(test::random_aabb(rng, 30.0f, 2.0f));
+  const std::vector<Frustum> frusta = test_frusta();
+  const gpu::CullResult r = expect_agreement(culler(), flat_tree(boxes, 2), boxes, frusta);
+  for (const gpu::ViewResult& v : r.views) {
+    EXPECT_EQ(v.classes[0], Classification::Intersecting);
+    EXPECT_EQ(v.classes[1], Classification::Intersecting);  // contains the eye and crosses the near plane
+    EXPECT_EQ(v.classes[2], Classification::Outside);       // contains the eye, but ends before the near plane
+    EXPECT_EQ(v.classes[3], Classification::Intersecting);
+    EXPECT_EQ(v.classes[5], Classification::Outside);
+    EXPECT_EQ(v.classes[6], Classification::Outside);
+  }
+  EXPECT_EQ(r.views[0].classes[4], Classification::Inside);
+}
+
 TEST_F(GpuBvh, DrawsAndVisibleListOverflow) {
   test::Rng rng{12};
   std::vector<Aabb> boxes(8000);
@@ -341,7 +368,13 @@ TEST_F(GpuBvh, ThousandsOfPassesDoNotGrowMemory) {
   const std::size_t after = resident_bytes();
   std::printf("  resident memory: %.1f MiB before, %.1f MiB after 1000 more passes of each culler\n", before / 1048576.0,
               after / 1048576.0);
+#if defined(__SANITIZE_ADDRESS__)
+  // AddressSanitizer keeps freed memory in quarantine, so resident memory grows regardless;
+  // LeakSanitizer checks for leaks at exit instead.
+  (void)after;
+#else
   EXPECT_LT(after, before + 8u * 1024 * 1024) << "memory grows with every pass";
+#endif
 }
 
 }  // namespace
