@@ -10,12 +10,14 @@
 #include <tuple>
 #include <vector>
 
+#include "bvh/box_ops.hpp"
 #include "bvh/builders.hpp"
 
 namespace cullpipe::bvh {
-namespace {
 
-Aabb merged(const Aabb& a, const Aabb& b) { return {glm::min(a.min, b.min), glm::max(a.max, b.max)}; }
+using detail::merged;
+
+namespace {
 
 // What a merge costs: half the surface area of the merged box, in double; the half perimeter
 // (sum of extents) breaks ties between boxes of equal area, e.g. flat or collinear ones, whose

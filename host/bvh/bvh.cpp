@@ -10,21 +10,15 @@
 #include <emmintrin.h>
 #endif
 
+#include "bvh/box_ops.hpp"
 #include "geom/pn_vertex.hpp"
 
 namespace cullpipe::bvh {
+
+using detail::encloses;
+using detail::half_area;
+
 namespace {
-
-// Half the surface area, in double (only ratios matter).
-double half_area(const Aabb& b) {
-  if (!(b.min.x <= b.max.x)) return 0.0;
-  const glm::dvec3 e = glm::dvec3(b.max) - glm::dvec3(b.min);
-  return e.x * e.y + e.y * e.z + e.z * e.x;
-}
-
-bool encloses(const Aabb& outer, const Aabb& inner) {
-  return glm::all(glm::lessThanEqual(outer.min, inner.min)) && glm::all(glm::lessThanEqual(inner.max, outer.max));
-}
 
 // The p/n-vertex test of one box against the planes in `mask` (bit k = plane k); `straddled`
 // receives the planes the box crosses (its children must still test those).

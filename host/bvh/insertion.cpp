@@ -11,13 +11,15 @@
 
 #include <glm/geometric.hpp>
 
+#include "bvh/box_ops.hpp"
 #include "bvh/builders.hpp"
 #include "geom/splitmix.hpp"
 
 namespace cullpipe::bvh {
-namespace {
 
-Aabb merged(const Aabb& a, const Aabb& b) { return {glm::min(a.min, b.min), glm::max(a.max, b.max)}; }
+using detail::merged;
+
+namespace {
 
 // A cost in surface area: half the area of boxes, in double, with the half perimeter (sum of
 // extents) as a tie-breaker compared only when areas are equal (flat and collinear boxes have

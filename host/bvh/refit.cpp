@@ -5,24 +5,16 @@
 #include <string>
 #include <vector>
 
+#include "bvh/box_ops.hpp"
 #include "bvh/builders.hpp"
 
 namespace cullpipe::bvh {
+
+using detail::empty_box;
+using detail::grow;
+using detail::half_area;
+
 namespace {
-
-Aabb empty_box() { return {glm::vec3(INFINITY), glm::vec3(-INFINITY)}; }
-
-void grow(Aabb& a, const Aabb& b) {
-  a.min = glm::min(a.min, b.min);
-  a.max = glm::max(a.max, b.max);
-}
-
-// Half the surface area, in double (only ratios matter); 0 for an empty box.
-double half_area(const Aabb& b) {
-  if (!(b.min.x <= b.max.x)) return 0.0;
-  const glm::dvec3 e = glm::dvec3(b.max) - glm::dvec3(b.min);
-  return e.x * e.y + e.y * e.z + e.z * e.x;
-}
 
 // The nodes reachable from the root in pre-order (a parent before its children), so the
 // reverse visits children before parents whatever the index order. Throws on a child index

@@ -4,32 +4,18 @@
 #include <numeric>
 #include <vector>
 
+#include "bvh/box_ops.hpp"
 #include "bvh/builders.hpp"
 
 namespace cullpipe::bvh {
+
+using detail::empty_box;
+using detail::grow;
+using detail::half_area;
+
 namespace {
 
-Aabb empty_box() { return {glm::vec3(INFINITY), glm::vec3(-INFINITY)}; }
-
-void grow(Aabb& a, const Aabb& b) {
-  a.min = glm::min(a.min, b.min);
-  a.max = glm::max(a.max, b.max);
-}
-
-void grow(Aabb& a, const glm::vec3& p) {
-  a.min = glm::min(a.min, p);
-  a.max = glm::max(a.max, p);
-}
-
 bool is_empty(const Aabb& b) { return !(b.min.x <= b.max.x && b.min.y <= b.max.y && b.min.z <= b.max.z); }
-
-// Half the surface area in double, 0 for an empty box; the operations of bvh.cpp's half_area,
-// so the SAH costs here equal build_binned_sah's.
-double half_area(const Aabb& b) {
-  if (!(b.min.x <= b.max.x)) return 0.0;
-  const glm::dvec3 e = glm::dvec3(b.max) - glm::dvec3(b.min);
-  return e.x * e.y + e.y * e.z + e.z * e.x;
-}
 
 double volume(const Aabb& b) {
   if (is_empty(b)) return 0.0;

@@ -6,8 +6,7 @@
 #include <stdexcept>
 #include <string>
 
-#include <glm/vector_relational.hpp>
-
+#include "bvh/box_ops.hpp"
 #include "geom/validate.hpp"
 #include "gpu/pass_support.hpp"
 #include "vk/check.hpp"
@@ -72,9 +71,7 @@ void BvhCuller::upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes) {
   }
   for (std::size_t i = 0; i < n; ++i)
     if (const std::string why = invalid_reason(boxes[i]); !why.empty()) bad("box " + std::to_string(i) + ": " + why);
-  auto encloses = [](const Aabb& outer, const Aabb& inner) {
-    return glm::all(glm::lessThanEqual(outer.min, inner.min)) && glm::all(glm::lessThanEqual(inner.max, outer.max));
-  };
+  using bvh::detail::encloses;
   // Depth of every node (children follow their parent in depth-first order) and the layout
   // flatten() gives, which the GPU's work-queue capacities rely on: the root covers every
   // object; a node's two children split its object range and end where it ends; boxes enclose

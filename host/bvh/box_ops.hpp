@@ -1,0 +1,40 @@
+#pragma once
+// Small box operations the BVH builders, metrics, refit and upload checks share (internal to
+// host/bvh and host/gpu). Areas in double: only ratios matter, and every builder's SAH cost is
+// computed by the same operations, so costs compare exactly across builders.
+#include <cmath>
+#include <glm/common.hpp>
+#include <glm/vec3.hpp>
+#include <glm/vector_relational.hpp>
+
+#include "geom/aabb.hpp"
+
+namespace cullpipe::bvh::detail {
+
+/// The empty box: growing it by anything gives that thing.
+inline Aabb empty_box() { return {glm::vec3(INFINITY), glm::vec3(-INFINITY)}; }
+
+inline void grow(Aabb& a, const Aabb& b) {
+  a.min = glm::min(a.min, b.min);
+  a.max = glm::max(a.max, b.max);
+}
+
+inline void grow(Aabb& a, const glm::vec3& p) {
+  a.min = glm::min(a.min, p);
+  a.max = glm::max(a.max, p);
+}
+
+inline Aabb merged(const Aabb& a, const Aabb& b) { return {glm::min(a.min, b.min), glm::max(a.max, b.max)}; }
+
+/// Half the surface area, in double; 0 for an empty box.
+inline double half_area(const Aabb& b) {
+  if (!(b.min.x <= b.max.x)) return 0.0;
+  const glm::dvec3 e = glm::dvec3(b.max) - glm::dvec3(b.min);
+  return e.x * e.y + e.y * e.z + e.z * e.x;
+}
+
+inline bool encloses(const Aabb& outer, const Aabb& inner) {
+  return glm::all(glm::lessThanEqual(outer.min, inner.min)) && glm::all(glm::lessThanEqual(inner.max, outer.max));
+}
+
+}  // namespace cullpipe::bvh::detail
