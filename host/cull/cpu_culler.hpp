@@ -1,0 +1,93 @@
+#pragma once
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string_view>
+#include <vector>
+
+#include "cull/reference.hpp"
+#include "geom/aabb.hpp"
+#include "geom/bv_kind.hpp"
+#include "geom/classification.hpp"
+#include "geom/frustum.hpp"
+#include "geom/obb.hpp"
+#include "geom/sphere.hpp"
+
+/// The fast CPU path: structure-of-arrays bounds, SIMD kernels chosen at run time (AVX-512,
+/// AVX2, or a portable 4-lane build of the same source), and every core through a thread pool.
+/// Results equal cullpipe::reference bit for bit: same float operations, same order, no
+/// contraction.
+namespace cullpipe::fast {
+
+/// Instruction set of the kernels.
+enum class Isa : std::uint8_t { Portable, Avx2, Avx512 };
+
+std::string_view to_string(Isa isa);
+/// "portable", "avx2" or "avx512"; nullopt otherwise.
+std::optional<Isa> parse_isa(std::string_view name);
+/// True when the kernels for `isa` are built into this binary and the CPU runs them.
+bool isa_supported(Isa isa);
+/// The widest supported instruction set. The environment variable CULLPIPE_ISA
+/// (portable / avx2 / avx512) lowers it, e.g. to compare kernels or to test the portable path.
+Isa best_isa();
+
+struct CpuCullerConfig {
+  /// Threads culling, the calling thread included; 0 means every core
+  /// (std::thread::hardware_concurrency()).
+  unsigned threads = 0;
+  /// Kernels to use; default best_isa(). One the machine cannot run throws invalid_argument.
+  std::optional<Isa> isa;
+  /// Objects per task handed to a thread; rounded up to a multiple of 16.
+  std::size_t chunk_objects = 16384;
+};
+
+struct CpuCullOptions {
+  bool classes = true;      ///< fill CpuViewResult::classes
+  bool visible_ids = true;  ///< fill CpuViewResult::visible_ids
+};
+
+/// One view's result.
+struct CpuViewResult {
+  std::vector<Classification> classes;      ///< per object, in object order (with options.classes)
+  std::vector<std::uint32_t> visible_ids;   ///< INSIDE/INTERSECTING objects, in object order
+  reference::CullCounts counts;
+};
+
+/// Flat frustum culling on the CPU. upload() converts the volumes to structure-of-arrays once;
+/// cull() classifies them against any number of views. Not thread-safe (it is itself
+/// parallel); one call at a time.
+class CpuCuller {
+ public:
+  explicit CpuCuller(const CpuCullerConfig& config = {});
+  ~CpuCuller();
+  CpuCuller(const CpuCuller&) = delete;
+  CpuCuller& operator=(const CpuCuller&) = delete;
+
+  /// Replaces the volumes to cull. Throws std::length_error beyond 2^32 - 1 objects (ids are
+  /// 32-bit). Volumes are not validated: like the reference, any floats give a defined answer
+  /// (a NaN distance compares false, so it never rejects).
+  void upload(std::span<const Aabb> volumes);
+  void upload(std::span<const Obb> volumes);
+  void upload(std::span<const Sphere> volumes);
+
+  std::vector<CpuViewResult> cull(std::span<const Frustum> views, const CpuCullOptions& options = {});
+  /// The same, into `results` (resized to the view count), reusing its vectors' storage so a
+  /// pass per frame allocates nothing once sizes settle.
+  void cull(std::span<const Frustum> views, const CpuCullOptions& options, std::vector<CpuViewResult>& results);
+
+  BvKind kind() const { return kind_; }
+  std::size_t object_count() const { return count_; }
+  Isa isa() const { return isa_; }
+  unsigned threads() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+  BvKind kind_ = BvKind::Aabb;
+  std::size_t count_ = 0;
+  Isa isa_ = Isa::Portable;
+};
+
+}  // namespace cullpipe::fast

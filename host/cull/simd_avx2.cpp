@@ -1,0 +1,9 @@
+// The AVX2 kernels: 8 lanes. Built with -mavx2 (not -mfma: no contraction either way); called
+// only when the CPU reports AVX2.
+#define CULLPIPE_SIMD_NS avx2
+#define CULLPIPE_SIMD_LANES 8
+#include "cull/simd_kernels.inl"
+
+namespace cullpipe::fast::detail {
+KernelTable avx2_kernels() { return {avx2::cull_aabb, avx2::cull_obb, avx2::cull_sphere, 8}; }
+}  // namespace cullpipe::fast::detail

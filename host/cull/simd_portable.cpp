@@ -1,0 +1,8 @@
+// The portable kernels: 4-lane vectors in the baseline instruction set (SSE2 on x86-64).
+#define CULLPIPE_SIMD_NS portable
+#define CULLPIPE_SIMD_LANES 4
+#include "cull/simd_kernels.inl"
+
+namespace cullpipe::fast::detail {
+KernelTable portable_kernels() { return {portable::cull_aabb, portable::cull_obb, portable::cull_sphere, 4}; }
+}  // namespace cullpipe::fast::detail

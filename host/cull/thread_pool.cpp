@@ -1,0 +1,82 @@
+#include "cull/thread_pool.hpp"
+
+#include <algorithm>
+
+namespace cullpipe::fast {
+
+ThreadPool::ThreadPool(unsigned threads) {
+  if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
+  workers_.reserve(threads - 1);
+  for (unsigned t = 1; t < threads; ++t) workers_.emplace_back([this] { worker_loop(); });
+}
+
+ThreadPool::~ThreadPool() {
+  {
+    std::lock_guard lock(mutex_);
+    stop_ = true;
+  }
+  wake_.notify_all();
+  for (std::thread& w : workers_) w.join();
+}
+
+void ThreadPool::run_tasks() {
+  std::unique_lock lock(mutex_);
+  while (next_task_ < task_count_) {
+    const std::size_t t = next_task_++;
+    const std::function<void(std::size_t)>& task = *task_;
+    lock.unlock();
+    try {
+      task(t);
+    } catch (...) {
+      lock.lock();
+      if (!error_) error_ = std::current_exception();
+      continue;
+    }
+    lock.lock();
+  }
+}
+
+void ThreadPool::worker_loop() {
+  std::size_t seen = 0;
+  std::unique_lock lock(mutex_);
+  for (;;) {
+    wake_.wait(lock, [&] { return stop_ || generation_ != seen; });
+    if (stop_) return;
+    seen = generation_;
+    ++busy_;
+    lock.unlock();
+    run_tasks();
+    lock.lock();
+    if (--busy_ == 0) done_.notify_all();
+  }
+}
+
+void ThreadPool::parallel_for(std::size_t tasks, const std::function<void(std::size_t)>& task) {
+  if (tasks == 0) return;
+  if (workers_.empty() || tasks == 1) {
+    for (std::size_t t = 0; t < tasks; ++t) task(t);
+    return;
+  }
+  {
+    std::lock_guard lock(mutex_);
+    task_ = &task;
+    task_count_ = tasks;
+    next_task_ = 0;
+    error_ = nullptr;
+    ++generation_;
+  }
+  wake_.notify_all();
+  run_tasks();
+  std::unique_lock lock(mutex_);
+  // Every task has been taken; wait for workers still running one (or about to look).
+  done_.wait(lock, [&] { return busy_ == 0; });
+  task_ = nullptr;
+  task_count_ = 0;
+  if (error_) {
+    std::exception_ptr e = error_;
+    error_ = nullptr;
+    std::rethrow_exception(e);
+  }
+}
+
+}  // namespace cullpipe::fast

@@ -1,0 +1,45 @@
+#pragma once
+#include <condition_variable>
+#include <cstddef>
+#include <functional>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+namespace cullpipe::fast {
+
+/// A fixed set of worker threads that run the tasks of one parallel_for at a time. The calling
+/// thread works too, so a pool of N threads starts N - 1 workers; a pool of 1 runs everything
+/// on the caller. Tasks are handed out one at a time from a shared counter, so uneven tasks
+/// balance themselves. Not reentrant: call parallel_for from one thread at a time.
+class ThreadPool {
+ public:
+  /// threads = 0: std::thread::hardware_concurrency() (at least 1).
+  explicit ThreadPool(unsigned threads = 0);
+  ~ThreadPool();
+  ThreadPool(const ThreadPool&) = delete;
+  ThreadPool& operator=(const ThreadPool&) = delete;
+
+  unsigned size() const { return static_cast<unsigned>(workers_.size()) + 1; }
+
+  /// Runs task(t) for t = 0..tasks-1 across the pool and returns when all have finished.
+  /// The first exception thrown by a task is rethrown here (the remaining tasks still run).
+  void parallel_for(std::size_t tasks, const std::function<void(std::size_t)>& task);
+
+ private:
+  void worker_loop();
+  void run_tasks();
+
+  std::vector<std::thread> workers_;
+  std::mutex mutex_;
+  std::condition_variable wake_, done_;
+  const std::function<void(std::size_t)>* task_ = nullptr;
+  std::size_t task_count_ = 0;
+  std::size_t next_task_ = 0;      // guarded by mutex_ (tasks are coarse: one lock per task is cheap)
+  std::size_t generation_ = 0;     // bumped per parallel_for
+  unsigned busy_ = 0;              // workers inside the current generation
+  std::exception_ptr error_;
+  bool stop_ = false;
+};
+
+}  // namespace cullpipe::fast

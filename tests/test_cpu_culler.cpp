@@ -1,0 +1,217 @@
+// The fast CPU path (cull/cpu_culler) against the scalar reference: every kernel this machine
+// runs, several thread counts and chunk sizes, sizes around the vector widths, boundary cases
+// (objects exactly on planes, -0 normals, NaN and infinite values, denormals), several views.
+#include <gtest/gtest.h>
+
+#include <cfenv>
+#include <cmath>
+#include <limits>
+#include <string>
+#include <vector>
+#include <xmmintrin.h>
+
+#include "cull/compare.hpp"
+#include "cull/cpu_culler.hpp"
+#include "cull/reference.hpp"
+#include "cull/thread_pool.hpp"
+#include "test_util.hpp"
+
+namespace cullpipe {
+namespace {
+
+using fast::CpuCuller;
+using fast::CpuCullerConfig;
+using fast::CpuCullOptions;
+using fast::CpuViewResult;
+using fast::Isa;
+
+std::vector<Isa> runnable_isas() {
+  std::vector<Isa> isas;
+  for (Isa isa : {Isa::Portable, Isa::Avx2, Isa::Avx512})
+    if (fast::isa_supported(isa)) isas.push_back(isa);
+  return isas;
+}
+
+std::vector<Frustum> test_views() {
+  std::vector<Frustum> views;
+  views.push_back(Frustum::from_view_proj(test::test_view_proj()));
+  views.push_back(Frustum::from_view_proj(test::test_view_proj(20.0f, 1.0f)));
+  // Axis-aligned planes with -0 and +0 normal components: the p/n-vertex choice must treat
+  // -0 as positive, like the reference.
+  const std::vector<glm::vec4> planes = {{1, -0.0f, 0, 5}, {-1, 0, -0.0f, 5}, {-0.0f, 1, 0, 5},
+                                         {0, -1, 0, 5},    {0, 0, 1, 30},     {-0.0f, -0.0f, -1, 30}};
+  views.push_back(Frustum::from_planes(planes));
+  views.push_back(Frustum{});  // no planes: everything INSIDE
+  return views;
+}
+
+/// Fails with the object, the planes and both answers at the first difference; checks the
+/// counts and that the visible list is exactly the visible objects in object order.
+template <class Volume>
+void expect_equal_to_reference(std::span<const Volume> volumes, const Frustum& f, const CpuViewResult& r, const std::string& what) {
+  std::vector<Classification> expected(volumes.size());
+  const reference::CullCounts counts = reference::classify_all(volumes, f, expected);
+  ASSERT_EQ(r.classes.size(), volumes.size()) << what;
+  const std::size_t i = first_mismatch(expected, r.classes);
+  ASSERT_EQ(i, npos) << what << ": object " << i << ": " << describe(volumes[i]) << "; frustum " << describe(f)
+                     << "; reference says " << to_string(expected[i]) << ", fast CPU says " << to_string(r.classes[i]);
+  EXPECT_EQ(r.counts, counts) << what;
+  std::vector<std::uint32_t> ids;
+  for (std::size_t k = 0; k < expected.size(); ++k)
+    if (is_visible(expected[k])) ids.push_back(static_cast<std::uint32_t>(k));
+  EXPECT_EQ(r.visible_ids, ids) << what;
+}
+
+template <class Volume>
+void check_everywhere(const std::vector<Volume>& volumes, const std::string& what) {
+  const std::vector<Frustum> views = test_views();
+  for (Isa isa : runnable_isas())
+    for (unsigned threads : {1u, 2u, 3u})
+      for (std::size_t chunk : {16u, 48u, 16384u}) {
+        CpuCullerConfig config;
+        config.isa = isa;
+        config.threads = threads;
+        config.chunk_objects = chunk;
+        CpuCuller culler(config);
+        culler.upload(std::span<const Volume>(volumes));
+        const std::vector<CpuViewResult> results = culler.cull(views);
+        ASSERT_EQ(results.size(), views.size());
+        for (std::size_t v = 0; v < views.size(); ++v)
+          expect_equal_to_reference(std::span<const Volume>(volumes), views[v], results[v],
+                                    what + " n=" + std::to_string(volumes.size()) + " isa=" + std::string(to_string(isa)) +
+                                        " threads=" + std::to_string(threads) + " chunk=" + std::to_string(chunk) + " view " +
+                                        std::to_string(v));
+      }
+}
+
+TEST(CpuCuller, RandomAabbsObbsAndSpheresOfEverySizeAroundTheVectorWidths) {
+  test::Rng rng(7);
+  for (std::size_t n : {0u, 1u, 3u, 4u, 5u, 7u, 8u, 9u, 15u, 16u, 17u, 31u, 33u, 47u, 100u, 1000u, 5003u}) {
+    std::vector<Aabb> boxes(n);
+    std::vector<Obb> obbs(n);
+    std::vector<Sphere> spheres(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      boxes[i] = test::random_aabb(rng, 30.0f, 4.0f);
+      obbs[i] = test::random_obb(rng, 30.0f, 4.0f);
+      spheres[i] = test::random_sphere(rng, 30.0f, 4.0f);
+    }
+    check_everywhere(boxes, "aabb");
+    check_everywhere(obbs, "obb");
+    check_everywhere(spheres, "sphere");
+  }
+}
+
+TEST(CpuCuller, ObjectsTouchingPlanesExactly) {
+  // Boxes whose faces lie on the planes of the axis-aligned view (distance exactly 0) and
+  // degenerate boxes (points, flat slabs).
+  std::vector<Aabb> boxes;
+  std::vector<Sphere> spheres;
+  for (float a : {-6.0f, -5.0f, -4.0f, 0.0f, 4.0f, 5.0f, 6.0f})
+    for (float b : {-5.0f, 0.0f, 5.0f}) {
+      boxes.push_back({{a, b, -30}, {a, b, -30}});
+      boxes.push_back({{a, -5, -30}, {5, b, 30}});
+      boxes.push_back({{-5, a, b}, {a, 5, b}});
+      spheres.push_back({{a, b, 0}, 1.0f});
+      spheres.push_back({{a, b, -29}, 0.0f});
+    }
+  check_everywhere(boxes, "aabb on planes");
+  check_everywhere(spheres, "sphere on planes");
+}
+
+TEST(CpuCuller, NanInfinityAndDenormalValuesGiveTheReferenceAnswer) {
+  const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+  const float denorm = std::numeric_limits<float>::denorm_min();
+  std::vector<Aabb> boxes;
+  std::vector<Obb> obbs;
+  std::vector<Sphere> spheres;
+  for (float v : {nan, inf, -inf, denorm, -denorm, 1e30f, -1e30f, 1e-30f, 0.0f, -0.0f, 3.0f}) {
+    boxes.push_back({{v, 0, 0}, {1, 1, 1}});
+    boxes.push_back({{-1, -1, -1}, {v, v, v}});
+    boxes.push_back({{v, v, v}, {v, v, v}});
+    Obb o;
+    o.center = {v, 0, -5};
+    o.half_extents = {1, v, 1};
+    obbs.push_back(o);
+    o.basis[1] = glm::vec3(v, 0, 0);
+    obbs.push_back(o);
+    spheres.push_back({{0, v, -5}, 1.0f});
+    spheres.push_back({{0, 0, -5}, v});
+  }
+  check_everywhere(boxes, "aabb special");
+  check_everywhere(obbs, "obb special");
+  check_everywhere(spheres, "sphere special");
+}
+
+TEST(CpuCuller, AgreesUnderFlushToZero) {
+  // An engine may run with FTZ/DAZ on; kernels and reference see the same MXCSR, so they must
+  // still agree.
+  const unsigned saved = _mm_getcsr();
+  _mm_setcsr(saved | 0x8040);  // FTZ | DAZ
+  std::vector<Aabb> boxes;
+  const float denorm = std::numeric_limits<float>::denorm_min() * 1000.0f;
+  for (int i = -20; i <= 20; ++i) boxes.push_back({{denorm * float(i), -5, -30}, {5, 5, denorm * float(i)}});
+  check_everywhere(boxes, "aabb ftz");
+  _mm_setcsr(saved);
+}
+
+TEST(CpuCuller, OptionsLeaveOutputsEmptyAndResultsAreReused) {
+  test::Rng rng(3);
+  std::vector<Sphere> spheres(777);
+  for (Sphere& s : spheres) s = test::random_sphere(rng, 30.0f, 3.0f);
+  CpuCuller culler;
+  culler.upload(std::span<const Sphere>(spheres));
+  const std::vector<Frustum> views = test_views();
+  std::vector<CpuViewResult> results;
+  CpuCullOptions options;
+  options.classes = false;
+  culler.cull(views, options, results);
+  ASSERT_EQ(results.size(), views.size());
+  EXPECT_TRUE(results[0].classes.empty());
+  std::vector<Classification> expected(spheres.size());
+  EXPECT_EQ(results[0].counts, reference::classify_all(std::span<const Sphere>(spheres), views[0], expected));
+  options.classes = true;
+  options.visible_ids = false;
+  culler.cull(std::span<const Frustum>(views).first(1), options, results);
+  ASSERT_EQ(results.size(), 1u);
+  EXPECT_TRUE(results[0].visible_ids.empty());
+  EXPECT_EQ(results[0].classes, expected);
+  // A smaller upload of another kind on the same culler.
+  std::vector<Aabb> boxes(20);
+  for (Aabb& b : boxes) b = test::random_aabb(rng, 30.0f, 3.0f);
+  culler.upload(std::span<const Aabb>(boxes));
+  EXPECT_EQ(culler.kind(), BvKind::Aabb);
+  culler.cull(views, {}, results);
+  for (std::size_t v = 0; v < views.size(); ++v) expect_equal_to_reference(std::span<const Aabb>(boxes), views[v], results[v], "reuse");
+}
+
+TEST(CpuCuller, ReportsItsKernelsAndRejectsOnesTheCpuLacks) {
+  EXPECT_TRUE(fast::isa_supported(Isa::Portable));
+  EXPECT_TRUE(fast::isa_supported(fast::best_isa()));
+  EXPECT_EQ(fast::parse_isa("avx2"), Isa::Avx2);
+  EXPECT_EQ(fast::parse_isa("sse9"), std::nullopt);
+  for (Isa isa : {Isa::Avx2, Isa::Avx512})
+    if (!fast::isa_supported(isa)) {
+      CpuCullerConfig config;
+      config.isa = isa;
+      EXPECT_THROW(CpuCuller{config}, std::invalid_argument);
+    }
+  CpuCullerConfig config;
+  config.threads = 3;
+  EXPECT_EQ(CpuCuller(config).threads(), 3u);
+}
+
+TEST(ThreadPool, RunsEveryTaskOnceAndRethrows) {
+  fast::ThreadPool pool(3);
+  for (int round = 0; round < 200; ++round) {
+    std::vector<int> hits(97, 0);
+    pool.parallel_for(hits.size(), [&](std::size_t t) { ++hits[t]; });
+    for (int h : hits) ASSERT_EQ(h, 1);
+  }
+  EXPECT_THROW(pool.parallel_for(10, [](std::size_t t) { if (t == 7) throw std::runtime_error("task 7"); }), std::runtime_error);
+  int after = 0;
+  pool.parallel_for(1, [&](std::size_t) { ++after; });
+  EXPECT_EQ(after, 1);
+}
+
+}  // namespace
+}  // namespace cullpipe
