@@ -28,28 +28,12 @@
 #include "gpu/gpu_culler.hpp"
 #include "scene/generators.hpp"
 #include "vk/context.hpp"
+#include "bench_util.hpp"
 
 using namespace cullpipe;
+using namespace cullpipe::bench;
 
 namespace {
-
-using Clock = std::chrono::steady_clock;
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const std::size_t n = v.size();
-  return n == 0 ? 0.0 : n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
-double since(Clock::time_point t0) { return double(std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - t0).count()); }
-
-std::vector<std::string> split(const std::string& s) {
-  std::vector<std::string> out;
-  std::stringstream in(s);
-  for (std::string item; std::getline(in, item, ',');)
-    if (!item.empty()) out.push_back(item);
-  return out;
-}
 
 // Largest n each builder is run at (quadratic and cubic builders are oracles, not tools).
 std::size_t size_limit(const std::string& builder) {
@@ -96,28 +80,6 @@ nlohmann::json bench_builders(const std::vector<std::size_t>& sizes, std::vector
   return cells;
 }
 
-// A camera looking at the centre of the scene from outside, with a field of view chosen by
-// bisection so that about `fraction` of the objects are visible.
-Frustum frustum_for_fraction(const bvh::FlatTree& flat, const std::vector<Aabb>& boxes, const Aabb& bounds, double fraction,
-                             double& achieved) {
-  Camera cam = framing_camera(bounds);
-  cam.aspect = 1.0f;
-  double lo = 0.001, hi = 179.0;  // degrees
-  Frustum best = Frustum::from_view_proj(cam.view_proj());
-  double best_error = INFINITY;
-  for (int step = 0; step < 40; ++step) {
-    const double mid = 0.5 * (lo + hi);
-    cam.fov_y_degrees = float(mid);
-    const Frustum f = Frustum::from_view_proj(cam.view_proj());
-    const double visible = double(bvh::cull_hierarchical(flat, boxes, f).visible) / double(boxes.size());
-    if (std::abs(visible - fraction) < best_error) best_error = std::abs(visible - fraction), best = f, achieved = visible;
-    if (visible < fraction) lo = mid;
-    else hi = mid;
-    if (best_error < fraction * 0.02) break;
-  }
-  return best;
-}
-
 nlohmann::json bench_cull(std::size_t n, std::uint32_t leaf_size, const std::vector<double>& fractions, int repeats_override,
                           const std::string& device, bool& all_agree) {
   vk::ContextOptions options;
@@ -141,7 +103,8 @@ nlohmann::json bench_cull(std::size_t n, std::uint32_t leaf_size, const std::vec
   const int reps = repeats_override > 0 ? repeats_override : 7;
   for (double fraction : fractions) {
     double achieved = 0.0;
-    const Frustum f = frustum_for_fraction(flat, boxes, scene.bounds(), fraction, achieved);
+    const Frustum f = frustum_for_fraction(scene.bounds(), boxes.size(), fraction,
+                                           [&](const Frustum& v) { return bvh::cull_hierarchical(flat, boxes, v).visible; }, achieved);
     const Frustum views[1] = {f};
     std::vector<Classification> ref(boxes.size());
     std::vector<double> cpu_flat, cpu_bvh, gpu_flat, gpu_bvh;
@@ -194,29 +157,18 @@ int main(int argc, char** argv) {
       }
       return argv[++i];
     };
-    auto count = [&](const std::string& s) {
-      char* end = nullptr;
-      const double v = std::strtod(s.c_str(), &end);
-      if (*end != '\0' || !(v >= 1) || v > 1e8) {
-        std::fprintf(stderr, "bench_bvh: '%s' is not a count\n", s.c_str());
-        std::exit(2);
-      }
-      return std::size_t(v);
-    };
     if (a == "--part") {
       part = value();
     } else if (a == "--sizes") {
-      sizes.clear();
-      for (const std::string& s : split(value())) sizes.push_back(count(s));
+      sizes = parse_counts(value(), "bench_bvh", "--sizes");
     } else if (a == "--builders") {
       builders = split(value());
     } else if (a == "--cull-size") {
-      cull_size = count(value());
+      cull_size = parse_counts(value(), "bench_bvh", "--cull-size").front();
     } else if (a == "--leaf-size") {
       leaf_size = std::uint32_t(std::max(1, std::atoi(value().c_str())));
     } else if (a == "--fractions") {
-      fractions.clear();
-      for (const std::string& s : split(value())) fractions.push_back(std::strtod(s.c_str(), nullptr));
+      fractions = parse_fractions(value(), "bench_bvh", "--fractions");
     } else if (a == "--repeats") {
       repeats = std::atoi(value().c_str());
     } else if (a == "--device") {

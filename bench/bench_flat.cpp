@@ -21,31 +21,12 @@
 #include "gpu/gpu_culler.hpp"
 #include "scene/generators.hpp"
 #include "vk/context.hpp"
+#include "bench_util.hpp"
 
 using namespace cullpipe;
+using namespace cullpipe::bench;
 
 namespace {
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const std::size_t n = v.size();
-  return n == 0 ? 0.0 : n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
-std::vector<std::string> split(const std::string& s) {
-  std::vector<std::string> out;
-  std::stringstream in(s);
-  for (std::string item; std::getline(in, item, ',');)
-    if (!item.empty()) out.push_back(item);
-  return out;
-}
-
-std::string cpu_model() {
-  std::ifstream in("/proc/cpuinfo");
-  for (std::string line; std::getline(in, line);)
-    if (line.rfind("model name", 0) == 0) return line.substr(line.find(':') + 2);
-  return "unknown CPU";
-}
 
 struct Cell {
   std::string bv;
@@ -127,20 +108,7 @@ int main(int argc, char** argv) {
       return argv[++i];
     };
     if (a == "--sizes") {
-      sizes.clear();
-      for (const std::string& s : split(value())) {
-        char* end = nullptr;
-        const double n = std::strtod(s.c_str(), &end);
-        if (*end != '\0' || !(n >= 0) || n > 1e9) {
-          std::fprintf(stderr, "bench_flat: --sizes: '%s' is not a count\n", s.c_str());
-          return 2;
-        }
-        sizes.push_back(std::size_t(n));
-      }
-      if (sizes.empty()) {
-        std::fprintf(stderr, "bench_flat: --sizes needs at least one count\n");
-        return 2;
-      }
+      sizes = parse_counts(value(), "bench_flat", "--sizes");
     } else if (a == "--bv") {
       kinds = split(value());
     } else if (a == "--repeats") {

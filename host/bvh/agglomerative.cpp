@@ -101,8 +101,18 @@ std::uint64_t spread_bits(std::uint64_t x) {
   return x;
 }
 
-// The object order along the 63-bit Morton curve of box centres, quantised in cubic cells
-// over the box of the centres (ties by id).
+// A pair of positions lo < hi in the current cluster list: cost, then the nearer pair, then
+// pairs starting at even positions (so runs of equal boxes pair off (0,1), (2,3), ... rather
+// than one pair per pass), then the position. A total order, so the least pair considered is
+// always mutual and every pass merges at least once.
+struct LocalKey {
+  Measure cost;
+  std::uint32_t distance = 0, odd = 0, lo = 0;
+  auto operator<=>(const LocalKey&) const = default;
+};
+
+}  // namespace
+
 std::vector<std::uint32_t> morton_order(std::span<const Aabb> boxes) {
   const std::size_t n = boxes.size();
   glm::dvec3 lo(INFINITY), hi(-INFINITY);
@@ -128,17 +138,6 @@ std::vector<std::uint32_t> morton_order(std::span<const Aabb> boxes) {
   return order;
 }
 
-// A pair of positions lo < hi in the current cluster list: cost, then the nearer pair, then
-// pairs starting at even positions (so runs of equal boxes pair off (0,1), (2,3), ... rather
-// than one pair per pass), then the position. A total order, so the least pair considered is
-// always mutual and every pass merges at least once.
-struct LocalKey {
-  Measure cost;
-  std::uint32_t distance = 0, odd = 0, lo = 0;
-  auto operator<=>(const LocalKey&) const = default;
-};
-
-}  // namespace
 
 Tree build_agglomerative_brute(std::span<const Aabb> boxes, const BuildOptions& options) {
   const std::size_t n = boxes.size();

@@ -148,6 +148,12 @@ void refit(FlatTree& tree, std::span<const Aabb> boxes);
 /// Used by the bottom-up and insertion builders.
 Tree collapse_leaves(const Tree& tree, std::uint32_t max_leaf_size);
 
+/// The object order along the 63-bit Morton (Z-order) curve of box centres, quantised in
+/// cubic cells over the box of the centres, ties by id: a permutation of 0..n-1 that puts
+/// objects near each other in space near each other in memory. Used by the PLOC builder;
+/// also a cheap spatial sort of a scene.
+std::vector<std::uint32_t> morton_order(std::span<const Aabb> boxes);
+
 // ------------------------------------------------------------- metrics (detailed in top_down.cpp)
 
 /// More measures of a tree, in double; all 0 (and leaf_sizes empty) for an empty tree. The

@@ -187,6 +187,44 @@ void CpuCuller::upload(std::span<const Sphere> volumes) {
   count_ = volumes.size();
 }
 
+std::size_t CpuCuller::bytes_per_object() const { return impl_->arrays.size() * sizeof(float); }
+
+namespace {
+/// Reads `columns` arrays of `floats` floats each, split into tasks, and ORs what it read.
+std::uint32_t touch_columns(ThreadPool& pool, const detail::KernelTable& table, std::span<const float* const> columns,
+                            std::size_t floats, std::size_t per_task) {
+  const std::size_t per_column = std::max<std::size_t>(1, (floats + per_task - 1) / per_task);
+  std::vector<std::uint32_t> bits(columns.size() * per_column, 0);
+  pool.parallel_for(bits.size(), [&](std::size_t t) {
+    const float* data = columns[t / per_column];
+    const std::size_t begin = t % per_column * per_task, end = std::min(floats, begin + per_task);
+    if (begin >= end) return;
+    const std::size_t whole = begin + (end - begin) / kPad * kPad;
+    std::uint32_t b = table.touch(data, begin, whole);
+    for (std::size_t i = whole; i < end; ++i) {
+      std::uint32_t word;
+      std::memcpy(&word, data + i, sizeof word);
+      b |= word;
+    }
+    bits[t] = b;
+  });
+  std::uint32_t all = 0;
+  for (std::uint32_t b : bits) all |= b;
+  return all;
+}
+}  // namespace
+
+std::uint32_t CpuCuller::touch(std::span<const float> data) {
+  const float* column = data.data();
+  return touch_columns(impl_->pool, impl_->table, {&column, 1}, data.size(), impl_->chunk * 8);
+}
+
+std::uint32_t CpuCuller::touch_bounds() {
+  // Only the objects' floats (rounded up to a vector), not the spare padding.
+  const std::size_t used = (count_ + kPad - 1) / kPad * kPad;
+  return count_ ? touch_columns(impl_->pool, impl_->table, impl_->arrays, used, impl_->chunk) : 0;
+}
+
 std::vector<CpuViewResult> CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& options) {
   std::vector<CpuViewResult> results;
   cull(views, options, results);

@@ -77,6 +77,15 @@ class CpuCuller {
   /// pass per frame allocates nothing once sizes settle.
   void cull(std::span<const Frustum> views, const CpuCullOptions& options, std::vector<CpuViewResult>& results);
 
+  /// Reads every uploaded bound once with the same kernels' loads and threads but no tests,
+  /// and returns the OR of the bits read: the memory floor of a pass, for benchmarks.
+  std::uint32_t touch_bounds();
+  /// Reads `data` the same way (e.g. a buffer larger than the caches, to measure read
+  /// bandwidth). `data` is read in whole vectors: its size should be a multiple of 16.
+  std::uint32_t touch(std::span<const float> data);
+  /// Bytes per object of the uploaded structure-of-arrays bounds (24 AABB, 60 OBB, 16 sphere).
+  std::size_t bytes_per_object() const;
+
   BvKind kind() const { return kind_; }
   std::size_t object_count() const { return count_; }
   Isa isa() const { return isa_; }

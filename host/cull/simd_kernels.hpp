@@ -47,10 +47,15 @@ using AabbKernel = ChunkCounts (*)(const AabbArrays&, std::size_t begin, std::si
 using ObbKernel = ChunkCounts (*)(const ObbArrays&, std::size_t begin, std::size_t end, const PlaneSet&, ChunkOutput);
 using SphereKernel = ChunkCounts (*)(const SphereArrays&, std::size_t begin, std::size_t end, const PlaneSet&, ChunkOutput);
 
+/// Reads data[begin..end) (end - begin a multiple of 16 or data padded to one) and returns
+/// the OR of its bits: the memory floor of a pass, with the same loads as the kernels.
+using TouchKernel = std::uint32_t (*)(const float* data, std::size_t begin, std::size_t end);
+
 struct KernelTable {
   AabbKernel aabb;
   ObbKernel obb;
   SphereKernel sphere;
+  TouchKernel touch;
   unsigned lanes;
 };
 

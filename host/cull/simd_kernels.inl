@@ -6,7 +6,10 @@
 // reference's order ((n.x*p.x + n.y*p.y) + n.z*p.z) + d, with contraction off (-ffp-contract=off
 // is global), and the same comparisons. The reference's early exit at the first plane that
 // rejects does not change its answer (OUTSIDE wins over everything found before or after), so
-// the kernels OR the per-plane masks and stop only when every lane of a vector is OUTSIDE.
+// the kernels OR the per-plane masks over all planes. Only the OBB kernel, whose per-plane work
+// is large, stops early when every lane of a vector is OUTSIDE; for AABBs and spheres the
+// mispredicted exits cost more than they save (measured: AABB, 1% visible, 0.69 -> 0.52 ns
+// per object without them).
 // The p/n-vertex choice depends only on the plane (the sign of each normal component, -0 as
 // positive, as pn_vertices), so it is made once per plane by picking the min or max array.
 #include <cstddef>
@@ -127,7 +130,6 @@ ChunkCounts cull_aabb(const AabbArrays& a, std::size_t begin, std::size_t end, c
       const vf dn = ((nx * load(n_x[k] + i) + ny * load(n_y[k] + i)) + nz * load(n_z[k] + i)) + d;
       outside |= dp < zero;
       crossing |= dn < zero;
-      if (lane_bits(outside) == kAllLanes) break;
     }
     emit(i, begin, static_cast<unsigned>(end - i), outside, crossing, out, counts);
   }
@@ -164,11 +166,26 @@ ChunkCounts cull_sphere(const SphereArrays& a, std::size_t begin, std::size_t en
       const vf s = ((planes.nx[k] * cx + planes.ny[k] * cy) + planes.nz[k] * cz) + planes.d[k];
       outside |= s < -radius;
       crossing |= s < radius;
-      if (lane_bits(outside) == kAllLanes) break;
     }
     emit(i, begin, static_cast<unsigned>(end - i), outside, crossing, out, counts);
   }
   return counts;
+}
+
+std::uint32_t touch(const float* data, std::size_t begin, std::size_t end) {
+  vi acc0 = {}, acc1 = {}, acc2 = {}, acc3 = {};
+  std::size_t i = begin;
+  for (; i + 4 * W <= end; i += 4 * W) {  // four independent chains keep several loads in flight
+    acc0 |= reinterpret_cast<vi>(load(data + i));
+    acc1 |= reinterpret_cast<vi>(load(data + i + W));
+    acc2 |= reinterpret_cast<vi>(load(data + i + 2 * W));
+    acc3 |= reinterpret_cast<vi>(load(data + i + 3 * W));
+  }
+  for (; i < end; i += W) acc0 |= reinterpret_cast<vi>(load(data + i));
+  const vi all = (acc0 | acc1) | (acc2 | acc3);
+  std::uint32_t bits = 0;
+  for (unsigned l = 0; l < W; ++l) bits |= static_cast<std::uint32_t>(all[l]);
+  return bits;
 }
 
 }  // namespace

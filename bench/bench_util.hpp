@@ -1,0 +1,109 @@
+#pragma once
+// Helpers shared by the benchmark programs: timing, medians, argument lists, the machine banner.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "geom/frustum.hpp"
+#include "scene/camera.hpp"
+
+namespace cullpipe::bench {
+
+using Clock = std::chrono::steady_clock;
+
+inline double since(Clock::time_point t0) {
+  return double(std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - t0).count());
+}
+
+inline double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const std::size_t n = v.size();
+  return n == 0 ? 0.0 : n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+/// "a,b,,c" -> {"a", "b", "c"}.
+inline std::vector<std::string> split(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream in(s);
+  for (std::string item; std::getline(in, item, ',');)
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+/// "1000,1e6,4e6" -> counts; exits with status 2 and a message naming `program` and `option`
+/// on anything else.
+inline std::vector<std::size_t> parse_counts(const std::string& list, const char* program, const char* option) {
+  std::vector<std::size_t> counts;
+  for (const std::string& s : split(list)) {
+    char* end = nullptr;
+    const double n = std::strtod(s.c_str(), &end);
+    if (*end != '\0' || !(n >= 0) || n > 1e9) {
+      std::fprintf(stderr, "%s: %s: '%s' is not a count\n", program, option, s.c_str());
+      std::exit(2);
+    }
+    counts.push_back(std::size_t(n));
+  }
+  if (counts.empty()) {
+    std::fprintf(stderr, "%s: %s needs at least one count\n", program, option);
+    std::exit(2);
+  }
+  return counts;
+}
+
+/// "0.01,0.1" -> fractions in (0, 1]; exits with status 2 otherwise.
+inline std::vector<double> parse_fractions(const std::string& list, const char* program, const char* option) {
+  std::vector<double> out;
+  for (const std::string& s : split(list)) {
+    char* end = nullptr;
+    const double f = std::strtod(s.c_str(), &end);
+    if (*end != '\0' || !(f > 0.0 && f <= 1.0)) {
+      std::fprintf(stderr, "%s: %s: '%s' is not a fraction in (0, 1]\n", program, option, s.c_str());
+      std::exit(2);
+    }
+    out.push_back(f);
+  }
+  if (out.empty()) {
+    std::fprintf(stderr, "%s: %s needs at least one fraction\n", program, option);
+    std::exit(2);
+  }
+  return out;
+}
+
+inline std::string cpu_model() {
+  std::ifstream in("/proc/cpuinfo");
+  for (std::string line; std::getline(in, line);)
+    if (line.rfind("model name", 0) == 0) return line.substr(line.find(':') + 2);
+  return "unknown CPU";
+}
+
+/// A camera looking at the centre of `bounds` from outside (framing_camera), its field of view
+/// chosen by bisection so that about `fraction` of the objects are visible; count_visible(f)
+/// counts them for a frustum. `achieved` gets the fraction reached.
+template <class CountVisible>
+Frustum frustum_for_fraction(const Aabb& bounds, std::size_t objects, double fraction, CountVisible count_visible, double& achieved) {
+  Camera cam = framing_camera(bounds);
+  cam.aspect = 1.0f;
+  double lo = 0.001, hi = 179.0;  // degrees
+  Frustum best = Frustum::from_view_proj(cam.view_proj());
+  double best_error = 1e300;
+  achieved = 0.0;
+  for (int step = 0; step < 40 && objects > 0; ++step) {
+    const double mid = 0.5 * (lo + hi);
+    cam.fov_y_degrees = float(mid);
+    const Frustum f = Frustum::from_view_proj(cam.view_proj());
+    const double visible = double(count_visible(f)) / double(objects);
+    if (std::abs(visible - fraction) < best_error) best_error = std::abs(visible - fraction), best = f, achieved = visible;
+    if (visible < fraction) lo = mid;
+    else hi = mid;
+    if (best_error < fraction * 0.02) break;
+  }
+  return best;
+}
+
+}  // namespace cullpipe::bench

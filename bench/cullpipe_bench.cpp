@@ -1,0 +1,499 @@
+// cullpipe-bench: every culling method side by side on the same scenes, in one run, with the
+// machine's own memory read bandwidth (measured in the same run) as the yardstick.
+//
+// Methods (each cell: one method, one volume kind, N objects, one visible fraction, one order):
+//   reference  scalar CPU reference, one thread, per-object classes (reference::classify_all)
+//   cpu-fast   SIMD + threads (fast::CpuCuller), per-object classes and the visible list
+//   cpu-read   the memory floor: cpu-fast's loads of the same bytes with no tests
+//   cpu-bvh    scalar hierarchical traversal (bvh::cull_hierarchical), AABBs only
+//   gpu-flat   GpuCuller, visible list compacted on the device (time between timestamps)
+//   gpu-bvh    BvhCuller, visible list, AABBs only
+// Scenes: the first N objects of one uniform random scene, in shuffled order or sorted along the
+// Morton curve; the camera's field of view is chosen so that about 1%, 10%, 50% are visible.
+// Every cell's answers are checked once against the reference before it is timed; ns/object
+// is the median over repeats, each method's repeats back to back after an untimed pass (so
+// objects that fit the caches are measured in cache, for every method alike).
+//
+// usage: cullpipe-bench [--methods m,..] [--bv aabb,obb,sphere] [--sizes 1e3,..] [--fractions 0.01,..]
+//                       [--order shuffled,sorted] [--repeats R] [--threads T] [--isa NAME]
+//                       [--device NAME] [--csv FILE] [--json FILE] [--plot PREFIX]
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <glm/common.hpp>
+#include <cstring>
+#include <fstream>
+#include <functional>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "bench_util.hpp"
+#include "bvh/builders.hpp"
+#include "bvh/bvh.hpp"
+#include "cull/cpu_culler.hpp"
+#include "cull/reference.hpp"
+#include "geom/splitmix.hpp"
+#include "gpu/bvh_culler.hpp"
+#include "gpu/gpu_culler.hpp"
+#include "scene/generators.hpp"
+#include "vk/context.hpp"
+
+using namespace cullpipe;
+using namespace cullpipe::bench;
+
+namespace {
+
+const char* const kProgram = "cullpipe-bench";
+const std::vector<std::string> kMethods = {"reference", "cpu-fast", "cpu-read", "cpu-bvh", "gpu-flat", "gpu-bvh"};
+
+struct Cell {
+  std::string method, bv, order;
+  std::size_t n = 0;
+  double target_fraction = 0, visible_fraction = 0;
+  int repeats = 0;
+  double ns = 0;       ///< median time of one pass (GPU: between timestamps)
+  double wall_ns = 0;  ///< GPU: median wall time of a pass (record, submit, wait, read back)
+  std::size_t bytes_per_object = 0;
+  std::optional<bool> agree;  ///< nullopt when there is nothing to check (cpu-read)
+  std::string note;           ///< why a method did not run
+};
+
+struct Config {
+  std::vector<std::string> methods = kMethods;
+  std::vector<std::string> bvs = {"aabb", "obb", "sphere"};
+  std::vector<std::size_t> sizes = {1000, 10000, 100000, 1000000, 4000000, 16000000};
+  std::vector<double> fractions = {0.01, 0.1, 0.5};
+  std::vector<std::string> orders = {"shuffled", "sorted"};
+  int repeats = 0;  // 0: by size
+  unsigned threads = 0;
+  std::optional<fast::Isa> isa;
+  std::string device, csv, json, plot;
+};
+
+bool wants(const Config& c, const std::string& method) {
+  return std::find(c.methods.begin(), c.methods.end(), method) != c.methods.end();
+}
+
+/// The GPU side, created on first use; its absence is a note, not an error.
+struct Gpu {
+  std::unique_ptr<vk::Context> ctx;
+  std::unique_ptr<gpu::GpuCuller> flat;
+  std::unique_ptr<gpu::BvhCuller> bvh;
+  std::string error;
+};
+
+template <class Volume>
+std::size_t gpu_bytes_per_object();
+template <>
+std::size_t gpu_bytes_per_object<Aabb>() { return sizeof(gpu::GpuAabb); }
+template <>
+std::size_t gpu_bytes_per_object<Obb>() { return sizeof(gpu::GpuObb); }
+template <>
+std::size_t gpu_bytes_per_object<Sphere>() { return sizeof(gpu::GpuSphere); }
+
+/// Measures one (volume kind, N, order) for every fraction; appends the cells.
+template <class Volume>
+void run_scene(const Config& config, const std::string& bv, const std::string& order, const std::vector<Volume>& volumes,
+               const std::vector<Aabb>& boxes, const Aabb& bounds, fast::CpuCuller& fast_culler, Gpu& gpu, std::vector<Cell>& cells,
+               bool& all_agree) {
+  const std::size_t n = volumes.size();
+  const std::span<const Volume> vspan(volumes);
+  const bool is_aabb = std::is_same_v<Volume, Aabb>;
+  fast_culler.upload(vspan);
+
+  // The BVH (binned SAH, leaves of 4), built once per scene; not part of the timed passes.
+  const bool bvh_methods = is_aabb && (wants(config, "cpu-bvh") || wants(config, "gpu-bvh"));
+  bvh::FlatTree tree;
+  if (bvh_methods) tree = bvh::flatten(bvh::build("binned-sah", boxes));
+
+  std::string gpu_flat_note, gpu_bvh_note;
+  if (gpu.flat && wants(config, "gpu-flat")) {
+    try {
+      gpu.flat->upload(vspan);
+    } catch (const std::length_error& e) {
+      gpu_flat_note = "exceeds one storage buffer";
+    }
+  }
+  if (gpu.bvh && bvh_methods && wants(config, "gpu-bvh")) {
+    try {
+      gpu.bvh->upload(tree, boxes);
+    } catch (const std::length_error& e) {
+      gpu_bvh_note = "exceeds one storage buffer";
+    }
+  }
+
+  fast::CpuCullOptions counts_only;
+  counts_only.classes = counts_only.visible_ids = false;
+  std::vector<fast::CpuViewResult> fast_results;
+  for (double fraction : config.fractions) {
+    double achieved = 0;
+    const Frustum f = frustum_for_fraction(bounds, n, fraction, [&](const Frustum& v) {
+      fast_culler.cull({&v, 1}, counts_only, fast_results);
+      return fast_results[0].counts.visible;
+    }, achieved);
+    const Frustum views[1] = {f};
+    const int reps = config.repeats > 0 ? config.repeats : int(std::clamp<std::size_t>(20'000'000 / std::max<std::size_t>(n, 1), 3, 51));
+
+    // The reference answer, then every method checked against it once.
+    std::vector<Classification> ref(n);
+    const reference::CullCounts ref_counts = reference::classify_all(vspan, f, ref);
+    std::vector<std::uint32_t> ref_ids;
+    for (std::size_t i = 0; i < n; ++i)
+      if (is_visible(ref[i])) ref_ids.push_back(static_cast<std::uint32_t>(i));
+
+    struct Timed {
+      std::string method;
+      std::function<void(std::vector<double>&, std::vector<double>&)> pass;  // appends time (and wall time)
+      std::vector<double> times, walls;
+      Cell cell;
+    };
+    std::vector<Timed> timed;
+    auto add = [&](const std::string& method, std::size_t bytes, std::optional<bool> agree, std::string note,
+                   std::function<void(std::vector<double>&, std::vector<double>&)> pass) {
+      Timed t;
+      t.method = method;
+      t.cell = {method, bv, order, n, fraction, achieved, reps, 0, 0, bytes, agree, std::move(note)};
+      if (t.cell.note.empty()) t.pass = std::move(pass);
+      timed.push_back(std::move(t));
+    };
+    std::vector<Classification> scratch(n);
+    if (wants(config, "reference"))
+      add("reference", sizeof(Volume), true, "", [&](std::vector<double>& t, std::vector<double>&) {
+        const auto t0 = Clock::now();
+        reference::classify_all(vspan, f, scratch);
+        t.push_back(since(t0));
+      });
+    if (wants(config, "cpu-fast")) {
+      fast_culler.cull(views, {}, fast_results);
+      const bool ok = fast_results[0].classes == ref && fast_results[0].counts == ref_counts && fast_results[0].visible_ids == ref_ids;
+      add("cpu-fast", fast_culler.bytes_per_object(), ok, "", [&](std::vector<double>& t, std::vector<double>&) {
+        const auto t0 = Clock::now();
+        fast_culler.cull(views, {}, fast_results);
+        t.push_back(since(t0));
+      });
+    }
+    if (wants(config, "cpu-read")) {
+      add("cpu-read", fast_culler.bytes_per_object(), std::nullopt, "", [&](std::vector<double>& t, std::vector<double>&) {
+        const auto t0 = Clock::now();
+        volatile std::uint32_t sink = fast_culler.touch_bounds();
+        (void)sink;
+        t.push_back(since(t0));
+      });
+    }
+    bvh::HierarchicalResult h;
+    if (wants(config, "cpu-bvh")) {
+      std::string note = is_aabb ? "" : "AABBs only";
+      std::optional<bool> ok;
+      if (is_aabb) {
+        h = bvh::cull_hierarchical(tree, boxes, f);
+        bool same_set = h.visible == ref_counts.visible;
+        for (std::size_t i = 0; i < n && same_set; ++i) same_set = is_visible(h.classes[i]) == is_visible(ref[i]);
+        ok = same_set;
+      }
+      add("cpu-bvh", sizeof(Aabb), ok, note, [&](std::vector<double>& t, std::vector<double>&) {
+        const auto t0 = Clock::now();
+        const bvh::HierarchicalResult r = bvh::cull_hierarchical(tree, boxes, f);
+        t.push_back(since(t0));
+      });
+    }
+    gpu::CullOptions list_only;
+    list_only.classes = false;
+    if (wants(config, "gpu-flat")) {
+      std::string note = !gpu.flat ? "no GPU: " + gpu.error : gpu_flat_note;
+      std::optional<bool> ok;
+      if (note.empty()) {
+        const gpu::CullResult g = gpu.flat->cull(views);  // also the warm-up (pipeline compile)
+        ok = g.views[0].classes == ref && g.views[0].counts == ref_counts && g.views[0].visible_ids.size() == ref_ids.size();
+      }
+      add("gpu-flat", gpu_bytes_per_object<Volume>(), ok, note, [&](std::vector<double>& t, std::vector<double>& w) {
+        const gpu::CullResult g = gpu.flat->cull(views, list_only);
+        t.push_back(g.timings.gpu_ns);
+        w.push_back(g.timings.wall_ns);
+      });
+    }
+    if (wants(config, "gpu-bvh")) {
+      std::string note = !is_aabb ? "AABBs only" : !gpu.bvh ? "no GPU: " + gpu.error : gpu_bvh_note;
+      std::optional<bool> ok;
+      if (note.empty()) {
+        if (h.classes.empty()) h = bvh::cull_hierarchical(tree, boxes, f);
+        const gpu::CullResult g = gpu.bvh->cull(views);
+        ok = g.views[0].classes == h.classes && g.views[0].counts.visible == h.visible && g.views[0].counts.inside == h.inside &&
+             g.views[0].node_tests == h.node_tests && g.views[0].object_tests == h.object_tests;
+      }
+      add("gpu-bvh", sizeof(gpu::GpuAabb), ok, note, [&](std::vector<double>& t, std::vector<double>& w) {
+        const gpu::CullResult g = gpu.bvh->cull(views, list_only);
+        t.push_back(g.timings.gpu_ns);
+        w.push_back(g.timings.wall_ns);
+      });
+    }
+
+    // Each method's repeats back to back after one untimed pass, so every method runs with the
+    // caches as it leaves them (interleaving would hand one method's cache to the next).
+    for (Timed& t : timed) {
+      if (!t.pass) continue;
+      std::vector<double> warm_times, warm_walls;
+      t.pass(warm_times, warm_walls);
+      for (int r = 0; r < reps; ++r) t.pass(t.times, t.walls);
+    }
+    for (Timed& t : timed) {
+      t.cell.ns = median(t.times);
+      t.cell.wall_ns = median(t.walls);
+      if (t.cell.agree && !*t.cell.agree) all_agree = false;
+      cells.push_back(t.cell);
+    }
+    // Print this fraction's rows.
+    double ref_ns = 0;
+    for (const Timed& t : timed)
+      if (t.method == "reference") ref_ns = t.cell.ns;
+    for (const Timed& t : timed) {
+      const Cell& c = t.cell;
+      const double dn = double(std::max<std::size_t>(n, 1));
+      if (!c.note.empty()) {
+        std::printf("%-10s %-7s %-9s %9zu %6.1f%%   (%s)\n", c.method.c_str(), bv.c_str(), order.c_str(), n, 100 * achieved, c.note.c_str());
+        continue;
+      }
+      const double gbps = c.ns > 0 ? double(c.bytes_per_object) * dn / c.ns : 0.0;
+      std::printf("%-10s %-7s %-9s %9zu %6.1f%% %5d %10.3f %10.1f %8.2f %8.2f %10s %6s\n", c.method.c_str(), bv.c_str(), order.c_str(), n,
+                  100 * achieved, c.repeats, c.ns / dn, c.ns > 0 ? dn / c.ns * 1e3 : 0.0, gbps,
+                  ref_ns > 0 && c.ns > 0 ? ref_ns / c.ns : 0.0, c.wall_ns > 0 ? std::to_string(c.wall_ns / dn).substr(0, 8).c_str() : "-",
+                  !c.agree ? "-" : *c.agree ? "yes" : "NO");
+    }
+    std::fflush(stdout);
+  }
+}
+
+/// Median bandwidth of reading a buffer 8x larger than the last-level cache (at least 256 MiB)
+/// with the fast path's loads and threads, in GB/s.
+double measure_read_bandwidth(fast::CpuCuller& culler) {
+  std::vector<float> buffer(std::size_t(64) << 20, 1.0f);  // 256 MiB
+  std::vector<double> times;
+  volatile std::uint32_t sink = 0;
+  for (int r = 0; r < 9; ++r) {
+    const auto t0 = Clock::now();
+    sink = sink | culler.touch(buffer);
+    times.push_back(since(t0));
+  }
+  return double(buffer.size() * sizeof(float)) / median(times);
+}
+
+void write_plots(const Config& config, const std::vector<Cell>& cells) {
+  // One PNG per volume kind: ns/object against N, one line per method, log scales; shuffled
+  // order at the middle fraction asked for.
+  const double fraction = config.fractions[config.fractions.size() / 2];
+  const std::string order = std::find(config.orders.begin(), config.orders.end(), "shuffled") != config.orders.end()
+                                ? "shuffled" : config.orders.front();
+  for (const std::string& bv : config.bvs) {
+    const std::string data = config.plot + "-" + bv + ".dat", script = config.plot + "-" + bv + ".gp", png = config.plot + "-" + bv + ".png";
+    std::ofstream out(data);
+    std::vector<std::string> plotted;
+    for (const std::string& method : config.methods) {
+      bool any = false;
+      for (const Cell& c : cells)
+        if (c.method == method && c.bv == bv && c.order == order && c.target_fraction == fraction && c.note.empty() && c.ns > 0) {
+          if (!any) out << "\"" << method << "\"\n";
+          any = true;
+          out << c.n << " " << c.ns / double(std::max<std::size_t>(c.n, 1)) << "\n";
+        }
+      if (any) {
+        out << "\n\n";
+        plotted.push_back(method);
+      }
+    }
+    out.close();
+    if (plotted.empty()) continue;
+    std::ofstream gp(script);
+    gp << "set terminal pngcairo size 900,560 noenhanced\nset output '" << png << "'\n"
+       << "set title '" << bv << ", " << order << ", ~" << fraction * 100 << "% visible: time per object (lower is better)'\n"
+       << "set logscale xy\nset xlabel 'objects N'\nset ylabel 'ns per object'\nset key outside right\nset grid\n"
+       << "plot for [i=0:" << plotted.size() - 1 << "] '" << data << "' index i using 1:2 with linespoints title columnheader(1)\n";
+    gp.close();
+    const std::string command = "gnuplot '" + script + "'";
+    if (std::system(command.c_str()) != 0) {
+      std::fprintf(stderr, "%s: gnuplot failed or is missing (install gnuplot-nox; scripts/bench.sh does)\n", kProgram);
+      std::exit(1);
+    }
+    std::remove(data.c_str());
+    std::remove(script.c_str());
+    std::printf("plot: %s\n", png.c_str());
+  }
+}
+
+void usage(FILE* to) {
+  std::fprintf(to,
+               "usage: cullpipe-bench [--methods m,..] [--bv aabb,obb,sphere] [--sizes 1e3,..] [--fractions 0.01,..]\n"
+               "                      [--order shuffled,sorted] [--repeats R] [--threads T] [--isa portable|avx2|avx512]\n"
+               "                      [--device NAME] [--csv FILE] [--json FILE] [--plot PREFIX]\n"
+               "methods: reference, cpu-fast, cpu-read, cpu-bvh, gpu-flat, gpu-bvh (default: all)\n");
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Config config;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "%s: %s needs a value\n", kProgram, a.c_str());
+        std::exit(2);
+      }
+      return argv[++i];
+    };
+    auto list_of = [&](const std::vector<std::string>& known) {
+      std::vector<std::string> items = split(value());
+      for (const std::string& item : items)
+        if (std::find(known.begin(), known.end(), item) == known.end()) {
+          std::fprintf(stderr, "%s: %s: unknown '%s'\n", kProgram, a.c_str(), item.c_str());
+          std::exit(2);
+        }
+      if (items.empty()) {
+        std::fprintf(stderr, "%s: %s needs at least one value\n", kProgram, a.c_str());
+        std::exit(2);
+      }
+      return items;
+    };
+    if (a == "--methods") config.methods = list_of(kMethods);
+    else if (a == "--bv") config.bvs = list_of({"aabb", "obb", "sphere"});
+    else if (a == "--sizes") config.sizes = parse_counts(value(), kProgram, "--sizes");
+    else if (a == "--fractions") config.fractions = parse_fractions(value(), kProgram, "--fractions");
+    else if (a == "--order") config.orders = list_of({"shuffled", "sorted"});
+    else if (a == "--repeats") config.repeats = std::atoi(value().c_str());
+    else if (a == "--threads") config.threads = unsigned(std::atoi(value().c_str()));
+    else if (a == "--isa") {
+      const std::string name = value();
+      config.isa = fast::parse_isa(name);
+      if (!config.isa || !fast::isa_supported(*config.isa)) {
+        std::fprintf(stderr, "%s: --isa %s: not an instruction set this machine runs (portable, avx2, avx512)\n", kProgram, name.c_str());
+        return 2;
+      }
+    } else if (a == "--device") config.device = value();
+    else if (a == "--csv") config.csv = value();
+    else if (a == "--json") config.json = value();
+    else if (a == "--plot") config.plot = value();
+    else if (a == "--help") {
+      usage(stdout);
+      return 0;
+    } else {
+      usage(stderr);
+      return 2;
+    }
+  }
+
+  fast::CpuCullerConfig fast_config;
+  fast_config.threads = config.threads;
+  fast_config.isa = config.isa;
+  fast::CpuCuller fast_culler(fast_config);
+  Gpu gpu;
+  if (wants(config, "gpu-flat") || wants(config, "gpu-bvh")) {
+    try {
+      vk::ContextOptions options;
+      options.device_filter = config.device;
+      gpu.ctx = std::make_unique<vk::Context>(options);
+      gpu.flat = std::make_unique<gpu::GpuCuller>(*gpu.ctx);
+      gpu.bvh = std::make_unique<gpu::BvhCuller>(*gpu.ctx);
+    } catch (const std::exception& e) {
+      gpu.error = e.what();
+      gpu.flat.reset();
+      gpu.bvh.reset();
+    }
+  }
+  const double read_gbps = measure_read_bandwidth(fast_culler);
+  std::printf("cullpipe-bench: culling methods side by side, medians of repeats\n");
+  std::printf("cpu: %s, %u hardware threads; fast path: %s kernels, %u threads\n", cpu_model().c_str(), std::thread::hardware_concurrency(),
+              std::string(to_string(fast_culler.isa())).c_str(), fast_culler.threads());
+  if (gpu.ctx) std::printf("gpu: %s, %s\n", gpu.ctx->info().name.c_str(), gpu.ctx->info().driver.c_str());
+  else if (!gpu.error.empty()) std::printf("gpu: none (%s)\n", gpu.error.c_str());
+  std::printf("memory read bandwidth (256 MiB, %u threads): %.1f GB/s\n\n", fast_culler.threads(), read_gbps);
+  std::printf("%-10s %-7s %-9s %9s %7s %5s %10s %10s %8s %8s %10s %6s\n", "method", "bv", "order", "N", "visible", "reps", "ns/obj",
+              "Mobj/s", "GB/s", "x ref", "wall ns/o", "agree");
+
+  std::vector<Cell> cells;
+  bool all_agree = true;
+  const std::size_t largest = *std::max_element(config.sizes.begin(), config.sizes.end());
+  const Scene scene = generate_scene(SceneKind::Uniform, largest, 1);
+  const std::vector<Aabb> all_boxes = world_aabbs(scene);
+  for (const std::string& bv : config.bvs) {
+    std::vector<Obb> all_obbs;
+    std::vector<Sphere> all_spheres;
+    if (bv == "obb") all_obbs = world_obbs(scene);
+    if (bv == "sphere") all_spheres = world_spheres(scene);
+    for (std::size_t n : config.sizes) {
+      // The first n objects, shuffled (a fixed random permutation) or sorted along the Morton
+      // curve of their boxes.
+      std::vector<std::uint32_t> shuffled(n);
+      for (std::uint32_t i = 0; i < n; ++i) shuffled[i] = i;
+      SplitMix64 rng{n};
+      for (std::size_t i = n; i > 1; --i) std::swap(shuffled[i - 1], shuffled[rng.next() % i]);
+      Aabb bounds{glm::vec3(INFINITY), glm::vec3(-INFINITY)};
+      for (std::size_t i = 0; i < n; ++i) bounds = {glm::min(bounds.min, all_boxes[i].min), glm::max(bounds.max, all_boxes[i].max)};
+      for (const std::string& order : config.orders) {
+        std::vector<std::uint32_t> pick = shuffled;
+        if (order == "sorted") pick = bvh::morton_order(std::span<const Aabb>(all_boxes.data(), n));
+        std::vector<Aabb> boxes(n);
+        for (std::size_t i = 0; i < n; ++i) boxes[i] = all_boxes[pick[i]];
+        auto gather = [&](const auto& all) {
+          std::remove_cvref_t<decltype(all)> out(n);
+          for (std::size_t i = 0; i < n; ++i) out[i] = all[pick[i]];
+          return out;
+        };
+        if (bv == "aabb") run_scene(config, bv, order, boxes, boxes, bounds, fast_culler, gpu, cells, all_agree);
+        if (bv == "obb") run_scene(config, bv, order, gather(all_obbs), boxes, bounds, fast_culler, gpu, cells, all_agree);
+        if (bv == "sphere") run_scene(config, bv, order, gather(all_spheres), boxes, bounds, fast_culler, gpu, cells, all_agree);
+      }
+    }
+  }
+
+  auto record = [&](const Cell& c) {
+    const double dn = double(std::max<std::size_t>(c.n, 1));
+    double ref_ns = 0;
+    for (const Cell& r : cells)
+      if (r.method == "reference" && r.bv == c.bv && r.order == c.order && r.n == c.n && r.target_fraction == c.target_fraction) ref_ns = r.ns;
+    const double gbps = c.ns > 0 ? double(c.bytes_per_object) * dn / c.ns : 0.0;
+    return nlohmann::json{{"method", c.method}, {"bv", c.bv}, {"n", c.n}, {"order", c.order}, {"target_fraction", c.target_fraction},
+                          {"visible_fraction", c.visible_fraction}, {"repeats", c.repeats}, {"ns_per_object", c.ns / dn},
+                          {"objects_per_s", c.ns > 0 ? dn / c.ns * 1e9 : 0.0}, {"bytes_per_object", c.bytes_per_object},
+                          {"gb_per_s", gbps}, {"bandwidth_fraction", gbps / read_gbps}, {"read_bandwidth_gbps", read_gbps},
+                          {"speedup_vs_reference", ref_ns > 0 && c.ns > 0 ? ref_ns / c.ns : 0.0},
+                          {"gpu_wall_ns_per_object", c.wall_ns / dn}, {"agree", c.agree ? nlohmann::json(*c.agree) : nlohmann::json()},
+                          {"note", c.note}};
+  };
+  if (!config.csv.empty()) {
+    std::ofstream csv(config.csv);
+    const char* const columns[] = {"method", "bv", "n", "order", "target_fraction", "visible_fraction", "repeats", "ns_per_object",
+                                   "objects_per_s", "bytes_per_object", "gb_per_s", "bandwidth_fraction", "read_bandwidth_gbps",
+                                   "speedup_vs_reference", "gpu_wall_ns_per_object", "agree", "note"};
+    for (std::size_t k = 0; k < std::size(columns); ++k) csv << (k ? "," : "") << columns[k];
+    csv << "\n";
+    for (const Cell& c : cells) {
+      const nlohmann::json j = record(c);
+      for (std::size_t k = 0; k < std::size(columns); ++k) {
+        const nlohmann::json& v = j[columns[k]];
+        csv << (k ? "," : "") << (v.is_string() ? v.get<std::string>() : v.is_null() ? "" : v.dump());
+      }
+      csv << "\n";
+    }
+  }
+  if (!config.json.empty()) {
+    nlohmann::json j;
+    j["cpu"] = cpu_model();
+    j["hardware_threads"] = std::thread::hardware_concurrency();
+    j["fast_isa"] = std::string(to_string(fast_culler.isa()));
+    j["fast_threads"] = fast_culler.threads();
+    j["device"] = gpu.ctx ? gpu.ctx->info().name : "";
+    j["driver"] = gpu.ctx ? gpu.ctx->info().driver : "";
+    j["read_bandwidth_gbps"] = read_gbps;
+    j["cells"] = nlohmann::json::array();
+    for (const Cell& c : cells) j["cells"].push_back(record(c));
+    std::ofstream(config.json) << j.dump(2) << "\n";
+  }
+  if (!config.plot.empty()) write_plots(config, cells);
+  if (!all_agree) {
+    std::fprintf(stderr, "%s: at least one method disagreed with the reference (see the agree column)\n", kProgram);
+    return 1;
+  }
+  return 0;
+}
