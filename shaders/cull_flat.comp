@@ -1,12 +1,13 @@
 #version 460
-// Flat frustum culling: one invocation per object and view; gl_GlobalInvocationID.y is the
-// view. One dispatch covers all views (and a chunk of at most maxComputeWorkGroupCount[0]
-// groups of objects). Writes each object's classification and counts visible / inside /
-// intersecting objects. Then, by specialization:
-// - ORDERED == 0: appends visible ids (and, with WRITE_DRAWS, draw commands) to the view's
-//   lists in arrival order, one atomic per subgroup;
-// - ORDERED == 1: writes only each workgroup's visible count; compact_scan.comp and
-//   compact_scatter.comp then write the lists in object order.
+// Flat frustum culling; gl_GlobalInvocationID.y is the view. One dispatch covers all views
+// (and a chunk of at most maxComputeWorkGroupCount[0] groups of objects). Writes each object's
+// classification and counts visible / inside / intersecting objects. Then, by specialization:
+// - ORDERED == 0: OBJECTS_PER_INVOCATION objects per invocation; appends visible ids (and, with
+//   WRITE_DRAWS, draw commands) to the view's lists in arrival order, one atomic per subgroup
+//   for all of its objects (on lavapipe 8 objects per invocation measured 2.6x faster than 1:
+//   the planes are loaded once and the counter's cache line bounces 8x less);
+// - ORDERED == 1: one object per invocation; writes only each workgroup's visible count;
+//   compact_scan.comp and compact_scatter.comp then write the lists in object order.
 //
 // Bit-exact contract with host/cull/reference.cpp: every distance is computed as
 // ((n.x*p.x + n.y*p.y) + n.z*p.z) + d, written out (not dot()) and marked `precise`, so no
@@ -17,6 +18,7 @@
 #extension GL_GOOGLE_include_directive : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_ballot : require
+#extension GL_KHR_shader_subgroup_arithmetic : require
 #extension GL_EXT_control_flow_attributes : require
 
 #include "shared/cull_types.h"
@@ -25,6 +27,11 @@ layout(local_size_x_id = 1) in;                 // = FLAT_CULL_GROUP_SIZE, set b
 layout(constant_id = 0) const uint BV_KIND = BV_KIND_AABB;
 layout(constant_id = 2) const uint ORDERED = 0;      // 1: object-order compaction by later passes
 layout(constant_id = 3) const uint WRITE_DRAWS = 0;  // 1: also write draw commands (arrival order)
+// Objects per invocation in the arrival-order pass (ORDERED == 0): the planes are loaded once
+// for all of them and the visible list takes one atomic per subgroup for K x subgroup objects.
+// Object j of an invocation is at block + j * group size, so each step of the loop reads one
+// contiguous run of objects per workgroup. The ordered pass keeps one object per invocation.
+layout(constant_id = 4) const uint OBJECTS_PER_INVOCATION = 1;
 
 layout(std430, set = 0, binding = BINDING_BOUNDS) readonly buffer Bounds { vec4 bounds[]; };
 layout(std430, set = 0, binding = BINDING_CLASSES) writeonly buffer Classes { uint classes[]; };
@@ -101,70 +108,100 @@ uint classify_sphere(vec4 center_radius) {
   return outside ? CLASS_OUTSIDE : intersecting ? CLASS_INTERSECTING : CLASS_INSIDE;
 }
 
-void main() {
+uint classify_object(uint i) {
+  if (BV_KIND == BV_KIND_AABB) return classify_aabb(bounds[AABB_VEC4S * i].xyz, bounds[AABB_VEC4S * i + 1].xyz);
+  if (BV_KIND == BV_KIND_OBB) {
+    uint b = OBB_VEC4S * i;
+    return classify_obb(bounds[b].xyz, bounds[b + 1], bounds[b + 2], bounds[b + 3]);
+  }
+  return classify_sphere(bounds[SPHERE_VEC4S * i]);
+}
+
+void load_view() {
+  view_plane_count = min(views[view].plane_count, MAX_FRUSTUM_PLANES);
+  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = views[view].planes[k];
+}
+
+// Object order: each workgroup counts its visible objects; compact_scan / compact_scatter write
+// the lists.
+void main_ordered() {
   uint i = params.first_object + gl_GlobalInvocationID.x;
-  view = gl_GlobalInvocationID.y;
-  // No early return: the ordered path has workgroup barriers, which every invocation must reach.
+  // No early return: there are workgroup barriers, which every invocation must reach.
   bool in_range = i < params.object_count && view < params.view_count;
   uint c = CLASS_OUTSIDE;
   if (in_range) {
-    view_plane_count = min(views[view].plane_count, MAX_FRUSTUM_PLANES);
-    [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = views[view].planes[k];
-    if (BV_KIND == BV_KIND_AABB) {
-      c = classify_aabb(bounds[AABB_VEC4S * i].xyz, bounds[AABB_VEC4S * i + 1].xyz);
-    } else if (BV_KIND == BV_KIND_OBB) {
-      uint b = OBB_VEC4S * i;
-      c = classify_obb(bounds[b].xyz, bounds[b + 1], bounds[b + 2], bounds[b + 3]);
-    } else {
-      c = classify_sphere(bounds[SPHERE_VEC4S * i]);
-    }
+    load_view();
+    c = classify_object(i);
     classes[view * params.object_count + i] = c;
   }
-
-  bool visible = c != CLASS_OUTSIDE;  // inactive invocations count as OUTSIDE
-  uvec4 vis_ballot = subgroupBallot(visible);
-  uint vis_total = subgroupBallotBitCount(vis_ballot);
+  uint vis_total = subgroupBallotBitCount(subgroupBallot(c != CLASS_OUTSIDE));  // inactive = OUTSIDE
   uint inside_total = subgroupBallotBitCount(subgroupBallot(c == CLASS_INSIDE));
-
-  if (ORDERED != 0) {
-    // Count per workgroup; one global atomic per workgroup and view.
-    if (gl_LocalInvocationIndex == 0) {
-      group_visible = 0;
-      group_inside = 0;
-    }
-    barrier();
-    if (subgroupElect()) {
-      atomicAdd(group_visible, vis_total);
-      atomicAdd(group_inside, inside_total);
-    }
-    barrier();
-    if (gl_LocalInvocationIndex == 0) {
-      uint groups = (params.object_count + gl_WorkGroupSize.x - 1) / gl_WorkGroupSize.x;
-      uint g = params.first_object / gl_WorkGroupSize.x + gl_WorkGroupID.x;
-      group_counts[view * groups + g] = group_visible;
-      if (group_visible > 0) {
-        atomicAdd(counters[view].visible_count, group_visible);
-        atomicAdd(counters[view].inside_count, group_inside);
-      }
-    }
-    return;
+  // Count per workgroup; one global atomic per workgroup and view.
+  if (gl_LocalInvocationIndex == 0) {
+    group_visible = 0;
+    group_inside = 0;
   }
+  barrier();
+  if (subgroupElect()) {
+    atomicAdd(group_visible, vis_total);
+    atomicAdd(group_inside, inside_total);
+  }
+  barrier();
+  if (gl_LocalInvocationIndex == 0) {
+    uint groups = (params.object_count + gl_WorkGroupSize.x - 1) / gl_WorkGroupSize.x;
+    uint g = params.first_object / gl_WorkGroupSize.x + gl_WorkGroupID.x;
+    group_counts[view * groups + g] = group_visible;
+    if (group_visible > 0) {
+      atomicAdd(counters[view].visible_count, group_visible);
+      atomicAdd(counters[view].inside_count, group_inside);
+    }
+  }
+}
 
-  // Arrival-order compaction: one atomic per subgroup for the visible list, then each visible
-  // invocation writes its id at its rank within the subgroup.
+// Arrival order: OBJECTS_PER_INVOCATION objects each, one atomic per subgroup for all of them,
+// then each invocation writes its visible ids at its rank within the subgroup.
+void main_arrival() {
+  bool view_ok = view < params.view_count;
+  if (view_ok) load_view();
+  uint block = params.first_object + gl_WorkGroupID.x * gl_WorkGroupSize.x * OBJECTS_PER_INVOCATION + gl_LocalInvocationIndex;
+  uint visible_bits = 0, inside = 0;
+  [[unroll]] for (uint j = 0; j < OBJECTS_PER_INVOCATION; ++j) {
+    uint i = block + j * gl_WorkGroupSize.x;
+    if (view_ok && i < params.object_count) {
+      uint c = classify_object(i);
+      classes[view * params.object_count + i] = c;
+      if (c != CLASS_OUTSIDE) visible_bits |= 1u << j;
+      if (c == CLASS_INSIDE) ++inside;
+    }
+  }
+  uint count = bitCount(visible_bits);
+  uint vis_total = subgroupAdd(count);
+  uint inside_total = subgroupAdd(inside);
+  uint rank = subgroupExclusiveAdd(count);
   uint base = 0;
   if (subgroupElect() && vis_total > 0) {
     base = atomicAdd(counters[view].visible_count, vis_total);
     atomicAdd(counters[view].inside_count, inside_total);
   }
-  base = subgroupBroadcastFirst(base);
-  uint slot = base + subgroupBallotExclusiveBitCount(vis_ballot);
-  if (visible && slot < params.visible_capacity) {
-    visible_ids[view * params.visible_capacity + slot] = i;
-    if (WRITE_DRAWS != 0) {
-      DrawCommand d = templates[i];
-      d.object_id = i;
-      draws[view * params.visible_capacity + slot] = d;
+  uint slot = subgroupBroadcastFirst(base) + rank;
+  [[unroll]] for (uint j = 0; j < OBJECTS_PER_INVOCATION; ++j) {
+    if ((visible_bits & (1u << j)) != 0) {
+      uint i = block + j * gl_WorkGroupSize.x;
+      if (slot < params.visible_capacity) {
+        visible_ids[view * params.visible_capacity + slot] = i;
+        if (WRITE_DRAWS != 0) {
+          DrawCommand d = templates[i];
+          d.object_id = i;
+          draws[view * params.visible_capacity + slot] = d;
+        }
+      }
+      ++slot;
     }
   }
+}
+
+void main() {
+  view = gl_GlobalInvocationID.y;
+  if (ORDERED != 0) main_ordered();
+  else main_arrival();
 }

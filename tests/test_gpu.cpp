@@ -345,6 +345,14 @@ TEST_F(Gpu, PassesSplitIntoChunksAgree) {
   std::vector<Aabb> boxes(193);  // not a multiple of the chunk
   for (Aabb& b : boxes) b = test::random_aabb(rng, 30.0f, 3.0f);
   expect_agreement(chunked, boxes, test_frusta());
+  // Objects per invocation of the arrival-order pass: one, an odd count, the most; with a
+  // visible list too short to hold every id.
+  for (std::uint32_t k : {1u, 3u, 32u}) {
+    gpu::GpuCuller per_invocation(*GpuEnvironment::context, gpu::GpuCullerConfig{64, 3, k});
+    EXPECT_EQ(per_invocation.objects_per_invocation(), k);
+    expect_agreement(per_invocation, obbs, test_frusta());
+    expect_agreement(per_invocation, boxes, test_frusta(), gpu::CullOptions{true, true, 50});
+  }
 }
 
 // Ordered compaction and draw output: the visible list in object order equals the CPU's

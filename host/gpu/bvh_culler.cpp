@@ -29,15 +29,9 @@ BvhCuller::BvhCuller(const vk::Context& ctx) : ctx_(ctx) {
   if (limits.maxPerStageDescriptorStorageBuffers < BVH_BINDING_COUNT)
     throw vk::Error("hierarchical culling needs " + std::to_string(BVH_BINDING_COUNT) + " storage buffers per stage; " +
                     ctx_.info().name + " allows " + std::to_string(limits.maxPerStageDescriptorStorageBuffers));
-  VkPhysicalDeviceSubgroupProperties subgroup{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_SUBGROUP_PROPERTIES};
-  VkPhysicalDeviceProperties2 properties{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2, &subgroup, {}};
-  vkGetPhysicalDeviceProperties2(ctx_.physical_device(), &properties);
-  const VkSubgroupFeatureFlags needed = VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_VOTE_BIT |
-                                        VK_SUBGROUP_FEATURE_ARITHMETIC_BIT | VK_SUBGROUP_FEATURE_BALLOT_BIT |
-                                        VK_SUBGROUP_FEATURE_SHUFFLE_BIT;
-  if (!(subgroup.supportedStages & VK_SHADER_STAGE_COMPUTE_BIT) || (subgroup.supportedOperations & needed) != needed)
-    throw vk::Error("hierarchical culling needs subgroup basic, vote, arithmetic, ballot and shuffle operations in compute "
-                    "shaders; " + ctx_.info().name + " lacks some");
+  detail::check_subgroup_operations(ctx_, VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_VOTE_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT |
+                                              VK_SUBGROUP_FEATURE_BALLOT_BIT | VK_SUBGROUP_FEATURE_SHUFFLE_BIT,
+                                    "hierarchical culling");
   resources_ = std::make_unique<detail::PassResources>(ctx_, pipeline(BVH_PASS_LEVEL, false).set_layout(), BVH_BINDING_COUNT);
 }
 

@@ -28,6 +28,9 @@ GpuCuller::GpuCuller(const vk::Context& ctx, const GpuCullerConfig& config) : ct
   const VkPhysicalDeviceLimits& limits = ctx_.properties().limits;
   group_size_ = std::max<std::uint32_t>(
       1, std::min({config.group_size, limits.maxComputeWorkGroupSize[0], limits.maxComputeWorkGroupInvocations}));
+  detail::check_subgroup_operations(ctx_, VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT | VK_SUBGROUP_FEATURE_BALLOT_BIT,
+                                    "flat culling");
+  objects_per_invocation_ = std::clamp<std::uint32_t>(config.objects_per_invocation, 1, 32);
   max_groups_ = config.max_groups_per_dispatch ? std::min(config.max_groups_per_dispatch, limits.maxComputeWorkGroupCount[0])
                                                : limits.maxComputeWorkGroupCount[0];
   group_size_ = std::min(group_size_, MAX_CULL_GROUP_SIZE);
@@ -55,8 +58,10 @@ const vk::ComputePipeline& GpuCuller::pipeline(int shader, std::uint32_t kind, b
     spirv = {cullpipe_compact_scatter_spv, sizeof(cullpipe_compact_scatter_spv) / sizeof(std::uint32_t)};
     name = std::string("ordered compaction scatter") + (draws ? " (draws)" : "");
   }
-  // Specialization constants: 0 kind, 1 group size, 2 ordered, 3 draws.
-  const std::uint32_t spec[4] = {kind, group_size_, ordered ? 1u : 0u, draws ? 1u : 0u};
+  // Specialization constants: 0 kind, 1 group size, 2 ordered, 3 draws, 4 objects per invocation
+  // (arrival-order cull pass only).
+  const std::uint32_t spec[5] = {kind, group_size_, ordered ? 1u : 0u, draws ? 1u : 0u,
+                                 shader == 0 && !ordered ? objects_per_invocation_ : 1u};
   slot = std::make_unique<vk::ComputePipeline>(
       ctx_, vk::ComputePipelineDesc{spirv, kBindingCount, sizeof(FlatCullParams), spec, name.c_str()});
   return *slot;
@@ -161,7 +166,6 @@ void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
 void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
   const std::size_t view_count = last_view_count_;
   const CullOptions& options = last_options_;
-  const std::uint64_t objects_per_dispatch = std::uint64_t(max_groups_) * group_size_;
 
   detail::record_entry_barrier(ctx_, cmd);
   vkCmdFillBuffer(cmd, counters_.handle(), 0, view_count * sizeof(ViewCounters), 0);
@@ -172,7 +176,9 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
   const VkDescriptorSet set = resources_->set();
   const FlatCullParams base_params{std::uint32_t(object_count_), 0, std::uint32_t(view_count), std::uint32_t(last_capacity_)};
   // One pass over every object in chunks of at most max_groups_ workgroups.
-  auto object_pass = [&](const vk::ComputePipeline& pipe) {
+  auto object_pass = [&](const vk::ComputePipeline& pipe, std::uint32_t objects_per_invocation) {
+    const std::uint64_t objects_per_group = std::uint64_t(group_size_) * objects_per_invocation;
+    const std::uint64_t objects_per_dispatch = std::uint64_t(max_groups_) * objects_per_group;
     vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.pipeline());
     vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.layout(), 0, 1, &set, 0, nullptr);
     for (std::uint64_t first = 0; first < object_count_; first += objects_per_dispatch) {
@@ -181,15 +187,15 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
       FlatCullParams params = base_params;
       params.first_object = std::uint32_t(first);
       vkCmdPushConstants(cmd, pipe.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
-      vkCmdDispatch(cmd, vk::group_count(count, group_size_), std::uint32_t(view_count), 1);
+      vkCmdDispatch(cmd, std::uint32_t((count + objects_per_group - 1) / objects_per_group), std::uint32_t(view_count), 1);
     }
   };
   const std::uint32_t kind = kind_index(kind_);
   if (!options.ordered) {
-    object_pass(pipeline(0, kind, false, options.draws));
+    object_pass(pipeline(0, kind, false, options.draws), objects_per_invocation_);
   } else if (object_count_ > 0) {
     // Count per workgroup, scan the counts per view, scatter in object order.
-    object_pass(pipeline(0, kind, true, false));
+    object_pass(pipeline(0, kind, true, false), 1);
     compute_to_compute();
     const vk::ComputePipeline& scan = pipeline(1, 0, false, false);
     vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, scan.pipeline());
@@ -197,7 +203,7 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
     vkCmdPushConstants(cmd, scan.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(base_params), &base_params);
     vkCmdDispatch(cmd, 1, std::uint32_t(view_count), 1);
     compute_to_compute();
-    object_pass(pipeline(2, 0, false, options.draws));
+    object_pass(pipeline(2, 0, false, options.draws), 1);
   }
   if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps, 1);
   detail::record_exit_barrier(ctx_, cmd);

@@ -75,10 +75,14 @@ struct GpuCullerConfig {
   /// Workgroups per dispatch before the pass is split into chunks; 0 means the device limit
   /// (maxComputeWorkGroupCount[0]). Tests set it low to exercise the chunked path.
   std::uint32_t max_groups_per_dispatch = 0;
+  /// Objects each invocation classifies in the arrival-order pass (1..32): planes loaded once
+  /// for all of them and one visible-list atomic per subgroup for all of them. The ordered
+  /// pass uses 1.
+  std::uint32_t objects_per_invocation = FLAT_OBJECTS_PER_INVOCATION;
 };
 
 /// Flat frustum culling on a Vulkan device: uploads one set of volumes, then classifies them
-/// against any number of views per pass, one compute invocation per object and view, with
+/// against any number of views per pass, a few objects per compute invocation and view, with
 /// results identical bit for bit to cullpipe::reference. Not thread-safe; one pass at a time.
 class GpuCuller {
  public:
@@ -131,6 +135,7 @@ class GpuCuller {
 
   BvKind kind() const { return kind_; }
   std::uint32_t group_size() const { return group_size_; }
+  std::uint32_t objects_per_invocation() const { return objects_per_invocation_; }
   std::size_t object_count() const { return object_count_; }
   const vk::Context& context() const { return ctx_; }
 
@@ -145,6 +150,7 @@ class GpuCuller {
   const vk::Context& ctx_;
   std::uint32_t group_size_ = FLAT_CULL_GROUP_SIZE;
   std::uint32_t max_groups_ = 0;
+  std::uint32_t objects_per_invocation_ = 1;
   BvKind kind_ = BvKind::Aabb;
   std::size_t object_count_ = 0;
   // Built on first use: [shader][kind][ordered][draws]; shader 0 = cull_flat, 1 = compact_scan,

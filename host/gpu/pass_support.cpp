@@ -19,6 +19,23 @@ VkPipelineStageFlags graphics_stages(const vk::Context& ctx) {
 
 }  // namespace
 
+void check_subgroup_operations(const vk::Context& ctx, VkSubgroupFeatureFlags needed, const std::string& who) {
+  VkPhysicalDeviceSubgroupProperties subgroup{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_SUBGROUP_PROPERTIES};
+  VkPhysicalDeviceProperties2 properties{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2, &subgroup, {}};
+  vkGetPhysicalDeviceProperties2(ctx.physical_device(), &properties);
+  const bool compute = (subgroup.supportedStages & VK_SHADER_STAGE_COMPUTE_BIT) != 0;
+  const VkSubgroupFeatureFlags missing = compute ? needed & ~subgroup.supportedOperations : needed;
+  if (!missing) return;
+  static const std::pair<VkSubgroupFeatureFlagBits, const char*> names[] = {
+      {VK_SUBGROUP_FEATURE_BASIC_BIT, "basic"},   {VK_SUBGROUP_FEATURE_VOTE_BIT, "vote"},
+      {VK_SUBGROUP_FEATURE_ARITHMETIC_BIT, "arithmetic"}, {VK_SUBGROUP_FEATURE_BALLOT_BIT, "ballot"},
+      {VK_SUBGROUP_FEATURE_SHUFFLE_BIT, "shuffle"}};
+  std::string list;
+  for (const auto& [bit, name] : names)
+    if (missing & bit) list += (list.empty() ? "" : ", ") + std::string(name);
+  throw vk::Error(who + " needs subgroup operations in compute shaders that " + ctx.info().name + " lacks: " + list);
+}
+
 void check_storage_range(const vk::Context& ctx, VkDeviceSize bytes, const std::string& what) {
   const VkDeviceSize limit = ctx.properties().limits.maxStorageBufferRange;
   if (bytes > limit)

@@ -16,6 +16,10 @@ namespace cullpipe::gpu::detail {
 
 /// Throws std::length_error naming `what`, its size and the device limit when `bytes` exceed
 /// one storage buffer (maxStorageBufferRange).
+/// Throws vk::Error naming `who` and the missing operations unless compute shaders on the
+/// context's device support every subgroup operation in `needed`.
+void check_subgroup_operations(const vk::Context& ctx, VkSubgroupFeatureFlags needed, const std::string& who);
+
 void check_storage_range(const vk::Context& ctx, VkDeviceSize bytes, const std::string& what);
 
 /// Grows `buffer` to at least `bytes` (never shrinks). Sets `dirty` (descriptors must be

@@ -31,6 +31,8 @@ CP_CONST CLASS_INSIDE = 2u;
 
 // Invocations per workgroup of the flat culling shader.
 CP_CONST FLAT_CULL_GROUP_SIZE = 256u;
+// Objects per invocation of the flat arrival-order pass (GpuCullerConfig::objects_per_invocation).
+CP_CONST FLAT_OBJECTS_PER_INVOCATION = 8u;
 // Planes in a frustum: left, right, bottom, top, near, far (far may be absent: infinite).
 CP_CONST MAX_FRUSTUM_PLANES = 6u;
 
