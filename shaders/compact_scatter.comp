@@ -43,10 +43,10 @@ void main() {
   uint g = params.first_object / gl_WorkGroupSize.x + gl_WorkGroupID.x;
   uint slot = group_offsets[view * groups + g] + scan[t] - 1u;
   if (slot < params.visible_capacity) {
-    visible_ids[view * params.visible_capacity + slot] = i;
+    visible_ids[view * params.visible_capacity + slot] = params.id_base + i;
     if (WRITE_DRAWS != 0) {
       DrawCommand d = templates[i];
-      d.object_id = i;
+      d.object_id = params.id_base + i;
       draws[view * params.visible_capacity + slot] = d;
     }
   }

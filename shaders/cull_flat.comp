@@ -188,10 +188,10 @@ void main_arrival() {
     if ((visible_bits & (1u << j)) != 0) {
       uint i = block + j * gl_WorkGroupSize.x;
       if (slot < params.visible_capacity) {
-        visible_ids[view * params.visible_capacity + slot] = i;
+        visible_ids[view * params.visible_capacity + slot] = params.id_base + i;
         if (WRITE_DRAWS != 0) {
           DrawCommand d = templates[i];
-          d.object_id = i;
+          d.object_id = params.id_base + i;
           draws[view * params.visible_capacity + slot] = d;
         }
       }

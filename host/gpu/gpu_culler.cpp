@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstring>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -31,6 +32,7 @@ GpuCuller::GpuCuller(const vk::Context& ctx, const GpuCullerConfig& config) : ct
   detail::check_subgroup_operations(ctx_, VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT | VK_SUBGROUP_FEATURE_BALLOT_BIT,
                                     "flat culling");
   objects_per_invocation_ = std::clamp<std::uint32_t>(config.objects_per_invocation, 1, 32);
+  max_segment_objects_ = config.max_segment_objects;
   max_groups_ = config.max_groups_per_dispatch ? std::min(config.max_groups_per_dispatch, limits.maxComputeWorkGroupCount[0])
                                                : limits.maxComputeWorkGroupCount[0];
   group_size_ = std::min(group_size_, MAX_CULL_GROUP_SIZE);
@@ -88,10 +90,14 @@ void GpuCuller::upload(std::span<const Sphere> volumes) {
 }
 
 void GpuCuller::upload_words(BvKind kind, const void* data, std::size_t count, std::size_t bytes_per_object) {
-  // The storage-range limit also keeps object ids and output indices within 32 bits.
+  const std::string what = std::to_string(count) + " " + std::string(to_string(kind)) + " volumes";
+  if (count > std::numeric_limits<std::uint32_t>::max())
+    throw std::length_error(what + ": object ids are 32-bit (at most 4294967295 objects)");
   const VkDeviceSize bytes = VkDeviceSize(count) * bytes_per_object;
-  detail::check_storage_range(ctx_, bytes, std::to_string(count) + " " + std::string(to_string(kind)) + " volumes");
+  detail::check_allocation_size(ctx_, bytes, what);
   object_count_ = 0;  // stays 0 if the allocation below fails
+  bytes_per_object_ = bytes_per_object;
+  descriptors_dirty_ = true;  // segment ranges depend on the object size and count
   detail::ensure_buffer(ctx_, bounds_, bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "bounds buffer", descriptors_dirty_);
   if (bytes) std::memcpy(bounds_.data(), data, bytes);
   kind_ = kind;
@@ -100,8 +106,9 @@ void GpuCuller::upload_words(BvKind kind, const void* data, std::size_t count, s
 
 void GpuCuller::upload_draws(std::span<const DrawCommand> templates) {
   const VkDeviceSize bytes = VkDeviceSize(templates.size()) * sizeof(DrawCommand);
-  detail::check_storage_range(ctx_, bytes, std::to_string(templates.size()) + " draw templates");
+  detail::check_allocation_size(ctx_, bytes, std::to_string(templates.size()) + " draw templates");
   template_count_ = 0;
+  descriptors_dirty_ = true;  // segment ranges of the templates
   detail::ensure_buffer(ctx_, templates_, bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "draw template buffer", descriptors_dirty_);
   if (bytes) std::memcpy(templates_.data(), templates.data(), bytes);
   template_count_ = templates.size();
@@ -112,7 +119,9 @@ void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capac
   const VkDeviceSize visible = VkDeviceSize(visible_capacity) * view_count * sizeof(std::uint32_t);
   const VkDeviceSize draw_bytes = draws ? VkDeviceSize(visible_capacity) * view_count * sizeof(DrawCommand) : 0;
   const VkDeviceSize groups = VkDeviceSize(vk::group_count(object_count_, group_size_)) * view_count * sizeof(std::uint32_t);
-  detail::check_storage_range(ctx_, outputs, std::to_string(view_count) + " views x " + std::to_string(object_count_) + " objects of output");
+  // Classes are bound per segment (plan_segments keeps each within range); all of them must
+  // still fit one allocation.
+  detail::check_allocation_size(ctx_, outputs, std::to_string(view_count) + " views x " + std::to_string(object_count_) + " objects of output");
   detail::check_storage_range(ctx_, visible, std::to_string(view_count) + " views x " + std::to_string(visible_capacity) + " visible ids");
   detail::check_storage_range(ctx_, draw_bytes, std::to_string(view_count) + " views x " + std::to_string(visible_capacity) + " draw commands");
   constexpr VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
@@ -127,12 +136,52 @@ void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capac
   detail::ensure_buffer(ctx_, group_counts_, groups, storage, "group count buffer", dirty);
 }
 
+void GpuCuller::plan_segments(std::size_t view_count, bool ordered) {
+  // Objects per segment: as many as every per-object binding allows within one storage buffer
+  // range, rounded down to a multiple of 256 so every segment's offset in every buffer is a
+  // multiple of 4 KiB (>= any minStorageBufferOffsetAlignment).
+  const VkDeviceSize range = ctx_.properties().limits.maxStorageBufferRange;
+  std::size_t s = object_count_;
+  s = std::min<std::size_t>(s, range / bytes_per_object_);
+  s = std::min<std::size_t>(s, range / (sizeof(std::uint32_t) * std::max<std::size_t>(view_count, 1)));
+  if (template_count_) s = std::min<std::size_t>(s, range / sizeof(DrawCommand));
+  if (max_segment_objects_) s = std::min(s, max_segment_objects_);
+  if (s < object_count_) s = std::max<std::size_t>(256, s / 256 * 256);
+  segment_objects_ = s;
+  segment_count_ = object_count_ && s ? (object_count_ + s - 1) / s : 1;
+  if (segment_count_ > 1 && ordered)
+    throw std::length_error("object-order output (CullOptions::ordered) is limited to one storage buffer of objects; " +
+                            std::to_string(object_count_) + " objects need " + std::to_string(segment_count_) +
+                            " segments of " + std::to_string(s) + " on " + ctx_.info().name + " (use arrival order)");
+}
+
 void GpuCuller::update_descriptors() {
-  if (!descriptors_dirty_) return;
-  const vk::Buffer* const buffers[kBindingCount] = {&bounds_, &classes_, &visible_, &counters_, &views_, &templates_, &draws_, &group_counts_};
+  if (!descriptors_dirty_ && written_segment_objects_ == segment_objects_ && written_view_count_ == last_view_count_ &&
+      resources_->set_count() >= segment_count_)
+    return;
   static_assert(BINDING_BOUNDS == 0 && BINDING_CLASSES == 1 && BINDING_VISIBLE == 2 && BINDING_COUNTERS == 3 &&
                 BINDING_VIEWS == 4 && BINDING_DRAW_TEMPLATES == 5 && BINDING_DRAWS == 6 && BINDING_GROUP_COUNTS == 7);
-  resources_->write(buffers);
+  resources_->ensure_sets(segment_count_);
+  const std::size_t views = last_view_count_;
+  for (std::size_t seg = 0; seg < segment_count_; ++seg) {
+    using Range = detail::PassResources::Range;
+    // Whole buffers, but never more than one storage buffer range (a buffer grown for an
+    // earlier, larger scene may be bigger).
+    const VkDeviceSize range = ctx_.properties().limits.maxStorageBufferRange;
+    auto whole = [&](const vk::Buffer& b) { return Range{&b, 0, std::min<VkDeviceSize>(b.size(), range)}; };
+    Range ranges[kBindingCount] = {whole(bounds_), whole(classes_),   whole(visible_), whole(counters_),
+                                   whole(views_),  whole(templates_), whole(draws_),   whole(group_counts_)};
+    if (segment_count_ > 1) {  // one segment binds whole buffers
+      const VkDeviceSize first = VkDeviceSize(seg) * segment_objects_;
+      const VkDeviceSize n = std::min<VkDeviceSize>(segment_objects_, object_count_ - first);
+      ranges[BINDING_BOUNDS] = {&bounds_, first * bytes_per_object_, n * bytes_per_object_};
+      ranges[BINDING_CLASSES] = {&classes_, first * views * sizeof(std::uint32_t), n * views * sizeof(std::uint32_t)};
+      if (template_count_ == object_count_) ranges[BINDING_DRAW_TEMPLATES] = {&templates_, first * sizeof(DrawCommand), n * sizeof(DrawCommand)};
+    }
+    resources_->write(seg, ranges);
+  }
+  written_segment_objects_ = segment_objects_;
+  written_view_count_ = views;
   descriptors_dirty_ = false;
 }
 
@@ -145,12 +194,13 @@ void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
     throw std::length_error(std::to_string(views.size()) + " views exceed the device's dispatch limit of " +
                             std::to_string(ctx_.properties().limits.maxComputeWorkGroupCount[1]));
   detail::ensure_buffer(ctx_, bounds_, 0, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "bounds buffer", descriptors_dirty_);
+  plan_segments(views.size(), options.ordered);
   ensure_outputs(views.size(), capacity, options.draws);
+  last_view_count_ = views.size();
   update_descriptors();
   auto gpu_views = views_.as<GpuFrustum>();
   for (std::size_t v = 0; v < views.size(); ++v) gpu_views[v] = pack(views[v]);
   last_capacity_ = capacity;
-  last_view_count_ = views.size();
   last_options_ = options;
   // Build every pipeline the pass needs now, not while recording.
   const std::uint32_t kind = kind_index(kind_);
@@ -174,20 +224,29 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
 
   auto compute_to_compute = [&] { detail::record_compute_to_compute(cmd); };
   const VkDescriptorSet set = resources_->set();
-  const FlatCullParams base_params{std::uint32_t(object_count_), 0, std::uint32_t(view_count), std::uint32_t(last_capacity_)};
-  // One pass over every object in chunks of at most max_groups_ workgroups.
+  const FlatCullParams base_params{std::uint32_t(object_count_), 0, std::uint32_t(view_count), std::uint32_t(last_capacity_), 0};
+  // One pass over every object: per segment (its own descriptor set), in chunks of at most
+  // max_groups_ workgroups.
   auto object_pass = [&](const vk::ComputePipeline& pipe, std::uint32_t objects_per_invocation) {
     const std::uint64_t objects_per_group = std::uint64_t(group_size_) * objects_per_invocation;
     const std::uint64_t objects_per_dispatch = std::uint64_t(max_groups_) * objects_per_group;
     vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.pipeline());
-    vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.layout(), 0, 1, &set, 0, nullptr);
-    for (std::uint64_t first = 0; first < object_count_; first += objects_per_dispatch) {
-      if (first > 0) compute_to_compute();  // successive chunks update the same counters
-      const std::uint64_t count = std::min<std::uint64_t>(objects_per_dispatch, object_count_ - first);
-      FlatCullParams params = base_params;
-      params.first_object = std::uint32_t(first);
-      vkCmdPushConstants(cmd, pipe.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
-      vkCmdDispatch(cmd, std::uint32_t((count + objects_per_group - 1) / objects_per_group), std::uint32_t(view_count), 1);
+    for (std::size_t seg = 0; seg < segment_count_; ++seg) {
+      const VkDescriptorSet segment_set = resources_->set(seg);
+      vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.layout(), 0, 1, &segment_set, 0, nullptr);
+      const std::uint64_t segment_first = std::uint64_t(seg) * segment_objects_;
+      const std::uint64_t segment_count = segment_count_ > 1 ? std::min<std::uint64_t>(segment_objects_, object_count_ - segment_first)
+                                                             : object_count_;
+      for (std::uint64_t first = 0; first < segment_count; first += objects_per_dispatch) {
+        if (first > 0 || seg > 0) compute_to_compute();  // successive dispatches update the same counters
+        const std::uint64_t count = std::min<std::uint64_t>(objects_per_dispatch, segment_count - first);
+        FlatCullParams params = base_params;
+        params.object_count = std::uint32_t(segment_count);
+        params.first_object = std::uint32_t(first);
+        params.id_base = std::uint32_t(segment_first);
+        vkCmdPushConstants(cmd, pipe.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
+        vkCmdDispatch(cmd, std::uint32_t((count + objects_per_group - 1) / objects_per_group), std::uint32_t(view_count), 1);
+      }
     }
   };
   const std::uint32_t kind = kind_index(kind_);
@@ -217,7 +276,7 @@ void GpuCuller::record(VkCommandBuffer cmd, std::span<const Frustum> views, cons
 
 CullResult GpuCuller::read_results() const {
   CullResult result = detail::read_outputs({counters_, classes_, visible_, draws_}, object_count_, last_view_count_, last_capacity_,
-                                           last_options_);
+                                           last_options_, segment_count_ > 1 ? segment_objects_ : 0);
   for (ViewResult& view : result.views) view.object_tests = object_count_;  // flat: every object, no nodes
   return result;
 }

@@ -79,6 +79,10 @@ struct GpuCullerConfig {
   /// for all of them and one visible-list atomic per subgroup for all of them. The ordered
   /// pass uses 1.
   std::uint32_t objects_per_invocation = FLAT_OBJECTS_PER_INVOCATION;
+  /// Most objects per segment; 0 means as many as the device's storage-buffer range allows.
+  /// Scenes larger than one storage buffer are culled in segments of this many objects (a
+  /// multiple of 256), each bound as its own range. Tests set it low to exercise that path.
+  std::size_t max_segment_objects = 0;
 };
 
 /// Flat frustum culling on a Vulkan device: uploads one set of volumes, then classifies them
@@ -92,8 +96,9 @@ class GpuCuller {
   GpuCuller& operator=(const GpuCuller&) = delete;
 
   /// Uploads the volumes to cull, replacing any earlier upload. Volumes must be valid
-  /// (see invalid_reason); throws std::length_error when they do not fit one storage buffer
-  /// (maxStorageBufferRange), naming the sizes.
+  /// (see invalid_reason). More than one storage buffer (maxStorageBufferRange) of them is
+  /// culled in segments; throws std::length_error, naming the sizes, when they do not fit one
+  /// memory allocation (maxMemoryAllocationSize) or exceed 2^32 - 1 objects.
   void upload(std::span<const Aabb> volumes);
   void upload(std::span<const Obb> volumes);
   void upload(std::span<const Sphere> volumes);
@@ -115,7 +120,8 @@ class GpuCuller {
   std::size_t last_visible_capacity() const { return last_capacity_; }
 
   /// Classifies the uploaded volumes against every view in one submission and waits.
-  /// Throws std::length_error when views x objects outputs exceed a storage buffer.
+  /// Throws std::length_error when the visible lists or draws (views x capacity) exceed a
+  /// storage buffer, or when `ordered` output is asked of more than one segment of objects.
   CullResult cull(std::span<const Frustum> views, const CullOptions& options = {});
 
   /// The engine path: records the whole pass (counter reset, dispatches, barriers) into the
@@ -136,12 +142,15 @@ class GpuCuller {
   BvKind kind() const { return kind_; }
   std::uint32_t group_size() const { return group_size_; }
   std::uint32_t objects_per_invocation() const { return objects_per_invocation_; }
+  /// Segments of the last pass (1 unless the scene exceeds one storage buffer).
+  std::size_t last_segment_count() const { return segment_count_; }
   std::size_t object_count() const { return object_count_; }
   const vk::Context& context() const { return ctx_; }
 
  private:
   void upload_words(BvKind kind, const void* data, std::size_t count, std::size_t bytes_per_object);
   void ensure_outputs(std::size_t view_count, std::size_t visible_capacity, bool draws);
+  void plan_segments(std::size_t view_count, bool ordered);
   void prepare(std::span<const Frustum> views, const CullOptions& options);
   void record_passes(VkCommandBuffer cmd, VkQueryPool timestamps);
   const vk::ComputePipeline& pipeline(int shader, std::uint32_t kind, bool ordered, bool draws);
@@ -151,6 +160,13 @@ class GpuCuller {
   std::uint32_t group_size_ = FLAT_CULL_GROUP_SIZE;
   std::uint32_t max_groups_ = 0;
   std::uint32_t objects_per_invocation_ = 1;
+  std::size_t max_segment_objects_ = 0;
+  std::size_t bytes_per_object_ = sizeof(GpuAabb);
+  // Segments of the current pass: objects per segment and their count (1 when all fit).
+  std::size_t segment_objects_ = 0;
+  std::size_t segment_count_ = 1;
+  // What the descriptor sets were last written for.
+  std::size_t written_segment_objects_ = 0, written_view_count_ = 0;
   BvKind kind_ = BvKind::Aabb;
   std::size_t object_count_ = 0;
   // Built on first use: [shader][kind][ordered][draws]; shader 0 = cull_flat, 1 = compact_scan,

@@ -89,8 +89,19 @@ void record_compute_to_compute(VkCommandBuffer cmd, bool indirect) {
   vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, dst, 0, 1, &barrier, 0, nullptr, 0, nullptr);
 }
 
+void check_allocation_size(const vk::Context& ctx, VkDeviceSize bytes, const std::string& what) {
+  VkPhysicalDeviceMaintenance3Properties m3{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_MAINTENANCE_3_PROPERTIES};
+  VkPhysicalDeviceProperties2 properties{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2, &m3, {}};
+  vkGetPhysicalDeviceProperties2(ctx.physical_device(), &properties);
+  if (bytes > m3.maxMemoryAllocationSize)
+    throw std::length_error(what + " needs " + std::to_string(bytes) + " bytes (" + mib(bytes) + "), more than one memory allocation can hold on " +
+                            ctx.info().name + " (maxMemoryAllocationSize " + std::to_string(m3.maxMemoryAllocationSize) + " bytes, " +
+                            mib(m3.maxMemoryAllocationSize) + ")");
+}
+
 CullResult read_outputs(const OutputBuffers& buffers, std::size_t object_count, std::size_t view_count, std::size_t capacity,
-                        const CullOptions& options) {
+                        const CullOptions& options, std::size_t segment_objects) {
+  if (segment_objects == 0 || segment_objects > object_count) segment_objects = object_count;
   CullResult result;
   result.views.resize(view_count);
   if (view_count == 0) return result;
@@ -105,8 +116,12 @@ CullResult read_outputs(const OutputBuffers& buffers, std::size_t object_count, 
     const std::size_t listed = std::min<std::size_t>(c.visible_count, capacity);
     if (options.classes) {
       out.classes.resize(object_count);
-      const std::uint32_t* src = buffers.classes.as<const std::uint32_t>().data() + v * object_count;
-      for (std::size_t i = 0; i < object_count; ++i) out.classes[i] = static_cast<Classification>(src[i]);
+      const std::uint32_t* all = buffers.classes.as<const std::uint32_t>().data();
+      for (std::size_t first = 0; first < object_count; first += segment_objects) {
+        const std::size_t n = std::min(segment_objects, object_count - first);
+        const std::uint32_t* src = all + first * view_count + v * n;  // segment [view][object]
+        for (std::size_t i = 0; i < n; ++i) out.classes[first + i] = static_cast<Classification>(src[i]);
+      }
     }
     if (options.visible_ids) {
       const std::uint32_t* src = buffers.visible.as<const std::uint32_t>().data() + v * capacity;
@@ -121,20 +136,10 @@ CullResult read_outputs(const OutputBuffers& buffers, std::size_t object_count, 
 }
 
 PassResources::PassResources(const vk::Context& ctx, VkDescriptorSetLayout layout, std::uint32_t binding_count)
-    : ctx_(ctx), binding_count_(binding_count) {
+    : ctx_(ctx), binding_count_(binding_count), layout_(layout) {
   try {
     VkDevice dev = ctx_.device();
-    VkDescriptorPoolSize pool_size{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, binding_count};
-    VkDescriptorPoolCreateInfo pool_info{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
-    pool_info.maxSets = 1;
-    pool_info.poolSizeCount = 1;
-    pool_info.pPoolSizes = &pool_size;
-    CULLPIPE_VK_CHECK(vkCreateDescriptorPool(dev, &pool_info, nullptr, &pool_));
-    VkDescriptorSetAllocateInfo set_info{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO};
-    set_info.descriptorPool = pool_;
-    set_info.descriptorSetCount = 1;
-    set_info.pSetLayouts = &layout;
-    CULLPIPE_VK_CHECK(vkAllocateDescriptorSets(dev, &set_info, &set_));
+    ensure_sets(1);
 
     VkCommandBufferAllocateInfo cmd_info{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
     cmd_info.commandPool = ctx_.command_pool();
@@ -170,14 +175,46 @@ void PassResources::release() {
   pool_ = VK_NULL_HANDLE;
 }
 
+void PassResources::ensure_sets(std::size_t count) {
+  if (count <= sets_.size()) return;
+  VkDevice dev = ctx_.device();
+  if (pool_) {
+    // The sets may be referenced by a recording that has not finished on our own device.
+    if (ctx_.owns_device()) vkDeviceWaitIdle(dev);
+    vkDestroyDescriptorPool(dev, pool_, nullptr);
+    pool_ = VK_NULL_HANDLE;
+    sets_.clear();
+  }
+  VkDescriptorPoolSize pool_size{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, binding_count_ * std::uint32_t(count)};
+  VkDescriptorPoolCreateInfo pool_info{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
+  pool_info.maxSets = std::uint32_t(count);
+  pool_info.poolSizeCount = 1;
+  pool_info.pPoolSizes = &pool_size;
+  CULLPIPE_VK_CHECK(vkCreateDescriptorPool(dev, &pool_info, nullptr, &pool_));
+  std::vector<VkDescriptorSetLayout> layouts(count, layout_);
+  std::vector<VkDescriptorSet> sets(count);
+  VkDescriptorSetAllocateInfo set_info{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO};
+  set_info.descriptorPool = pool_;
+  set_info.descriptorSetCount = std::uint32_t(count);
+  set_info.pSetLayouts = layouts.data();
+  CULLPIPE_VK_CHECK(vkAllocateDescriptorSets(dev, &set_info, sets.data()));
+  sets_ = std::move(sets);
+}
+
 void PassResources::write(std::span<const vk::Buffer* const> buffers) {
+  std::vector<Range> ranges;
+  for (const vk::Buffer* b : buffers) ranges.push_back({b});
+  write(0, ranges);
+}
+
+void PassResources::write(std::size_t index, std::span<const Range> ranges) {
   std::vector<VkDescriptorBufferInfo> infos(binding_count_);
   std::vector<VkWriteDescriptorSet> writes(binding_count_);
-  if (buffers.size() != binding_count_) throw std::logic_error("PassResources::write: one buffer per binding");
+  if (ranges.size() != binding_count_) throw std::logic_error("PassResources::write: one buffer per binding");
   for (std::uint32_t b = 0; b < binding_count_; ++b) {
-    infos[b] = {buffers[b]->handle(), 0, VK_WHOLE_SIZE};
+    infos[b] = {ranges[b].buffer->handle(), ranges[b].offset, ranges[b].size};
     writes[b] = {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
-    writes[b].dstSet = set_;
+    writes[b].dstSet = sets_.at(index);
     writes[b].dstBinding = b;
     writes[b].descriptorCount = 1;
     writes[b].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;

@@ -7,6 +7,7 @@
 #include <functional>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "gpu/gpu_culler.hpp"
 #include "vk/buffer.hpp"
@@ -48,8 +49,14 @@ struct OutputBuffers {
   const vk::Buffer& draws;     ///< DrawCommand, `capacity` per view
 };
 /// Reads a completed pass's outputs back as the options ask (counts and test counts always).
+/// The classes are stored per segment of `segment_objects` objects (0: one segment of all),
+/// each segment as [view][object within the segment].
 CullResult read_outputs(const OutputBuffers& buffers, std::size_t object_count, std::size_t view_count, std::size_t capacity,
-                        const CullOptions& options);
+                        const CullOptions& options, std::size_t segment_objects = 0);
+
+/// Throws std::length_error naming `what` and the device limit when `bytes` exceed one memory
+/// allocation (maxMemoryAllocationSize).
+void check_allocation_size(const vk::Context& ctx, VkDeviceSize bytes, const std::string& what);
 
 /// One descriptor set of storage buffers, a command buffer and a two-entry timestamp pool.
 class PassResources {
@@ -59,9 +66,21 @@ class PassResources {
   PassResources(const PassResources&) = delete;
   PassResources& operator=(const PassResources&) = delete;
 
-  VkDescriptorSet set() const { return set_; }
-  /// Binding i of the set = the whole of buffers[i].
+  VkDescriptorSet set(std::size_t index = 0) const { return sets_.at(index); }
+  std::size_t set_count() const { return sets_.size(); }
+  /// Makes room for `count` descriptor sets (same layout); earlier sets are freed and must be
+  /// written again when the count grows.
+  void ensure_sets(std::size_t count);
+  /// Binding i of set 0 = the whole of buffers[i].
   void write(std::span<const vk::Buffer* const> buffers);
+  /// A part of a buffer bound to one binding.
+  struct Range {
+    const vk::Buffer* buffer;
+    VkDeviceSize offset = 0;
+    VkDeviceSize size = VK_WHOLE_SIZE;
+  };
+  /// Binding i of set `index` = ranges[i].
+  void write(std::size_t index, std::span<const Range> ranges);
 
   /// Records with `record(cmd, query_pool)` (query_pool is VK_NULL_HANDLE without timestamps;
   /// else the recorder writes timestamps 0 and 1 around its work), submits, waits, and
@@ -73,8 +92,9 @@ class PassResources {
 
   const vk::Context& ctx_;
   std::uint32_t binding_count_;
+  VkDescriptorSetLayout layout_;
   VkDescriptorPool pool_ = VK_NULL_HANDLE;
-  VkDescriptorSet set_ = VK_NULL_HANDLE;
+  std::vector<VkDescriptorSet> sets_;
   VkCommandBuffer cmd_ = VK_NULL_HANDLE;
   VkQueryPool query_pool_ = VK_NULL_HANDLE;
 };

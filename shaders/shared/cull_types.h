@@ -70,12 +70,15 @@ struct GpuFrustum {
 };
 
 // Push constants of the flat culling pass. One dispatch covers every view (y = view index)
-// and up to maxComputeWorkGroupCount[0] groups of objects, starting at first_object.
+// and up to maxComputeWorkGroupCount[0] groups of objects, starting at first_object. Scenes
+// larger than one storage buffer are culled in segments, each bound as its own range of the
+// bounds, classes and draw-template buffers; indices here are within the segment.
 struct FlatCullParams {
-  uint object_count;      // objects in the bounds buffer
-  uint first_object;      // index of the first object of this dispatch
+  uint object_count;      // objects in the bound segment of the bounds buffer
+  uint first_object;      // index of the first object of this dispatch, within the segment
   uint view_count;        // views in the views buffer
   uint visible_capacity;  // capacity of each view's visible-id list
+  uint id_base;           // object id of the segment's first object (added to listed ids)
 };
 
 // Largest workgroup the compaction shaders support (their shared scan array).
