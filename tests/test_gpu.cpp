@@ -12,6 +12,7 @@
 #include "cull/compare.hpp"
 #include "cull/reference.hpp"
 #include "gpu/gpu_culler.hpp"
+#include "vk/compute_pipeline.hpp"
 #include "gpu/layout.hpp"
 #include "scene/generators.hpp"
 #include "scene/gltf_scene.hpp"
@@ -374,6 +375,34 @@ TEST_F(Gpu, SegmentedPassesAgreeForEveryKindAndOutput) {
   std::vector<Aabb> few(boxes.begin(), boxes.begin() + 200);
   expect_agreement(segmented, few, test_frusta(), ordered);
   EXPECT_EQ(segmented.last_segment_count(), 1u);
+}
+
+TEST_F(Gpu, CorruptShadersAreRefusedBeforeTheDriverSeesThem) {
+  // A minimal sound module: header, then OpCapability Shader (2 words) and OpMemoryModel
+  // Logical GLSL450 (3 words).
+  const std::vector<std::uint32_t> sound = {0x07230203u, 0x00010300u, 0, 8, 0, 2u << 16 | 17u, 1, 3u << 16 | 14u, 0, 1};
+  EXPECT_EQ(vk::spirv_problem(sound), "");
+  std::vector<std::uint32_t> bad = sound;
+  bad[0] = 0x03022307u;  // byte-swapped magic
+  EXPECT_NE(vk::spirv_problem(bad).find("magic"), std::string::npos);
+  bad = sound;
+  bad.pop_back();  // truncated
+  EXPECT_NE(vk::spirv_problem(bad).find("past the end"), std::string::npos);
+  bad = sound;
+  bad[5] = 0;  // zero word count
+  EXPECT_NE(vk::spirv_problem(bad).find("word count of 0"), std::string::npos);
+  EXPECT_NE(vk::spirv_problem(std::span(sound).first(3)).find("header"), std::string::npos);
+  bad = sound;
+  bad[1] = 0x00020000u;
+  EXPECT_NE(vk::spirv_problem(bad).find("version"), std::string::npos);
+  for (const std::vector<std::uint32_t>& words : {std::vector<std::uint32_t>{}, std::vector<std::uint32_t>(sound.begin(), sound.end() - 1)}) {
+    try {
+      vk::ComputePipeline pipe(*GpuEnvironment::context, vk::ComputePipelineDesc{words, 1, 0, {}, "test pipeline"});
+      FAIL() << "expected vk::Error";
+    } catch (const vk::Error& e) {
+      EXPECT_NE(std::string(e.what()).find("test pipeline: SPIR-V is corrupt"), std::string::npos) << e.what();
+    }
+  }
 }
 
 TEST_F(Gpu, VisibleListOverflowIsReportedNotSilent) {

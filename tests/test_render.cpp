@@ -164,6 +164,18 @@ TEST(Render, TopDownImageAndPng) {
   EXPECT_GT(std::filesystem::file_size(path), 1000u);
   std::filesystem::remove(path);
   EXPECT_THROW(render::write_png("/nonexistent-dir/x.png", img), InputError);
+  // Atomic: a failed write leaves the earlier file whole and no temporary behind.
+  const auto dir = std::filesystem::temp_directory_path() / "cullpipe_png_atomic";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const auto kept = dir / "kept.png";
+  render::write_png(kept.string(), img);
+  const auto size = std::filesystem::file_size(kept);
+  std::filesystem::create_directory(dir / "blocker.png.tmp");  // the temporary cannot be created
+  EXPECT_THROW(render::write_png((dir / "blocker.png").string(), img), InputError);
+  EXPECT_FALSE(std::filesystem::exists(dir / "blocker.png"));
+  EXPECT_EQ(std::filesystem::file_size(kept), size);
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

@@ -8,6 +8,7 @@
 #include <glm/matrix.hpp>
 #include <limits>
 #include <stdexcept>
+#include <string>
 
 #include "scene/scene.hpp"
 
@@ -56,8 +57,15 @@ std::uint32_t darker(std::uint32_t c) {
 void write_png(const std::string& path, const Image& image) {
   if (image.width == 0 || image.height == 0 || image.rgba.size() != std::size_t(image.width) * image.height * 4)
     throw InputError(path + ": cannot write an empty or inconsistent image");
-  if (!stbi_write_png(path.c_str(), int(image.width), int(image.height), 4, image.rgba.data(), int(image.width * 4)))
-    throw InputError(path + ": cannot write the PNG file");
+  // Encoded in memory, then written atomically: a failed or interrupted write never leaves a
+  // truncated PNG in place of an earlier one.
+  std::string png;
+  const auto append = [](void* context, void* data, int size) {
+    static_cast<std::string*>(context)->append(static_cast<const char*>(data), std::size_t(size));
+  };
+  if (!stbi_write_png_to_func(append, &png, int(image.width), int(image.height), 4, image.rgba.data(), int(image.width * 4)))
+    throw InputError(path + ": cannot encode the PNG image");
+  write_file_atomic(path, png);
 }
 
 std::size_t count_different_pixels(const Image& a, const Image& b) {

@@ -95,7 +95,6 @@ inline json to_json(const glm::mat4& m) {
   return a;
 }
 
-/// Writes `text` to `path` atomically (temporary file, then rename); throws InputError.
-void write_file_atomic(const std::string& path, const std::string& text);
+using cullpipe::write_file_atomic;  // scene/scene.hpp
 
 }  // namespace cullpipe::json_util

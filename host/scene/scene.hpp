@@ -4,6 +4,7 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "bounds/aabb_update.hpp"
@@ -21,6 +22,11 @@ class InputError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
 };
+
+/// Writes `bytes` to `path` atomically: into `path`.tmp beside it, then renamed over `path`,
+/// so a reader never sees a half-written file and a failed write leaves an existing file
+/// untouched (and no temporary behind). Throws InputError naming the path.
+void write_file_atomic(const std::string& path, std::string_view bytes);
 
 /// Where an object came from in a glTF file (-1: not from glTF).
 struct ObjectOrigin {

@@ -10,9 +10,7 @@
 
 namespace cullpipe {
 
-namespace json_util {
-
-void write_file_atomic(const std::string& path, const std::string& text) {
+void write_file_atomic(const std::string& path, std::string_view text) {
   const std::string tmp = path + ".tmp";
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
@@ -31,8 +29,6 @@ void write_file_atomic(const std::string& path, const std::string& text) {
     throw InputError(path + ": cannot replace file: " + ec.message());
   }
 }
-
-}  // namespace json_util
 
 using json_util::json;
 

@@ -7,11 +7,33 @@
 
 namespace cullpipe::vk {
 
+std::string spirv_problem(std::span<const std::uint32_t> words) {
+  // The module's structure (SPIR-V spec 2.3-2.4): a 5-word header (magic, version, generator,
+  // id bound, 0), then instructions whose first word holds their word count in the high
+  // 16 bits. Drivers are not required to survive malformed modules, so they never get one.
+  if (words.size() < 5) return "shorter than the 5-word header (" + std::to_string(words.size()) + " words)";
+  if (words[0] != 0x07230203u) return "bad magic number";
+  const std::uint32_t major = words[1] >> 16 & 0xff;
+  if (major != 1 || (words[1] & 0xff0000ffu) != 0) return "unknown version word";
+  if (words[3] == 0) return "id bound of 0";
+  if (words[4] != 0) return "reserved header word is not 0";
+  std::size_t at = 5, instructions = 0;
+  while (at < words.size()) {
+    const std::uint32_t count = words[at] >> 16;
+    if (count == 0) return "instruction at word " + std::to_string(at) + " has a word count of 0";
+    if (count > words.size() - at)
+      return "instruction at word " + std::to_string(at) + " runs past the end (truncated module?)";
+    at += count;
+    ++instructions;
+  }
+  if (instructions == 0) return "no instructions";
+  return {};
+}
+
 ComputePipeline::ComputePipeline(const Context& ctx, const ComputePipelineDesc& desc)
     : device_(ctx.device()), push_constant_size_(desc.push_constant_size) {
   const std::string name = desc.name;
-  if (desc.spirv.empty() || desc.spirv[0] != 0x07230203u)
-    throw Error(name + ": SPIR-V is empty or corrupt (bad magic number)");
+  if (const std::string why = spirv_problem(desc.spirv); !why.empty()) throw Error(name + ": SPIR-V is corrupt: " + why);
   if (desc.push_constant_size > ctx.properties().limits.maxPushConstantsSize)
     throw Error(name + ": needs " + std::to_string(desc.push_constant_size) + " bytes of push constants, device allows " +
                 std::to_string(ctx.properties().limits.maxPushConstantsSize));

@@ -3,6 +3,7 @@
 
 #include <cstdint>
 #include <span>
+#include <string>
 
 #include "vk/context.hpp"
 
@@ -16,6 +17,11 @@ struct ComputePipelineDesc {
   std::span<const std::uint32_t> specialization;   ///< values of constant_id 0..n-1 (32-bit each)
   const char* name = "compute pipeline";           ///< for error messages
 };
+
+/// Why `words` is not a structurally sound SPIR-V module (header, then instructions that
+/// exactly fill the words), or an empty string. ComputePipeline refuses such a module with
+/// vk::Error before the driver sees it.
+std::string spirv_problem(std::span<const std::uint32_t> words);
 
 /// A compute pipeline with its descriptor-set layout and pipeline layout. Move-free; the
 /// owner keeps it alive while command buffers that use it are pending.
