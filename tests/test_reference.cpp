@@ -136,6 +136,32 @@ TEST(Reference, SphereIsConservative) {
   EXPECT_GT(exact_hits, 5000);
 }
 
+// Zero-area frusta: a zero field of view, near == far, or a zero-width orthographic box make
+// a singular or non-finite matrix, which Frustum::from_view_proj refuses. A sliver (a field of
+// view of 1e-4 degrees) is a valid frustum; it keeps what lies on its axis and stays
+// conservative.
+TEST(Reference, ZeroAreaFrustaAreRefusedAndSliversStayConservative) {
+  auto flip = [](glm::mat4 p) {
+    p[1][1] *= -1.0f;
+    return p;
+  };
+  const glm::mat4 view = glm::lookAtRH(glm::vec3(0, 0, 10), glm::vec3(0), glm::vec3(0, 1, 0));
+  EXPECT_THROW(Frustum::from_view_proj(flip(glm::perspectiveRH_ZO(0.0f, 1.5f, 0.5f, 50.0f)) * view), std::invalid_argument);
+  EXPECT_THROW(Frustum::from_view_proj(flip(glm::perspectiveRH_ZO(1.0f, 1.5f, 5.0f, 5.0f)) * view), std::invalid_argument);
+  EXPECT_THROW(Frustum::from_view_proj(glm::orthoRH_ZO(2.0f, 2.0f, -1.0f, 1.0f, 0.5f, 50.0f) * view), std::invalid_argument);
+  const Frustum sliver = Frustum::from_view_proj(flip(glm::perspectiveRH_ZO(glm::radians(1e-4f), 1.0f, 0.5f, 50.0f)) * view);
+  EXPECT_EQ(classify_pn(Aabb{{-0.1f, -0.1f, -1}, {0.1f, 0.1f, 1}}, sliver), kCross);  // on the axis
+  EXPECT_EQ(classify_pn(Aabb{{1, 1, -1}, {2, 2, 1}}, sliver), kOut);
+  test::Rng rng{5};
+  int exact_hits = 0, false_positives = 0;
+  for (int i = 0; i < 20000; ++i) {
+    Obb box = test::random_obb(rng, 3.0f, 1.0f);
+    check_box(box, classify(box, sliver), sliver, exact_hits, false_positives);
+    if (HasFatalFailure()) return;
+  }
+  EXPECT_GT(exact_hits, 10);
+}
+
 TEST(Reference, ClassifyAllCountsAndChecksSizes) {
   const Frustum f = unit_cube();
   const std::vector<Sphere> spheres = {{{0, 0, 0}, 0.1f}, {{5, 0, 0}, 1}, {{1, 0, 0}, 0.5f}, {{0, 0.5f, 0}, 0.2f}};
