@@ -6,6 +6,7 @@
 //   cpu-fast   SIMD + threads (fast::CpuCuller), per-object classes and the visible list
 //   cpu-read   the memory floor: cpu-fast's loads of the same bytes with no tests
 //   cpu-bvh    scalar hierarchical traversal (bvh::cull_hierarchical), AABBs only
+//   cpu-fast-bvh  the same traversal on every core (fast::CpuBvhCuller), AABBs only
 //   gpu-flat   GpuCuller, visible list compacted on the device (time between timestamps)
 //   gpu-bvh    BvhCuller, visible list, AABBs only
 // Scenes: the first N objects of one uniform random scene, in shuffled order or sorted along the
@@ -34,6 +35,7 @@
 #include "bench_util.hpp"
 #include "bvh/builders.hpp"
 #include "bvh/bvh.hpp"
+#include "cull/cpu_bvh_culler.hpp"
 #include "cull/cpu_culler.hpp"
 #include "cull/reference.hpp"
 #include "geom/splitmix.hpp"
@@ -48,7 +50,7 @@ using namespace cullpipe::bench;
 namespace {
 
 const char* const kProgram = "cullpipe-bench";
-const std::vector<std::string> kMethods = {"reference", "cpu-fast", "cpu-read", "cpu-bvh", "gpu-flat", "gpu-bvh"};
+const std::vector<std::string> kMethods = {"reference", "cpu-fast", "cpu-read", "cpu-bvh", "cpu-fast-bvh", "gpu-flat", "gpu-bvh"};
 
 struct Cell {
   std::string method, bv, order;
@@ -98,17 +100,18 @@ std::size_t gpu_bytes_per_object<Sphere>() { return sizeof(gpu::GpuSphere); }
 /// Measures one (volume kind, N, order) for every fraction; appends the cells.
 template <class Volume>
 void run_scene(const Config& config, const std::string& bv, const std::string& order, const std::vector<Volume>& volumes,
-               const std::vector<Aabb>& boxes, const Aabb& bounds, fast::CpuCuller& fast_culler, Gpu& gpu, std::vector<Cell>& cells,
-               bool& all_agree) {
+               const std::vector<Aabb>& boxes, const Aabb& bounds, fast::CpuCuller& fast_culler, fast::CpuBvhCuller& fast_bvh,
+               Gpu& gpu, std::vector<Cell>& cells, bool& all_agree) {
   const std::size_t n = volumes.size();
   const std::span<const Volume> vspan(volumes);
   const bool is_aabb = std::is_same_v<Volume, Aabb>;
   fast_culler.upload(vspan);
 
   // The BVH (binned SAH, leaves of 4), built once per scene; not part of the timed passes.
-  const bool bvh_methods = is_aabb && (wants(config, "cpu-bvh") || wants(config, "gpu-bvh"));
+  const bool bvh_methods = is_aabb && (wants(config, "cpu-bvh") || wants(config, "cpu-fast-bvh") || wants(config, "gpu-bvh"));
   bvh::FlatTree tree;
   if (bvh_methods) tree = bvh::flatten(bvh::build("binned-sah", boxes));
+  if (bvh_methods && wants(config, "cpu-fast-bvh")) fast_bvh.upload(tree, boxes);
 
   std::string gpu_flat_note, gpu_bvh_note;
   if (gpu.flat && wants(config, "gpu-flat")) {
@@ -200,6 +203,22 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
         t.push_back(since(t0));
       });
     }
+    bvh::HierarchicalResult fast_h;
+    if (wants(config, "cpu-fast-bvh")) {
+      std::string note = is_aabb ? "" : "AABBs only";
+      std::optional<bool> ok;
+      if (is_aabb) {
+        if (h.classes.empty()) h = bvh::cull_hierarchical(tree, boxes, f);
+        fast_bvh.cull(f, fast_h);
+        ok = fast_h.classes == h.classes && fast_h.node_tests == h.node_tests && fast_h.object_tests == h.object_tests &&
+             fast_h.visible == h.visible && fast_h.inside == h.inside;
+      }
+      add("cpu-fast-bvh", sizeof(Aabb), ok, note, [&](std::vector<double>& t, std::vector<double>&) {
+        const auto t0 = Clock::now();
+        fast_bvh.cull(f, fast_h);
+        t.push_back(since(t0));
+      });
+    }
     gpu::CullOptions list_only;
     list_only.classes = false;
     if (wants(config, "gpu-flat")) {
@@ -253,11 +272,11 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
       const Cell& c = t.cell;
       const double dn = double(std::max<std::size_t>(n, 1));
       if (!c.note.empty()) {
-        std::printf("%-10s %-7s %-9s %9zu %6.1f%%   (%s)\n", c.method.c_str(), bv.c_str(), order.c_str(), n, 100 * achieved, c.note.c_str());
+        std::printf("%-12s %-7s %-9s %9zu %6.1f%%   (%s)\n", c.method.c_str(), bv.c_str(), order.c_str(), n, 100 * achieved, c.note.c_str());
         continue;
       }
       const double gbps = c.ns > 0 ? double(c.bytes_per_object) * dn / c.ns : 0.0;
-      std::printf("%-10s %-7s %-9s %9zu %6.1f%% %5d %10.3f %10.1f %8.2f %8.2f %10s %6s\n", c.method.c_str(), bv.c_str(), order.c_str(), n,
+      std::printf("%-12s %-7s %-9s %9zu %6.1f%% %5d %10.3f %10.1f %8.2f %8.2f %10s %6s\n", c.method.c_str(), bv.c_str(), order.c_str(), n,
                   100 * achieved, c.repeats, c.ns / dn, c.ns > 0 ? dn / c.ns * 1e3 : 0.0, gbps,
                   ref_ns > 0 && c.ns > 0 ? ref_ns / c.ns : 0.0, c.wall_ns > 0 ? std::to_string(c.wall_ns / dn).substr(0, 8).c_str() : "-",
                   !c.agree ? "-" : *c.agree ? "yes" : "NO");
@@ -327,7 +346,7 @@ void usage(FILE* to) {
                "usage: cullpipe-bench [--methods m,..] [--bv aabb,obb,sphere] [--sizes 1e3,..] [--fractions 0.01,..]\n"
                "                      [--order shuffled,sorted] [--repeats R] [--threads T] [--isa portable|avx2|avx512]\n"
                "                      [--device NAME] [--csv FILE] [--json FILE] [--plot PREFIX]\n"
-               "methods: reference, cpu-fast, cpu-read, cpu-bvh, gpu-flat, gpu-bvh (default: all)\n");
+               "methods: reference, cpu-fast, cpu-read, cpu-bvh, cpu-fast-bvh, gpu-flat, gpu-bvh (default: all)\n");
 }
 
 }  // namespace
@@ -387,6 +406,7 @@ int main(int argc, char** argv) {
   fast_config.threads = config.threads;
   fast_config.isa = config.isa;
   fast::CpuCuller fast_culler(fast_config);
+  fast::CpuBvhCuller fast_bvh(config.threads);
   Gpu gpu;
   if (wants(config, "gpu-flat") || wants(config, "gpu-bvh")) {
     try {
@@ -408,7 +428,7 @@ int main(int argc, char** argv) {
   if (gpu.ctx) std::printf("gpu: %s, %s\n", gpu.ctx->info().name.c_str(), gpu.ctx->info().driver.c_str());
   else if (!gpu.error.empty()) std::printf("gpu: none (%s)\n", gpu.error.c_str());
   std::printf("memory read bandwidth (256 MiB, %u threads): %.1f GB/s\n\n", fast_culler.threads(), read_gbps);
-  std::printf("%-10s %-7s %-9s %9s %7s %5s %10s %10s %8s %8s %10s %6s\n", "method", "bv", "order", "N", "visible", "reps", "ns/obj",
+  std::printf("%-12s %-7s %-9s %9s %7s %5s %10s %10s %8s %8s %10s %6s\n", "method", "bv", "order", "N", "visible", "reps", "ns/obj",
               "Mobj/s", "GB/s", "x ref", "wall ns/o", "agree");
 
   std::vector<Cell> cells;
@@ -440,9 +460,9 @@ int main(int argc, char** argv) {
           for (std::size_t i = 0; i < n; ++i) out[i] = all[pick[i]];
           return out;
         };
-        if (bv == "aabb") run_scene(config, bv, order, boxes, boxes, bounds, fast_culler, gpu, cells, all_agree);
-        if (bv == "obb") run_scene(config, bv, order, gather(all_obbs), boxes, bounds, fast_culler, gpu, cells, all_agree);
-        if (bv == "sphere") run_scene(config, bv, order, gather(all_spheres), boxes, bounds, fast_culler, gpu, cells, all_agree);
+        if (bv == "aabb") run_scene(config, bv, order, boxes, boxes, bounds, fast_culler, fast_bvh, gpu, cells, all_agree);
+        if (bv == "obb") run_scene(config, bv, order, gather(all_obbs), boxes, bounds, fast_culler, fast_bvh, gpu, cells, all_agree);
+        if (bv == "sphere") run_scene(config, bv, order, gather(all_spheres), boxes, bounds, fast_culler, fast_bvh, gpu, cells, all_agree);
       }
     }
   }

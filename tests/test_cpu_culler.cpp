@@ -10,7 +10,10 @@
 #include <vector>
 #include <xmmintrin.h>
 
+#include "bvh/builders.hpp"
+#include "bvh/bvh.hpp"
 #include "cull/compare.hpp"
+#include "cull/cpu_bvh_culler.hpp"
 #include "cull/cpu_culler.hpp"
 #include "cull/reference.hpp"
 #include "cull/thread_pool.hpp"
@@ -198,6 +201,57 @@ TEST(CpuCuller, ReportsItsKernelsAndRejectsOnesTheCpuLacks) {
   CpuCullerConfig config;
   config.threads = 3;
   EXPECT_EQ(CpuCuller(config).threads(), 3u);
+}
+
+void expect_same_traversal(const bvh::HierarchicalResult& expected, const bvh::HierarchicalResult& got, const std::string& what) {
+  ASSERT_EQ(got.classes.size(), expected.classes.size()) << what;
+  const std::size_t i = first_mismatch(expected.classes, got.classes);
+  ASSERT_EQ(i, npos) << what << ": object " << i << ": scalar traversal says " << to_string(expected.classes[i]) << ", fast says "
+                     << to_string(got.classes[i]);
+  EXPECT_EQ(got.node_tests, expected.node_tests) << what;
+  EXPECT_EQ(got.object_tests, expected.object_tests) << what;
+  EXPECT_EQ(got.visible, expected.visible) << what;
+  EXPECT_EQ(got.inside, expected.inside) << what;
+}
+
+TEST(CpuBvhCuller, EqualsTheScalarTraversalExactly) {
+  test::Rng rng{11};
+  std::vector<Frustum> views = test_views();
+  // A frustum that holds everything (the root is INSIDE) and one that holds nothing.
+  const glm::vec4 everything[1] = {{0, 0, 1, 1e6f}};
+  const glm::vec4 nothing[1] = {{0, 0, 1, -1e6f}};
+  views.push_back(Frustum::from_planes(everything));
+  views.push_back(Frustum::from_planes(nothing));
+  for (std::size_t n : {0u, 1u, 2u, 5u, 100u, 3000u, 70000u}) {
+    std::vector<Aabb> boxes(n);
+    for (Aabb& b : boxes) b = test::random_aabb(rng, 30.0f, 2.0f);
+    for (const char* builder : {"binned-sah", "agglomerative-local", "insertion-greedy"}) {
+      if (n > 3000 && std::string(builder) != "binned-sah") continue;
+      bvh::BuildOptions options;
+      options.max_leaf_size = n % 2 ? 1 : 6;
+      const bvh::FlatTree tree = bvh::flatten(bvh::build(builder, boxes, options));
+      for (unsigned threads : {1u, 2u, 3u}) {
+        fast::CpuBvhCuller culler(threads);
+        culler.upload(tree, boxes);
+        bvh::HierarchicalResult reused;
+        for (std::size_t v = 0; v < views.size(); ++v) {
+          const std::string what = std::string(builder) + " n=" + std::to_string(n) + " threads=" + std::to_string(threads) + " view " +
+                                   std::to_string(v);
+          const bvh::HierarchicalResult expected = bvh::cull_hierarchical(tree, boxes, views[v]);
+          culler.cull(views[v], reused);
+          expect_same_traversal(expected, reused, what);
+          if (HasFatalFailure()) return;
+        }
+      }
+    }
+  }
+}
+
+TEST(CpuBvhCuller, RefusesATreeOfOtherBoxes) {
+  std::vector<Aabb> boxes(10, Aabb{{0, 0, 0}, {1, 1, 1}});
+  const bvh::FlatTree tree = bvh::flatten(bvh::build("binned-sah", boxes));
+  fast::CpuBvhCuller culler(2);
+  EXPECT_THROW(culler.upload(tree, std::span<const Aabb>(boxes).first(9)), std::invalid_argument);
 }
 
 TEST(ThreadPool, RunsEveryTaskOnceAndRethrows) {

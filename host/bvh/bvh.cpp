@@ -18,10 +18,6 @@ namespace cullpipe::bvh {
 using detail::encloses;
 using detail::half_area;
 
-namespace {
-
-// The p/n-vertex test of one box against the planes in `mask` (bit k = plane k); `straddled`
-// receives the planes the box crosses (its children must still test those).
 Classification classify_masked(const Aabb& box, const Frustum& frustum, std::uint32_t mask, std::uint32_t& straddled) {
   straddled = 0;
   const auto planes = frustum.active();
@@ -34,6 +30,8 @@ Classification classify_masked(const Aabb& box, const Frustum& frustum, std::uin
   }
   return straddled ? Classification::Intersecting : Classification::Inside;
 }
+
+namespace {
 
 // The binned builder's working types. Four floats, the fourth unused by the box maths: a box
 // corner in one SIMD register where there is SSE2 (every x86-64), plain loops elsewhere;

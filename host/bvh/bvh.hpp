@@ -74,6 +74,12 @@ struct FlatTree {
 };
 FlatTree flatten(const Tree& tree);
 
+/// The p/n-vertex test of `box` against the planes of `frustum` in `mask` (bit k = plane k):
+/// OUTSIDE at the first such plane the box is behind, else INTERSECTING when it straddles any
+/// (their bits go to `straddled`: a child must still test those), else INSIDE. The node test
+/// of every hierarchical traversal (CPU, fast CPU; the shader mirrors it).
+Classification classify_masked(const Aabb& box, const Frustum& frustum, std::uint32_t mask, std::uint32_t& straddled);
+
 /// The scalar hierarchical cull (the reference for GPU traversal): each node box is tested
 /// with the p/n-vertex test against the planes its parent straddles (plane masking, Assarsson
 /// & Moller 2000); OUTSIDE drops the subtree, INSIDE accepts its object range without tests,

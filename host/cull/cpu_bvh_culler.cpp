@@ -1,0 +1,151 @@
+#include "cull/cpu_bvh_culler.hpp"
+
+#include <algorithm>
+#include <deque>
+#include <stdexcept>
+#include <string>
+
+#include "cull/thread_pool.hpp"
+
+namespace cullpipe::fast {
+
+namespace {
+
+constexpr std::uint32_t kRangeChunk = 16384;  // objects per accepted-range task
+
+/// Work for one thread: a subtree to walk (node, planes to test) or part of an accepted range.
+struct Task {
+  enum Kind : std::uint8_t { Subtree, Inside } kind;
+  std::uint32_t node_or_first;
+  std::uint32_t mask_or_count;
+};
+
+/// What one task found; summed at the end.
+struct Tally {
+  std::size_t node_tests = 0, object_tests = 0, visible = 0, inside = 0;
+};
+
+}  // namespace
+
+CpuBvhCuller::CpuBvhCuller(unsigned threads) : pool_(std::make_unique<ThreadPool>(threads)) {}
+CpuBvhCuller::~CpuBvhCuller() = default;
+
+unsigned CpuBvhCuller::threads() const { return pool_->size(); }
+
+void CpuBvhCuller::upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes) {
+  if (tree.objects.size() != boxes.size())
+    throw std::invalid_argument("CpuBvhCuller::upload: the tree holds " + std::to_string(tree.objects.size()) + " objects, " +
+                                std::to_string(boxes.size()) + " boxes given");
+  std::vector<Aabb> ordered(boxes.size());
+  for (std::size_t k = 0; k < tree.objects.size(); ++k) {
+    if (tree.objects[k] >= boxes.size())
+      throw std::invalid_argument("CpuBvhCuller::upload: object id " + std::to_string(tree.objects[k]) + " out of range");
+    ordered[k] = boxes[tree.objects[k]];
+  }
+  tree_ = tree;
+  boxes_in_tree_order_ = std::move(ordered);
+}
+
+bvh::HierarchicalResult CpuBvhCuller::cull(const Frustum& frustum) {
+  bvh::HierarchicalResult r;
+  cull(frustum, r);
+  return r;
+}
+
+void CpuBvhCuller::cull(const Frustum& frustum, bvh::HierarchicalResult& r) {
+  const std::size_t n = boxes_in_tree_order_.size();
+  const std::vector<bvh::FlatNode>& nodes = tree_.nodes;
+  const std::vector<std::uint32_t>& objects = tree_.objects;
+  r.classes.resize(n);
+  r.node_tests = r.object_tests = r.visible = r.inside = 0;
+
+  // Everything starts OUTSIDE, in parallel chunks.
+  const std::size_t fill_tasks = (n + kRangeChunk - 1) / kRangeChunk;
+  pool_->parallel_for(fill_tasks, [&](std::size_t t) {
+    const std::size_t begin = t * kRangeChunk, end = std::min(n, begin + kRangeChunk);
+    std::fill(r.classes.begin() + std::ptrdiff_t(begin), r.classes.begin() + std::ptrdiff_t(end), Classification::Outside);
+  });
+  if (nodes.empty()) return;
+
+  // The top of the tree, breadth first, until there are subtrees enough for the threads.
+  const std::uint32_t all = (1u << frustum.active().size()) - 1u;
+  const std::size_t wanted = std::size_t(pool_->size()) * 16;
+  std::deque<Task> frontier{{Task::Subtree, 0, all}};
+  std::vector<Task> tasks;
+  Tally top;
+  auto accept = [&](std::uint32_t first, std::uint32_t count) {
+    for (std::uint32_t k = 0; k < count; k += kRangeChunk) tasks.push_back({Task::Inside, first + k, std::min(kRangeChunk, count - k)});
+  };
+  while (!frontier.empty() && frontier.size() + tasks.size() < wanted) {
+    const Task t = frontier.front();
+    frontier.pop_front();
+    const bvh::FlatNode& node = nodes[t.node_or_first];
+    if (node.leaf) {  // leaves go to the threads whole
+      tasks.push_back(t);
+      continue;
+    }
+    ++top.node_tests;
+    std::uint32_t straddled = 0;
+    const Classification c = bvh::classify_masked(node.box, frustum, t.mask_or_count, straddled);
+    if (c == Classification::Outside) continue;
+    if (c == Classification::Inside) {
+      accept(node.first, node.count);
+      continue;
+    }
+    frontier.push_back({Task::Subtree, t.node_or_first + 1, straddled});
+    frontier.push_back({Task::Subtree, nodes[t.node_or_first + 1].skip, straddled});
+  }
+  tasks.insert(tasks.end(), frontier.begin(), frontier.end());
+
+  std::vector<Tally> tallies(tasks.size());
+  pool_->parallel_for(tasks.size(), [&](std::size_t index) {
+    const Task& task = tasks[index];
+    Tally& tally = tallies[index];
+    if (task.kind == Task::Inside) {
+      for (std::uint32_t k = task.node_or_first; k < task.node_or_first + task.mask_or_count; ++k)
+        r.classes[objects[k]] = Classification::Inside;
+      tally.visible += task.mask_or_count;
+      tally.inside += task.mask_or_count;
+      return;
+    }
+    // Depth first, as bvh::cull_hierarchical.
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> stack{{task.node_or_first, task.mask_or_count}};
+    while (!stack.empty()) {
+      const auto [i, mask] = stack.back();
+      stack.pop_back();
+      const bvh::FlatNode& node = nodes[i];
+      ++tally.node_tests;
+      std::uint32_t straddled = 0;
+      const Classification c = bvh::classify_masked(node.box, frustum, mask, straddled);
+      if (c == Classification::Outside) continue;
+      if (c == Classification::Inside) {
+        for (std::uint32_t k = node.first; k < node.first + node.count; ++k) r.classes[objects[k]] = Classification::Inside;
+        tally.visible += node.count;
+        tally.inside += node.count;
+        continue;
+      }
+      if (node.leaf) {
+        for (std::uint32_t k = node.first; k < node.first + node.count; ++k) {
+          std::uint32_t unused = 0;
+          const Classification oc = bvh::classify_masked(boxes_in_tree_order_[k], frustum, straddled, unused);
+          r.classes[objects[k]] = oc;
+          ++tally.object_tests;
+          tally.visible += oc != Classification::Outside;
+          tally.inside += oc == Classification::Inside;
+        }
+        continue;
+      }
+      stack.push_back({nodes[i + 1].skip, straddled});
+      stack.push_back({i + 1, straddled});
+    }
+  });
+  r.node_tests = top.node_tests;
+  for (const Tally& t : tallies) {
+    r.node_tests += t.node_tests;
+    r.object_tests += t.object_tests;
+    r.visible += t.visible;
+    r.inside += t.inside;
+  }
+}
+
+}  // namespace cullpipe::fast
