@@ -92,17 +92,10 @@ void check_everywhere(const std::vector<Volume>& volumes, const std::string& wha
 TEST(CpuCuller, RandomAabbsObbsAndSpheresOfEverySizeAroundTheVectorWidths) {
   test::Rng rng(7);
   for (std::size_t n : {0u, 1u, 3u, 4u, 5u, 7u, 8u, 9u, 15u, 16u, 17u, 31u, 33u, 47u, 100u, 1000u, 5003u}) {
-    std::vector<Aabb> boxes(n);
-    std::vector<Obb> obbs(n);
-    std::vector<Sphere> spheres(n);
-    for (std::size_t i = 0; i < n; ++i) {
-      boxes[i] = test::random_aabb(rng, 30.0f, 4.0f);
-      obbs[i] = test::random_obb(rng, 30.0f, 4.0f);
-      spheres[i] = test::random_sphere(rng, 30.0f, 4.0f);
-    }
-    check_everywhere(boxes, "aabb");
-    check_everywhere(obbs, "obb");
-    check_everywhere(spheres, "sphere");
+    const test::RandomVolumes v = test::random_volumes(rng, n, 30.0f, 4.0f);
+    check_everywhere(v.aabbs, "aabb");
+    check_everywhere(v.obbs, "obb");
+    check_everywhere(v.spheres, "sphere");
   }
 }
 

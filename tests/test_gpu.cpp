@@ -497,14 +497,7 @@ TEST_F(Gpu, OrderedCompactionAndDrawCommands) {
   test::Rng rng{21};
   for (std::size_t n : {0u, 1u, 255u, 256u, 257u, 5000u}) {
     SCOPED_TRACE("n = " + std::to_string(n));
-    std::vector<Aabb> boxes(n);
-    std::vector<Obb> obbs(n);
-    std::vector<Sphere> spheres(n);
-    for (std::size_t i = 0; i < n; ++i) {
-      boxes[i] = test::random_aabb(rng, 30.0f, 4.0f);
-      obbs[i] = test::random_obb(rng, 30.0f, 4.0f);
-      spheres[i] = test::random_sphere(rng, 30.0f, 4.0f);
-    }
+    auto [boxes, obbs, spheres] = test::random_volumes(rng, n, 30.0f, 4.0f);
     expect_draws(culler(), boxes, test_frusta(), 1);
     expect_draws(culler(), obbs, test_frusta(), 2);
     expect_draws(culler(), spheres, test_frusta(), 3);

@@ -57,6 +57,22 @@ inline Sphere random_sphere(Rng& rng, float spread, float max_radius) {
   return {rng.vec3(-spread, spread) + glm::vec3(0, 0, -spread * 0.5f), rng.uniform(0.0f, max_radius)};
 }
 
+/// n random AABBs, OBBs and spheres, drawn interleaved (box i, OBB i, sphere i, ...).
+struct RandomVolumes {
+  std::vector<Aabb> aabbs;
+  std::vector<Obb> obbs;
+  std::vector<Sphere> spheres;
+};
+inline RandomVolumes random_volumes(Rng& rng, std::size_t n, float spread, float max_half) {
+  RandomVolumes v{std::vector<Aabb>(n), std::vector<Obb>(n), std::vector<Sphere>(n)};
+  for (std::size_t i = 0; i < n; ++i) {
+    v.aabbs[i] = random_aabb(rng, spread, max_half);
+    v.obbs[i] = random_obb(rng, spread, max_half);
+    v.spheres[i] = random_sphere(rng, spread, max_half);
+  }
+  return v;
+}
+
 // ---- exact geometry in double -------------------------------------------------------------
 
 using dvec3 = glm::dvec3;
