@@ -169,7 +169,7 @@ void main_arrival() {
     uint i = block + j * gl_WorkGroupSize.x;
     if (view_ok && i < params.object_count) {
       uint c = classify_object(i);
-      classes[view * params.object_count + i] = c;
+      if (params.write_classes != 0) classes[view * params.object_count + i] = c;
       if (c != CLASS_OUTSIDE) visible_bits |= 1u << j;
       if (c == CLASS_INSIDE) ++inside;
     }

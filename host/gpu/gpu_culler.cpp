@@ -224,7 +224,10 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
 
   auto compute_to_compute = [&] { detail::record_compute_to_compute(cmd); };
   const VkDescriptorSet set = resources_->set();
-  const FlatCullParams base_params{std::uint32_t(object_count_), 0, std::uint32_t(view_count), std::uint32_t(last_capacity_), 0};
+  // The ordered passes always write classes (the scatter pass reads them); the arrival-order
+  // pass only when they are read back (on lavapipe: spheres 5.2 -> 4.6 ns/object, AABBs within noise).
+  const FlatCullParams base_params{std::uint32_t(object_count_), 0, std::uint32_t(view_count), std::uint32_t(last_capacity_), 0,
+                                   options.classes || options.ordered ? 1u : 0u};
   // One pass over every object: per segment (its own descriptor set), in chunks of at most
   // max_groups_ workgroups.
   auto object_pass = [&](const vk::ComputePipeline& pipe, std::uint32_t objects_per_invocation) {

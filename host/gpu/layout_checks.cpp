@@ -27,12 +27,13 @@ static_assert(offsetof(GpuFrustum, planes) == 0);
 static_assert(offsetof(GpuFrustum, plane_count) == 96);
 static_assert(offsetof(GpuFrustum, reserved2) == 108);
 
-static_assert(sizeof(FlatCullParams) == 20);
+static_assert(sizeof(FlatCullParams) == 24);
 static_assert(offsetof(FlatCullParams, object_count) == 0);
 static_assert(offsetof(FlatCullParams, first_object) == 4);
 static_assert(offsetof(FlatCullParams, view_count) == 8);
 static_assert(offsetof(FlatCullParams, visible_capacity) == 12);
 static_assert(offsetof(FlatCullParams, id_base) == 16);
+static_assert(offsetof(FlatCullParams, write_classes) == 20);
 
 static_assert(sizeof(ViewCounters) == 16);
 static_assert(offsetof(ViewCounters, visible_count) == 0);

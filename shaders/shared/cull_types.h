@@ -79,6 +79,7 @@ struct FlatCullParams {
   uint view_count;        // views in the views buffer
   uint visible_capacity;  // capacity of each view's visible-id list
   uint id_base;           // object id of the segment's first object (added to listed ids)
+  uint write_classes;     // arrival-order pass: 0 skips the per-object classes (not asked for)
 };
 
 // Largest workgroup the compaction shaders support (their shared scan array).
