@@ -258,6 +258,25 @@ TEST(Cli, NoVulkanDeviceIsClearAndTheCpuBackendStillWorks) {
   EXPECT_EQ(classify.code, 0) << classify.err;
 }
 
+TEST(Cli, OutOfDeviceMemoryIsClearWritesNothingAndTheCpuBackendStillWorks) {
+  // A 16 MiB device-memory budget cannot hold a million AABBs (32 MB of bounds).
+  const fs::path json = temp_dir() / "oom.json";
+  fs::remove(json);
+  const Result gpu = cullpipe("run --generate uniform:1000000 --backend gpu --gpu-memory 16 --json '" + json.string() + "'");
+  EXPECT_EQ(gpu.code, 3);
+  EXPECT_NE(gpu.err.find("VK_ERROR_OUT_OF_DEVICE_MEMORY"), std::string::npos) << gpu.err;
+  EXPECT_NE(gpu.err.find("memory budget of 16777216 bytes"), std::string::npos) << gpu.err;
+  EXPECT_NE(gpu.err.find("--backend cpu"), std::string::npos) << gpu.err;
+  EXPECT_FALSE(fs::exists(json)) << "no output file after a failed run";
+  EXPECT_FALSE(fs::exists(json.string() + ".tmp"));
+  const Result cpu = cullpipe("run --generate uniform:1000000 --backend cpu --gpu-memory 16 --json '" + json.string() + "'");
+  EXPECT_EQ(cpu.code, 0) << cpu.err;
+  EXPECT_TRUE(fs::exists(json));
+  // Enough budget: the same scene on the GPU agrees with the CPU.
+  const Result fits = cullpipe("run --generate uniform:100000 --gpu-memory 64");
+  EXPECT_EQ(fits.code, 0) << fits.err;
+}
+
 TEST(Cli, GenerateWritesALoadableScene) {
   const fs::path scene = temp_dir() / "gen.json";
   ASSERT_EQ(cullpipe("generate city:300 --seed 2 --out '" + scene.string() + "'").code, 0);

@@ -377,6 +377,38 @@ TEST_F(Gpu, SegmentedPassesAgreeForEveryKindAndOutput) {
   EXPECT_EQ(segmented.last_segment_count(), 1u);
 }
 
+TEST_F(Gpu, OutOfDeviceMemoryIsAClearErrorAndTheCullerStaysUsable) {
+  vk::Context& ctx = *GpuEnvironment::context;
+  gpu::GpuCuller culler_under_budget(ctx);
+  test::Rng rng{41};
+  std::vector<Aabb> boxes(100000);
+  for (Aabb& b : boxes) b = test::random_aabb(rng, 30.0f, 3.0f);
+  // Room for 1 MiB more than is held now: 100,000 boxes (3.2 MB of bounds) do not fit.
+  ctx.set_memory_budget(ctx.memory_in_use() + (1u << 20));
+  try {
+    culler_under_budget.upload(std::span<const Aabb>(boxes));
+    FAIL() << "expected vk::Error";
+  } catch (const vk::Error& e) {
+    EXPECT_EQ(e.result(), VK_ERROR_OUT_OF_DEVICE_MEMORY);
+    EXPECT_NE(std::string(e.what()).find("bounds buffer"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("memory budget"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(culler_under_budget.object_count(), 0u) << "a failed upload leaves no half-uploaded scene";
+  // A scene that fits, on the same culler: exact as ever.
+  std::vector<Aabb> few(boxes.begin(), boxes.begin() + 2000);
+  expect_agreement(culler_under_budget, few, test_frusta());
+  // Outputs that do not fit fail the same way, and the culler recovers once memory is there.
+  ctx.set_memory_budget(ctx.memory_in_use() + 1024);
+  culler_under_budget.upload(std::span<const Aabb>(few));  // reuses the bounds buffer
+  std::vector<Frustum> many_views(64, test_frusta()[0]);
+  EXPECT_THROW(culler_under_budget.cull(many_views), vk::Error);
+  ctx.set_memory_budget(0);
+  expect_agreement(culler_under_budget, few, many_views);
+  const VkDeviceSize held = ctx.memory_in_use();
+  { gpu::GpuCuller temporary(ctx); }
+  EXPECT_EQ(ctx.memory_in_use(), held) << "buffers give their memory back to the budget";
+}
+
 TEST_F(Gpu, CorruptShadersAreRefusedBeforeTheDriverSeesThem) {
   // A minimal sound module: header, then OpCapability Shader (2 words) and OpMemoryModel
   // Logical GLSL450 (3 words).

@@ -50,6 +50,7 @@ struct GpuSession {
       vk::ContextOptions o;
       o.validation = options.validation;
       o.device_filter = options.device;
+      o.memory_budget = VkDeviceSize(options.gpu_memory_mib * 1024.0 * 1024.0);
       context = std::make_unique<vk::Context>(o);
     }
     return *context;

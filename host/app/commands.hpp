@@ -20,6 +20,7 @@ inline constexpr int kExitInternal = 4;   ///< a bug: an unexpected exception
 struct DeviceOptions {
   std::string device;      ///< device name substring; empty: CULLPIPE_DEVICE or the default
   bool validation = false; ///< Vulkan validation layers on; any message fails the command
+  double gpu_memory_mib = 0; ///< device memory budget in MiB (vk::ContextOptions::memory_budget); 0: none
 };
 
 /// Where a scene comes from, shared by `run` and `render`.

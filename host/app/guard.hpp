@@ -20,6 +20,8 @@ int guarded(std::ostream& err, F&& body) {
     return kExitBadInput;
   } catch (const vk::Error& e) {
     err << "error: Vulkan: " << e.what() << "\n";
+    if (e.result() == VK_ERROR_OUT_OF_DEVICE_MEMORY || e.result() == VK_ERROR_OUT_OF_HOST_MEMORY)
+      err << "(the scene does not fit the device's memory; try a smaller scene, or --backend cpu)\n";
     return kExitNoDevice;
   } catch (const std::length_error& e) {
     err << "error: too large: " << e.what() << "\n";

@@ -14,6 +14,8 @@ const std::map<std::string, Backend> kBackends{{"gpu", Backend::Gpu}, {"cpu", Ba
 void add_device_options(CLI::App* cmd, DeviceOptions& d) {
   cmd->add_option("--device", d.device, "Vulkan device name substring (default: $CULLPIPE_DEVICE, else first GPU, else lavapipe)");
   cmd->add_flag("--validate", d.validation, "Enable Vulkan validation layers; any message fails the command");
+  cmd->add_option("--gpu-memory", d.gpu_memory_mib, "Device memory budget in MiB; past it a clear out-of-memory error (default: no budget)")
+      ->check(CLI::NonNegativeNumber);
 }
 
 // Options choosing and building the scene, shared by `run` and `render`.

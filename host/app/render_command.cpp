@@ -24,6 +24,7 @@ int render_command(const RenderOptions& o, std::ostream& out, std::ostream& err)
     vk::ContextOptions options;
     options.validation = o.device.validation;
     options.device_filter = o.device.device;
+    options.memory_budget = VkDeviceSize(o.device.gpu_memory_mib * 1024.0 * 1024.0);
     const vk::Context ctx(options);
     render::RendererConfig config;
     config.width = o.width;

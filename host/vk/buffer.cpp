@@ -7,7 +7,7 @@
 namespace cullpipe::vk {
 
 Buffer::Buffer(const Context& ctx, VkDeviceSize size, VkBufferUsageFlags usage, const char* what)
-    : device_(ctx.device()), size_(size) {
+    : ctx_(&ctx), device_(ctx.device()), size_(size) {
   const std::string context = std::string(what) + " (" + std::to_string(size) + " bytes)";
   VkBufferCreateInfo info{VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO};
   info.size = size;
@@ -19,6 +19,8 @@ Buffer::Buffer(const Context& ctx, VkDeviceSize size, VkBufferUsageFlags usage, 
   VkMemoryRequirements req{};
   vkGetBufferMemoryRequirements(device_, buffer_, &req);
   try {
+    ctx.reserve_memory(req.size, context);
+    reserved_ = req.size;
     VkMemoryAllocateInfo alloc{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
     alloc.allocationSize = req.size;
     alloc.memoryTypeIndex =
@@ -39,6 +41,8 @@ Buffer::Buffer(const Context& ctx, VkDeviceSize size, VkBufferUsageFlags usage, 
 Buffer& Buffer::operator=(Buffer&& o) noexcept {
   if (this != &o) {
     reset();
+    std::swap(ctx_, o.ctx_);
+    std::swap(reserved_, o.reserved_);
     std::swap(device_, o.device_);
     std::swap(buffer_, o.buffer_);
     std::swap(memory_, o.memory_);
@@ -54,6 +58,8 @@ void Buffer::reset() {
     vkFreeMemory(device_, memory_, nullptr);
   }
   if (buffer_) vkDestroyBuffer(device_, buffer_, nullptr);
+  if (ctx_ && reserved_) ctx_->release_memory(reserved_);
+  reserved_ = 0;
   buffer_ = VK_NULL_HANDLE;
   memory_ = VK_NULL_HANDLE;
   mapped_ = nullptr;

@@ -34,6 +34,8 @@ class Buffer {
   void reset();
 
  private:
+  const Context* ctx_ = nullptr;  // for the memory budget
+  VkDeviceSize reserved_ = 0;     // bytes counted against it
   VkDevice device_ = VK_NULL_HANDLE;
   VkBuffer buffer_ = VK_NULL_HANDLE;
   VkDeviceMemory memory_ = VK_NULL_HANDLE;

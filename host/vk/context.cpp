@@ -181,7 +181,17 @@ std::vector<DeviceInfo> list_devices() {
   return out;
 }
 
-Context::Context(const ContextOptions& options) : on_message_(options.on_message) {
+void Context::reserve_memory(VkDeviceSize bytes, const std::string& what) const {
+  const VkDeviceSize before = memory_in_use_.fetch_add(bytes);
+  if (memory_budget_ && before + bytes > memory_budget_) {
+    memory_in_use_ -= bytes;
+    throw Error("allocating " + what + " failed: VK_ERROR_OUT_OF_DEVICE_MEMORY (memory budget of " + std::to_string(memory_budget_) +
+                    " bytes, " + std::to_string(before) + " in use)",
+                VK_ERROR_OUT_OF_DEVICE_MEMORY);
+  }
+}
+
+Context::Context(const ContextOptions& options) : on_message_(options.on_message), memory_budget_(options.memory_budget) {
   try {
     VkDebugUtilsMessengerCreateInfoEXT info{VK_STRUCTURE_TYPE_DEBUG_UTILS_MESSENGER_CREATE_INFO_EXT};
     info.messageSeverity = VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT;

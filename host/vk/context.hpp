@@ -22,6 +22,11 @@ struct ContextOptions {
   std::string device_filter;
   /// Receives every validation message; default prints it to stderr.
   std::function<void(std::string_view)> on_message;
+  /// The most device memory cullpipe may hold at once through this context, in bytes; 0: no
+  /// limit beyond the device's. An allocation past it fails as the device would when out of
+  /// memory (vk::Error with VK_ERROR_OUT_OF_DEVICE_MEMORY), naming the budget. See
+  /// Context::set_memory_budget.
+  VkDeviceSize memory_budget = 0;
 };
 
 /// Handles of a device the caller already has (an engine's own device). The Context borrows
@@ -100,6 +105,18 @@ class Context {
   /// Submits one recorded command buffer to the queue and waits for it to finish.
   void submit_and_wait(VkCommandBuffer cmd) const;
 
+  /// Device memory budget (ContextOptions::memory_budget; also for borrowed devices, e.g. an
+  /// engine's share of its GPU). 0: none. Lowering it below what is held frees nothing; later
+  /// allocations fail until enough is released.
+  void set_memory_budget(VkDeviceSize bytes) { memory_budget_ = bytes; }
+  VkDeviceSize memory_budget() const { return memory_budget_; }
+  /// Device memory held by buffers of this context now, in bytes.
+  VkDeviceSize memory_in_use() const { return memory_in_use_.load(); }
+  /// Counts `bytes` against the budget before they are allocated; throws vk::Error
+  /// (VK_ERROR_OUT_OF_DEVICE_MEMORY) naming `what` when they do not fit. Used by vk::Buffer.
+  void reserve_memory(VkDeviceSize bytes, const std::string& what) const;
+  void release_memory(VkDeviceSize bytes) const { memory_in_use_ -= bytes; }
+
  private:
   static VKAPI_ATTR VkBool32 VKAPI_CALL debug_callback(VkDebugUtilsMessageSeverityFlagBitsEXT severity,
                                                        VkDebugUtilsMessageTypeFlagsEXT types,
@@ -128,6 +145,8 @@ class Context {
 
   std::function<void(std::string_view)> on_message_;
   std::atomic<std::size_t> message_count_{0};
+  VkDeviceSize memory_budget_ = 0;
+  mutable std::atomic<VkDeviceSize> memory_in_use_{0};
   std::mutex messages_mutex_;
   std::vector<std::string> messages_;
 };
