@@ -14,12 +14,15 @@ CC=clang CXX=clang++ cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=Re
   -DCULLPIPE_BUILD_TESTS=OFF -DCULLPIPE_BUILD_BENCH=OFF >/dev/null
 cmake --build "$build" --parallel "$(nproc)" --target fuzz_gltf fuzz_json fuzz_points
 
-# Seed corpora: regression inputs committed in tests/fuzz/corpus/<target>, plus real files.
+# Seed corpora: inputs committed in tests/fuzz/corpus/<target> and every earlier failing input
+# (tests/fuzz/regressions/<target>; CTest replays both), plus real files.
 corpus=$build/corpus
 rm -rf "$corpus" "$build/crashes"
 mkdir -p "$corpus"/{gltf,json,points} "$build/crashes"
 for t in gltf json points; do
-  [ -d "$root/tests/fuzz/corpus/$t" ] && cp "$root/tests/fuzz/corpus/$t"/* "$corpus/$t/" 2>/dev/null || true
+  for dir in "$root/tests/fuzz/corpus/$t" "$root/tests/fuzz/regressions/$t"; do
+    [ -d "$dir" ] && cp "$dir"/* "$corpus/$t/" 2>/dev/null || true
+  done
 done
 cp "$root/scenes/"*.json "$root/tests/data/"*.json "$corpus/json/"
 shared=$root/../shared/scenes
@@ -27,9 +30,6 @@ if [ -d "$shared" ]; then
   # Small real glTF files only (the fuzzer mutates them; large ones slow every run).
   find "$shared" \( -name '*.gltf' -o -name '*.glb' \) -size -64k -exec cp {} "$corpus/gltf/" \;
 fi
-printf '0 0 0\n1 2 3\n# comment\n\n4 5 6\n' > "$corpus/points/txt"
-printf '\x01OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n' > "$corpus/points/off"
-printf '\x02v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n' > "$corpus/points/obj"
 
 status=0
 for t in gltf json points; do
@@ -38,6 +38,7 @@ for t in gltf json points; do
           -max_total_time="$seconds" -timeout=10 -rss_limit_mb=4096 -max_len=65536 -print_final_stats=1 \
           2>"$build/fuzz_$t.log"); then
     echo "fuzz: fuzz_$t FAILED; log: $build/fuzz_$t.log, inputs in $build/crashes" >&2
+    echo "fuzz: after the fix, copy the input to tests/fuzz/regressions/$t/ (CTest replays it from then on)" >&2
     tail -40 "$build/fuzz_$t.log" >&2
     status=1
   else
