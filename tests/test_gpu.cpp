@@ -12,6 +12,7 @@
 #include "cull/compare.hpp"
 #include "cull/reference.hpp"
 #include "gpu/gpu_culler.hpp"
+#include "gpu/pass_support.hpp"
 #include "vk/compute_pipeline.hpp"
 #include "gpu/layout.hpp"
 #include "scene/generators.hpp"
@@ -407,6 +408,25 @@ TEST_F(Gpu, OutOfDeviceMemoryIsAClearErrorAndTheCullerStaysUsable) {
   const VkDeviceSize held = ctx.memory_in_use();
   { gpu::GpuCuller temporary(ctx); }
   EXPECT_EQ(ctx.memory_in_use(), held) << "buffers give their memory back to the budget";
+}
+
+TEST_F(Gpu, AMissingDeviceFeatureIsAClearError) {
+  // What the cullers need is there; a feature this device lacks is named in the error. (lavapipe
+  // has no clustered subgroup operations; on a device that has them the check passes.)
+  const vk::Context& ctx = *GpuEnvironment::context;
+  EXPECT_NO_THROW(gpu::detail::check_subgroup_operations(ctx, VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_BALLOT_BIT, "flat culling"));
+  VkPhysicalDeviceSubgroupProperties subgroup{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_SUBGROUP_PROPERTIES};
+  VkPhysicalDeviceProperties2 properties{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2, &subgroup, {}};
+  vkGetPhysicalDeviceProperties2(ctx.physical_device(), &properties);
+  if (subgroup.supportedOperations & VK_SUBGROUP_FEATURE_CLUSTERED_BIT) GTEST_SKIP() << "this device has clustered operations";
+  try {
+    gpu::detail::check_subgroup_operations(ctx, VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_CLUSTERED_BIT, "a test pass");
+    FAIL() << "expected vk::Error";
+  } catch (const vk::Error& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("a test pass needs subgroup operations"), std::string::npos) << what;
+    EXPECT_NE(what.find("lacks: clustered"), std::string::npos) << what;
+  }
 }
 
 TEST_F(Gpu, CorruptShadersAreRefusedBeforeTheDriverSeesThem) {

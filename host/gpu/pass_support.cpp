@@ -29,7 +29,8 @@ void check_subgroup_operations(const vk::Context& ctx, VkSubgroupFeatureFlags ne
   static const std::pair<VkSubgroupFeatureFlagBits, const char*> names[] = {
       {VK_SUBGROUP_FEATURE_BASIC_BIT, "basic"},   {VK_SUBGROUP_FEATURE_VOTE_BIT, "vote"},
       {VK_SUBGROUP_FEATURE_ARITHMETIC_BIT, "arithmetic"}, {VK_SUBGROUP_FEATURE_BALLOT_BIT, "ballot"},
-      {VK_SUBGROUP_FEATURE_SHUFFLE_BIT, "shuffle"}};
+      {VK_SUBGROUP_FEATURE_SHUFFLE_BIT, "shuffle"},       {VK_SUBGROUP_FEATURE_SHUFFLE_RELATIVE_BIT, "shuffle relative"},
+      {VK_SUBGROUP_FEATURE_CLUSTERED_BIT, "clustered"},   {VK_SUBGROUP_FEATURE_QUAD_BIT, "quad"}};
   std::string list;
   for (const auto& [bit, name] : names)
     if (missing & bit) list += (list.empty() ? "" : ", ") + std::string(name);
