@@ -141,16 +141,38 @@ TEST(CpuCuller, NanInfinityAndDenormalValuesGiveTheReferenceAnswer) {
 }
 
 #if defined(__SSE__)
-TEST(CpuCuller, AgreesUnderFlushToZero) {
-  // An engine may run with FTZ/DAZ on; kernels and reference see the same MXCSR, so they must
-  // still agree.
-  const unsigned saved = _mm_getcsr();
-  _mm_setcsr(saved | 0x8040);  // FTZ | DAZ
+TEST(CpuCuller, AgreesUnderFlushToZeroSetAfterThePoolStarted) {
+  // An engine may turn FTZ/DAZ on at any time, on its own thread. Planes through the origin
+  // and boxes whose plane distances are themselves subnormal: with DAZ a distance of -1e-40
+  // reads as 0 (not behind the plane), without it the box is OUTSIDE. Every chunk, whichever
+  // thread runs it, must use the caller's mode, as the reference on the caller's thread does.
   std::vector<Aabb> boxes;
-  const float denorm = std::numeric_limits<float>::denorm_min() * 1000.0f;
-  for (int i = -20; i <= 20; ++i) boxes.push_back({{denorm * float(i), -5, -30}, {5, 5, denorm * float(i)}});
-  check_everywhere(boxes, "aabb ftz");
-  _mm_setcsr(saved);
+  for (int i = 0; i < 1'000'000; ++i) {  // enough work that the workers wake in time to take some
+    const float tiny = std::numeric_limits<float>::denorm_min() * float(1 + i % 50) * (i % 2 ? 1.0f : -1.0f);
+    boxes.push_back({{tiny - 1.0f, -1, -1}, {tiny, 1, 1}});
+  }
+  const glm::vec4 planes[2] = {{1, 0, 0, 0}, {0, 0, 1, 5}};
+  const Frustum f = Frustum::from_planes(planes);
+  for (unsigned threads : {2u, 3u}) {
+    CpuCullerConfig config;
+    config.threads = threads;
+    config.chunk_objects = 4096;  // many chunks
+    CpuCuller culler(config);
+    culler.upload(std::span<const Aabb>(boxes));
+    std::vector<Classification> without_daz(boxes.size());
+    reference::classify_all(std::span<const Aabb>(boxes), f, without_daz);
+    const unsigned saved = _mm_getcsr();
+    _mm_setcsr(saved | 0x8040);  // FTZ | DAZ, after the pool's threads exist
+    const std::vector<CpuViewResult> r = culler.cull({&f, 1});
+    std::vector<Classification> with_daz(boxes.size());
+    const reference::CullCounts counts = reference::classify_all(std::span<const Aabb>(boxes), f, with_daz);
+    _mm_setcsr(saved);
+    ASSERT_NE(with_daz, without_daz) << "the case must be sharp: DAZ changes the reference's answer";
+    const std::size_t i = first_mismatch(with_daz, r[0].classes);
+    EXPECT_EQ(i, npos) << "threads=" << threads << ": object " << i << " " << describe(boxes[i]) << ": reference under DAZ says "
+                       << to_string(with_daz[i]) << ", fast CPU says " << to_string(r[0].classes[i]);
+    EXPECT_EQ(r[0].counts, counts);
+  }
 }
 #endif
 
@@ -249,6 +271,9 @@ TEST(CpuBvhCuller, RefusesATreeOfOtherBoxes) {
   const bvh::FlatTree tree = bvh::flatten(bvh::build("binned-sah", boxes));
   fast::CpuBvhCuller culler(2);
   EXPECT_THROW(culler.upload(tree, std::span<const Aabb>(boxes).first(9)), std::invalid_argument);
+  bvh::FlatTree repeated = tree;
+  repeated.objects[1] = repeated.objects[0];  // an id twice (and one missing)
+  EXPECT_THROW(culler.upload(repeated, boxes), std::invalid_argument);
 }
 
 TEST(ThreadPool, RunsEveryTaskOnceAndRethrows) {

@@ -36,11 +36,15 @@ void CpuBvhCuller::upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes
   if (tree.objects.size() != boxes.size())
     throw std::invalid_argument("CpuBvhCuller::upload: the tree holds " + std::to_string(tree.objects.size()) + " objects, " +
                                 std::to_string(boxes.size()) + " boxes given");
+  // Each id exactly once: the threads write classes by id, so a repeated id would be a race.
   std::vector<Aabb> ordered(boxes.size());
+  std::vector<bool> seen(boxes.size(), false);
   for (std::size_t k = 0; k < tree.objects.size(); ++k) {
-    if (tree.objects[k] >= boxes.size())
-      throw std::invalid_argument("CpuBvhCuller::upload: object id " + std::to_string(tree.objects[k]) + " out of range");
-    ordered[k] = boxes[tree.objects[k]];
+    const std::uint32_t id = tree.objects[k];
+    if (id >= boxes.size()) throw std::invalid_argument("CpuBvhCuller::upload: object id " + std::to_string(id) + " out of range");
+    if (seen[id]) throw std::invalid_argument("CpuBvhCuller::upload: object id " + std::to_string(id) + " appears twice");
+    seen[id] = true;
+    ordered[k] = boxes[id];
   }
   tree_ = tree;
   boxes_in_tree_order_ = std::move(ordered);

@@ -32,7 +32,8 @@ class CpuBvhCuller {
   CpuBvhCuller& operator=(const CpuBvhCuller&) = delete;
 
   /// Copies the tree and the boxes (in tree order, so a leaf's boxes are adjacent in memory).
-  /// Throws std::invalid_argument when the tree does not index exactly `boxes`.
+  /// Throws std::invalid_argument unless the tree's object list is a permutation of the ids
+  /// of `boxes`.
   void upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes);
 
   bvh::HierarchicalResult cull(const Frustum& frustum);

@@ -2,6 +2,10 @@
 
 #include <algorithm>
 
+#if defined(__SSE__)
+#include <xmmintrin.h>
+#endif
+
 namespace cullpipe::fast {
 
 ThreadPool::ThreadPool(unsigned threads) {
@@ -44,8 +48,15 @@ void ThreadPool::worker_loop() {
     if (stop_) return;
     seen = generation_;
     ++busy_;
+#if defined(__SSE__)
+    const unsigned own_mode = _mm_getcsr();
+    _mm_setcsr(fp_mode_);
+#endif
     lock.unlock();
     run_tasks();
+#if defined(__SSE__)
+    _mm_setcsr(own_mode);
+#endif
     lock.lock();
     if (--busy_ == 0) done_.notify_all();
   }
@@ -61,6 +72,9 @@ void ThreadPool::parallel_for(std::size_t tasks, const std::function<void(std::s
     std::lock_guard lock(mutex_);
     task_ = &task;
     task_count_ = tasks;
+#if defined(__SSE__)
+    fp_mode_ = _mm_getcsr();
+#endif
     next_task_ = 0;
     error_ = nullptr;
     ++generation_;

@@ -1,6 +1,7 @@
 #pragma once
 #include <condition_variable>
 #include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <mutex>
 #include <thread>
@@ -11,7 +12,9 @@ namespace cullpipe::fast {
 /// A fixed set of worker threads that run the tasks of one parallel_for at a time. The calling
 /// thread works too, so a pool of N threads starts N - 1 workers; a pool of 1 runs everything
 /// on the caller. Tasks are handed out one at a time from a shared counter, so uneven tasks
-/// balance themselves. Not reentrant: call parallel_for from one thread at a time.
+/// balance themselves. Tasks run with the caller's floating-point mode (on x86, its MXCSR:
+/// flush-to-zero, denormals-are-zero, rounding), so a result does not depend on which thread
+/// ran it. Not reentrant: call parallel_for from one thread at a time.
 class ThreadPool {
  public:
   /// threads = 0: std::thread::hardware_concurrency() (at least 1).
@@ -39,6 +42,7 @@ class ThreadPool {
   std::size_t generation_ = 0;     // bumped per parallel_for
   unsigned busy_ = 0;              // workers inside the current generation
   std::exception_ptr error_;
+  std::uint32_t fp_mode_ = 0;  // the caller's MXCSR for this parallel_for (x86)
   bool stop_ = false;
 };
 

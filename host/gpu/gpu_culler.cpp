@@ -136,10 +136,11 @@ void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capac
   detail::ensure_buffer(ctx_, group_counts_, groups, storage, "group count buffer", dirty);
 }
 
-void GpuCuller::plan_segments(std::size_t view_count, bool ordered) {
+GpuCuller::SegmentPlan GpuCuller::plan_segments(std::size_t view_count, bool ordered) const {
   // Objects per segment: as many as every per-object binding allows within one storage buffer
   // range, rounded down to a multiple of 256 so every segment's offset in every buffer is a
-  // multiple of 4 KiB (>= any minStorageBufferOffsetAlignment).
+  // multiple of 256 x (bytes per object) >= 1 KiB, and so of any minStorageBufferOffsetAlignment
+  // (at most 256 bytes by the Vulkan spec).
   const VkDeviceSize range = ctx_.properties().limits.maxStorageBufferRange;
   std::size_t s = object_count_;
   s = std::min<std::size_t>(s, range / bytes_per_object_);
@@ -147,12 +148,12 @@ void GpuCuller::plan_segments(std::size_t view_count, bool ordered) {
   if (template_count_) s = std::min<std::size_t>(s, range / sizeof(DrawCommand));
   if (max_segment_objects_) s = std::min(s, max_segment_objects_);
   if (s < object_count_) s = std::max<std::size_t>(256, s / 256 * 256);
-  segment_objects_ = s;
-  segment_count_ = object_count_ && s ? (object_count_ + s - 1) / s : 1;
-  if (segment_count_ > 1 && ordered)
+  const SegmentPlan plan{s, object_count_ && s ? (object_count_ + s - 1) / s : 1};
+  if (plan.count > 1 && ordered)
     throw std::length_error("object-order output (CullOptions::ordered) is limited to one storage buffer of objects; " +
-                            std::to_string(object_count_) + " objects need " + std::to_string(segment_count_) +
+                            std::to_string(object_count_) + " objects need " + std::to_string(plan.count) +
                             " segments of " + std::to_string(s) + " on " + ctx_.info().name + " (use arrival order)");
+  return plan;
 }
 
 void GpuCuller::update_descriptors() {
@@ -194,8 +195,11 @@ void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
     throw std::length_error(std::to_string(views.size()) + " views exceed the device's dispatch limit of " +
                             std::to_string(ctx_.properties().limits.maxComputeWorkGroupCount[1]));
   detail::ensure_buffer(ctx_, bounds_, 0, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "bounds buffer", descriptors_dirty_);
-  plan_segments(views.size(), options.ordered);
+  // Nothing of the pass's state changes until every check and allocation has passed.
+  const SegmentPlan plan = plan_segments(views.size(), options.ordered);
   ensure_outputs(views.size(), capacity, options.draws);
+  segment_objects_ = plan.objects;
+  segment_count_ = plan.count;
   last_view_count_ = views.size();
   update_descriptors();
   auto gpu_views = views_.as<GpuFrustum>();

@@ -150,7 +150,11 @@ class GpuCuller {
  private:
   void upload_words(BvKind kind, const void* data, std::size_t count, std::size_t bytes_per_object);
   void ensure_outputs(std::size_t view_count, std::size_t visible_capacity, bool draws);
-  void plan_segments(std::size_t view_count, bool ordered);
+  struct SegmentPlan {
+    std::size_t objects = 0;  // per segment
+    std::size_t count = 1;
+  };
+  SegmentPlan plan_segments(std::size_t view_count, bool ordered) const;
   void prepare(std::span<const Frustum> views, const CullOptions& options);
   void record_passes(VkCommandBuffer cmd, VkQueryPool timestamps);
   const vk::ComputePipeline& pipeline(int shader, std::uint32_t kind, bool ordered, bool draws);

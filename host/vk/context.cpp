@@ -182,10 +182,11 @@ std::vector<DeviceInfo> list_devices() {
 }
 
 void Context::reserve_memory(VkDeviceSize bytes, const std::string& what) const {
+  const VkDeviceSize budget = memory_budget_.load();
   const VkDeviceSize before = memory_in_use_.fetch_add(bytes);
-  if (memory_budget_ && before + bytes > memory_budget_) {
+  if (budget && before + bytes > budget) {
     memory_in_use_ -= bytes;
-    throw Error("allocating " + what + " failed: VK_ERROR_OUT_OF_DEVICE_MEMORY (memory budget of " + std::to_string(memory_budget_) +
+    throw Error("allocating " + what + " failed: VK_ERROR_OUT_OF_DEVICE_MEMORY (memory budget of " + std::to_string(budget) +
                     " bytes, " + std::to_string(before) + " in use)",
                 VK_ERROR_OUT_OF_DEVICE_MEMORY);
   }

@@ -109,7 +109,7 @@ class Context {
   /// engine's share of its GPU). 0: none. Lowering it below what is held frees nothing; later
   /// allocations fail until enough is released.
   void set_memory_budget(VkDeviceSize bytes) { memory_budget_ = bytes; }
-  VkDeviceSize memory_budget() const { return memory_budget_; }
+  VkDeviceSize memory_budget() const { return memory_budget_.load(); }
   /// Device memory held by buffers of this context now, in bytes.
   VkDeviceSize memory_in_use() const { return memory_in_use_.load(); }
   /// Counts `bytes` against the budget before they are allocated; throws vk::Error
@@ -145,7 +145,7 @@ class Context {
 
   std::function<void(std::string_view)> on_message_;
   std::atomic<std::size_t> message_count_{0};
-  VkDeviceSize memory_budget_ = 0;
+  std::atomic<VkDeviceSize> memory_budget_{0};
   mutable std::atomic<VkDeviceSize> memory_in_use_{0};
   std::mutex messages_mutex_;
   std::vector<std::string> messages_;

@@ -2,7 +2,7 @@
 // corpus and every input a fuzzer ever failed on (tests/fuzz/regressions/<target>/) run as
 // ordinary CTest tests in every build, sanitizers included. A target aborts on anything but
 // a documented rejection, which fails the test.
-// usage: replay_fuzz_TARGET FILE|DIR...
+// usage: replay_fuzz_TARGET FILE|DIR...   (every argument must exist; at least one input in all)
 #include <algorithm>
 #include <cstdint>
 #include <cstdio>
@@ -20,10 +20,17 @@ int main(int argc, char** argv) {
     const fs::path p = argv[i];
     if (fs::is_directory(p)) {
       for (const fs::directory_entry& e : fs::directory_iterator(p))
-        if (e.is_regular_file() && e.path().filename() != "README.md") inputs.push_back(e.path());
+        if (e.is_regular_file() && e.path().filename().string().front() != '.') inputs.push_back(e.path());
     } else if (fs::is_regular_file(p)) {
       inputs.push_back(p);
+    } else {
+      std::fprintf(stderr, "replay: %s does not exist\n", p.string().c_str());
+      return 2;
     }
+  }
+  if (inputs.empty()) {
+    std::fprintf(stderr, "replay: no inputs to replay\n");
+    return 2;
   }
   std::sort(inputs.begin(), inputs.end());
   for (const fs::path& p : inputs) {
