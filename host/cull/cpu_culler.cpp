@@ -99,6 +99,7 @@ struct CpuCuller::Impl {
   std::size_t scratch_size = 0;
   std::vector<detail::ChunkCounts> chunk_counts;  // [view * chunks + chunk]
   std::vector<std::size_t> offsets;               // [view * chunks + chunk]: first id's index in the view's list
+  std::vector<detail::PlaneSet> planes;           // per view of the current pass
 
   /// Room for `components` arrays of `count` objects, each padded with zeros to kPad.
   float* reserve(std::size_t components, std::size_t count) {
@@ -236,8 +237,8 @@ void CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& optio
   const std::size_t n = count_;
   const std::size_t chunks = std::max<std::size_t>(1, (n + m.chunk - 1) / m.chunk);
   results.resize(views.size());
-  std::vector<detail::PlaneSet> planes;
-  planes.reserve(views.size());
+  std::vector<detail::PlaneSet>& planes = m.planes;  // kept between calls: no allocation per pass
+  planes.clear();
   for (const Frustum& f : views) planes.push_back(plane_set(f));
   // Each chunk writes its visible ids at its own slot of the view's scratch (chunk size plus
   // the kernels' slack), then they are gathered in chunk order.

@@ -27,7 +27,7 @@ void ThreadPool::run_tasks() {
   std::unique_lock lock(mutex_);
   while (next_task_ < task_count_) {
     const std::size_t t = next_task_++;
-    const std::function<void(std::size_t)>& task = *task_;
+    const TaskRef task = *task_;
     lock.unlock();
     try {
       task(t);
@@ -62,7 +62,7 @@ void ThreadPool::worker_loop() {
   }
 }
 
-void ThreadPool::parallel_for(std::size_t tasks, const std::function<void(std::size_t)>& task) {
+void ThreadPool::parallel_for(std::size_t tasks, TaskRef task) {
   if (tasks == 0) return;
   if (workers_.empty() || tasks == 1) {
     for (std::size_t t = 0; t < tasks; ++t) task(t);

@@ -2,12 +2,24 @@
 #include <condition_variable>
 #include <cstddef>
 #include <cstdint>
-#include <functional>
 #include <mutex>
 #include <thread>
 #include <vector>
 
 namespace cullpipe::fast {
+
+/// A non-owning reference to a callable taking a task index (like C++26 std::function_ref):
+/// no allocation, so a pass per frame stays allocation-free. The callable must outlive it.
+class TaskRef {
+ public:
+  template <class F>
+  TaskRef(F& f) : object_(&f), call_([](void* o, std::size_t t) { (*static_cast<F*>(o))(t); }) {}  // NOLINT: implicit by design
+  void operator()(std::size_t t) const { call_(object_, t); }
+
+ private:
+  void* object_;
+  void (*call_)(void*, std::size_t);
+};
 
 /// A fixed set of worker threads that run the tasks of one parallel_for at a time. The calling
 /// thread works too, so a pool of N threads starts N - 1 workers; a pool of 1 runs everything
@@ -27,7 +39,11 @@ class ThreadPool {
 
   /// Runs task(t) for t = 0..tasks-1 across the pool and returns when all have finished.
   /// The first exception thrown by a task is rethrown here (the remaining tasks still run).
-  void parallel_for(std::size_t tasks, const std::function<void(std::size_t)>& task);
+  void parallel_for(std::size_t tasks, TaskRef task);
+  template <class F>
+  void parallel_for(std::size_t tasks, F&& task) {
+    parallel_for(tasks, TaskRef(task));
+  }
 
  private:
   void worker_loop();
@@ -36,7 +52,7 @@ class ThreadPool {
   std::vector<std::thread> workers_;
   std::mutex mutex_;
   std::condition_variable wake_, done_;
-  const std::function<void(std::size_t)>* task_ = nullptr;
+  const TaskRef* task_ = nullptr;
   std::size_t task_count_ = 0;
   std::size_t next_task_ = 0;      // guarded by mutex_ (tasks are coarse: one lock per task is cheap)
   std::size_t generation_ = 0;     // bumped per parallel_for
