@@ -3,7 +3,10 @@
 // (objects exactly on planes, -0 normals, NaN and infinite values, denormals), several views.
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cfenv>
+#include <cstdlib>
+#include <new>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -20,6 +23,24 @@
 #include "cull/reference.hpp"
 #include "cull/thread_pool.hpp"
 #include "test_util.hpp"
+
+// Counts operator new calls, so a test can check that a steady pass allocates nothing.
+namespace {
+std::atomic<long> g_allocations{0};
+}
+// The replacement new allocates with malloc, so its deletes free; GCC cannot see that
+// pairing through inlined allocators and warns.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpragmas"
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
+void* operator new(std::size_t n) {
+  ++g_allocations;
+  if (void* p = std::malloc(n ? n : 1)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+#pragma GCC diagnostic pop
 
 namespace cullpipe {
 namespace {
@@ -204,6 +225,23 @@ TEST(CpuCuller, OptionsLeaveOutputsEmptyAndResultsAreReused) {
   EXPECT_EQ(culler.kind(), BvKind::Aabb);
   culler.cull(views, {}, results);
   for (std::size_t v = 0; v < views.size(); ++v) expect_equal_to_reference(std::span<const Aabb>(boxes), views[v], results[v], "reuse");
+}
+
+TEST(CpuCuller, ASteadyPassAllocatesNothing) {
+  test::Rng rng{17};
+  std::vector<Aabb> boxes(100000);
+  for (Aabb& b : boxes) b = test::random_aabb(rng, 30.0f, 3.0f);
+  CpuCullerConfig config;
+  config.threads = 2;
+  CpuCuller culler(config);
+  culler.upload(std::span<const Aabb>(boxes));
+  const std::vector<Frustum> views = test_views();
+  std::vector<CpuViewResult> results;
+  culler.cull(views, {}, results);  // sizes settle
+  const long before = g_allocations.load();
+  for (int frame = 0; frame < 10; ++frame) culler.cull(views, {}, results);
+  EXPECT_EQ(g_allocations.load() - before, 0) << "allocations in ten steady passes";
+  for (std::size_t v = 0; v < views.size(); ++v) expect_equal_to_reference(std::span<const Aabb>(boxes), views[v], results[v], "steady");
 }
 
 TEST(CpuCuller, ReportsItsKernelsAndRejectsOnesTheCpuLacks) {
