@@ -15,24 +15,14 @@
 
 namespace cullpipe::bvh {
 
+using detail::measure;
+using detail::Measure;
 using detail::merged;
 
 namespace {
 
-// What a merge costs: half the surface area of the merged box, in double; the half perimeter
-// (sum of extents) breaks ties between boxes of equal area, e.g. flat or collinear ones, whose
-// areas are all zero. Both grow with the box, so a cluster never pairs better than its parts.
-struct Measure {
-  double area = 0.0, perimeter = 0.0;
-  auto operator<=>(const Measure&) const = default;
-};
-Measure measure(const Aabb& b) {
-  const glm::dvec3 e = glm::dvec3(b.max) - glm::dvec3(b.min);
-  return {e.x * e.y + e.y * e.z + e.z * e.x, e.x + e.y + e.z};
-}
-
 // A candidate pair of clusters (ids lo < hi) in a total order, so both exact builders make
-// the same merges even when costs tie: by cost, then by objects in the pair (equal boxes merge
+// the same merges even when costs tie: by cost (detail::measure of the merged box), then by objects in the pair (equal boxes merge
 // into a balanced tree), then by a hash of the ids (so among equal pairs the clusters do not
 // all want the same partner, which would make the priority queue re-pair nearly every cluster
 // after each merge), then by the ids.

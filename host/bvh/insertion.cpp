@@ -17,24 +17,11 @@
 
 namespace cullpipe::bvh {
 
+using detail::measure;
+using detail::Measure;
 using detail::merged;
 
 namespace {
-
-// A cost in surface area: half the area of boxes, in double, with the half perimeter (sum of
-// extents) as a tie-breaker compared only when areas are equal (flat and collinear boxes have
-// area 0). Costs add and subtract componentwise and compare lexicographically, so the induced
-// costs stay lower bounds and the branch and bound stays exact.
-struct Measure {
-  double area = 0.0, perimeter = 0.0;
-  auto operator<=>(const Measure&) const = default;
-  Measure operator+(const Measure& o) const { return {area + o.area, perimeter + o.perimeter}; }
-  Measure operator-(const Measure& o) const { return {area - o.area, perimeter - o.perimeter}; }
-};
-Measure measure(const Aabb& b) {
-  const glm::dvec3 e = glm::dvec3(b.max) - glm::dvec3(b.min);
-  return {e.x * e.y + e.y * e.z + e.z * e.x, e.x + e.y + e.z};
-}
 
 // A node of the tree while it grows: parent links for walking up, object counts for breaking
 // ties towards the smaller subtree.

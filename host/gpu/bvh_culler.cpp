@@ -1,7 +1,6 @@
 #include "gpu/bvh_culler.hpp"
 
 #include <algorithm>
-#include <chrono>
 #include <cstring>
 #include <stdexcept>
 #include <string>
@@ -273,14 +272,10 @@ CullResult BvhCuller::read_results() const {
 }
 
 CullResult BvhCuller::cull(std::span<const Frustum> views, const CullOptions& options) {
-  const auto start = std::chrono::steady_clock::now();
   if (views.empty()) return {};
-  prepare(views, options);
-  const double gpu_ns = resources_->run([&](VkCommandBuffer cmd, VkQueryPool timestamps) { record_passes(cmd, timestamps); });
-  CullResult result = read_results();
-  result.timings.gpu_ns = gpu_ns;
-  result.timings.wall_ns = double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());
-  return result;
+  return detail::timed_pass(
+      *resources_, [&] { prepare(views, options); },
+      [&](VkCommandBuffer cmd, VkQueryPool timestamps) { record_passes(cmd, timestamps); }, [&] { return read_results(); });
 }
 
 }  // namespace cullpipe::gpu

@@ -1,6 +1,7 @@
 #include "gpu/pass_support.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <stdexcept>
 #include <vector>
 
@@ -88,6 +89,17 @@ void record_compute_to_compute(VkCommandBuffer cmd, bool indirect) {
     dst |= VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT;
   }
   vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, dst, 0, 1, &barrier, 0, nullptr, 0, nullptr);
+}
+
+CullResult timed_pass(PassResources& resources, const std::function<void()>& prepare,
+                      const std::function<void(VkCommandBuffer, VkQueryPool)>& record, const std::function<CullResult()>& read) {
+  const auto start = std::chrono::steady_clock::now();
+  prepare();
+  const double gpu_ns = resources.run(record);
+  CullResult result = read();
+  result.timings.gpu_ns = gpu_ns;
+  result.timings.wall_ns = double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());
+  return result;
 }
 
 void check_allocation_size(const vk::Context& ctx, VkDeviceSize bytes, const std::string& what) {

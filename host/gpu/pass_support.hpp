@@ -58,6 +58,14 @@ CullResult read_outputs(const OutputBuffers& buffers, std::size_t object_count, 
 /// allocation (maxMemoryAllocationSize).
 void check_allocation_size(const vk::Context& ctx, VkDeviceSize bytes, const std::string& what);
 
+class PassResources;
+
+/// One whole culling pass on `resources`' command buffer, as both cullers' cull() run it:
+/// `prepare()`, then `record` between timestamps, submit and wait, then `read()`. Fills the
+/// result's timings: GPU time between the timestamps, wall time around all of it.
+CullResult timed_pass(PassResources& resources, const std::function<void()>& prepare,
+                      const std::function<void(VkCommandBuffer, VkQueryPool)>& record, const std::function<CullResult()>& read);
+
 /// One descriptor set of storage buffers, a command buffer and a two-entry timestamp pool.
 class PassResources {
  public:
