@@ -11,6 +11,7 @@
 #include "cull/reference.hpp"
 #include "scene/generators.hpp"
 #include "scene/gltf_scene.hpp"
+#include "bvh_test_util.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe {
@@ -59,15 +60,7 @@ void expect_same_as_flat(const std::vector<Aabb>& boxes, const std::vector<Frust
   ASSERT_EQ(bvh::check_tree(tree, boxes), "");
   const bvh::FlatTree flat = bvh::flatten(tree);
   expect_flat_tree_valid(flat, boxes);
-  for (std::size_t v = 0; v < frusta.size(); ++v) {
-    std::vector<Classification> cpu(boxes.size());
-    const reference::CullCounts counts = reference::classify_all(std::span<const Aabb>(boxes), frusta[v], cpu);
-    const bvh::HierarchicalResult h = bvh::cull_hierarchical(flat, boxes, frusta[v]);
-    ASSERT_EQ(h.classes, cpu) << "view " << v;
-    EXPECT_EQ(h.visible, counts.visible);
-    EXPECT_EQ(h.inside, counts.inside);
-    EXPECT_LE(h.object_tests, boxes.size());
-  }
+  test::expect_hierarchy_equals_flat(flat, boxes, frusta);
 }
 
 TEST(Bvh, RandomSetsOfEverySize) {

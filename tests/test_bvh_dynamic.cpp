@@ -8,6 +8,7 @@
 #include "bvh/builders.hpp"
 #include "cull/reference.hpp"
 #include "scene/generators.hpp"
+#include "bvh_test_util.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe {
@@ -89,15 +90,7 @@ void expect_valid_and_culls_like_reference(const bvh::Tree& tree, std::span<cons
   EXPECT_LE(m.max_leaf_size, max_leaf);
   EXPECT_EQ(m.nodes, tree.nodes.size());  // no unreachable nodes
   EXPECT_EQ(m.leaves, (m.nodes + 1) / 2);
-  const bvh::FlatTree flat = bvh::flatten(tree);
-  for (std::size_t v = 0; v < frusta.size(); ++v) {
-    std::vector<Classification> cpu(boxes.size());
-    const reference::CullCounts counts = reference::classify_all(boxes, frusta[v], cpu);
-    const bvh::HierarchicalResult h = bvh::cull_hierarchical(flat, boxes, frusta[v]);
-    ASSERT_EQ(h.classes, cpu) << "view " << v;
-    EXPECT_EQ(h.visible, counts.visible);
-    EXPECT_EQ(h.inside, counts.inside);
-  }
+  test::expect_hierarchy_equals_flat(bvh::flatten(tree), boxes, frusta);
 }
 
 std::vector<Frustum> test_frusta() {

@@ -11,6 +11,7 @@
 #include "bvh/builders.hpp"
 #include "cull/reference.hpp"
 #include "scene/generators.hpp"
+#include "bvh_test_util.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe {
@@ -122,15 +123,7 @@ bvh::Tree build_and_check(std::span<const Aabb> boxes, const bvh::BuildOptions& 
 
 // The hierarchical cull over the tree gives every object the flat reference's class.
 void expect_same_classes(const bvh::Tree& tree, std::span<const Aabb> boxes, const std::vector<Frustum>& frusta) {
-  const bvh::FlatTree flat = bvh::flatten(tree);
-  for (std::size_t v = 0; v < frusta.size(); ++v) {
-    std::vector<Classification> cpu(boxes.size());
-    const reference::CullCounts counts = reference::classify_all(boxes, frusta[v], cpu);
-    const bvh::HierarchicalResult h = bvh::cull_hierarchical(flat, boxes, frusta[v]);
-    ASSERT_EQ(h.classes, cpu) << "view " << v;
-    EXPECT_EQ(h.visible, counts.visible);
-    EXPECT_EQ(h.inside, counts.inside);
-  }
+  test::expect_hierarchy_equals_flat(bvh::flatten(tree), boxes, frusta);
 }
 
 TEST(TopDown, EveryCombinationOnRandomAndClusteredScenes) {

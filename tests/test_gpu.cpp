@@ -17,37 +17,16 @@
 #include "gpu/layout.hpp"
 #include "scene/generators.hpp"
 #include "scene/gltf_scene.hpp"
+#include "gpu_test_env.hpp"
 #include "test_util.hpp"
 #include "vk/check.hpp"
 
 namespace cullpipe {
 namespace {
 
-// One validated context and culler for the whole process.
-class GpuEnvironment : public ::testing::Environment {
- public:
-  static inline std::unique_ptr<vk::Context> context;
-  static inline std::unique_ptr<gpu::GpuCuller> culler;
-  void SetUp() override {
-    vk::ContextOptions options;
-    options.validation = true;
-    options.on_message = [](std::string_view m) { ADD_FAILURE() << m; };
-    context = std::make_unique<vk::Context>(options);
-    culler = std::make_unique<gpu::GpuCuller>(*context);
-    std::printf("device: %s (%s)\n", context->info().name.c_str(), context->info().driver.c_str());
-  }
-  void TearDown() override {
-    culler.reset();
-    context.reset();
-  }
-};
+using GpuEnvironment = test::GpuTestEnvironment<gpu::GpuCuller>;
 const auto* const kEnvironment = ::testing::AddGlobalTestEnvironment(new GpuEnvironment);
-
-class Gpu : public ::testing::Test {
- protected:
-  gpu::GpuCuller& culler() { return *GpuEnvironment::culler; }
-  void TearDown() override { EXPECT_EQ(GpuEnvironment::context->validation_message_count(), 0u); }
-};
+using Gpu = test::GpuTest<gpu::GpuCuller>;
 
 // Culls `volumes` against `frusta` on the GPU and the CPU; every classification, every
 // counter and the visible-id list must agree (cull/compare.hpp). Returns the CPU classes of

@@ -18,36 +18,16 @@
 #include "gpu/bvh_culler.hpp"
 #include "scene/generators.hpp"
 #include "scene/gltf_scene.hpp"
+#include "gpu_test_env.hpp"
 #include "test_util.hpp"
 #include "vk/check.hpp"
 
 namespace cullpipe {
 namespace {
 
-class GpuBvhEnvironment : public ::testing::Environment {
- public:
-  static inline std::unique_ptr<vk::Context> context;
-  static inline std::unique_ptr<gpu::BvhCuller> culler;
-  void SetUp() override {
-    vk::ContextOptions options;
-    options.validation = true;
-    options.on_message = [](std::string_view m) { ADD_FAILURE() << m; };
-    context = std::make_unique<vk::Context>(options);
-    culler = std::make_unique<gpu::BvhCuller>(*context);
-    std::printf("device: %s (%s)\n", context->info().name.c_str(), context->info().driver.c_str());
-  }
-  void TearDown() override {
-    culler.reset();
-    context.reset();
-  }
-};
+using GpuBvhEnvironment = test::GpuTestEnvironment<gpu::BvhCuller>;
 const auto* const kEnvironment = ::testing::AddGlobalTestEnvironment(new GpuBvhEnvironment);
-
-class GpuBvh : public ::testing::Test {
- protected:
-  gpu::BvhCuller& culler() { return *GpuBvhEnvironment::culler; }
-  void TearDown() override { EXPECT_EQ(GpuBvhEnvironment::context->validation_message_count(), 0u); }
-};
+using GpuBvh = test::GpuTest<gpu::BvhCuller>;
 
 // Culls `boxes` through `flat` on the GPU, all views in one pass, and checks every view: the
 // classes equal the CPU hierarchical traversal's object by object (and flat culling's), the
