@@ -288,10 +288,13 @@ TEST_F(Gpu, RepeatedCullsReuseBuffersAndStayCorrect) {
 }
 
 TEST_F(Gpu, ScenesLargerThanAStorageBufferAreCulledInSegments) {
-  // More OBBs than one storage buffer range holds (2.1 million on lavapipe's 128 MiB): the
-  // pass binds them as two segments and must still agree object by object, ids included.
-  const VkDeviceSize limit = GpuEnvironment::context->properties().limits.maxStorageBufferRange;
-  const std::size_t count = std::size_t(limit / sizeof(gpu::GpuObb)) + 1000;
+  // More OBBs than one storage buffer range holds (2.1 million on lavapipe's 128 MiB). The
+  // volumes are read through a texel buffer view, which covers them whole; 17 views make the
+  // per-object classes outgrow one storage buffer, so the pass is split into segments and
+  // must still agree object by object, ids included.
+  const VkPhysicalDeviceLimits& limits = GpuEnvironment::context->properties().limits;
+  const VkDeviceSize range = limits.maxStorageBufferRange;
+  const std::size_t count = std::size_t(range / sizeof(gpu::GpuObb)) + 1000;
   if (count > 5'000'000) GTEST_SKIP() << "device storage range too large to test cheaply";
   test::Rng rng{77};
   std::vector<Obb> obbs(count);
@@ -304,9 +307,23 @@ TEST_F(Gpu, ScenesLargerThanAStorageBufferAreCulledInSegments) {
     obbs[i] = pool[i % pool.size()];
     obbs[i].center += glm::vec3(float(i % 97) * 0.5f - 24.0f, float(i % 89) * 0.5f - 22.0f, 0.0f);
   }
-  const std::vector<Frustum> frusta = {test_frusta()[0]};
-  expect_agreement(culler(), obbs, frusta);
-  EXPECT_EQ(culler().last_segment_count(), 2u);
+  constexpr std::size_t kViews = 17;
+  std::vector<Frustum> frusta;
+  for (std::size_t v = 0; v < kViews; ++v) frusta.push_back(test_frusta()[v % test_frusta().size()]);
+  // What the limits allow per segment: the classes (4 bytes per object and view) and the
+  // texel view of the volumes, in multiples of 256 objects.
+  const std::size_t by_classes = std::size_t(range / (sizeof(std::uint32_t) * kViews));
+  const std::size_t by_texels = std::size_t(VkDeviceSize(limits.maxTexelBufferElements) * 16 / sizeof(gpu::GpuObb));
+  const std::size_t per_segment = std::min(by_classes, by_texels) / 256 * 256;
+  const std::size_t segments = (count + per_segment - 1) / per_segment;
+  ASSERT_GE(segments, 2u);
+  gpu::CullOptions options;
+  options.visible_capacity = by_classes;  // the visible lists must fit one storage buffer too
+  expect_agreement(culler(), obbs, frusta, options);
+  EXPECT_EQ(culler().last_segment_count(), segments);
+  // One view: the classes fit, and the texel view holds more than a storage buffer could.
+  expect_agreement(culler(), obbs, std::vector<Frustum>{frusta[0]});
+  EXPECT_EQ(culler().last_segment_count(), count * sizeof(gpu::GpuObb) <= VkDeviceSize(limits.maxTexelBufferElements) * 16 ? 1u : 2u);
 }
 
 TEST_F(Gpu, SegmentedPassesAgreeForEveryKindAndOutput) {

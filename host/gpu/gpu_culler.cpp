@@ -19,6 +19,11 @@ namespace cullpipe::gpu {
 namespace {
 
 constexpr std::uint32_t kBindingCount = CULL_BINDING_COUNT;  // one descriptor set for every shader
+// The volumes are read through a uniform texel buffer: on lavapipe a texel fetch loads a whole
+// 16-byte texel per lane, where a storage-buffer load is a bounds-checked branch per lane and
+// per component (AABBs: 8.0 -> 5.5 ns/object); on GPUs both are ordinary typed loads.
+constexpr std::uint32_t kTexelBindings = 1u << BINDING_BOUNDS;
+constexpr VkBufferUsageFlags kBoundsUsage = VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT;
 
 std::uint32_t kind_index(BvKind k) { return static_cast<std::uint32_t>(k); }
 
@@ -28,8 +33,10 @@ GpuCuller::GpuCuller(const vk::Context& ctx, const GpuCullerConfig& config) : ct
   const VkPhysicalDeviceLimits& limits = ctx_.properties().limits;
   group_size_ = std::max<std::uint32_t>(
       1, std::min({config.group_size, limits.maxComputeWorkGroupSize[0], limits.maxComputeWorkGroupInvocations}));
-  detail::check_subgroup_operations(ctx_, VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT | VK_SUBGROUP_FEATURE_BALLOT_BIT,
+  detail::check_subgroup_operations(ctx_, VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT | VK_SUBGROUP_FEATURE_BALLOT_BIT |
+                                             VK_SUBGROUP_FEATURE_SHUFFLE_BIT,
                                     "flat culling");
+  detail::check_texel_format(ctx_, "flat culling");
   objects_per_invocation_ = std::clamp<std::uint32_t>(config.objects_per_invocation, 1, 32);
   max_segment_objects_ = config.max_segment_objects;
   max_groups_ = config.max_groups_per_dispatch ? std::min(config.max_groups_per_dispatch, limits.maxComputeWorkGroupCount[0])
@@ -39,7 +46,7 @@ GpuCuller::GpuCuller(const vk::Context& ctx, const GpuCullerConfig& config) : ct
   // set, the others on first use.
   static_assert(BV_KIND_AABB == 0 && BV_KIND_OBB == 1 && BV_KIND_SPHERE == 2, "BvKind order must match the shader");
   pipeline(0, 0, false, false);
-  resources_ = std::make_unique<detail::PassResources>(ctx_, pipelines_[0][0][0][0]->set_layout(), kBindingCount);
+  resources_ = std::make_unique<detail::PassResources>(ctx_, pipelines_[0][0][0][0]->set_layout(), kBindingCount, kTexelBindings);
 }
 
 const vk::ComputePipeline& GpuCuller::pipeline(int shader, std::uint32_t kind, bool ordered, bool draws) {
@@ -64,7 +71,7 @@ const vk::ComputePipeline& GpuCuller::pipeline(int shader, std::uint32_t kind, b
   const std::uint32_t spec[5] = {kind, group_size_, ordered ? 1u : 0u, draws ? 1u : 0u,
                                  shader == 0 && !ordered ? objects_per_invocation_ : 1u};
   slot = std::make_unique<vk::ComputePipeline>(
-      ctx_, vk::ComputePipelineDesc{spirv, kBindingCount, sizeof(FlatCullParams), spec, name.c_str()});
+      ctx_, vk::ComputePipelineDesc{spirv, kBindingCount, sizeof(FlatCullParams), spec, name.c_str(), kTexelBindings});
   return *slot;
 }
 
@@ -97,7 +104,7 @@ void GpuCuller::upload_words(BvKind kind, const void* data, std::size_t count, s
   object_count_ = 0;  // stays 0 if the allocation below fails
   bytes_per_object_ = bytes_per_object;
   descriptors_dirty_ = true;  // segment ranges depend on the object size and count
-  detail::ensure_buffer(ctx_, bounds_, bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "bounds buffer", descriptors_dirty_);
+  detail::ensure_buffer(ctx_, bounds_, bytes, kBoundsUsage, "bounds buffer", descriptors_dirty_);
   if (bytes) std::memcpy(bounds_.data(), data, bytes);
   kind_ = kind;
   object_count_ = count;
@@ -135,14 +142,18 @@ void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capac
   detail::ensure_buffer(ctx_, group_counts_, groups, storage, "group count buffer", dirty);
 }
 
+VkDeviceSize GpuCuller::texel_range() const {
+  return VkDeviceSize(ctx_.properties().limits.maxTexelBufferElements) * detail::kTexelBytes;
+}
+
 GpuCuller::SegmentPlan GpuCuller::plan_segments(std::size_t view_count, bool ordered) const {
   // Objects per segment: as many as every per-object binding allows within one storage buffer
-  // range, rounded down to a multiple of 256 so every segment's offset in every buffer is a
+  // range (the bounds: one texel buffer view), rounded down to a multiple of 256 so every segment's offset in every buffer is a
   // multiple of 256 x (bytes per object) >= 1 KiB, and so of any minStorageBufferOffsetAlignment
   // (at most 256 bytes by the Vulkan spec).
   const VkDeviceSize range = ctx_.properties().limits.maxStorageBufferRange;
   std::size_t s = object_count_;
-  s = std::min<std::size_t>(s, range / bytes_per_object_);
+  s = std::min<std::size_t>(s, texel_range() / bytes_per_object_);
   s = std::min<std::size_t>(s, range / (sizeof(std::uint32_t) * std::max<std::size_t>(view_count, 1)));
   if (template_count_) s = std::min<std::size_t>(s, range / sizeof(DrawCommand));
   if (max_segment_objects_) s = std::min(s, max_segment_objects_);
@@ -169,7 +180,8 @@ void GpuCuller::update_descriptors() {
     // earlier, larger scene may be bigger).
     const VkDeviceSize range = ctx_.properties().limits.maxStorageBufferRange;
     auto whole = [&](const vk::Buffer& b) { return Range{&b, 0, std::min<VkDeviceSize>(b.size(), range)}; };
-    Range ranges[kBindingCount] = {whole(bounds_), whole(classes_),   whole(visible_), whole(counters_),
+    const Range bounds{&bounds_, 0, std::min<VkDeviceSize>(bounds_.size(), texel_range()) / detail::kTexelBytes * detail::kTexelBytes};
+    Range ranges[kBindingCount] = {bounds,         whole(classes_),   whole(visible_), whole(counters_),
                                    whole(views_),  whole(templates_), whole(draws_),   whole(group_counts_)};
     if (segment_count_ > 1) {  // one segment binds whole buffers
       const VkDeviceSize first = VkDeviceSize(seg) * segment_objects_;
@@ -193,7 +205,7 @@ void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   if (views.size() > ctx_.properties().limits.maxComputeWorkGroupCount[1])
     throw std::length_error(std::to_string(views.size()) + " views exceed the device's dispatch limit of " +
                             std::to_string(ctx_.properties().limits.maxComputeWorkGroupCount[1]));
-  detail::ensure_buffer(ctx_, bounds_, 0, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "bounds buffer", descriptors_dirty_);
+  detail::ensure_buffer(ctx_, bounds_, 0, kBoundsUsage, "bounds buffer", descriptors_dirty_);
   // Nothing of the pass's state changes until every check and allocation has passed.
   const SegmentPlan plan = plan_segments(views.size(), options.ordered);
   ensure_outputs(views.size(), capacity, options.draws);

@@ -46,6 +46,13 @@ void check_storage_range(const vk::Context& ctx, VkDeviceSize bytes, const std::
                             std::to_string(limit) + " bytes, " + mib(limit) + ")");
 }
 
+void check_texel_format(const vk::Context& ctx, const std::string& who) {
+  VkFormatProperties props{};
+  vkGetPhysicalDeviceFormatProperties(ctx.physical_device(), kTexelFormat, &props);
+  if (!(props.bufferFeatures & VK_FORMAT_FEATURE_UNIFORM_TEXEL_BUFFER_BIT))
+    throw vk::Error(who + ": " + ctx.info().name + " cannot read R32G32B32A32_UINT uniform texel buffers");
+}
+
 void ensure_buffer(const vk::Context& ctx, vk::Buffer& buffer, VkDeviceSize bytes, VkBufferUsageFlags usage,
                    const char* what, bool& dirty) {
   bytes = std::max(bytes, kMinBufferSize);
@@ -148,8 +155,9 @@ CullResult read_outputs(const OutputBuffers& buffers, std::size_t object_count, 
   return result;
 }
 
-PassResources::PassResources(const vk::Context& ctx, VkDescriptorSetLayout layout, std::uint32_t binding_count)
-    : ctx_(ctx), binding_count_(binding_count), layout_(layout) {
+PassResources::PassResources(const vk::Context& ctx, VkDescriptorSetLayout layout, std::uint32_t binding_count,
+                             std::uint32_t texel_bindings)
+    : ctx_(ctx), binding_count_(binding_count), texel_bindings_(texel_bindings), layout_(layout) {
   try {
     VkDevice dev = ctx_.device();
     ensure_sets(1);
@@ -182,6 +190,7 @@ void PassResources::release() {
   if (ctx_.owns_device()) vkDeviceWaitIdle(dev);
   if (query_pool_) vkDestroyQueryPool(dev, query_pool_, nullptr);
   if (cmd_) vkFreeCommandBuffers(dev, ctx_.command_pool(), 1, &cmd_);
+  for (std::size_t set = 0; set < views_.size(); ++set) destroy_views(set);
   if (pool_) vkDestroyDescriptorPool(dev, pool_, nullptr);
   query_pool_ = VK_NULL_HANDLE;
   cmd_ = VK_NULL_HANDLE;
@@ -197,12 +206,18 @@ void PassResources::ensure_sets(std::size_t count) {
     vkDestroyDescriptorPool(dev, pool_, nullptr);
     pool_ = VK_NULL_HANDLE;
     sets_.clear();
+    for (std::size_t set = 0; set < views_.size(); ++set) destroy_views(set);
   }
-  VkDescriptorPoolSize pool_size{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, binding_count_ * std::uint32_t(count)};
+  std::uint32_t texels = 0;
+  for (std::uint32_t b = 0; b < binding_count_; ++b) texels += texel(b) ? 1 : 0;
+  VkDescriptorPoolSize pool_sizes[2];
+  std::uint32_t size_count = 0;
+  if (binding_count_ > texels) pool_sizes[size_count++] = {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, (binding_count_ - texels) * std::uint32_t(count)};
+  if (texels) pool_sizes[size_count++] = {VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER, texels * std::uint32_t(count)};
   VkDescriptorPoolCreateInfo pool_info{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
   pool_info.maxSets = std::uint32_t(count);
-  pool_info.poolSizeCount = 1;
-  pool_info.pPoolSizes = &pool_size;
+  pool_info.poolSizeCount = size_count;
+  pool_info.pPoolSizes = pool_sizes;
   CULLPIPE_VK_CHECK(vkCreateDescriptorPool(dev, &pool_info, nullptr, &pool_));
   std::vector<VkDescriptorSetLayout> layouts(count, layout_);
   std::vector<VkDescriptorSet> sets(count);
@@ -212,6 +227,12 @@ void PassResources::ensure_sets(std::size_t count) {
   set_info.pSetLayouts = layouts.data();
   CULLPIPE_VK_CHECK(vkAllocateDescriptorSets(dev, &set_info, sets.data()));
   sets_ = std::move(sets);
+  views_.resize(sets_.size());
+}
+
+void PassResources::destroy_views(std::size_t set) {
+  for (VkBufferView view : views_.at(set)) vkDestroyBufferView(ctx_.device(), view, nullptr);
+  views_[set].clear();
 }
 
 void PassResources::write(std::span<const vk::Buffer* const> buffers) {
@@ -224,16 +245,42 @@ void PassResources::write(std::size_t index, std::span<const Range> ranges) {
   std::vector<VkDescriptorBufferInfo> infos(binding_count_);
   std::vector<VkWriteDescriptorSet> writes(binding_count_);
   if (ranges.size() != binding_count_) throw std::logic_error("PassResources::write: one buffer per binding");
+  // No pending work uses the set's old views (the cullers' record() contract: one recorded
+  // pass at a time). The new views are made first, so a failure leaves the set as it was.
+  std::vector<VkBufferView> views(binding_count_, VK_NULL_HANDLE);
+  try {
+    for (std::uint32_t b = 0; b < binding_count_; ++b) {
+      if (!texel(b)) continue;
+      VkBufferViewCreateInfo view_info{VK_STRUCTURE_TYPE_BUFFER_VIEW_CREATE_INFO};
+      view_info.buffer = ranges[b].buffer->handle();
+      view_info.format = kTexelFormat;
+      view_info.offset = ranges[b].offset;
+      view_info.range = ranges[b].size;
+      CULLPIPE_VK_CHECK(vkCreateBufferView(ctx_.device(), &view_info, nullptr, &views[b]));
+    }
+  } catch (...) {
+    for (VkBufferView view : views)
+      if (view) vkDestroyBufferView(ctx_.device(), view, nullptr);
+    throw;
+  }
   for (std::uint32_t b = 0; b < binding_count_; ++b) {
     infos[b] = {ranges[b].buffer->handle(), ranges[b].offset, ranges[b].size};
     writes[b] = {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
     writes[b].dstSet = sets_.at(index);
     writes[b].dstBinding = b;
     writes[b].descriptorCount = 1;
-    writes[b].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
-    writes[b].pBufferInfo = &infos[b];
+    if (texel(b)) {
+      writes[b].descriptorType = VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER;
+      writes[b].pTexelBufferView = &views[b];
+    } else {
+      writes[b].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+      writes[b].pBufferInfo = &infos[b];
+    }
   }
   vkUpdateDescriptorSets(ctx_.device(), binding_count_, writes.data(), 0, nullptr);
+  destroy_views(index);
+  for (VkBufferView view : views)
+    if (view) views_[index].push_back(view);
 }
 
 double PassResources::run(const std::function<void(VkCommandBuffer, VkQueryPool)>& record) {

@@ -15,6 +15,12 @@
 
 namespace cullpipe::gpu::detail {
 
+/// Format of every uniform texel buffer binding: four 32-bit words per texel, fetched as
+/// integers (the shaders reinterpret them with uintBitsToFloat, so every bit pattern arrives
+/// unchanged: no float conversion, denormal flush or NaN canonicalisation on the way).
+inline constexpr VkFormat kTexelFormat = VK_FORMAT_R32G32B32A32_UINT;
+inline constexpr VkDeviceSize kTexelBytes = 16;
+
 /// Throws std::length_error naming `what`, its size and the device limit when `bytes` exceed
 /// one storage buffer (maxStorageBufferRange).
 /// Throws vk::Error naming `who` and the missing operations unless compute shaders on the
@@ -22,6 +28,10 @@ namespace cullpipe::gpu::detail {
 void check_subgroup_operations(const vk::Context& ctx, VkSubgroupFeatureFlags needed, const std::string& who);
 
 void check_storage_range(const vk::Context& ctx, VkDeviceSize bytes, const std::string& what);
+
+/// Throws vk::Error naming `who` unless the device reads kTexelFormat from uniform texel
+/// buffers (a format the Vulkan spec makes mandatory; checked for a clear error anyway).
+void check_texel_format(const vk::Context& ctx, const std::string& who);
 
 /// Grows `buffer` to at least `bytes` (never shrinks). Sets `dirty` (descriptors must be
 /// rewritten) before the old buffer is freed, so a failed allocation cannot leave a descriptor
@@ -66,10 +76,13 @@ class PassResources;
 CullResult timed_pass(PassResources& resources, const std::function<void()>& prepare,
                       const std::function<void(VkCommandBuffer, VkQueryPool)>& record, const std::function<CullResult()>& read);
 
-/// One descriptor set of storage buffers, a command buffer and a two-entry timestamp pool.
+/// Descriptor sets of storage buffers (and uniform texel buffers, whose buffer views it owns),
+/// a command buffer and a two-entry timestamp pool.
 class PassResources {
  public:
-  PassResources(const vk::Context& ctx, VkDescriptorSetLayout layout, std::uint32_t binding_count);
+  /// Bindings 0..binding_count-1 of `layout`: storage buffers, except bit i of
+  /// `texel_bindings` makes binding i a uniform texel buffer of kTexelFormat.
+  PassResources(const vk::Context& ctx, VkDescriptorSetLayout layout, std::uint32_t binding_count, std::uint32_t texel_bindings = 0);
   ~PassResources();
   PassResources(const PassResources&) = delete;
   PassResources& operator=(const PassResources&) = delete;
@@ -81,7 +94,8 @@ class PassResources {
   void ensure_sets(std::size_t count);
   /// Binding i of set 0 = the whole of buffers[i].
   void write(std::span<const vk::Buffer* const> buffers);
-  /// A part of a buffer bound to one binding.
+  /// A part of a buffer bound to one binding (for a texel binding: a multiple of kTexelBytes,
+  /// VK_WHOLE_SIZE for the rest of the buffer).
   struct Range {
     const vk::Buffer* buffer;
     VkDeviceSize offset = 0;
@@ -99,10 +113,15 @@ class PassResources {
   void release();
 
   const vk::Context& ctx_;
+  bool texel(std::uint32_t binding) const { return binding < 32 && (texel_bindings_ >> binding & 1u); }
+  void destroy_views(std::size_t set);
+
   std::uint32_t binding_count_;
+  std::uint32_t texel_bindings_;
   VkDescriptorSetLayout layout_;
   VkDescriptorPool pool_ = VK_NULL_HANDLE;
   std::vector<VkDescriptorSet> sets_;
+  std::vector<std::vector<VkBufferView>> views_;  // per set, the texel bindings' views
   VkCommandBuffer cmd_ = VK_NULL_HANDLE;
   VkQueryPool query_pool_ = VK_NULL_HANDLE;
 };

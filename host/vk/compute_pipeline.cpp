@@ -40,9 +40,12 @@ ComputePipeline::ComputePipeline(const Context& ctx, const ComputePipelineDesc& 
 
   VkShaderModule module = VK_NULL_HANDLE;
   try {
-    std::vector<VkDescriptorSetLayoutBinding> bindings(desc.storage_buffer_count);
-    for (std::uint32_t i = 0; i < desc.storage_buffer_count; ++i)
-      bindings[i] = {i, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr};
+    std::vector<VkDescriptorSetLayoutBinding> bindings(desc.binding_count);
+    for (std::uint32_t i = 0; i < desc.binding_count; ++i) {
+      const bool texel = i < 32 && (desc.uniform_texel_bindings >> i & 1u);
+      bindings[i] = {i, texel ? VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1,
+                     VK_SHADER_STAGE_COMPUTE_BIT, nullptr};
+    }
     VkDescriptorSetLayoutCreateInfo set_info{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO};
     set_info.bindingCount = std::uint32_t(bindings.size());
     set_info.pBindings = bindings.data();
