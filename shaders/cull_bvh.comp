@@ -37,14 +37,17 @@ layout(local_size_x_id = 1) in;  // = BVH_CULL_GROUP_SIZE, set by the host
 layout(constant_id = 0) const uint PASS = BVH_PASS_LEVEL;
 layout(constant_id = 3) const uint WRITE_DRAWS = 0;  // ACCEPT / TEST: also write draw commands
 
-layout(std430, set = 0, binding = BINDING_BOUNDS) readonly buffer Bounds { GpuAabb boxes[]; };  // in tree order
+// The object boxes (GpuAabb, in tree order) and the nodes (GpuBvhNode) are read as integer
+// texels (exact bits) from uniform texel buffers: on lavapipe a texel fetch loads 16 bytes per
+// lane, a storage-buffer load branches per lane and component.
+layout(set = 0, binding = BINDING_BOUNDS) uniform usamplerBuffer boxes;
 layout(std430, set = 0, binding = BINDING_CLASSES) writeonly buffer Classes { uint classes[]; };
 layout(std430, set = 0, binding = BINDING_VISIBLE) writeonly buffer Visible { uint visible_ids[]; };
 layout(std430, set = 0, binding = BINDING_COUNTERS) buffer Counters { ViewCounters counters[]; };
 layout(std430, set = 0, binding = BINDING_VIEWS) readonly buffer Views { GpuFrustum views[]; };
 layout(std430, set = 0, binding = BINDING_DRAW_TEMPLATES) readonly buffer DrawTemplates { DrawCommand templates[]; };
 layout(std430, set = 0, binding = BINDING_DRAWS) writeonly buffer Draws { DrawCommand draws[]; };
-layout(std430, set = 0, binding = BVH_BINDING_NODES) readonly buffer Nodes { GpuBvhNode nodes[]; };
+layout(set = 0, binding = BVH_BINDING_NODES) uniform usamplerBuffer nodes;
 layout(std430, set = 0, binding = BVH_BINDING_OBJECTS) readonly buffer Objects { uint object_ids[]; };
 layout(std430, set = 0, binding = BVH_BINDING_QUEUE) buffer Queue { BvhWorkItem queue[]; };
 layout(std430, set = 0, binding = BVH_BINDING_RANGES) buffer Ranges { BvhRange ranges[]; };
@@ -54,6 +57,13 @@ layout(std430, set = 0, binding = BVH_BINDING_TRAVERSAL) buffer Traversal { BvhT
 layout(push_constant, std430) uniform Push { BvhCullParams params; };
 
 const uint MASK = (1u << BVH_MASK_BITS) - 1u;
+
+GpuBvhNode load_node(uint index) {
+  uvec4 a = texelFetch(nodes, int(3u * index)), b = texelFetch(nodes, int(3u * index + 1u)), c = texelFetch(nodes, int(3u * index + 2u));
+  return GpuBvhNode(uintBitsToFloat(a.xyz), a.w, uintBitsToFloat(b.xyz), b.w, c.x, c.y, c.z, c.w);
+}
+
+vec3 box_corner(uint slot, uint corner) { return uintBitsToFloat(texelFetch(boxes, int(2u * slot + corner)).xyz); }
 
 float plane_distance(vec4 plane, vec3 p) {
   precise float s = plane.x * p.x + plane.y * p.y + plane.z * p.z + plane.w;
@@ -108,7 +118,7 @@ void note_overflow() { atomicOr(state.overflow, 1u); }
 
 // Writes a visible object's outputs: class, list slot, draw.
 void emit_visible(uint view, uint object, uint slot, uint c) {
-  classes[view * params.object_count + object] = c;
+  if (params.write_classes != 0u) classes[view * params.object_count + object] = c;
   if (slot < params.visible_capacity) {
     visible_ids[view * params.visible_capacity + slot] = object;
     if (WRITE_DRAWS != 0) {
@@ -176,7 +186,7 @@ bool test_node(bool has_node, uint index, uint view, uint mask, out uint straddl
   node.leaf = 1u;
   node.second_child = 0u;
   if (has_node) {
-    node = nodes[index];
+    node = load_node(index);
     c = classify_masked(node.box_min, node.box_max, mask, straddled);
   }
   second_child = node.second_child;
@@ -322,8 +332,8 @@ void test() {
     object = object_ids[item.index];
     uint mask = item.view_mask & MASK, unused;
     // An empty mask: an object of an INSIDE subtree, accepted without a test.
-    c = mask == 0u ? CLASS_INSIDE : classify_masked(boxes[item.index].min_corner.xyz, boxes[item.index].max_corner.xyz, mask, unused);
-    classes[view * params.object_count + object] = c;
+    c = mask == 0u ? CLASS_INSIDE : classify_masked(box_corner(item.index, 0u), box_corner(item.index, 1u), mask, unused);
+    if (params.write_classes != 0u) classes[view * params.object_count + object] = c;
   }
   bool visible = c != CLASS_OUTSIDE;
   if (subgroupAllEqual(view)) {  // the usual case: one atomic per subgroup

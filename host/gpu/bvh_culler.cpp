@@ -17,6 +17,10 @@ namespace cullpipe::gpu {
 namespace {
 
 constexpr VkBufferUsageFlags kStorage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
+constexpr VkBufferUsageFlags kTexel = VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT;
+// Object boxes and nodes are read through uniform texel buffers (see cull_bvh.comp).
+constexpr std::uint32_t kTexelBindings = 1u << BINDING_BOUNDS | 1u << BVH_BINDING_NODES;
+constexpr std::uint32_t kStorageBindings = BVH_BINDING_COUNT - 2;
 
 }  // namespace
 
@@ -25,13 +29,15 @@ BvhCuller::BvhCuller(const vk::Context& ctx) : ctx_(ctx) {
   if (limits.maxComputeWorkGroupSize[0] < BVH_CULL_GROUP_SIZE || limits.maxComputeWorkGroupInvocations < BVH_CULL_GROUP_SIZE)
     throw vk::Error("hierarchical culling needs workgroups of " + std::to_string(BVH_CULL_GROUP_SIZE) + " invocations; " +
                     ctx_.info().name + " allows " + std::to_string(limits.maxComputeWorkGroupInvocations));
-  if (limits.maxPerStageDescriptorStorageBuffers < BVH_BINDING_COUNT)
-    throw vk::Error("hierarchical culling needs " + std::to_string(BVH_BINDING_COUNT) + " storage buffers per stage; " +
+  if (limits.maxPerStageDescriptorStorageBuffers < kStorageBindings)
+    throw vk::Error("hierarchical culling needs " + std::to_string(kStorageBindings) + " storage buffers per stage; " +
                     ctx_.info().name + " allows " + std::to_string(limits.maxPerStageDescriptorStorageBuffers));
+  detail::check_texel_format(ctx_, "hierarchical culling");
   detail::check_subgroup_operations(ctx_, VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_VOTE_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT |
                                               VK_SUBGROUP_FEATURE_BALLOT_BIT | VK_SUBGROUP_FEATURE_SHUFFLE_BIT,
                                     "hierarchical culling");
-  resources_ = std::make_unique<detail::PassResources>(ctx_, pipeline(BVH_PASS_LEVEL, false).set_layout(), BVH_BINDING_COUNT);
+  resources_ = std::make_unique<detail::PassResources>(ctx_, pipeline(BVH_PASS_LEVEL, false).set_layout(), BVH_BINDING_COUNT,
+                                                      kTexelBindings);
 }
 
 BvhCuller::~BvhCuller() = default;
@@ -46,7 +52,7 @@ const vk::ComputePipeline& BvhCuller::pipeline(std::uint32_t pass, bool draws) {
   const std::uint32_t spec[4] = {pass, group_size_, 0u, draws ? 1u : 0u};
   slot = std::make_unique<vk::ComputePipeline>(
       ctx_, vk::ComputePipelineDesc{std::span<const std::uint32_t>(cullpipe_cull_bvh_spv),
-                                    BVH_BINDING_COUNT, sizeof(BvhCullParams), spec, name.c_str()});
+                                    BVH_BINDING_COUNT, sizeof(BvhCullParams), spec, name.c_str(), kTexelBindings});
   return *slot;
 }
 
@@ -110,12 +116,12 @@ void BvhCuller::upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes) {
   }
 
   const VkDeviceSize box_bytes = VkDeviceSize(n) * sizeof(GpuAabb), node_bytes = VkDeviceSize(nodes) * sizeof(GpuBvhNode);
-  detail::check_storage_range(ctx_, box_bytes, std::to_string(n) + " object boxes");
-  detail::check_storage_range(ctx_, node_bytes, std::to_string(nodes) + " BVH nodes");
+  detail::check_texel_range(ctx_, box_bytes, std::to_string(n) + " object boxes");
+  detail::check_texel_range(ctx_, node_bytes, std::to_string(nodes) + " BVH nodes");
   object_count_ = node_count_ = 0;  // stay 0 if an allocation below fails
   bool& dirty = descriptors_dirty_;
-  detail::ensure_buffer(ctx_, bounds_, box_bytes, kStorage, "object box buffer", dirty);
-  detail::ensure_buffer(ctx_, nodes_, node_bytes, kStorage, "BVH node buffer", dirty);
+  detail::ensure_buffer(ctx_, bounds_, box_bytes, kTexel, "object box buffer", dirty);
+  detail::ensure_buffer(ctx_, nodes_, node_bytes, kTexel, "BVH node buffer", dirty);
   detail::ensure_buffer(ctx_, objects_, VkDeviceSize(n) * sizeof(std::uint32_t), kStorage, "BVH object order buffer", dirty);
   auto gpu_boxes = bounds_.as<GpuAabb>();
   for (std::size_t i = 0; i < n; ++i) gpu_boxes[i] = pack(boxes[tree.objects[i]]);  // tree order
@@ -183,8 +189,8 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   check(range_bytes, views_x + "accepted ranges");
   check(test_bytes, views_x + std::to_string(object_count_) + " object tests (work queue)");
   bool& dirty = descriptors_dirty_;
-  detail::ensure_buffer(ctx_, bounds_, 0, kStorage, "object box buffer", dirty);
-  detail::ensure_buffer(ctx_, nodes_, 0, kStorage, "BVH node buffer", dirty);
+  detail::ensure_buffer(ctx_, bounds_, 0, kTexel, "object box buffer", dirty);
+  detail::ensure_buffer(ctx_, nodes_, 0, kTexel, "BVH node buffer", dirty);
   detail::ensure_buffer(ctx_, objects_, 0, kStorage, "BVH object order buffer", dirty);
   detail::ensure_buffer(ctx_, templates_, 0, kStorage, "draw template buffer", dirty);
   detail::ensure_buffer(ctx_, classes_, outputs, kStorage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, "classification buffer", dirty);
@@ -225,6 +231,7 @@ void BvhCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
   params.range_capacity = std::uint32_t(range_capacity_);
   params.test_capacity = std::uint32_t(test_capacity_);
   params.max_groups_x = ctx_.properties().limits.maxComputeWorkGroupCount[0];
+  params.write_classes = last_options_.classes ? 1u : 0u;
   const bool draws = last_options_.draws;
   VkDescriptorSet set = resources_->set();
   auto bind = [&](std::uint32_t pass) {

@@ -46,6 +46,14 @@ void check_storage_range(const vk::Context& ctx, VkDeviceSize bytes, const std::
                             std::to_string(limit) + " bytes, " + mib(limit) + ")");
 }
 
+void check_texel_range(const vk::Context& ctx, VkDeviceSize bytes, const std::string& what) {
+  const VkDeviceSize limit = VkDeviceSize(ctx.properties().limits.maxTexelBufferElements) * kTexelBytes;
+  if (bytes > limit)
+    throw std::length_error(what + " needs " + std::to_string(bytes) + " bytes (" + mib(bytes) + "), more than one texel buffer view covers on " +
+                            ctx.info().name + " (maxTexelBufferElements " + std::to_string(ctx.properties().limits.maxTexelBufferElements) +
+                            " of 16 bytes, " + mib(limit) + ")");
+}
+
 void check_texel_format(const vk::Context& ctx, const std::string& who) {
   VkFormatProperties props{};
   vkGetPhysicalDeviceFormatProperties(ctx.physical_device(), kTexelFormat, &props);

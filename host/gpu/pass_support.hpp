@@ -29,6 +29,10 @@ void check_subgroup_operations(const vk::Context& ctx, VkSubgroupFeatureFlags ne
 
 void check_storage_range(const vk::Context& ctx, VkDeviceSize bytes, const std::string& what);
 
+/// Throws std::length_error naming `what`, its size and the device limit when `bytes` exceed
+/// one texel buffer view (maxTexelBufferElements texels of kTexelBytes).
+void check_texel_range(const vk::Context& ctx, VkDeviceSize bytes, const std::string& what);
+
 /// Throws vk::Error naming `who` unless the device reads kTexelFormat from uniform texel
 /// buffers (a format the Vulkan spec makes mandatory; checked for a clear error anyway).
 void check_texel_format(const vk::Context& ctx, const std::string& who);

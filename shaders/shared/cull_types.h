@@ -206,7 +206,7 @@ struct BvhCullParams {
   uint test_capacity;     // object tests
   uint level;             // LEVEL: which LEVEL dispatch this is (its input queue half = level & 1)
   uint max_groups_x;      // maxComputeWorkGroupCount[0]: larger dispatches fold into y
-  uint reserved0;
+  uint write_classes;     // 0: per-object classes are not read back and not written
   uint reserved1;
   uint reserved2;
 };
@@ -214,7 +214,7 @@ struct BvhCullParams {
 // Storage-buffer bindings of the hierarchical passes (set 0). 0..6 mean what they mean for
 // the flat pass, except that BINDING_BOUNDS holds the GpuAabb of each object in tree order (the
 // order of BVH_BINDING_OBJECTS), so a leaf's boxes are read together.
-CP_CONST BVH_BINDING_NODES = 7u;      // GpuBvhNode, depth first
+CP_CONST BVH_BINDING_NODES = 7u;      // GpuBvhNode, depth first (a uniform texel buffer, like BINDING_BOUNDS)
 CP_CONST BVH_BINDING_OBJECTS = 8u;    // object ids in tree order
 CP_CONST BVH_BINDING_QUEUE = 9u;      // BvhWorkItem: two halves of queue_capacity
 CP_CONST BVH_BINDING_RANGES = 10u;    // BvhRange
