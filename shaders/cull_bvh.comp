@@ -12,7 +12,7 @@
 //           last workgroup to finish (a counter, as in AMD FidelityFX SPD) writes the
 //           indirect arguments of the next LEVEL dispatch
 //   FINISH  indirect arguments for ACCEPT and TEST
-//   ACCEPT  every object of an accepted chunk is INSIDE
+//   ACCEPT  every object of an accepted chunk is INSIDE (list slots reserved by LEVEL)
 //   TEST    each object of an INTERSECTING leaf is tested on the straddled planes
 // An INSIDE subtree's object range is split so that no invocation idles on a small subtree:
 // full chunks of the workgroup size go to ACCEPT (one workgroup each), the rest to the dense
@@ -205,6 +205,20 @@ bool test_node(bool has_node, uint index, uint view, uint mask, out uint straddl
     note_overflow();  // writes nothing (stays in uniform control flow)
     tests_wanted = full = 0u;
   }
+  // The accepted chunks' objects are visible and INSIDE: their list slots are reserved now, so
+  // ACCEPT writes them without atomics.
+  uint accepted = full * gl_WorkGroupSize.x, slot_base = 0u;
+  if (subgroupAllEqual(view)) {
+    uint total = subgroupAdd(accepted), base = 0u;
+    if (subgroupElect() && total > 0u) {
+      base = atomicAdd(counters[view].visible_count, total);
+      atomicAdd(counters[view].inside_count, total);
+    }
+    slot_base = subgroupBroadcastFirst(base) + subgroupExclusiveAdd(accepted);
+  } else if (accepted > 0u) {
+    slot_base = atomicAdd(counters[view].visible_count, accepted);
+    atomicAdd(counters[view].inside_count, accepted);
+  }
   // Test entries and chunks are written by the whole subgroup, lane by lane: a lane with many
   // (an INSIDE subtree's remainder, a large accepted range) does not keep the others idle.
   uint view_mask = (view << BVH_MASK_BITS) | (c == CLASS_INSIDE ? 0u : straddled);
@@ -219,8 +233,10 @@ bool test_node(bool has_node, uint index, uint view, uint mask, out uint straddl
     for (uint k = gl_SubgroupInvocationID; k < n_tests; k += gl_SubgroupSize)
       tests[lane_test_base + k] = BvhWorkItem(lane_first_test + k, lane_view_mask);
     uint lane_range_base = subgroupShuffle(range_base, lane), lane_first = subgroupShuffle(node.first, lane);
+    uint lane_slot = subgroupShuffle(slot_base, lane);
     for (uint k = gl_SubgroupInvocationID; k < n_full; k += gl_SubgroupSize)
-      ranges[lane_range_base + k] = BvhRange(lane_first + k * gl_WorkGroupSize.x, gl_WorkGroupSize.x, lane_view_mask >> BVH_MASK_BITS, 0u);
+      ranges[lane_range_base + k] = BvhRange(lane_first + k * gl_WorkGroupSize.x, gl_WorkGroupSize.x, lane_view_mask >> BVH_MASK_BITS,
+                                             lane_slot + k * gl_WorkGroupSize.x);
   }
   return c == CLASS_INTERSECTING && node.leaf == 0u;
 }
@@ -295,31 +311,20 @@ void finish() {
   // After an overflow the lists may have holes: run nothing more (the host reports it).
   bool ok = state.overflow == 0u;
   uint chunks = ok ? min(state.range_count, params.range_capacity) : 0u;
-  state.accept = dispatch_for(chunks, chunks);
+  state.accept = dispatch_for(min(chunks, BVH_ACCEPT_MAX_GROUPS), chunks);
   uint objects = ok ? min(state.test_count, params.test_capacity) : 0u;
   state.test = dispatch_for((objects + gl_WorkGroupSize.x - 1u) / gl_WorkGroupSize.x, objects);
 }
 
 void accept() {
-  // One workgroup per chunk; every invocation of the workgroup has the same view.
-  uint chunk = flat_group();
-  if (chunk >= state.accept.items) return;  // uniform across the workgroup
-  BvhRange range = ranges[chunk];
-  bool in_chunk = gl_LocalInvocationIndex < range.count;
-  uvec4 ballot = subgroupBallot(in_chunk);
-  uint total = subgroupBallotBitCount(ballot);
-  uint base = 0u;
-  if (subgroupElect() && total > 0u) {
-    base = atomicAdd(counters[range.view].visible_count, total);
-    atomicAdd(counters[range.view].inside_count, total);
-  }
-  base = subgroupBroadcastFirst(base);
-  if (in_chunk) {
-    uint object = object_ids[range.first + gl_LocalInvocationIndex];
-    emit_visible(range.view, object, base + subgroupBallotExclusiveBitCount(ballot), CLASS_INSIDE);
+  // Every chunk is full (one object per invocation) and its slots are reserved: no atomics.
+  uint groups = gl_NumWorkGroups.x * gl_NumWorkGroups.y;
+  for (uint chunk = flat_group(); chunk < state.accept.items; chunk += groups) {  // uniform across the workgroup
+    BvhRange range = ranges[chunk];
+    if (gl_LocalInvocationIndex < range.count)
+      emit_visible(range.view, object_ids[range.first + gl_LocalInvocationIndex], range.slot + gl_LocalInvocationIndex, CLASS_INSIDE);
   }
 }
-
 
 void test() {
   uint i = flat_group() * gl_WorkGroupSize.x + gl_LocalInvocationIndex;

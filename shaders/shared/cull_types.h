@@ -162,13 +162,18 @@ struct BvhWorkItem {
   uint view_mask;
 };
 
-// BVH_CULL_GROUP_SIZE objects of an INSIDE subtree, accepted by one workgroup.
+// BVH_CULL_GROUP_SIZE objects of an INSIDE subtree, accepted by one workgroup. Their slots in
+// the view's visible list were reserved when the range was queued.
 struct BvhRange {
   uint first;  // index into the object-order buffer
   uint count;
   uint view;
-  uint reserved;
+  uint slot;   // visible-list slot of the range's first object
 };
+
+// Most workgroups an ACCEPT dispatch uses; each loops over every so-many-th chunk (on lavapipe
+// a workgroup costs about as much to start as its 64 objects cost to accept).
+CP_CONST BVH_ACCEPT_MAX_GROUPS = 256u;
 
 // Indirect dispatch arguments (x, y, z = VkDispatchIndirectCommand) and the items they cover.
 struct BvhDispatch {
