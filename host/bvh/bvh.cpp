@@ -8,6 +8,7 @@
 #include <array>
 #include <bit>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <stdexcept>
 #if defined(__SSE2__)
@@ -16,6 +17,7 @@
 
 #include "bvh/box_ops.hpp"
 #include "geom/pn_vertex.hpp"
+#include "geom/rounding.hpp"
 
 namespace cullpipe::bvh {
 
@@ -33,6 +35,92 @@ Classification classify_masked(const Aabb& box, const Frustum& frustum, std::uin
     if (plane.distance(v.n) < 0.0f) straddled |= 1u << k;
   }
   return straddled ? Classification::Intersecting : Classification::Inside;
+}
+
+Classification classify_masked_margin(const Aabb& box, const Frustum& frustum, std::uint32_t mask, std::uint32_t& straddled) {
+  straddled = 0;
+  // Evaluated in this order, as in shaders/cull_bvh.comp (the margin is part of the contract).
+  const float reach = std::max(std::abs(box.min.x), std::abs(box.max.x)) + std::max(std::abs(box.min.y), std::abs(box.max.y)) +
+                      std::max(std::abs(box.min.z), std::abs(box.max.z));
+  const auto planes = frustum.active();
+  for (std::uint32_t k = 0; k < planes.size(); ++k) {
+    if (!(mask & (1u << k))) continue;
+    const Plane& plane = planes[k];
+    const float margin = kBvhMarginScale * (reach + std::abs(plane.d)) + kBvhMarginFloor;
+    const bool certain = margin < std::numeric_limits<float>::infinity();  // an overflowing margin decides nothing
+    const PnVertices v = pn_vertices(plane.normal, box);
+    if (certain && plane.distance(v.p) < -margin) return Classification::Outside;
+    if (!certain || plane.distance(v.n) < margin) straddled |= 1u << k;
+  }
+  return straddled ? Classification::Intersecting : Classification::Inside;
+}
+
+Classification classify_object(const Aabb& box, const Frustum& frustum, std::uint32_t mask) {
+  std::uint32_t unused = 0;
+  return classify_masked(box, frustum, mask, unused);
+}
+
+Classification classify_object(const Obb& box, const Frustum& frustum, std::uint32_t mask) {
+  // cull/reference.cpp classify(const Obb&), on the planes in `mask`.
+  bool intersecting = false;
+  const auto planes = frustum.active();
+  for (std::uint32_t k = 0; k < planes.size(); ++k) {
+    if (!(mask & (1u << k))) continue;
+    const Plane& plane = planes[k];
+    const glm::vec3& n = plane.normal;
+    const float s = plane.distance(box.center);
+    const glm::vec3 &u0 = box.basis[0], &u1 = box.basis[1], &u2 = box.basis[2];
+    const float n_dot_u0 = n.x * u0.x + n.y * u0.y + n.z * u0.z;
+    const float n_dot_u1 = n.x * u1.x + n.y * u1.y + n.z * u1.z;
+    const float n_dot_u2 = n.x * u2.x + n.y * u2.y + n.z * u2.z;
+    const float r = std::abs(n_dot_u0) * box.half_extents.x + std::abs(n_dot_u1) * box.half_extents.y +
+                    std::abs(n_dot_u2) * box.half_extents.z;
+    if (s < -r) return Classification::Outside;
+    if (s < r) intersecting = true;
+  }
+  return intersecting ? Classification::Intersecting : Classification::Inside;
+}
+
+Classification classify_object(const Sphere& sphere, const Frustum& frustum, std::uint32_t mask) {
+  // cull/reference.cpp classify(const Sphere&), on the planes in `mask`.
+  bool intersecting = false;
+  const auto planes = frustum.active();
+  for (std::uint32_t k = 0; k < planes.size(); ++k) {
+    if (!(mask & (1u << k))) continue;
+    const float s = planes[k].distance(sphere.center);
+    if (s < -sphere.radius) return Classification::Outside;
+    if (s < sphere.radius) intersecting = true;
+  }
+  return intersecting ? Classification::Intersecting : Classification::Inside;
+}
+
+namespace {
+
+// One float step below round_down(v) / above round_up(v): the double arithmetic before the
+// rounding may itself have rounded, by far less than a float step.
+float below(double v) { return std::nextafter(round_down(v), -std::numeric_limits<float>::infinity()); }
+float above(double v) { return std::nextafter(round_up(v), std::numeric_limits<float>::infinity()); }
+
+}  // namespace
+
+Aabb enclosing_box(const Obb& box) {
+  Aabb out;
+  for (int j = 0; j < 3; ++j) {
+    double extent = 0.0;
+    for (int i = 0; i < 3; ++i) extent += std::abs(double(box.basis[i][j])) * double(box.half_extents[i]);
+    out.min[j] = below(double(box.center[j]) - extent);
+    out.max[j] = above(double(box.center[j]) + extent);
+  }
+  return out;
+}
+
+Aabb enclosing_box(const Sphere& sphere) {
+  Aabb out;
+  for (int j = 0; j < 3; ++j) {
+    out.min[j] = below(double(sphere.center[j]) - double(sphere.radius));
+    out.max[j] = above(double(sphere.center[j]) + double(sphere.radius));
+  }
+  return out;
 }
 
 namespace {
@@ -431,9 +519,12 @@ FlatTree flatten(const Tree& tree) {
   return out;
 }
 
-HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Aabb> boxes, const Frustum& frustum) {
+namespace {
+
+template <class Volume>
+HierarchicalResult cull_hierarchical_impl(const FlatTree& tree, std::span<const Volume> volumes, const Frustum& frustum) {
   HierarchicalResult r;
-  r.classes.assign(boxes.size(), Classification::Outside);
+  r.classes.assign(volumes.size(), Classification::Outside);
   if (tree.nodes.empty()) return r;
   const std::uint32_t all = (1u << frustum.active().size()) - 1u;
   std::vector<std::pair<std::uint32_t, std::uint32_t>> stack{{0, all}};  // (node, planes to test)
@@ -443,7 +534,7 @@ HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Aabb>
     const FlatNode& node = tree.nodes[i];
     ++r.node_tests;
     std::uint32_t straddled = 0;
-    const Classification c = classify_masked(node.box, frustum, mask, straddled);
+    const Classification c = classify_node<Volume>(node.box, frustum, mask, straddled);
     if (c == Classification::Outside) continue;
     if (c == Classification::Inside) {  // the whole range, no further tests
       for (std::uint32_t k = node.first; k < node.first + node.count; ++k) r.classes[tree.objects[k]] = Classification::Inside;
@@ -451,8 +542,7 @@ HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Aabb>
     }
     if (node.leaf) {
       for (std::uint32_t k = node.first; k < node.first + node.count; ++k) {
-        std::uint32_t unused = 0;
-        r.classes[tree.objects[k]] = classify_masked(boxes[tree.objects[k]], frustum, straddled, unused);
+        r.classes[tree.objects[k]] = classify_object(volumes[tree.objects[k]], frustum, straddled);
         ++r.object_tests;
       }
       continue;
@@ -466,6 +556,18 @@ HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Aabb>
     r.inside += c == Classification::Inside;
   }
   return r;
+}
+
+}  // namespace
+
+HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Aabb> boxes, const Frustum& frustum) {
+  return cull_hierarchical_impl(tree, boxes, frustum);
+}
+HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Obb> volumes, const Frustum& frustum) {
+  return cull_hierarchical_impl(tree, volumes, frustum);
+}
+HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Sphere> volumes, const Frustum& frustum) {
+  return cull_hierarchical_impl(tree, volumes, frustum);
 }
 
 }  // namespace cullpipe::bvh

@@ -2,11 +2,14 @@
 #include <cstdint>
 #include <span>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "geom/aabb.hpp"
 #include "geom/classification.hpp"
 #include "geom/frustum.hpp"
+#include "geom/obb.hpp"
+#include "geom/sphere.hpp"
 
 /// Bounding volume hierarchies over object AABBs (issue 4, first part): the binned-SAH
 /// top-down builder, quality metrics, validation, the depth-first flattening with skip
@@ -80,6 +83,56 @@ FlatTree flatten(const Tree& tree);
 /// of every hierarchical traversal (CPU, fast CPU; the shader mirrors it).
 Classification classify_masked(const Aabb& box, const Frustum& frustum, std::uint32_t mask, std::uint32_t& straddled);
 
+/// Hierarchies over OBBs or spheres: the tree is built over each volume's enclosing box and
+/// its nodes are tested with a margin, so that a node is OUTSIDE (or INSIDE a plane) only when
+/// every volume in it is, as the volume's own float test computes it.
+///
+/// Why a margin: for boxes, float sums and products are monotone, so a node's p/n-vertex test
+/// and its boxes' tests can never disagree. An OBB's or a sphere's test rounds differently
+/// from its enclosing box's, so without a margin an object touching a plane could be found
+/// visible by flat culling and dropped with its node (or the other way round). The margin is
+/// kBvhMarginScale x (sum over axes of the node's largest |coordinate| + |d|), far above the
+/// rounding error of both tests (about 12 units in the last place of that sum); nodes
+/// within it of a plane are INTERSECTING and their objects get their own test. Then every
+/// object's class equals flat culling's exactly (tests/test_bvh_volumes.cpp tries objects
+/// exactly on the planes).
+inline constexpr float kBvhMarginScale = 0x1p-16f;
+/// Added to every margin so that rounding of subnormal numbers is covered too.
+inline constexpr float kBvhMarginFloor = 0x1p-120f;
+
+/// The box a hierarchy stores for a volume: its axis-aligned bounds computed in double and
+/// rounded outward (one float step beyond), so it contains the volume exactly.
+Aabb enclosing_box(const Obb& box);
+Aabb enclosing_box(const Sphere& sphere);
+inline Aabb enclosing_box(const Aabb& box) { return box; }
+template <class Volume>
+std::vector<Aabb> enclosing_boxes(std::span<const Volume> volumes) {
+  std::vector<Aabb> boxes(volumes.size());
+  for (std::size_t i = 0; i < volumes.size(); ++i) boxes[i] = enclosing_box(volumes[i]);
+  return boxes;
+}
+
+/// classify_masked with the margin above: the node test of hierarchies over OBBs and spheres.
+/// OUTSIDE when the p-vertex is more than the margin behind a plane in `mask`; a plane goes to
+/// `straddled` unless the n-vertex is at least the margin in front. A margin that overflows
+/// to infinity decides nothing: the plane is straddled.
+Classification classify_masked_margin(const Aabb& box, const Frustum& frustum, std::uint32_t mask, std::uint32_t& straddled);
+
+/// The object tests of hierarchical culling, on the planes in `mask` only; the same float
+/// operations as the reference's flat tests (cull/reference.hpp).
+Classification classify_object(const Aabb& box, const Frustum& frustum, std::uint32_t mask);
+Classification classify_object(const Obb& box, const Frustum& frustum, std::uint32_t mask);
+Classification classify_object(const Sphere& sphere, const Frustum& frustum, std::uint32_t mask);
+
+/// The node test of a hierarchy over `Volume`.
+template <class Volume>
+Classification classify_node(const Aabb& box, const Frustum& frustum, std::uint32_t mask, std::uint32_t& straddled) {
+  if constexpr (std::is_same_v<Volume, Aabb>)
+    return classify_masked(box, frustum, mask, straddled);
+  else
+    return classify_masked_margin(box, frustum, mask, straddled);
+}
+
 /// The scalar hierarchical cull (the reference for GPU traversal): each node box is tested
 /// with the p/n-vertex test against the planes its parent straddles (plane masking, Assarsson
 /// & Moller 2000); OUTSIDE drops the subtree, INSIDE accepts its object range without tests,
@@ -93,5 +146,10 @@ struct HierarchicalResult {
   std::size_t visible = 0, inside = 0;
 };
 HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Aabb> boxes, const Frustum& frustum);
+/// The same over OBBs or spheres: the tree's node boxes must enclose enclosing_box() of each of
+/// its volumes (build the tree over enclosing_boxes()). Every object's class equals flat
+/// culling's (see kBvhMarginScale).
+HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Obb> volumes, const Frustum& frustum);
+HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Sphere> volumes, const Frustum& frustum);
 
 }  // namespace cullpipe::bvh
