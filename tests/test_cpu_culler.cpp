@@ -314,6 +314,52 @@ TEST(CpuBvhCuller, RefusesATreeOfOtherBoxes) {
   EXPECT_THROW(culler.upload(repeated, boxes), std::invalid_argument);
 }
 
+TEST(CpuBvhCuller, ObbsAndSpheresEqualTheScalarTraversalAndFlatCulling) {
+  test::Rng rng{17};
+  const std::vector<Frustum> views = test_views();
+  for (std::size_t n : {0u, 1u, 7u, 3000u, 40000u}) {
+    const test::RandomVolumes v = test::random_volumes(rng, n, 30.0f, 2.0f);
+    const bvh::FlatTree obb_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(v.obbs))));
+    const bvh::FlatTree sphere_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Sphere>(v.spheres))));
+    for (unsigned threads : {1u, 2u, 3u}) {
+      fast::CpuBvhCuller culler(threads);
+      bvh::HierarchicalResult got;
+      for (std::size_t view = 0; view < views.size(); ++view) {
+        const std::string what = "n=" + std::to_string(n) + " threads=" + std::to_string(threads) + " view " + std::to_string(view);
+        culler.upload(obb_tree, std::span<const Obb>(v.obbs));
+        EXPECT_EQ(culler.kind(), BvKind::Obb);
+        culler.cull(views[view], got);
+        expect_same_traversal(bvh::cull_hierarchical(obb_tree, std::span<const Obb>(v.obbs), views[view]), got, "obb " + what);
+        std::vector<Classification> flat(n);
+        reference::classify_all(std::span<const Obb>(v.obbs), views[view], flat);
+        EXPECT_EQ(got.classes, flat) << "obb " << what;
+        culler.upload(sphere_tree, std::span<const Sphere>(v.spheres));
+        culler.cull(views[view], got);
+        expect_same_traversal(bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(v.spheres), views[view]), got, "sphere " + what);
+        reference::classify_all(std::span<const Sphere>(v.spheres), views[view], flat);
+        EXPECT_EQ(got.classes, flat) << "sphere " << what;
+        if (HasFatalFailure()) return;
+      }
+    }
+  }
+}
+
+TEST(CpuBvhCuller, RefusesLeavesThatDoNotEncloseTheirVolumes) {
+  test::Rng rng{19};
+  const test::RandomVolumes v = test::random_volumes(rng, 200, 30.0f, 2.0f);
+  fast::CpuBvhCuller culler(2);
+  // A tree over the spheres' centres only (not their enclosing boxes).
+  std::vector<Aabb> centres;
+  for (const Sphere& s : v.spheres) centres.push_back({s.center, s.center});
+  const bvh::FlatTree tree = bvh::flatten(bvh::build("binned-sah", centres));
+  try {
+    culler.upload(tree, std::span<const Sphere>(v.spheres));
+    ADD_FAILURE() << "a tree over the centres was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("enclosing_boxes"), std::string::npos) << e.what();
+  }
+}
+
 TEST(ThreadPool, RunsEveryTaskOnceAndRethrows) {
   fast::ThreadPool pool(3);
   for (int round = 0; round < 200; ++round) {

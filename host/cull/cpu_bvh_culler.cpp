@@ -32,23 +32,46 @@ CpuBvhCuller::~CpuBvhCuller() = default;
 
 unsigned CpuBvhCuller::threads() const { return pool_->size(); }
 
-void CpuBvhCuller::upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes) {
-  if (tree.objects.size() != boxes.size())
+template <class Volume>
+void CpuBvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> volumes, std::vector<Volume>& out) {
+  const std::string kind(to_string(kind_of<Volume>()));
+  if (tree.objects.size() != volumes.size())
     throw std::invalid_argument("CpuBvhCuller::upload: the tree holds " + std::to_string(tree.objects.size()) + " objects, " +
-                                std::to_string(boxes.size()) + " boxes given");
+                                std::to_string(volumes.size()) + " " + kind + " volumes given");
   // Each id exactly once: the threads write classes by id, so a repeated id would be a race.
-  std::vector<Aabb> ordered(boxes.size());
-  std::vector<bool> seen(boxes.size(), false);
+  std::vector<Volume> ordered(volumes.size());
+  std::vector<bool> seen(volumes.size(), false);
   for (std::size_t k = 0; k < tree.objects.size(); ++k) {
     const std::uint32_t id = tree.objects[k];
-    if (id >= boxes.size()) throw std::invalid_argument("CpuBvhCuller::upload: object id " + std::to_string(id) + " out of range");
+    if (id >= volumes.size()) throw std::invalid_argument("CpuBvhCuller::upload: object id " + std::to_string(id) + " out of range");
     if (seen[id]) throw std::invalid_argument("CpuBvhCuller::upload: object id " + std::to_string(id) + " appears twice");
     seen[id] = true;
-    ordered[k] = boxes[id];
+    ordered[k] = volumes[id];
+  }
+  // A leaf that does not enclose its volumes could drop a visible one.
+  for (std::size_t i = 0; i < tree.nodes.size(); ++i) {
+    const bvh::FlatNode& node = tree.nodes[i];
+    if (!node.leaf) continue;
+    if (std::size_t(node.first) + node.count > ordered.size())
+      throw std::invalid_argument("CpuBvhCuller::upload: node " + std::to_string(i) + ": object range past the object list");
+    for (std::uint32_t k = node.first; k < node.first + node.count; ++k) {
+      const Aabb b = bvh::enclosing_box(ordered[k]);
+      if (!glm::all(glm::lessThanEqual(node.box.min, b.min)) || !glm::all(glm::lessThanEqual(b.max, node.box.max)))
+        throw std::invalid_argument("CpuBvhCuller::upload: leaf " + std::to_string(i) + " does not enclose " + kind + " " +
+                                    std::to_string(tree.objects[k]) + (std::is_same_v<Volume, Aabb> ? "" : " (build the tree over bvh::enclosing_boxes)"));
+    }
   }
   tree_ = tree;
-  boxes_in_tree_order_ = std::move(ordered);
+  boxes_.clear();
+  obbs_.clear();
+  spheres_.clear();
+  out = std::move(ordered);
+  kind_ = kind_of<Volume>();
 }
+
+void CpuBvhCuller::upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes) { upload_impl(tree, boxes, boxes_); }
+void CpuBvhCuller::upload(const bvh::FlatTree& tree, std::span<const Obb> obbs) { upload_impl(tree, obbs, obbs_); }
+void CpuBvhCuller::upload(const bvh::FlatTree& tree, std::span<const Sphere> spheres) { upload_impl(tree, spheres, spheres_); }
 
 bvh::HierarchicalResult CpuBvhCuller::cull(const Frustum& frustum) {
   bvh::HierarchicalResult r;
@@ -57,7 +80,17 @@ bvh::HierarchicalResult CpuBvhCuller::cull(const Frustum& frustum) {
 }
 
 void CpuBvhCuller::cull(const Frustum& frustum, bvh::HierarchicalResult& r) {
-  const std::size_t n = boxes_in_tree_order_.size();
+  if (kind_ == BvKind::Obb)
+    cull_impl(frustum, r, obbs_);
+  else if (kind_ == BvKind::Sphere)
+    cull_impl(frustum, r, spheres_);
+  else
+    cull_impl(frustum, r, boxes_);
+}
+
+template <class Volume>
+void CpuBvhCuller::cull_impl(const Frustum& frustum, bvh::HierarchicalResult& r, const std::vector<Volume>& volumes) {
+  const std::size_t n = volumes.size();
   const std::vector<bvh::FlatNode>& nodes = tree_.nodes;
   const std::vector<std::uint32_t>& objects = tree_.objects;
   r.classes.resize(n);
@@ -90,7 +123,7 @@ void CpuBvhCuller::cull(const Frustum& frustum, bvh::HierarchicalResult& r) {
     }
     ++top.node_tests;
     std::uint32_t straddled = 0;
-    const Classification c = bvh::classify_masked(node.box, frustum, t.mask_or_count, straddled);
+    const Classification c = bvh::classify_node<Volume>(node.box, frustum, t.mask_or_count, straddled);
     if (c == Classification::Outside) continue;
     if (c == Classification::Inside) {
       accept(node.first, node.count);
@@ -120,7 +153,7 @@ void CpuBvhCuller::cull(const Frustum& frustum, bvh::HierarchicalResult& r) {
       const bvh::FlatNode& node = nodes[i];
       ++tally.node_tests;
       std::uint32_t straddled = 0;
-      const Classification c = bvh::classify_masked(node.box, frustum, mask, straddled);
+      const Classification c = bvh::classify_node<Volume>(node.box, frustum, mask, straddled);
       if (c == Classification::Outside) continue;
       if (c == Classification::Inside) {
         for (std::uint32_t k = node.first; k < node.first + node.count; ++k) r.classes[objects[k]] = Classification::Inside;
@@ -130,8 +163,7 @@ void CpuBvhCuller::cull(const Frustum& frustum, bvh::HierarchicalResult& r) {
       }
       if (node.leaf) {
         for (std::uint32_t k = node.first; k < node.first + node.count; ++k) {
-          std::uint32_t unused = 0;
-          const Classification oc = bvh::classify_masked(boxes_in_tree_order_[k], frustum, straddled, unused);
+          const Classification oc = bvh::classify_object(volumes[k], frustum, straddled);
           r.classes[objects[k]] = oc;
           ++tally.object_tests;
           tally.visible += oc != Classification::Outside;

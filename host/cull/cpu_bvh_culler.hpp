@@ -6,7 +6,10 @@
 
 #include "bvh/bvh.hpp"
 #include "geom/aabb.hpp"
+#include "geom/bv_kind.hpp"
 #include "geom/frustum.hpp"
+#include "geom/obb.hpp"
+#include "geom/sphere.hpp"
 
 namespace cullpipe::fast {
 
@@ -23,6 +26,10 @@ class ThreadPool;
 /// one thread. INSIDE ranges are split into chunks so one large accepted subtree still uses
 /// every core. Objects are written by id, and a subtree's objects are its own, so no two
 /// threads write the same class.
+///
+/// The objects may be AABBs, OBBs or spheres (bvh::cull_hierarchical's three forms: a tree
+/// over OBBs or spheres is built over bvh::enclosing_boxes and its nodes are tested with a
+/// margin, so every class still equals flat culling's).
 class CpuBvhCuller {
  public:
   /// threads = 0: every core.
@@ -31,10 +38,15 @@ class CpuBvhCuller {
   CpuBvhCuller(const CpuBvhCuller&) = delete;
   CpuBvhCuller& operator=(const CpuBvhCuller&) = delete;
 
-  /// Copies the tree and the boxes (in tree order, so a leaf's boxes are adjacent in memory).
-  /// Throws std::invalid_argument unless the tree's object list is a permutation of the ids
-  /// of `boxes`.
+  /// Copies the tree and the volumes (in tree order, so a leaf's volumes are adjacent in
+  /// memory). Throws std::invalid_argument unless the tree's object list is a permutation of
+  /// the ids of the volumes and every leaf's box encloses its volumes (their enclosing boxes).
   void upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes);
+  void upload(const bvh::FlatTree& tree, std::span<const Obb> obbs);
+  void upload(const bvh::FlatTree& tree, std::span<const Sphere> spheres);
+
+  /// The kind of the volumes uploaded last.
+  BvKind kind() const { return kind_; }
 
   bvh::HierarchicalResult cull(const Frustum& frustum);
   /// The same into `result`, reusing its storage.
@@ -43,9 +55,18 @@ class CpuBvhCuller {
   unsigned threads() const;
 
  private:
+  template <class Volume>
+  void upload_impl(const bvh::FlatTree& tree, std::span<const Volume> volumes, std::vector<Volume>& ordered);
+  template <class Volume>
+  void cull_impl(const Frustum& frustum, bvh::HierarchicalResult& result, const std::vector<Volume>& volumes);
+
   std::unique_ptr<ThreadPool> pool_;
   bvh::FlatTree tree_;
-  std::vector<Aabb> boxes_in_tree_order_;
+  BvKind kind_ = BvKind::Aabb;
+  // The uploaded volumes in tree order (only the vector of kind_ is used).
+  std::vector<Aabb> boxes_;
+  std::vector<Obb> obbs_;
+  std::vector<Sphere> spheres_;
 };
 
 }  // namespace cullpipe::fast
