@@ -35,9 +35,11 @@
 
 layout(local_size_x_id = 1) in;  // = BVH_CULL_GROUP_SIZE, set by the host
 layout(constant_id = 0) const uint PASS = BVH_PASS_LEVEL;
+layout(constant_id = 2) const uint BV_KIND = BV_KIND_AABB;  // LEVEL: node margin; TEST: the object test
 layout(constant_id = 3) const uint WRITE_DRAWS = 0;  // ACCEPT / TEST: also write draw commands
 
-// The object boxes (GpuAabb, in tree order) and the nodes (GpuBvhNode) are read as integer
+// The object volumes (GpuAabb, GpuObb or GpuSphere by BV_KIND, in tree order) and the nodes
+// (GpuBvhNode) are read as integer
 // texels (exact bits) from uniform texel buffers: on lavapipe a texel fetch loads 16 bytes per
 // lane, a storage-buffer load branches per lane and component.
 layout(set = 0, binding = BINDING_BOUNDS) uniform usamplerBuffer boxes;
@@ -63,7 +65,7 @@ GpuBvhNode load_node(uint index) {
   return GpuBvhNode(uintBitsToFloat(a.xyz), a.w, uintBitsToFloat(b.xyz), b.w, c.x, c.y, c.z, c.w);
 }
 
-vec3 box_corner(uint slot, uint corner) { return uintBitsToFloat(texelFetch(boxes, int(2u * slot + corner)).xyz); }
+vec4 volume_word(uint word) { return uintBitsToFloat(texelFetch(boxes, int(word))); }
 
 float plane_distance(vec4 plane, vec3 p) {
   precise float s = plane.x * p.x + plane.y * p.y + plane.z * p.z + plane.w;
@@ -103,6 +105,64 @@ uint classify_masked(vec3 lo, vec3 hi, uint mask, out uint straddled) {
     if (tested && plane_distance(plane, n_vertex) < 0.0) straddled |= 1u << k;
   }
   return outside ? CLASS_OUTSIDE : straddled != 0u ? CLASS_INTERSECTING : CLASS_INSIDE;
+}
+
+// The node test of hierarchies over OBBs and spheres (bvh::classify_masked_margin): a plane
+// decides a node only beyond a margin of 2^-16 x (reach + |d|) + 2^-120, reach = the sum over
+// axes of the box's largest |coordinate|; an infinite margin decides nothing.
+uint classify_masked_margin(vec3 lo, vec3 hi, uint mask, out uint straddled) {
+  bool outside = false;
+  straddled = 0u;
+  precise float reach = max(abs(lo.x), abs(hi.x)) + max(abs(lo.y), abs(hi.y)) + max(abs(lo.z), abs(hi.z));
+  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) {
+    vec4 plane = view_planes[k];
+    precise float margin = uintBitsToFloat(BVH_MARGIN_SCALE_BITS) * (reach + abs(plane.w)) + uintBitsToFloat(BVH_MARGIN_FLOOR_BITS);
+    bool certain = !isinf(margin);
+    vec3 p_vertex = vec3(plane.x >= 0.0 ? hi.x : lo.x, plane.y >= 0.0 ? hi.y : lo.y, plane.z >= 0.0 ? hi.z : lo.z);
+    vec3 n_vertex = vec3(plane.x >= 0.0 ? lo.x : hi.x, plane.y >= 0.0 ? lo.y : hi.y, plane.z >= 0.0 ? lo.z : hi.z);
+    bool tested = k < view_plane_count && (mask & (1u << k)) != 0u;
+    outside = outside || (tested && certain && plane_distance(plane, p_vertex) < -margin);
+    if (tested && (!certain || plane_distance(plane, n_vertex) < margin)) straddled |= 1u << k;
+  }
+  return outside ? CLASS_OUTSIDE : straddled != 0u ? CLASS_INTERSECTING : CLASS_INSIDE;
+}
+
+uint classify_node(vec3 lo, vec3 hi, uint mask, out uint straddled) {
+  if (BV_KIND == BV_KIND_AABB) return classify_masked(lo, hi, mask, straddled);
+  return classify_masked_margin(lo, hi, mask, straddled);
+}
+
+// The object test of slot `slot` (tree order) on the planes in `mask` (bvh::classify_object):
+// the flat shader's float operations, restricted to the masked planes.
+uint classify_object(uint slot, uint mask) {
+  bool outside = false, intersecting = false;
+  if (BV_KIND == BV_KIND_AABB) {
+    uint unused;
+    return classify_masked(volume_word(AABB_VEC4S * slot).xyz, volume_word(AABB_VEC4S * slot + 1u).xyz, mask, unused);
+  } else if (BV_KIND == BV_KIND_OBB) {
+    vec3 center = volume_word(OBB_VEC4S * slot).xyz;
+    vec4 u0 = volume_word(OBB_VEC4S * slot + 1u), u1 = volume_word(OBB_VEC4S * slot + 2u), u2 = volume_word(OBB_VEC4S * slot + 3u);
+    [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) {
+      vec4 plane = view_planes[k];
+      bool tested = k < view_plane_count && (mask & (1u << k)) != 0u;
+      float s = plane_distance(plane, center);
+      precise float n_dot_u0 = plane.x * u0.x + plane.y * u0.y + plane.z * u0.z;
+      precise float n_dot_u1 = plane.x * u1.x + plane.y * u1.y + plane.z * u1.z;
+      precise float n_dot_u2 = plane.x * u2.x + plane.y * u2.y + plane.z * u2.z;
+      precise float r = abs(n_dot_u0) * u0.w + abs(n_dot_u1) * u1.w + abs(n_dot_u2) * u2.w;
+      outside = outside || (tested && s < -r);
+      intersecting = intersecting || (tested && s < r);
+    }
+  } else {
+    vec4 sphere = volume_word(SPHERE_VEC4S * slot);
+    [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) {
+      bool tested = k < view_plane_count && (mask & (1u << k)) != 0u;
+      float s = plane_distance(view_planes[k], sphere.xyz);
+      outside = outside || (tested && s < -sphere.w);
+      intersecting = intersecting || (tested && s < sphere.w);
+    }
+  }
+  return outside ? CLASS_OUTSIDE : intersecting ? CLASS_INTERSECTING : CLASS_INSIDE;
 }
 
 // Dispatches larger than max_groups_x workgroups fold into y.
@@ -187,7 +247,7 @@ bool test_node(bool has_node, uint index, uint view, uint mask, out uint straddl
   node.second_child = 0u;
   if (has_node) {
     node = load_node(index);
-    c = classify_masked(node.box_min, node.box_max, mask, straddled);
+    c = classify_node(node.box_min, node.box_max, mask, straddled);
   }
   second_child = node.second_child;
   uint tests_wanted = 0u, full = 0u, object_tests = 0u;
@@ -335,9 +395,9 @@ void test() {
   load_view(view);
   if (in_list) {
     object = object_ids[item.index];
-    uint mask = item.view_mask & MASK, unused;
+    uint mask = item.view_mask & MASK;
     // An empty mask: an object of an INSIDE subtree, accepted without a test.
-    c = mask == 0u ? CLASS_INSIDE : classify_masked(box_corner(item.index, 0u), box_corner(item.index, 1u), mask, unused);
+    c = mask == 0u ? CLASS_INSIDE : classify_object(item.index, mask);
     if (params.write_classes != 0u) classes[view * params.object_count + object] = c;
   }
   bool visible = c != CLASS_OUTSIDE;

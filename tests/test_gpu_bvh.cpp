@@ -11,6 +11,8 @@
 #include <filesystem>
 #include <memory>
 
+#include <glm/gtc/matrix_transform.hpp>
+
 #include "bvh/builders.hpp"
 #include "bvh/bvh.hpp"
 #include "cull/compare.hpp"
@@ -33,19 +35,21 @@ using GpuBvh = test::GpuTest<gpu::BvhCuller>;
 // classes equal the CPU hierarchical traversal's object by object (and flat culling's), the
 // counters and the node/object test counts equal the CPU's, and the visible list holds each
 // visible object exactly once. A mismatch prints the object, the planes and both answers.
-gpu::CullResult expect_agreement(gpu::BvhCuller& culler, const bvh::FlatTree& flat, const std::vector<Aabb>& boxes,
+template <class Volume>
+gpu::CullResult expect_agreement(gpu::BvhCuller& culler, const bvh::FlatTree& flat, const std::vector<Volume>& boxes,
                                  const std::vector<Frustum>& frusta, const gpu::CullOptions& options = {}) {
-  culler.upload(flat, boxes);
+  const std::span<const Volume> volumes(boxes);
+  culler.upload(flat, volumes);
   gpu::CullResult result = culler.cull(frusta, options);
   EXPECT_EQ(result.views.size(), frusta.size());
   const std::size_t capacity = options.visible_capacity ? options.visible_capacity : boxes.size();
   for (std::size_t v = 0; v < frusta.size() && v < result.views.size(); ++v) {
-    const bvh::HierarchicalResult cpu = bvh::cull_hierarchical(flat, boxes, frusta[v]);
+    const bvh::HierarchicalResult cpu = bvh::cull_hierarchical(flat, volumes, frusta[v]);
     std::vector<Classification> flat_classes(boxes.size());
-    const reference::CullCounts counts = reference::classify_all(std::span<const Aabb>(boxes), frusta[v], flat_classes);
+    const reference::CullCounts counts = reference::classify_all(volumes, frusta[v], flat_classes);
     EXPECT_EQ(cpu.classes, flat_classes) << "CPU hierarchical vs flat, view " << v;
     const gpu::ViewResult& g = result.views[v];
-    const Agreement a = check_agreement<Aabb>(boxes, frusta[v], cpu.classes, counts, g.classes, g.counts, g.visible_ids, capacity);
+    const Agreement a = check_agreement<Volume>(volumes, frusta[v], cpu.classes, counts, g.classes, g.counts, g.visible_ids, capacity);
     EXPECT_TRUE(a.ok()) << a.mismatches << " mismatches in view " << v << "; first: " << (a.reports.empty() ? "" : a.reports[0]);
     EXPECT_EQ(g.node_tests, cpu.node_tests) << "view " << v;
     EXPECT_EQ(g.object_tests, cpu.object_tests) << "view " << v;
@@ -78,6 +82,67 @@ TEST_F(GpuBvh, RandomSetsEverySizeAndLeafSize) {
       SCOPED_TRACE("n = " + std::to_string(n) + ", leaf " + std::to_string(leaf));
       expect_agreement(culler(), flat_tree(boxes, leaf), boxes, test_frusta());
     }
+  }
+}
+
+template <class Volume>
+bvh::FlatTree tree_over(const std::vector<Volume>& volumes, std::uint32_t leaf = 4) {
+  return flat_tree(bvh::enclosing_boxes(std::span<const Volume>(volumes)), leaf);
+}
+
+TEST_F(GpuBvh, ObbAndSphereHierarchiesAgree) {
+  test::Rng rng{43};
+  for (std::size_t n : {0u, 1u, 65u, 5000u}) {
+    const test::RandomVolumes v = test::random_volumes(rng, n, 40.0f, 3.0f);
+    for (std::uint32_t leaf : {1u, 4u}) {
+      SCOPED_TRACE("n = " + std::to_string(n) + ", leaf " + std::to_string(leaf));
+      expect_agreement(culler(), tree_over(v.obbs, leaf), v.obbs, test_frusta());
+      expect_agreement(culler(), tree_over(v.spheres, leaf), v.spheres, test_frusta());
+    }
+  }
+  // Draws, a short list and the kind switching back to boxes on the same culler.
+  const test::RandomVolumes v = test::random_volumes(rng, 3000, 40.0f, 3.0f);
+  std::vector<gpu::DrawCommand> templates(v.spheres.size());
+  for (std::size_t i = 0; i < templates.size(); ++i) templates[i] = {std::uint32_t(3 + i % 7), 1, std::uint32_t(i), 0, 0, 0};
+  culler().upload_draws(templates);
+  gpu::CullOptions options;
+  options.draws = true;
+  options.visible_capacity = 100;
+  expect_agreement(culler(), tree_over(v.spheres), v.spheres, test_frusta(), options);
+  EXPECT_EQ(culler().kind(), BvKind::Sphere);
+  expect_agreement(culler(), flat_tree(v.aabbs), v.aabbs, test_frusta());
+  EXPECT_EQ(culler().kind(), BvKind::Aabb);
+}
+
+TEST_F(GpuBvh, VolumesAtThePlanesFarFromTheOriginAgree) {
+  // Spheres and OBBs touching the planes of a camera 10^5 from the origin, where the node
+  // margin decides the most: the GPU must make exactly the CPU's decisions.
+  test::Rng rng{47};
+  const glm::vec3 eye(1.0e5f, -3.0e4f, 2.0e5f);
+  glm::mat4 proj = glm::perspectiveRH_ZO(glm::radians(50.0f), 1.5f, 0.5f, 200.0f);
+  proj[1][1] *= -1.0f;
+  const Frustum f = Frustum::from_view_proj(proj * glm::lookAtRH(eye, eye + glm::vec3(0.1f, -0.05f, -1.0f), glm::vec3(0, 1, 0)));
+  std::vector<Sphere> spheres;
+  std::vector<Obb> obbs;
+  for (std::size_t k = 0; k < f.plane_count; ++k) {
+    const Plane& plane = f.planes[k];
+    for (int i = 0; i < 3000; ++i) {
+      const float depth = rng.uniform(2.0f, 60.0f);
+      const glm::vec3 q = eye + glm::vec3(0.1f, -0.05f, -1.0f) * depth + glm::vec3(rng.uniform(-0.4f, 0.4f), rng.uniform(-0.3f, 0.3f), 0.0f) * depth;
+      const glm::vec3 on_plane = q - plane.normal * plane.distance(q);
+      const float size = std::pow(10.0f, rng.uniform(-3.0f, 0.0f));
+      const float side = (i & 1) ? size : -size;
+      spheres.push_back({on_plane + plane.normal * side, size});
+      Obb b;
+      b.center = on_plane + plane.normal * side;
+      b.basis = rng.rotation();
+      b.half_extents = glm::vec3(size, size * 0.5f, size * 0.25f);
+      obbs.push_back(b);
+    }
+  }
+  for (std::uint32_t leaf : {1u, 4u}) {
+    expect_agreement(culler(), tree_over(spheres, leaf), spheres, {f});
+    expect_agreement(culler(), tree_over(obbs, leaf), obbs, {f});
   }
 }
 

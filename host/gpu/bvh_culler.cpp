@@ -44,23 +44,33 @@ BvhCuller::~BvhCuller() = default;
 
 const vk::ComputePipeline& BvhCuller::pipeline(std::uint32_t pass, bool draws) {
   if (pass != BVH_PASS_ACCEPT && pass != BVH_PASS_TEST) draws = false;
-  std::unique_ptr<vk::ComputePipeline>& slot = pipelines_[pass][draws];
+  // The kind matters to the passes that test (LEVEL: the node margin; TEST: the object test).
+  const std::uint32_t kind = pass == BVH_PASS_LEVEL || pass == BVH_PASS_TEST ? std::uint32_t(kind_) : 0u;
+  std::unique_ptr<vk::ComputePipeline>& slot = pipelines_[kind][pass][draws];
   if (slot) return *slot;
   static const char* names[BVH_PASS_COUNT] = {"seed", "level", "finish", "accept", "test"};
-  const std::string name = std::string("hierarchical cull (") + names[pass] + (draws ? ", draws" : "") + ")";
-  // Specialization constants: 0 pass, 1 group size, 2 unused, 3 draws.
-  const std::uint32_t spec[4] = {pass, group_size_, 0u, draws ? 1u : 0u};
+  const std::string name = std::string("hierarchical cull (") + names[pass] + ", " + std::string(to_string(BvKind(kind))) +
+                           (draws ? ", draws" : "") + ")";
+  // Specialization constants: 0 pass, 1 group size, 2 volume kind, 3 draws.
+  static_assert(BV_KIND_AABB == 0 && BV_KIND_OBB == 1 && BV_KIND_SPHERE == 2, "BvKind order must match the shader");
+  const std::uint32_t spec[4] = {pass, group_size_, kind, draws ? 1u : 0u};
   slot = std::make_unique<vk::ComputePipeline>(
       ctx_, vk::ComputePipelineDesc{std::span<const std::uint32_t>(cullpipe_cull_bvh_spv),
                                     BVH_BINDING_COUNT, sizeof(BvhCullParams), spec, name.c_str(), kTexelBindings});
   return *slot;
 }
 
-void BvhCuller::upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes) {
+void BvhCuller::upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes) { upload_impl(tree, boxes); }
+void BvhCuller::upload(const bvh::FlatTree& tree, std::span<const Obb> obbs) { upload_impl(tree, obbs); }
+void BvhCuller::upload(const bvh::FlatTree& tree, std::span<const Sphere> spheres) { upload_impl(tree, spheres); }
+
+template <class Volume>
+void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> boxes) {
   const std::size_t n = boxes.size(), nodes = tree.nodes.size();
+  const std::string kind(to_string(kind_of<Volume>()));
   auto bad = [&](const std::string& what) { throw std::invalid_argument("BvhCuller::upload: " + what); };
   if (tree.objects.size() != n)
-    bad("the tree orders " + std::to_string(tree.objects.size()) + " objects, but " + std::to_string(n) + " boxes were given");
+    bad("the tree orders " + std::to_string(tree.objects.size()) + " objects, but " + std::to_string(n) + " " + kind + " volumes were given");
   if ((nodes == 0) != (n == 0)) bad(nodes ? "a tree over no objects must have no nodes" : "no nodes for " + std::to_string(n) + " objects");
   if (nodes >= std::size_t(UINT32_MAX) || n >= std::size_t(UINT32_MAX)) bad("too many nodes or objects for 32-bit indices");
   std::vector<char> seen(n, 0);
@@ -69,7 +79,7 @@ void BvhCuller::upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes) {
     if (seen[o]++) bad("object id " + std::to_string(o) + " appears twice");
   }
   for (std::size_t i = 0; i < n; ++i)
-    if (const std::string why = invalid_reason(boxes[i]); !why.empty()) bad("box " + std::to_string(i) + ": " + why);
+    if (const std::string why = invalid_reason(boxes[i]); !why.empty()) bad(kind + " " + std::to_string(i) + ": " + why);
   using bvh::detail::encloses;
   // Depth of every node (children follow their parent in depth-first order) and the layout
   // flatten() gives, which the GPU's work-queue capacities rely on: the root covers every
@@ -93,7 +103,9 @@ void BvhCuller::upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes) {
     if (node.leaf) {
       if (node.skip != i + 1) bad(at + "leaf whose skip is not the next node");
       for (std::uint32_t k = node.first; k < node.first + node.count; ++k)
-        if (!encloses(node.box, boxes[tree.objects[k]])) bad(at + "box does not enclose object " + std::to_string(tree.objects[k]));
+        if (!encloses(node.box, bvh::enclosing_box(boxes[tree.objects[k]])))
+          bad(at + "box does not enclose " + kind + " " + std::to_string(tree.objects[k]) +
+              (std::is_same_v<Volume, Aabb> ? "" : " (build the tree over bvh::enclosing_boxes)"));
     } else {
       if (i + 1 >= node.skip) bad(at + "inner node without children");
       second = tree.nodes[i + 1].skip;
@@ -115,21 +127,23 @@ void BvhCuller::upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes) {
     ++width[d - 1];
   }
 
-  const VkDeviceSize box_bytes = VkDeviceSize(n) * sizeof(GpuAabb), node_bytes = VkDeviceSize(nodes) * sizeof(GpuBvhNode);
-  detail::check_texel_range(ctx_, box_bytes, std::to_string(n) + " object boxes");
+  using Packed = decltype(pack(boxes[0]));
+  const VkDeviceSize box_bytes = VkDeviceSize(n) * sizeof(Packed), node_bytes = VkDeviceSize(nodes) * sizeof(GpuBvhNode);
+  detail::check_texel_range(ctx_, box_bytes, std::to_string(n) + " " + kind + " volumes");
   detail::check_texel_range(ctx_, node_bytes, std::to_string(nodes) + " BVH nodes");
   object_count_ = node_count_ = 0;  // stay 0 if an allocation below fails
   bool& dirty = descriptors_dirty_;
-  detail::ensure_buffer(ctx_, bounds_, box_bytes, kTexel, "object box buffer", dirty);
+  detail::ensure_buffer(ctx_, bounds_, box_bytes, kTexel, "object volume buffer", dirty);
   detail::ensure_buffer(ctx_, nodes_, node_bytes, kTexel, "BVH node buffer", dirty);
   detail::ensure_buffer(ctx_, objects_, VkDeviceSize(n) * sizeof(std::uint32_t), kStorage, "BVH object order buffer", dirty);
-  auto gpu_boxes = bounds_.as<GpuAabb>();
+  auto gpu_boxes = bounds_.as<Packed>();
   for (std::size_t i = 0; i < n; ++i) gpu_boxes[i] = pack(boxes[tree.objects[i]]);  // tree order
   if (nodes) std::memcpy(nodes_.data(), packed.data(), node_bytes);
   if (n) std::memcpy(objects_.data(), tree.objects.data(), n * sizeof(std::uint32_t));
   object_count_ = n;
   node_count_ = nodes;
   levels_ = levels;
+  kind_ = kind_of<Volume>();
   widest_level_ = width.empty() ? 0 : *std::max_element(width.begin(), width.end());
 }
 
@@ -189,7 +203,7 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   check(range_bytes, views_x + "accepted ranges");
   check(test_bytes, views_x + std::to_string(object_count_) + " object tests (work queue)");
   bool& dirty = descriptors_dirty_;
-  detail::ensure_buffer(ctx_, bounds_, 0, kTexel, "object box buffer", dirty);
+  detail::ensure_buffer(ctx_, bounds_, 0, kTexel, "object volume buffer", dirty);
   detail::ensure_buffer(ctx_, nodes_, 0, kTexel, "BVH node buffer", dirty);
   detail::ensure_buffer(ctx_, objects_, 0, kStorage, "BVH object order buffer", dirty);
   detail::ensure_buffer(ctx_, templates_, 0, kStorage, "draw template buffer", dirty);

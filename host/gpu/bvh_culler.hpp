@@ -22,7 +22,9 @@ namespace cullpipe::gpu {
 /// accepts its object range with no further tests, INTERSECTING descends; objects of
 /// INTERSECTING leaves are tested on the planes the leaf straddles. Any number of views per
 /// pass, each with its own outputs. Classes and test counts equal bvh::cull_hierarchical bit
-/// for bit; the visible set equals flat culling's. Objects are AABBs. Visible ids and draws
+/// for bit; the visible set equals flat culling's. Objects are AABBs, OBBs or spheres (a tree
+/// over OBBs or spheres is built over bvh::enclosing_boxes; its nodes are tested with
+/// bvh::classify_masked_margin, so every class equals flat culling's). Visible ids and draws
 /// come in GPU arrival order (CullOptions::ordered is not supported). Not thread-safe.
 class BvhCuller {
  public:
@@ -37,6 +39,11 @@ class BvhCuller {
   /// as flatten nests them, boxes invalid or not enclosing), std::length_error when a buffer
   /// would exceed maxStorageBufferRange. O(nodes + objects).
   void upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes);
+  /// The same for OBBs or spheres; the tree's boxes must enclose bvh::enclosing_box of each.
+  void upload(const bvh::FlatTree& tree, std::span<const Obb> obbs);
+  void upload(const bvh::FlatTree& tree, std::span<const Sphere> spheres);
+  /// The kind of the volumes uploaded last.
+  BvKind kind() const { return kind_; }
 
   /// One draw template per object, by object id (see GpuCuller::upload_draws).
   void upload_draws(std::span<const DrawCommand> templates);
@@ -63,11 +70,14 @@ class BvhCuller {
   void prepare(std::span<const Frustum> views, const CullOptions& options);
   void record_passes(VkCommandBuffer cmd, VkQueryPool timestamps);
   const vk::ComputePipeline& pipeline(std::uint32_t pass, bool draws);
+  template <class Volume>
+  void upload_impl(const bvh::FlatTree& tree, std::span<const Volume> volumes);
   void update_descriptors();
 
   const vk::Context& ctx_;
   std::uint32_t group_size_ = BVH_CULL_GROUP_SIZE;
-  std::unique_ptr<vk::ComputePipeline> pipelines_[BVH_PASS_COUNT][2];  // [pass][draws]
+  std::unique_ptr<vk::ComputePipeline> pipelines_[3][BVH_PASS_COUNT][2];  // [kind][pass][draws]
+  BvKind kind_ = BvKind::Aabb;
   vk::Buffer bounds_, classes_, visible_, counters_, views_, templates_, draws_;
   vk::Buffer nodes_, objects_, queue_, ranges_, tests_, traversal_;
   // After the buffers: destroyed first, it waits for the device (own devices) before they go.

@@ -1,13 +1,19 @@
 // Compile-time checks that the C++ view of shaders/shared/cull_types.h matches std430, so the
 // structs written once there mean the same bytes to the host and to the shaders.
+#include <bit>
 #include <cstddef>
 #include <vulkan/vulkan.h>
 
+#include "bvh/bvh.hpp"
 #include "gpu/layout.hpp"
 
 namespace cullpipe::gpu {
 
 static_assert(sizeof(vec4) == 16 && alignof(vec4) <= 16);
+
+// The hierarchical node-test margin is one constant on both sides.
+static_assert(std::bit_cast<std::uint32_t>(bvh::kBvhMarginScale) == BVH_MARGIN_SCALE_BITS);
+static_assert(std::bit_cast<std::uint32_t>(bvh::kBvhMarginFloor) == BVH_MARGIN_FLOOR_BITS);
 
 static_assert(sizeof(GpuAabb) == AABB_VEC4S * 16);
 static_assert(offsetof(GpuAabb, min_corner) == 0);

@@ -141,6 +141,11 @@ CP_CONST BVH_PASS_ACCEPT = 3u;  // INSIDE ranges: every object INSIDE, no tests
 CP_CONST BVH_PASS_TEST = 4u;    // objects of INTERSECTING leaves, tested on the straddled planes
 CP_CONST BVH_PASS_COUNT = 5u;
 
+// The node-test margin of hierarchies over OBBs and spheres, as float bits: 2^-16 and 2^-120
+// (bvh::kBvhMarginScale and kBvhMarginFloor; checked in host/gpu/layout_checks.cpp).
+CP_CONST BVH_MARGIN_SCALE_BITS = 0x37800000u;
+CP_CONST BVH_MARGIN_FLOOR_BITS = 0x03800000u;
+
 // Plane masks (Assarsson & Moller 2000) take the low 8 bits of a work item's view_mask.
 CP_CONST BVH_MASK_BITS = 8u;
 
