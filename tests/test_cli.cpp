@@ -165,6 +165,33 @@ TEST(Cli, RunWithTheBvhAgreesAndDumpsTestCounts) {
   EXPECT_EQ(fd["tests"][0]["object_tests"], 500);
 }
 
+// Every volume kind, flat and hierarchical, with the reference or the fast CPU path on the
+// CPU side: the GPU agrees object by object and the report names the CPU path.
+TEST(Cli, EveryKindFlatAndHierarchicalOnEitherCpuPath) {
+  const fs::path json = temp_dir() / "kinds.json";
+  for (const char* bv : {"aabb", "obb", "sphere"})
+    for (const char* cull : {"flat", "bvh"})
+      for (const char* cpu : {"reference", "fast"}) {
+        const std::string args = std::string("run --generate clustered:3000 --views 2 --validate --bv ") + bv + " --cull " + cull + " --cpu " + cpu;
+        const Result r = cullpipe(args + " --json '" + json.string() + "'");
+        ASSERT_EQ(r.code, 0) << args << "\n" << r.out << r.err;
+        const auto j = nlohmann::json::parse(slurp(json));
+        EXPECT_EQ(j["agree"], true) << args;
+        EXPECT_EQ(j["bv"], bv);
+        const std::string path = j["cpu_path"];
+        EXPECT_EQ(path.find(std::string(cpu) == "fast" ? "fast" : "reference") != std::string::npos, true) << args << ": " << path;
+        EXPECT_NE(r.out.find("cpu " + path), std::string::npos) << r.out;
+        if (std::string(cull) == "bvh") {
+          EXPECT_GT(j["per_view"][0]["node_tests"].get<int>(), 0) << args;
+          EXPECT_LT(j["per_view"][0]["object_tests"].get<int>(), 3000) << args;
+        }
+      }
+  // Without Vulkan the fast CPU path runs alone.
+  const Result r = cullpipe("run --generate uniform:5000 --bv sphere --cull bvh --cpu fast --backend cpu", kNoVulkan);
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("cpu fast hierarchical"), std::string::npos) << r.out;
+}
+
 TEST(Cli, BvhCommandReportsEveryBuilder) {
   const Result list = cullpipe("bvh --list");
   ASSERT_EQ(list.code, 0) << list.err;
@@ -194,9 +221,9 @@ TEST(Cli, BadBvhOptionsAreClearErrors) {
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("no-such-builder"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("binned-sah"), std::string::npos) << "lists the known builders: " << r.err;
-  r = cullpipe("run --generate uniform:100 --cull bvh --bv sphere");
+  r = cullpipe("run --generate uniform:100 --cpu quick");
   EXPECT_EQ(r.code, 2);
-  EXPECT_NE(r.err.find("--bv aabb"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("--cpu"), std::string::npos) << r.err;
   r = cullpipe("run --generate uniform:100 --cull bvh --builder top-down:axis=sideways");
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("sideways"), std::string::npos) << r.err;

@@ -11,6 +11,8 @@
 
 #include "app/commands.hpp"
 #include "cull/compare.hpp"
+#include "cull/cpu_bvh_culler.hpp"
+#include "cull/cpu_culler.hpp"
 #include "cull/reference.hpp"
 #include "bvh/builders.hpp"
 #include "bvh/bvh.hpp"
@@ -28,7 +30,8 @@ struct BackendResults {
   std::vector<reference::CullCounts> cpu_counts, gpu_counts;
   std::vector<std::vector<std::uint32_t>> gpu_visible_ids;
   bool gpu_overflow = false;
-  double cpu_ns = 0.0;       ///< all views, scalar reference
+  double cpu_ns = 0.0;       ///< all views, on the CPU path that ran
+  std::string cpu_path;      ///< which: "reference" or "fast (avx512, 2 threads)"
   double gpu_ns = 0.0;       ///< all views, GPU timestamps
   double gpu_wall_ns = 0.0;  ///< all views, including submission and readback
   std::size_t mismatches = 0;
@@ -118,6 +121,14 @@ inline BuiltBvh build_bvh(const std::string& builder, std::span<const Aabb> boxe
   return built;
 }
 
+/// Which CPU code culls: the scalar reference (the oracle) or the fast path (SIMD on every
+/// core, bit-exact with the reference).
+enum class CpuPath { Reference, Fast };
+
+inline double elapsed_ns(std::chrono::steady_clock::time_point start) {
+  return double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());
+}
+
 /// Appends one GPU pass's views to `r`.
 inline void take_gpu_result(BackendResults& r, gpu::CullResult& g) {
   r.gpu_ns = g.timings.gpu_ns;
@@ -143,21 +154,40 @@ void compare_backends(BackendResults& r, std::span<const Volume> volumes, std::s
   }
 }
 
-/// Hierarchical culling of `boxes` through `tree`: the scalar traversal (bvh::cull_hierarchical)
-/// on the CPU, BvhCuller on the GPU, compared object by object.
-inline BackendResults cull_bvh_on_backends(const bvh::FlatTree& tree, std::span<const Aabb> boxes, std::span<const Frustum> frusta,
-                                           Backend backend, GpuSession& session, bool warm_up, std::size_t max_reports = 10) {
+/// Hierarchical culling of `boxes` (AABBs, OBBs or spheres) through `tree`: on the CPU the
+/// scalar traversal (bvh::cull_hierarchical) or, with CpuPath::Fast, fast::CpuBvhCuller; on the
+/// GPU BvhCuller; compared object by object.
+template <class Volume>
+BackendResults cull_bvh_on_backends(const bvh::FlatTree& tree, std::span<const Volume> boxes, std::span<const Frustum> frusta,
+                                    Backend backend, GpuSession& session, bool warm_up, CpuPath cpu = CpuPath::Reference,
+                                    std::size_t max_reports = 10) {
   BackendResults r;
   if (backend != Backend::Gpu) {
-    const auto start = std::chrono::steady_clock::now();
-    for (const Frustum& f : frusta) {
-      bvh::HierarchicalResult h = bvh::cull_hierarchical(tree, boxes, f);
+    auto take = [&](bvh::HierarchicalResult& h) {
       r.cpu_counts.push_back({h.visible, h.inside, h.visible - h.inside});
       r.node_tests.push_back(h.node_tests);
       r.object_tests.push_back(h.object_tests);
       r.cpu.push_back(std::move(h.classes));
+    };
+    if (cpu == CpuPath::Fast) {
+      fast::CpuBvhCuller culler;
+      culler.upload(tree, boxes);
+      std::vector<bvh::HierarchicalResult> results(frusta.size());
+      if (warm_up && !frusta.empty()) culler.cull(frusta[0], results[0]);
+      const auto start = std::chrono::steady_clock::now();
+      for (std::size_t v = 0; v < frusta.size(); ++v) culler.cull(frusta[v], results[v]);
+      r.cpu_ns = elapsed_ns(start);
+      for (bvh::HierarchicalResult& h : results) take(h);
+      r.cpu_path = "fast hierarchical (" + std::to_string(culler.threads()) + " threads)";
+    } else {
+      const auto start = std::chrono::steady_clock::now();
+      for (const Frustum& f : frusta) {
+        bvh::HierarchicalResult h = bvh::cull_hierarchical(tree, boxes, f);
+        take(h);
+      }
+      r.cpu_ns = elapsed_ns(start);
+      r.cpu_path = "hierarchical reference";
     }
-    r.cpu_ns = double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());
   }
   if (backend != Backend::Cpu) {
     gpu::BvhCuller& culler = session.bvh();
@@ -181,20 +211,36 @@ inline BackendResults cull_bvh_on_backends(const bvh::FlatTree& tree, std::span<
     }
     take_gpu_result(r, g);
   }
-  if (backend == Backend::Both) compare_backends<Aabb>(r, boxes, frusta, {}, max_reports);
+  if (backend == Backend::Both) compare_backends<Volume>(r, boxes, frusta, {}, max_reports);
   return r;
 }
 
 template <class Volume>
 BackendResults cull_on_backends(std::span<const Volume> volumes, std::span<const Frustum> frusta, Backend backend,
                                 GpuSession& session, bool warm_up, std::span<const std::size_t> object_ids = {},
-                                std::size_t max_reports = 10) {
+                                std::size_t max_reports = 10, CpuPath cpu = CpuPath::Reference) {
   BackendResults r;
-  if (backend != Backend::Gpu) {
+  if (backend != Backend::Gpu && cpu == CpuPath::Fast) {
+    fast::CpuCuller culler;
+    culler.upload(volumes);  // structure of arrays, not timed (done once per scene)
+    fast::CpuCullOptions options;
+    options.visible_ids = false;
+    std::vector<fast::CpuViewResult> results;
+    if (warm_up) culler.cull(frusta, options, results);
+    const auto start = std::chrono::steady_clock::now();
+    culler.cull(frusta, options, results);
+    r.cpu_ns = elapsed_ns(start);
+    for (fast::CpuViewResult& view : results) {
+      r.cpu.push_back(std::move(view.classes));
+      r.cpu_counts.push_back(view.counts);
+    }
+    r.cpu_path = "fast (" + std::string(fast::to_string(culler.isa())) + ", " + std::to_string(culler.threads()) + " threads)";
+  } else if (backend != Backend::Gpu) {
     r.cpu.assign(frusta.size(), std::vector<Classification>(volumes.size()));
     const auto start = std::chrono::steady_clock::now();
     for (std::size_t v = 0; v < frusta.size(); ++v) r.cpu_counts.push_back(reference::classify_all(volumes, frusta[v], r.cpu[v]));
-    r.cpu_ns = double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());
+    r.cpu_ns = elapsed_ns(start);
+    r.cpu_path = "reference";
   }
   if (backend != Backend::Cpu) {
     gpu::GpuCuller& culler = session.get();

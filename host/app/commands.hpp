@@ -41,10 +41,11 @@ struct SceneOptions {
 
 struct RunOptions : SceneOptions {
   std::string bv = "aabb";  ///< aabb | obb | sphere
-  std::string cull = "flat";            ///< flat (every object) | bvh (hierarchical, AABBs)
+  std::string cull = "flat";            ///< flat (every object) | bvh (hierarchical)
   std::string builder = "binned-sah";   ///< --cull bvh: builder name (bvh::builders())
   std::uint32_t leaf_size = 4;          ///< --cull bvh: most objects per leaf
   Backend backend = Backend::Both;
+  std::string cpu = "reference";  ///< CPU side: reference (scalar oracle) | fast (SIMD, every core, bit-exact)
   std::size_t views = 1;    ///< views along the camera path around the scene
   std::string json_path;    ///< summary as JSON
   std::string dump_path;    ///< planes, volumes and classes (classify schema)

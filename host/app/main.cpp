@@ -43,10 +43,11 @@ int main(int argc, char** argv) {
   CLI::App* run_cmd = app.add_subcommand("run", "Cull a scene on the GPU and/or the CPU and compare, view by view");
   add_scene_options(run_cmd, run);
   run_cmd->add_option("--bv", run.bv, "Bounding volume: aabb | obb | sphere")->capture_default_str()->check(CLI::IsMember({"aabb", "obb", "sphere"}));
-  run_cmd->add_option("--cull", run.cull, "flat (test every object) | bvh (hierarchical: AABBs, INSIDE subtrees accepted whole)")->capture_default_str()->check(CLI::IsMember({"flat", "bvh"}));
+  run_cmd->add_option("--cull", run.cull, "flat (test every object) | bvh (hierarchical: INSIDE subtrees accepted whole)")->capture_default_str()->check(CLI::IsMember({"flat", "bvh"}));
   run_cmd->add_option("--builder", run.builder, "--cull bvh: BVH builder (see `cullpipe bvh --list`)")->capture_default_str();
   run_cmd->add_option("--leaf-size", run.leaf_size, "--cull bvh: most objects per leaf")->capture_default_str()->check(CLI::Range(1u, 1024u));
   run_cmd->add_option("--backend", run.backend, "gpu | cpu | both (both compares them)")->transform(CLI::CheckedTransformer(kBackends))->default_str("both");
+  run_cmd->add_option("--cpu", run.cpu, "CPU side: reference (scalar oracle) | fast (SIMD on every core, bit-exact with the reference)")->capture_default_str()->check(CLI::IsMember({"reference", "fast"}));
   run_cmd->add_option("--views", run.views, "Number of views on a camera path around the scene")->capture_default_str()->check(CLI::PositiveNumber);
   run_cmd->add_option("--json", run.json_path, "Write a summary as JSON");
   run_cmd->add_option("--dump", run.dump_path, "Write planes, volumes and classes (the classify schema)");

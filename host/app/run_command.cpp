@@ -40,12 +40,25 @@ std::string format_fixed(double value, int digits) {
   return buf;
 }
 
+CpuPath cpu_path(const RunOptions& o) { return o.cpu == "fast" ? CpuPath::Fast : CpuPath::Reference; }
+
+// Hierarchical culling of one kind of volume: the tree is built over the volumes' enclosing
+// boxes (the boxes themselves for AABBs).
+template <class Volume>
+BackendResults cull_kind_bvh(const std::vector<Volume>& volumes, std::span<const Frustum> frusta, const RunOptions& o,
+                             GpuSession& session, std::vector<cullpipe::Volume>& dump_volumes, BuiltBvh& built) {
+  const std::span<const Volume> span(volumes);
+  built = build_bvh(o.builder, bvh::enclosing_boxes(span), o.leaf_size);
+  if (!o.dump_path.empty()) dump_volumes.assign(volumes.begin(), volumes.end());
+  return cull_bvh_on_backends(built.flat, span, frusta, o.backend, session, /*warm_up=*/true, cpu_path(o));
+}
+
 // Culls one kind of volume; with a dump path, also keeps the volumes for the dump.
 template <class Volume>
 BackendResults cull_kind(const std::vector<Volume>& volumes, std::span<const Frustum> frusta, const RunOptions& o,
                          GpuSession& session, std::vector<cullpipe::Volume>& dump_volumes) {
   if (!o.dump_path.empty()) dump_volumes.assign(volumes.begin(), volumes.end());
-  return cull_on_backends<Volume>(volumes, frusta, o.backend, session, /*warm_up=*/true);
+  return cull_on_backends<Volume>(volumes, frusta, o.backend, session, /*warm_up=*/true, {}, 10, cpu_path(o));
 }
 
 }  // namespace
@@ -70,9 +83,8 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
     if (!bv) throw InputError("--bv " + o.bv + ": expected aabb, obb or sphere");
     if (o.views == 0) throw InputError("--views must be at least 1");
     if (o.cull != "flat" && o.cull != "bvh") throw InputError("--cull " + o.cull + ": expected flat or bvh");
+    if (o.cpu != "reference" && o.cpu != "fast") throw InputError("--cpu " + o.cpu + ": expected reference or fast");
     const bool hierarchical = o.cull == "bvh";
-    if (hierarchical && *bv != BvKind::Aabb)
-      throw InputError("--cull bvh culls objects by their AABBs: use --bv aabb (OBBs and spheres are culled flat)");
 
     LoadedScene loaded = load_scene_source(o);
     const Scene& scene = loaded.scene;
@@ -97,17 +109,17 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
     BuiltBvh built;
     switch (*bv) {
       case BvKind::Aabb:
-        if (hierarchical) {
-          const std::vector<Aabb> boxes = world_aabbs(scene, loaded.aabb_update);
-          built = build_bvh(o.builder, boxes, o.leaf_size);
-          r = cull_bvh_on_backends(built.flat, boxes, frusta, o.backend, session, /*warm_up=*/true);
-          if (!o.dump_path.empty()) dump_volumes.assign(boxes.begin(), boxes.end());
-        } else {
-          r = cull_kind(world_aabbs(scene, loaded.aabb_update), frusta, o, session, dump_volumes);
-        }
+        r = hierarchical ? cull_kind_bvh(world_aabbs(scene, loaded.aabb_update), frusta, o, session, dump_volumes, built)
+                         : cull_kind(world_aabbs(scene, loaded.aabb_update), frusta, o, session, dump_volumes);
         break;
-      case BvKind::Obb: r = cull_kind(world_obbs(scene), frusta, o, session, dump_volumes); break;
-      case BvKind::Sphere: r = cull_kind(world_spheres(scene), frusta, o, session, dump_volumes); break;
+      case BvKind::Obb:
+        r = hierarchical ? cull_kind_bvh(world_obbs(scene), frusta, o, session, dump_volumes, built)
+                         : cull_kind(world_obbs(scene), frusta, o, session, dump_volumes);
+        break;
+      case BvKind::Sphere:
+        r = hierarchical ? cull_kind_bvh(world_spheres(scene), frusta, o, session, dump_volumes, built)
+                         : cull_kind(world_spheres(scene), frusta, o, session, dump_volumes);
+        break;
     }
 
     const std::size_t n = scene.objects.size();
@@ -139,10 +151,8 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
     if (shown < frusta.size()) out << "  ... " << frusta.size() - shown << " more views\n";
     out << "\n";
     const double object_views = double(std::max<std::size_t>(n * frusta.size(), 1));
-    if (have_cpu && hierarchical)
-      out << "  cpu hierarchical reference: " << format_ms(r.cpu_ns) << " ms\n";
-    else if (have_cpu)
-      out << "  cpu reference: " << format_ms(r.cpu_ns) << " ms (" << format_ms(r.cpu_ns / object_views * 1e6)
+    if (have_cpu)
+      out << "  cpu " << r.cpu_path << ": " << format_ms(r.cpu_ns) << " ms (" << format_ms(r.cpu_ns / object_views * 1e6)
           << " ns per object-view)\n";
     if (have_gpu)
       out << "  gpu:           " << format_ms(r.gpu_ns) << " ms on the GPU (timestamps), " << format_ms(r.gpu_wall_ns)
@@ -177,7 +187,10 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
         j["device"] = session.context->info().name;
         j["driver"] = session.context->info().driver;
       }
-      if (have_cpu) j["cpu_ns"] = r.cpu_ns;
+      if (have_cpu) {
+        j["cpu_ns"] = r.cpu_ns;
+        j["cpu_path"] = r.cpu_path;
+      }
       if (have_gpu) {
         j["gpu_ns"] = r.gpu_ns;
         j["gpu_wall_ns"] = r.gpu_wall_ns;
