@@ -271,6 +271,16 @@ void expect_same_traversal(const bvh::HierarchicalResult& expected, const bvh::H
   EXPECT_EQ(got.inside, expected.inside) << what;
 }
 
+// The visible list of a CpuBvhCuller pass: the tree's object order, filtered by the expected
+// classes.
+void expect_visible_list(const bvh::HierarchicalResult& expected, const bvh::FlatTree& tree, const std::vector<std::uint32_t>& ids,
+                         const std::string& what) {
+  std::vector<std::uint32_t> want;
+  for (std::uint32_t o : tree.objects)
+    if (expected.classes[o] != Classification::Outside) want.push_back(o);
+  EXPECT_EQ(ids, want) << what;
+}
+
 TEST(CpuBvhCuller, EqualsTheScalarTraversalExactly) {
   test::Rng rng{11};
   std::vector<Frustum> views = test_views();
@@ -298,6 +308,21 @@ TEST(CpuBvhCuller, EqualsTheScalarTraversalExactly) {
           culler.cull(views[v], reused);
           expect_same_traversal(expected, reused, what);
           if (HasFatalFailure()) return;
+          // The visible list, with and without the classes.
+          std::vector<std::uint32_t> ids{7, 7, 7};
+          for (bool classes : {true, false}) {
+            bvh::HierarchicalResult listed;
+            culler.cull(views[v], {classes, true}, listed, ids);
+            expect_visible_list(expected, tree, ids, what + (classes ? " (list and classes)" : " (list only)"));
+            EXPECT_EQ(listed.classes.size(), classes ? n : 0u) << what;
+            if (classes) {
+              EXPECT_EQ(listed.classes, expected.classes) << what;
+            }
+            EXPECT_EQ(listed.node_tests, expected.node_tests) << what;
+            EXPECT_EQ(listed.object_tests, expected.object_tests) << what;
+            EXPECT_EQ(listed.visible, expected.visible) << what;
+            EXPECT_EQ(listed.inside, expected.inside) << what;
+          }
         }
       }
     }
@@ -333,8 +358,14 @@ TEST(CpuBvhCuller, ObbsAndSpheresEqualTheScalarTraversalAndFlatCulling) {
         std::vector<Classification> flat(n);
         reference::classify_all(std::span<const Obb>(v.obbs), views[view], flat);
         EXPECT_EQ(got.classes, flat) << "obb " << what;
+        std::vector<std::uint32_t> ids;
+        bvh::HierarchicalResult listed;
+        culler.cull(views[view], {false, true}, listed, ids);
+        expect_visible_list(got, obb_tree, ids, "obb list " + what);
         culler.upload(sphere_tree, std::span<const Sphere>(v.spheres));
         culler.cull(views[view], got);
+        culler.cull(views[view], {false, true}, listed, ids);
+        expect_visible_list(got, sphere_tree, ids, "sphere list " + what);
         expect_same_traversal(bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(v.spheres), views[view]), got, "sphere " + what);
         reference::classify_all(std::span<const Sphere>(v.spheres), views[view], flat);
         EXPECT_EQ(got.classes, flat) << "sphere " << what;

@@ -13,19 +13,21 @@ namespace {
 
 constexpr std::uint32_t kRangeChunk = 16384;  // objects per accepted-range task
 
+
+}  // namespace
+
+/// What one task found; summed at the end. Kept between passes with its stack's storage.
+struct CpuBvhCuller::Tally {
+  std::size_t node_tests = 0, object_tests = 0, visible = 0, inside = 0;
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> stack;  // (node, planes to test)
+};
+
 /// Work for one thread: a subtree to walk (node, planes to test) or part of an accepted range.
-struct Task {
+struct CpuBvhCuller::Task {
   enum Kind : std::uint8_t { Subtree, Inside } kind;
   std::uint32_t node_or_first;
   std::uint32_t mask_or_count;
 };
-
-/// What one task found; summed at the end.
-struct Tally {
-  std::size_t node_tests = 0, object_tests = 0, visible = 0, inside = 0;
-};
-
-}  // namespace
 
 CpuBvhCuller::CpuBvhCuller(unsigned threads) : pool_(std::make_unique<ThreadPool>(threads)) {}
 CpuBvhCuller::~CpuBvhCuller() = default;
@@ -80,24 +82,33 @@ bvh::HierarchicalResult CpuBvhCuller::cull(const Frustum& frustum) {
 }
 
 void CpuBvhCuller::cull(const Frustum& frustum, bvh::HierarchicalResult& r) {
+  std::vector<std::uint32_t> unused;
+  cull(frustum, {}, r, unused);
+}
+
+void CpuBvhCuller::cull(const Frustum& frustum, const CpuBvhCullOptions& options, bvh::HierarchicalResult& r,
+                        std::vector<std::uint32_t>& visible_ids) {
   if (kind_ == BvKind::Obb)
-    cull_impl(frustum, r, obbs_);
+    cull_impl(frustum, options, r, visible_ids, obbs_);
   else if (kind_ == BvKind::Sphere)
-    cull_impl(frustum, r, spheres_);
+    cull_impl(frustum, options, r, visible_ids, spheres_);
   else
-    cull_impl(frustum, r, boxes_);
+    cull_impl(frustum, options, r, visible_ids, boxes_);
 }
 
 template <class Volume>
-void CpuBvhCuller::cull_impl(const Frustum& frustum, bvh::HierarchicalResult& r, const std::vector<Volume>& volumes) {
+void CpuBvhCuller::cull_impl(const Frustum& frustum, const CpuBvhCullOptions& options, bvh::HierarchicalResult& r,
+                             std::vector<std::uint32_t>& visible_ids, const std::vector<Volume>& volumes) {
   const std::size_t n = volumes.size();
   const std::vector<bvh::FlatNode>& nodes = tree_.nodes;
   const std::vector<std::uint32_t>& objects = tree_.objects;
-  r.classes.resize(n);
+  const bool classes = options.classes, ids = options.visible_ids;
+  r.classes.resize(classes ? n : 0);
   r.node_tests = r.object_tests = r.visible = r.inside = 0;
+  visible_ids.clear();
 
   // Everything starts OUTSIDE, in parallel chunks.
-  const std::size_t fill_tasks = (n + kRangeChunk - 1) / kRangeChunk;
+  const std::size_t fill_tasks = classes ? (n + kRangeChunk - 1) / kRangeChunk : 0;
   pool_->parallel_for(fill_tasks, [&](std::size_t t) {
     const std::size_t begin = t * kRangeChunk, end = std::min(n, begin + kRangeChunk);
     std::fill(r.classes.begin() + std::ptrdiff_t(begin), r.classes.begin() + std::ptrdiff_t(end), Classification::Outside);
@@ -108,7 +119,8 @@ void CpuBvhCuller::cull_impl(const Frustum& frustum, bvh::HierarchicalResult& r,
   const std::uint32_t all = (1u << frustum.active().size()) - 1u;
   const std::size_t wanted = std::size_t(pool_->size()) * 16;
   std::deque<Task> frontier{{Task::Subtree, 0, all}};
-  std::vector<Task> tasks;
+  std::vector<Task>& tasks = tasks_;
+  tasks.clear();
   Tally top;
   auto accept = [&](std::uint32_t first, std::uint32_t count) {
     for (std::uint32_t k = 0; k < count; k += kRangeChunk) tasks.push_back({Task::Inside, first + k, std::min(kRangeChunk, count - k)});
@@ -133,20 +145,34 @@ void CpuBvhCuller::cull_impl(const Frustum& frustum, bvh::HierarchicalResult& r,
     frontier.push_back({Task::Subtree, nodes[t.node_or_first + 1].skip, straddled});
   }
   tasks.insert(tasks.end(), frontier.begin(), frontier.end());
+  // Each task covers its own contiguous part of the tree's object order (a subtree's range or
+  // part of one): in that order, the tasks' visible lists concatenate into tree order.
+  auto first_object = [&](const Task& t) { return t.kind == Task::Inside ? t.node_or_first : nodes[t.node_or_first].first; };
+  if (ids) std::sort(tasks.begin(), tasks.end(), [&](const Task& a, const Task& b) { return first_object(a) < first_object(b); });
 
-  std::vector<Tally> tallies(tasks.size());
+  std::vector<Tally>& tallies = tallies_;
+  if (tallies.size() < tasks.size()) tallies.resize(tasks.size());
+  for (std::size_t t = 0; t < tasks.size(); ++t) tallies[t].node_tests = tallies[t].object_tests = tallies[t].visible = tallies[t].inside = 0;
+  if (task_ids_.size() < tasks.size()) task_ids_.resize(tasks.size());
   pool_->parallel_for(tasks.size(), [&](std::size_t index) {
     const Task& task = tasks[index];
     Tally& tally = tallies[index];
+    std::vector<std::uint32_t>& found = task_ids_[index];
+    found.clear();
+    auto accept_range = [&](std::uint32_t first, std::uint32_t count) {
+      if (classes)
+        for (std::uint32_t k = first; k < first + count; ++k) r.classes[objects[k]] = Classification::Inside;
+      if (ids) found.insert(found.end(), objects.begin() + first, objects.begin() + first + count);
+      tally.visible += count;
+      tally.inside += count;
+    };
     if (task.kind == Task::Inside) {
-      for (std::uint32_t k = task.node_or_first; k < task.node_or_first + task.mask_or_count; ++k)
-        r.classes[objects[k]] = Classification::Inside;
-      tally.visible += task.mask_or_count;
-      tally.inside += task.mask_or_count;
+      accept_range(task.node_or_first, task.mask_or_count);
       return;
     }
     // Depth first, as bvh::cull_hierarchical.
-    std::vector<std::pair<std::uint32_t, std::uint32_t>> stack{{task.node_or_first, task.mask_or_count}};
+    std::vector<std::pair<std::uint32_t, std::uint32_t>>& stack = tally.stack;
+    stack.assign(1, {task.node_or_first, task.mask_or_count});
     while (!stack.empty()) {
       const auto [i, mask] = stack.back();
       stack.pop_back();
@@ -156,15 +182,14 @@ void CpuBvhCuller::cull_impl(const Frustum& frustum, bvh::HierarchicalResult& r,
       const Classification c = bvh::classify_node<Volume>(node.box, frustum, mask, straddled);
       if (c == Classification::Outside) continue;
       if (c == Classification::Inside) {
-        for (std::uint32_t k = node.first; k < node.first + node.count; ++k) r.classes[objects[k]] = Classification::Inside;
-        tally.visible += node.count;
-        tally.inside += node.count;
+        accept_range(node.first, node.count);
         continue;
       }
       if (node.leaf) {
         for (std::uint32_t k = node.first; k < node.first + node.count; ++k) {
           const Classification oc = bvh::classify_object(volumes[k], frustum, straddled);
-          r.classes[objects[k]] = oc;
+          if (classes) r.classes[objects[k]] = oc;
+          if (ids && oc != Classification::Outside) found.push_back(objects[k]);
           ++tally.object_tests;
           tally.visible += oc != Classification::Outside;
           tally.inside += oc == Classification::Inside;
@@ -176,12 +201,20 @@ void CpuBvhCuller::cull_impl(const Frustum& frustum, bvh::HierarchicalResult& r,
     }
   });
   r.node_tests = top.node_tests;
-  for (const Tally& t : tallies) {
+  for (std::size_t index = 0; index < tasks.size(); ++index) {
+    const Tally& t = tallies[index];
     r.node_tests += t.node_tests;
     r.object_tests += t.object_tests;
     r.visible += t.visible;
     r.inside += t.inside;
   }
+  if (!ids) return;
+  visible_ids.resize(r.visible);
+  offsets_.assign(tasks.size() + 1, 0);
+  for (std::size_t t = 0; t < tasks.size(); ++t) offsets_[t + 1] = offsets_[t] + task_ids_[t].size();
+  pool_->parallel_for(tasks.size(), [&](std::size_t t) {
+    std::copy(task_ids_[t].begin(), task_ids_[t].end(), visible_ids.begin() + std::ptrdiff_t(offsets_[t]));
+  });
 }
 
 }  // namespace cullpipe::fast

@@ -15,6 +15,12 @@ namespace cullpipe::fast {
 
 class ThreadPool;
 
+/// What a CpuBvhCuller pass fills.
+struct CpuBvhCullOptions {
+  bool classes = true;       ///< bvh::HierarchicalResult::classes, one per object id
+  bool visible_ids = false;  ///< the ids of the visible objects, in the tree's object order
+};
+
 /// Hierarchical culling on the CPU with every core: the traversal of bvh::cull_hierarchical
 /// (plane masking, INSIDE subtrees accepted as ranges, leaf objects tested against the planes
 /// their leaf straddles), split into subtrees that the threads take one at a time. The result
@@ -51,6 +57,12 @@ class CpuBvhCuller {
   bvh::HierarchicalResult cull(const Frustum& frustum);
   /// The same into `result`, reusing its storage.
   void cull(const Frustum& frustum, bvh::HierarchicalResult& result);
+  /// As `options` asks: without classes `result.classes` is left empty (its counts and test
+  /// counts are always filled); with visible ids they go to `visible_ids` in the tree's object
+  /// order (an INSIDE subtree is one copied range). An engine that wants the visible list
+  /// skips the per-id class writes, which are scattered when the ids are not in tree order.
+  void cull(const Frustum& frustum, const CpuBvhCullOptions& options, bvh::HierarchicalResult& result,
+            std::vector<std::uint32_t>& visible_ids);
 
   unsigned threads() const;
 
@@ -58,7 +70,10 @@ class CpuBvhCuller {
   template <class Volume>
   void upload_impl(const bvh::FlatTree& tree, std::span<const Volume> volumes, std::vector<Volume>& ordered);
   template <class Volume>
-  void cull_impl(const Frustum& frustum, bvh::HierarchicalResult& result, const std::vector<Volume>& volumes);
+  void cull_impl(const Frustum& frustum, const CpuBvhCullOptions& options, bvh::HierarchicalResult& result,
+                 std::vector<std::uint32_t>& visible_ids, const std::vector<Volume>& volumes);
+  struct Task;
+  struct Tally;
 
   std::unique_ptr<ThreadPool> pool_;
   bvh::FlatTree tree_;
@@ -67,6 +82,11 @@ class CpuBvhCuller {
   std::vector<Aabb> boxes_;
   std::vector<Obb> obbs_;
   std::vector<Sphere> spheres_;
+  // Per-pass working storage, kept so passes reuse it.
+  std::vector<Task> tasks_;
+  std::vector<Tally> tallies_;
+  std::vector<std::vector<std::uint32_t>> task_ids_;
+  std::vector<std::size_t> offsets_;
 };
 
 }  // namespace cullpipe::fast
