@@ -243,27 +243,31 @@ void main_arrival() {
   }
   barrier();
   uint base = group_base + offset;
-  for (uint t = gl_SubgroupInvocationID; t - gl_SubgroupInvocationID < vis_total; t += gl_SubgroupSize) {
-    if (t < vis_total) {
-      // The object step j holding visible object t, then its lane within ballot j.
-      uint j = 0;
-      [[unroll]] for (uint q = 1; q < OBJECTS_PER_INVOCATION; ++q) j = t >= prefix[q] ? q : j;
-      uvec4 ballot = ballots[0];
-      uint before = 0;
-      [[unroll]] for (uint q = 1; q < OBJECTS_PER_INVOCATION; ++q) {
-        if (q == j) { ballot = ballots[q]; before = prefix[q]; }
-      }
-      // That lane's first object (no assumption on how lanes map to local invocations).
-      uint lane_block = group_first + subgroupShuffle(gl_LocalInvocationIndex, nth_set_lane(ballot, t - before));
-      uint i = lane_block + j * gl_WorkGroupSize.x;
-      uint slot = base + t;
-      if (slot < params.visible_capacity) {
-        visible_ids[view * params.visible_capacity + slot] = params.id_base + i;
-        if (WRITE_DRAWS != 0) {
-          DrawCommand d = templates[i];
-          d.object_id = params.id_base + i;
-          draws[view * params.visible_capacity + slot] = d;
-        }
+  // Rounds in subgroup-uniform control flow, so that every lane takes part in the shuffle (a
+  // shuffle from an inactive lane is undefined): lanes past the last visible object work out
+  // the last one again and store nothing.
+  for (uint round = 0; round < vis_total; round += gl_SubgroupSize) {
+    uint t = round + gl_SubgroupInvocationID;
+    uint k = min(t, vis_total - 1u);
+    // The object step j holding visible object k, then its lane within ballot j.
+    uint j = 0;
+    [[unroll]] for (uint q = 1; q < OBJECTS_PER_INVOCATION; ++q) j = k >= prefix[q] ? q : j;
+    uvec4 ballot = ballots[0];
+    uint before = 0;
+    [[unroll]] for (uint q = 1; q < OBJECTS_PER_INVOCATION; ++q) {
+      ballot = q == j ? ballots[q] : ballot;
+      before = q == j ? prefix[q] : before;
+    }
+    // That lane's first object (no assumption on how lanes map to local invocations).
+    uint lane_block = group_first + subgroupShuffle(gl_LocalInvocationIndex, nth_set_lane(ballot, k - before));
+    uint i = lane_block + j * gl_WorkGroupSize.x;
+    uint slot = base + t;
+    if (t < vis_total && slot < params.visible_capacity) {
+      visible_ids[view * params.visible_capacity + slot] = params.id_base + i;
+      if (WRITE_DRAWS != 0) {
+        DrawCommand d = templates[i];
+        d.object_id = params.id_base + i;
+        draws[view * params.visible_capacity + slot] = d;
       }
     }
   }
