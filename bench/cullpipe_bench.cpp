@@ -119,14 +119,14 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
     try {
       gpu.flat->upload(vspan);
     } catch (const std::length_error& e) {
-      gpu_flat_note = "exceeds one storage buffer";
+      gpu_flat_note = std::string("too large: ") + e.what();
     }
   }
   if (gpu.bvh && bvh_methods && wants(config, "gpu-bvh")) {
     try {
       gpu.bvh->upload(tree, vspan);
     } catch (const std::length_error& e) {
-      gpu_bvh_note = "exceeds one storage buffer";
+      gpu_bvh_note = std::string("too large: ") + e.what();
     }
   }
 

@@ -109,15 +109,16 @@ uint classify_masked(vec3 lo, vec3 hi, uint mask, out uint straddled) {
 
 // The node test of hierarchies over OBBs and spheres (bvh::classify_masked_margin): a plane
 // decides a node only beyond a margin of 2^-16 x (reach + |d|) + 2^-120, reach = the sum over
-// axes of the box's largest |coordinate|; an infinite margin decides nothing.
+// axes of the box's largest |coordinate|; past reach + |d| = 2^120 it decides nothing.
 uint classify_masked_margin(vec3 lo, vec3 hi, uint mask, out uint straddled) {
   bool outside = false;
   straddled = 0u;
   precise float reach = max(abs(lo.x), abs(hi.x)) + max(abs(lo.y), abs(hi.y)) + max(abs(lo.z), abs(hi.z));
   [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) {
     vec4 plane = view_planes[k];
-    precise float margin = uintBitsToFloat(BVH_MARGIN_SCALE_BITS) * (reach + abs(plane.w)) + uintBitsToFloat(BVH_MARGIN_FLOOR_BITS);
-    bool certain = !isinf(margin);
+    precise float size = reach + abs(plane.w);
+    bool certain = size <= uintBitsToFloat(BVH_MARGIN_LIMIT_BITS);  // false for NaN too
+    precise float margin = uintBitsToFloat(BVH_MARGIN_SCALE_BITS) * size + uintBitsToFloat(BVH_MARGIN_FLOOR_BITS);
     vec3 p_vertex = vec3(plane.x >= 0.0 ? hi.x : lo.x, plane.y >= 0.0 ? hi.y : lo.y, plane.z >= 0.0 ? hi.z : lo.z);
     vec3 n_vertex = vec3(plane.x >= 0.0 ? lo.x : hi.x, plane.y >= 0.0 ? lo.y : hi.y, plane.z >= 0.0 ? lo.z : hi.z);
     bool tested = k < view_plane_count && (mask & (1u << k)) != 0u;

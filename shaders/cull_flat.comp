@@ -29,7 +29,7 @@ layout(constant_id = 0) const uint BV_KIND = BV_KIND_AABB;
 layout(constant_id = 2) const uint ORDERED = 0;      // 1: object-order compaction by later passes
 layout(constant_id = 3) const uint WRITE_DRAWS = 0;  // 1: also write draw commands (arrival order)
 // Objects per invocation in the arrival-order pass (ORDERED == 0): the planes are loaded once
-// for all of them and the visible list takes one atomic per subgroup for K x subgroup objects.
+// for all of them and the visible list takes one atomic per workgroup for all of its objects.
 // Object j of an invocation is at block + j * group size, so each step of the loop reads one
 // contiguous run of objects per workgroup. The ordered pass keeps one object per invocation.
 layout(constant_id = 4) const uint OBJECTS_PER_INVOCATION = 1;

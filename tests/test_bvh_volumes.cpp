@@ -62,6 +62,37 @@ TEST(BvhVolumes, EnclosingBoxesContainTheVolumes) {
   }
 }
 
+TEST(BvhVolumes, EnclosingBoxOfAnObbWhoseCentreNearlyCancelsItsExtent) {
+  // x extent = (1 - 2^-20)(1 + 2^-20) + 2^-55 = 1 - 2^-40 + 2^-55: a double sum of it drops
+  // the 2^-55, and the centre 1 cancels the rest, so one float step after the subtraction
+  // would not cover what was dropped.
+  Obb b;
+  b.center = glm::vec3(1.0f, 0.0f, 0.0f);
+  b.basis = glm::mat3(glm::vec3(1.0f - 0x1p-20f, 0, 0), glm::vec3(0x1p-55f, 1, 0), glm::vec3(0, 0, 1));
+  b.half_extents = glm::vec3(1.0f + 0x1p-20f, 1.0f, 1.0f);
+  const Aabb box = bvh::enclosing_box(b);
+  if constexpr (std::numeric_limits<long double>::digits >= 64) {
+    const long double extent = (1.0L - 0x1p-20L) * (1.0L + 0x1p-20L) + 0x1p-55L;  // exact in 64 bits
+    EXPECT_LE(static_cast<long double>(box.min.x), 1.0L - extent);
+    EXPECT_GE(static_cast<long double>(box.max.x), 1.0L + extent);
+  }
+  EXPECT_LT(box.min.x, 0x1p-39f);  // and still tight
+}
+
+TEST(BvhVolumes, NonUnitPlaneNormalsAreRefused) {
+  // The margin's error bound takes unit normals: a half-length normal would let a node be
+  // dropped while a sphere in it is visible. Boxes do not need the margin.
+  const glm::vec4 planes[1] = {{0.5f, 0.0f, 0.0f, 1.0f}};
+  Frustum f = Frustum::from_planes(planes);  // normalises
+  f.planes[0] = Plane{glm::vec3(0.5f, 0.0f, 0.0f), 1.0f};  // hand-built, not normalised
+  const std::vector<Sphere> spheres = {{glm::vec3(0), 1.0f}};
+  const std::vector<Aabb> boxes = bvh::enclosing_boxes(std::span<const Sphere>(spheres));
+  const bvh::FlatTree tree = bvh::flatten(bvh::build("binned-sah", boxes));
+  EXPECT_THROW(bvh::cull_hierarchical(tree, std::span<const Sphere>(spheres), f), std::invalid_argument);
+  EXPECT_NO_THROW(bvh::cull_hierarchical(tree, std::span<const Aabb>(boxes), f));
+  EXPECT_NO_THROW(bvh::cull_hierarchical(tree, std::span<const Sphere>(spheres), Frustum::from_planes(planes)));
+}
+
 TEST(BvhVolumes, RandomObbsAndSpheresMatchFlat) {
   test::Rng rng{11};
   const std::vector<Frustum> frusta = {Frustum::from_view_proj(test::test_view_proj()),
@@ -176,6 +207,10 @@ TEST(BvhVolumes, AnOverflowingMarginDecidesNothing) {
   EXPECT_EQ(straddled, all);
   const Aabb far_away{glm::vec3(big * 0.9f), glm::vec3(big)};
   EXPECT_EQ(bvh::classify_masked_margin(far_away, f, all, straddled), Classification::Intersecting);
+  // Past 2^120 (before any overflow) nothing is decided either.
+  const Aabb beyond{glm::vec3(0x1p121f), glm::vec3(0x1p122f)};
+  EXPECT_EQ(bvh::classify_masked_margin(beyond, f, all, straddled), Classification::Intersecting);
+  EXPECT_EQ(straddled, all);
   // Ordinary boxes are still decided.
   const Aabb behind{glm::vec3(-1, -1, 20), glm::vec3(1, 1, 22)};
   EXPECT_EQ(bvh::classify_masked_margin(behind, f, all, straddled), Classification::Outside);

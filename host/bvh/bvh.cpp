@@ -11,6 +11,7 @@
 #include <limits>
 #include <memory>
 #include <stdexcept>
+#include <string>
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
@@ -46,13 +47,26 @@ Classification classify_masked_margin(const Aabb& box, const Frustum& frustum, s
   for (std::uint32_t k = 0; k < planes.size(); ++k) {
     if (!(mask & (1u << k))) continue;
     const Plane& plane = planes[k];
-    const float margin = kBvhMarginScale * (reach + std::abs(plane.d)) + kBvhMarginFloor;
-    const bool certain = margin < std::numeric_limits<float>::infinity();  // an overflowing margin decides nothing
+    const float size = reach + std::abs(plane.d);
+    // Beyond 2^120 a distance could overflow, and the error bound with it: decide nothing
+    // (also when `size` is NaN).
+    const bool certain = size <= kBvhMarginLimit;
+    const float margin = kBvhMarginScale * size + kBvhMarginFloor;
     const PnVertices v = pn_vertices(plane.normal, box);
     if (certain && plane.distance(v.p) < -margin) return Classification::Outside;
     if (!certain || plane.distance(v.n) < margin) straddled |= 1u << k;
   }
   return straddled ? Classification::Intersecting : Classification::Inside;
+}
+
+void require_unit_normals(const Frustum& frustum, const char* who) {
+  for (std::size_t k = 0; k < frustum.active().size(); ++k) {
+    const glm::vec3& n = frustum.planes[k].normal;
+    const double length = std::sqrt(double(n.x) * n.x + double(n.y) * n.y + double(n.z) * n.z);
+    if (!(std::abs(length - 1.0) <= kBvhUnitNormalTolerance))
+      throw std::invalid_argument(std::string(who) + ": plane " + std::to_string(k) + " has a normal of length " + std::to_string(length) +
+                                  "; hierarchies over OBBs and spheres need unit normals (Frustum::from_planes normalises)");
+  }
 }
 
 Classification classify_object(const Aabb& box, const Frustum& frustum, std::uint32_t mask) {
@@ -108,6 +122,9 @@ Aabb enclosing_box(const Obb& box) {
   for (int j = 0; j < 3; ++j) {
     double extent = 0.0;
     for (int i = 0; i < 3; ++i) extent += std::abs(double(box.basis[i][j])) * double(box.half_extents[i]);
+    // The sum may have rounded down by a double step of `extent`, which the float step after
+    // the subtraction below need not cover (when the centre nearly cancels it): round it up.
+    extent *= 1.0 + 0x1p-50;
     out.min[j] = below(double(box.center[j]) - extent);
     out.max[j] = above(double(box.center[j]) + extent);
   }
@@ -523,6 +540,7 @@ namespace {
 
 template <class Volume>
 HierarchicalResult cull_hierarchical_impl(const FlatTree& tree, std::span<const Volume> volumes, const Frustum& frustum) {
+  if constexpr (!std::is_same_v<Volume, Aabb>) require_unit_normals(frustum, "bvh::cull_hierarchical");
   HierarchicalResult r;
   r.classes.assign(volumes.size(), Classification::Outside);
   if (tree.nodes.empty()) return r;

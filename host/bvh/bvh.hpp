@@ -92,16 +92,27 @@ Classification classify_masked(const Aabb& box, const Frustum& frustum, std::uin
 /// from its enclosing box's, so without a margin an object touching a plane could be found
 /// visible by flat culling and dropped with its node (or the other way round). The margin is
 /// kBvhMarginScale x (sum over axes of the node's largest |coordinate| + |d|), far above the
-/// rounding error of both tests (about 12 units in the last place of that sum); nodes
-/// within it of a plane are INTERSECTING and their objects get their own test. Then every
-/// object's class equals flat culling's exactly (tests/test_bvh_volumes.cpp tries objects
-/// exactly on the planes).
+/// rounding error of both tests (about 12 units in the last place of that sum, for unit
+/// normals: |n_j| <= 1 bounds every product, and an object's centre and extents lie within
+/// the node's coordinates); nodes within it of a plane are INTERSECTING and their objects get
+/// their own test. Then every object's class equals flat culling's exactly
+/// (tests/test_bvh_volumes.cpp finds objects that a margin-free node test misjudges).
 inline constexpr float kBvhMarginScale = 0x1p-16f;
 /// Added to every margin so that rounding of subnormal numbers is covered too.
 inline constexpr float kBvhMarginFloor = 0x1p-120f;
+/// Beyond this reach + |d| a plane decides nothing at a node (distances could overflow).
+inline constexpr float kBvhMarginLimit = 0x1p120f;
+/// The error bound behind the margin takes unit plane normals (as Frustum::from_planes and
+/// from_view_proj make them, to 1e-6): hierarchical culling of OBBs and spheres throws
+/// std::invalid_argument for a frustum whose normals are further than this from length 1.
+inline constexpr double kBvhUnitNormalTolerance = 4e-6;
+/// Throws std::invalid_argument unless every active plane of `frustum` has a unit normal
+/// (within kBvhUnitNormalTolerance); `who` names the caller.
+void require_unit_normals(const Frustum& frustum, const char* who);
 
 /// The box a hierarchy stores for a volume: its axis-aligned bounds computed in double and
-/// rounded outward (one float step beyond), so it contains the volume exactly.
+/// rounded outward (one float step beyond, after the double sums are rounded up), so it
+/// contains the volume.
 Aabb enclosing_box(const Obb& box);
 Aabb enclosing_box(const Sphere& sphere);
 inline Aabb enclosing_box(const Aabb& box) { return box; }
@@ -114,8 +125,8 @@ std::vector<Aabb> enclosing_boxes(std::span<const Volume> volumes) {
 
 /// classify_masked with the margin above: the node test of hierarchies over OBBs and spheres.
 /// OUTSIDE when the p-vertex is more than the margin behind a plane in `mask`; a plane goes to
-/// `straddled` unless the n-vertex is at least the margin in front. A margin that overflows
-/// to infinity decides nothing: the plane is straddled.
+/// `straddled` unless the n-vertex is at least the margin in front. Past kBvhMarginLimit (or
+/// with NaN) a plane decides nothing: it is straddled.
 Classification classify_masked_margin(const Aabb& box, const Frustum& frustum, std::uint32_t mask, std::uint32_t& straddled);
 
 /// The object tests of hierarchical culling, on the planes in `mask` only; the same float

@@ -99,6 +99,7 @@ void CpuBvhCuller::cull(const Frustum& frustum, const CpuBvhCullOptions& options
 template <class Volume>
 void CpuBvhCuller::cull_impl(const Frustum& frustum, const CpuBvhCullOptions& options, bvh::HierarchicalResult& r,
                              std::vector<std::uint32_t>& visible_ids, const std::vector<Volume>& volumes) {
+  if constexpr (!std::is_same_v<Volume, Aabb>) bvh::require_unit_normals(frustum, "CpuBvhCuller");
   const std::size_t n = volumes.size();
   const std::vector<bvh::FlatNode>& nodes = tree_.nodes;
   const std::vector<std::uint32_t>& objects = tree_.objects;

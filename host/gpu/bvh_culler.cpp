@@ -1,6 +1,7 @@
 #include "gpu/bvh_culler.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cstring>
 #include <stdexcept>
 #include <string>
@@ -20,7 +21,7 @@ constexpr VkBufferUsageFlags kStorage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
 constexpr VkBufferUsageFlags kTexel = VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT;
 // Object boxes and nodes are read through uniform texel buffers (see cull_bvh.comp).
 constexpr std::uint32_t kTexelBindings = 1u << BINDING_BOUNDS | 1u << BVH_BINDING_NODES;
-constexpr std::uint32_t kStorageBindings = BVH_BINDING_COUNT - 2;
+constexpr std::uint32_t kStorageBindings = BVH_BINDING_COUNT - std::uint32_t(std::popcount(kTexelBindings));
 
 }  // namespace
 
@@ -177,8 +178,10 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
                                 std::to_string(object_count_) + " objects (call upload_draws)");
   const std::size_t v = views.size();
   if (v >= (std::size_t(1) << (32 - BVH_MASK_BITS))) throw std::length_error(std::to_string(v) + " views are too many for one pass");
-  for (const Frustum& f : views)
+  for (const Frustum& f : views) {
     if (f.plane_count > MAX_FRUSTUM_PLANES) throw std::invalid_argument("a frustum has more than 6 planes");
+    if (kind_ != BvKind::Aabb) bvh::require_unit_normals(f, "BvhCuller");
+  }
   const std::size_t capacity = options.visible_capacity ? options.visible_capacity : object_count_;
   // Work-queue capacities that cannot overflow: a level holds at most its nodes per view; the
   // accepted subtrees of a view are disjoint, so their full chunks number at most objects /

@@ -37,7 +37,7 @@ class BvhCuller {
   /// earlier upload; call again after a refit. Throws std::invalid_argument when the tree is
   /// not one over these boxes (ids out of range or repeated, links or object ranges not nested
   /// as flatten nests them, boxes invalid or not enclosing), std::length_error when a buffer
-  /// would exceed maxStorageBufferRange. O(nodes + objects).
+  /// would exceed one texel buffer view (maxTexelBufferElements). O(nodes + objects).
   void upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes);
   /// The same for OBBs or spheres; the tree's boxes must enclose bvh::enclosing_box of each.
   void upload(const bvh::FlatTree& tree, std::span<const Obb> obbs);

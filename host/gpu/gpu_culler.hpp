@@ -76,12 +76,13 @@ struct GpuCullerConfig {
   /// (maxComputeWorkGroupCount[0]). Tests set it low to exercise the chunked path.
   std::uint32_t max_groups_per_dispatch = 0;
   /// Objects each invocation classifies in the arrival-order pass (1..32): planes loaded once
-  /// for all of them and one visible-list atomic per subgroup for all of them. The ordered
-  /// pass uses 1.
+  /// for all of them, and one visible-list atomic per workgroup for all of the workgroup's.
+  /// The ordered pass uses 1.
   std::uint32_t objects_per_invocation = FLAT_OBJECTS_PER_INVOCATION;
-  /// Most objects per segment; 0 means as many as the device's storage-buffer range allows.
-  /// Scenes larger than one storage buffer are culled in segments of this many objects (a
-  /// multiple of 256), each bound as its own range. Tests set it low to exercise that path.
+  /// Most objects per segment; 0 means as many as the device's limits allow (one texel buffer
+  /// view of volumes, one storage buffer of classes). Larger scenes are culled in segments of
+  /// this many objects (a multiple of 256), each bound as its own range. Tests set it low to
+  /// exercise that path.
   std::size_t max_segment_objects = 0;
 };
 

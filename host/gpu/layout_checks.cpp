@@ -14,6 +14,7 @@ static_assert(sizeof(vec4) == 16 && alignof(vec4) <= 16);
 // The hierarchical node-test margin is one constant on both sides.
 static_assert(std::bit_cast<std::uint32_t>(bvh::kBvhMarginScale) == BVH_MARGIN_SCALE_BITS);
 static_assert(std::bit_cast<std::uint32_t>(bvh::kBvhMarginFloor) == BVH_MARGIN_FLOOR_BITS);
+static_assert(std::bit_cast<std::uint32_t>(bvh::kBvhMarginLimit) == BVH_MARGIN_LIMIT_BITS);
 
 static_assert(sizeof(GpuAabb) == AABB_VEC4S * 16);
 static_assert(offsetof(GpuAabb, min_corner) == 0);
@@ -56,7 +57,7 @@ static_assert(offsetof(GpuBvhNode, skip) == 32);
 static_assert(offsetof(GpuBvhNode, second_child) == 36);
 static_assert(offsetof(GpuBvhNode, leaf) == 40);
 static_assert(sizeof(BvhWorkItem) == 8 && offsetof(BvhWorkItem, view_mask) == 4);
-static_assert(sizeof(BvhRange) == 16 && offsetof(BvhRange, view) == 8);
+static_assert(sizeof(BvhRange) == 16 && offsetof(BvhRange, view) == 8 && offsetof(BvhRange, slot) == 12);
 static_assert(sizeof(BvhDispatch) == 16);
 static_assert(offsetof(BvhDispatch, x) == offsetof(VkDispatchIndirectCommand, x));
 static_assert(offsetof(BvhDispatch, y) == offsetof(VkDispatchIndirectCommand, y));
@@ -70,6 +71,7 @@ static_assert(offsetof(BvhTraversal, test) == 80);
 static_assert(sizeof(BvhCullParams) == 48);
 static_assert(offsetof(BvhCullParams, level) == 28);
 static_assert(offsetof(BvhCullParams, max_groups_x) == 32);
+static_assert(offsetof(BvhCullParams, write_classes) == 36);
 static_assert(MAX_FRUSTUM_PLANES <= BVH_MASK_BITS, "plane masks must fit their bits");
 
 // DrawCommand starts with exactly VkDrawIndexedIndirectCommand.

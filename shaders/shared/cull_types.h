@@ -142,9 +142,10 @@ CP_CONST BVH_PASS_TEST = 4u;    // objects of INTERSECTING leaves, tested on the
 CP_CONST BVH_PASS_COUNT = 5u;
 
 // The node-test margin of hierarchies over OBBs and spheres, as float bits: 2^-16 and 2^-120
-// (bvh::kBvhMarginScale and kBvhMarginFloor; checked in host/gpu/layout_checks.cpp).
+// (bvh::kBvhMarginScale, kBvhMarginFloor, kBvhMarginLimit; checked in host/gpu/layout_checks.cpp).
 CP_CONST BVH_MARGIN_SCALE_BITS = 0x37800000u;
 CP_CONST BVH_MARGIN_FLOOR_BITS = 0x03800000u;
+CP_CONST BVH_MARGIN_LIMIT_BITS = 0x7b800000u;  // 2^120 (bvh::kBvhMarginLimit)
 
 // Plane masks (Assarsson & Moller 2000) take the low 8 bits of a work item's view_mask.
 CP_CONST BVH_MASK_BITS = 8u;
