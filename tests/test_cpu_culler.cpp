@@ -337,6 +337,18 @@ TEST(CpuBvhCuller, RefusesATreeOfOtherBoxes) {
   bvh::FlatTree repeated = tree;
   repeated.objects[1] = repeated.objects[0];  // an id twice (and one missing)
   EXPECT_THROW(culler.upload(repeated, boxes), std::invalid_argument);
+  // Inner nodes are checked too: the traversal follows their links and ranges.
+  bvh::FlatTree bad_link = tree;
+  bad_link.nodes[1].skip = std::uint32_t(tree.nodes.size()) + 5;
+  EXPECT_THROW(culler.upload(bad_link, boxes), std::invalid_argument);
+  bvh::FlatTree bad_range = tree;
+  bad_range.nodes[1].count += 1;
+  EXPECT_THROW(culler.upload(bad_range, boxes), std::invalid_argument);
+  // A refused upload leaves the last good one in place.
+  culler.upload(tree, boxes);
+  EXPECT_THROW(culler.upload(bad_link, boxes), std::invalid_argument);
+  const glm::vec4 all[1] = {{0, 0, 1, 1e6f}};
+  EXPECT_EQ(culler.cull(Frustum::from_planes(all)).visible, boxes.size());
 }
 
 TEST(CpuBvhCuller, ObbsAndSpheresEqualTheScalarTraversalAndFlatCulling) {

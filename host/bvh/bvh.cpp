@@ -17,8 +17,10 @@
 #endif
 
 #include "bvh/box_ops.hpp"
+#include "geom/bv_kind.hpp"
 #include "geom/pn_vertex.hpp"
 #include "geom/rounding.hpp"
+#include "geom/validate.hpp"
 
 namespace cullpipe::bvh {
 
@@ -534,6 +536,70 @@ FlatTree flatten(const Tree& tree) {
     }
   }
   return out;
+}
+
+namespace {
+
+template <class Volume>
+std::string check_flat_tree_impl(const FlatTree& tree, std::span<const Volume> volumes, std::vector<std::uint32_t>* depth_out) {
+  const std::size_t n = volumes.size(), nodes = tree.nodes.size();
+  const std::string kind(to_string(kind_of<Volume>()));
+  if (tree.objects.size() != n)
+    return "the tree orders " + std::to_string(tree.objects.size()) + " objects, but " + std::to_string(n) + " " + kind + " volumes were given";
+  if ((nodes == 0) != (n == 0)) return nodes ? "a tree over no objects must have no nodes" : "no nodes for " + std::to_string(n) + " objects";
+  std::vector<char> seen(n, 0);
+  for (std::uint32_t o : tree.objects) {
+    if (o >= n) return "object id " + std::to_string(o) + " out of range (" + std::to_string(n) + " objects)";
+    if (seen[o]++) return "object id " + std::to_string(o) + " appears twice";
+  }
+  for (std::size_t i = 0; i < n; ++i)
+    if (const std::string why = invalid_reason(volumes[i]); !why.empty()) return kind + " " + std::to_string(i) + ": " + why;
+  // Depth of every node: children follow their parent in depth-first order.
+  std::vector<std::uint32_t> depth(nodes, 0);
+  if (nodes) {
+    depth[0] = 1;
+    if (tree.nodes[0].first != 0 || tree.nodes[0].count != n || tree.nodes[0].skip != nodes)
+      return "the root must cover every object and every node";
+  }
+  for (std::size_t i = 0; i < nodes; ++i) {
+    const FlatNode& node = tree.nodes[i];
+    const std::string at = "node " + std::to_string(i) + ": ";
+    if (depth[i] == 0) return at + "not reachable from the root in depth-first order";
+    if (node.skip <= i || node.skip > nodes) return at + "skip index " + std::to_string(node.skip) + " out of range";
+    if (std::size_t(node.first) + node.count > n) return at + "object range past the object list";
+    if (const std::string why = invalid_reason(node.box); !why.empty()) return at + "invalid box: " + why;
+    if (node.leaf) {
+      if (node.skip != i + 1) return at + "leaf whose skip is not the next node";
+      for (std::uint32_t k = node.first; k < node.first + node.count; ++k)
+        if (!encloses(node.box, enclosing_box(volumes[tree.objects[k]])))
+          return at + "box does not enclose " + kind + " " + std::to_string(tree.objects[k]) +
+                 (std::is_same_v<Volume, Aabb> ? "" : " (build the tree over bvh::enclosing_boxes)");
+    } else {
+      if (i + 1 >= node.skip) return at + "inner node without children";
+      const std::uint32_t second = tree.nodes[i + 1].skip;
+      if (second <= i + 1 || second >= node.skip) return at + "second child " + std::to_string(second) + " out of range";
+      const FlatNode &a = tree.nodes[i + 1], &b = tree.nodes[second];
+      if (b.skip != node.skip) return at + "more than two children";
+      if (a.first != node.first || b.first != a.first + a.count || std::size_t(a.count) + b.count != node.count)
+        return at + "children's object ranges do not split the node's";
+      if (!encloses(node.box, a.box) || !encloses(node.box, b.box)) return at + "box does not enclose its children";
+      depth[i + 1] = depth[second] = depth[i] + 1;
+    }
+  }
+  if (depth_out) *depth_out = std::move(depth);
+  return {};
+}
+
+}  // namespace
+
+std::string check_flat_tree(const FlatTree& tree, std::span<const Aabb> volumes, std::vector<std::uint32_t>* depth) {
+  return check_flat_tree_impl(tree, volumes, depth);
+}
+std::string check_flat_tree(const FlatTree& tree, std::span<const Obb> volumes, std::vector<std::uint32_t>* depth) {
+  return check_flat_tree_impl(tree, volumes, depth);
+}
+std::string check_flat_tree(const FlatTree& tree, std::span<const Sphere> volumes, std::vector<std::uint32_t>* depth) {
+  return check_flat_tree_impl(tree, volumes, depth);
 }
 
 namespace {

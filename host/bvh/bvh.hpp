@@ -77,6 +77,18 @@ struct FlatTree {
 };
 FlatTree flatten(const Tree& tree);
 
+/// Why `tree` is not a flattened tree over `volumes` as flatten() lays one out, or an empty
+/// string: the object list is a permutation of the volumes' ids; every volume and box is
+/// valid (invalid_reason); the root covers every object and node; an inner node has exactly
+/// two children (the next node, and the node at that one's skip) whose object ranges split
+/// its own; a leaf's skip is the next node; every box encloses its children and its objects'
+/// enclosing_box(). `depth`, when given, receives each node's depth (root 1). The cullers
+/// check this on upload: the traversals index by these links and ranges, and a box that does
+/// not enclose could drop a visible object. O(nodes + objects).
+std::string check_flat_tree(const FlatTree& tree, std::span<const Aabb> volumes, std::vector<std::uint32_t>* depth = nullptr);
+std::string check_flat_tree(const FlatTree& tree, std::span<const Obb> volumes, std::vector<std::uint32_t>* depth = nullptr);
+std::string check_flat_tree(const FlatTree& tree, std::span<const Sphere> volumes, std::vector<std::uint32_t>* depth = nullptr);
+
 /// The p/n-vertex test of `box` against the planes of `frustum` in `mask` (bit k = plane k):
 /// OUTSIDE at the first such plane the box is behind, else INTERSECTING when it straddles any
 /// (their bits go to `straddled`: a child must still test those), else INSIDE. The node test

@@ -36,34 +36,13 @@ unsigned CpuBvhCuller::threads() const { return pool_->size(); }
 
 template <class Volume>
 void CpuBvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> volumes, std::vector<Volume>& out) {
-  const std::string kind(to_string(kind_of<Volume>()));
-  if (tree.objects.size() != volumes.size())
-    throw std::invalid_argument("CpuBvhCuller::upload: the tree holds " + std::to_string(tree.objects.size()) + " objects, " +
-                                std::to_string(volumes.size()) + " " + kind + " volumes given");
-  // Each id exactly once: the threads write classes by id, so a repeated id would be a race.
+  if (const std::string why = bvh::check_flat_tree(tree, volumes); !why.empty())
+    throw std::invalid_argument("CpuBvhCuller::upload: " + why);
+  // Each id exactly once (checked): the threads write classes by id without racing.
   std::vector<Volume> ordered(volumes.size());
-  std::vector<bool> seen(volumes.size(), false);
-  for (std::size_t k = 0; k < tree.objects.size(); ++k) {
-    const std::uint32_t id = tree.objects[k];
-    if (id >= volumes.size()) throw std::invalid_argument("CpuBvhCuller::upload: object id " + std::to_string(id) + " out of range");
-    if (seen[id]) throw std::invalid_argument("CpuBvhCuller::upload: object id " + std::to_string(id) + " appears twice");
-    seen[id] = true;
-    ordered[k] = volumes[id];
-  }
-  // A leaf that does not enclose its volumes could drop a visible one.
-  for (std::size_t i = 0; i < tree.nodes.size(); ++i) {
-    const bvh::FlatNode& node = tree.nodes[i];
-    if (!node.leaf) continue;
-    if (std::size_t(node.first) + node.count > ordered.size())
-      throw std::invalid_argument("CpuBvhCuller::upload: node " + std::to_string(i) + ": object range past the object list");
-    for (std::uint32_t k = node.first; k < node.first + node.count; ++k) {
-      const Aabb b = bvh::enclosing_box(ordered[k]);
-      if (!glm::all(glm::lessThanEqual(node.box.min, b.min)) || !glm::all(glm::lessThanEqual(b.max, node.box.max)))
-        throw std::invalid_argument("CpuBvhCuller::upload: leaf " + std::to_string(i) + " does not enclose " + kind + " " +
-                                    std::to_string(tree.objects[k]) + (std::is_same_v<Volume, Aabb> ? "" : " (build the tree over bvh::enclosing_boxes)"));
-    }
-  }
-  tree_ = tree;
+  for (std::size_t k = 0; k < tree.objects.size(); ++k) ordered[k] = volumes[tree.objects[k]];
+  bvh::FlatTree copy = tree;  // copied before anything changes, so a failure leaves the old upload
+  tree_ = std::move(copy);
   boxes_.clear();
   obbs_.clear();
   spheres_.clear();

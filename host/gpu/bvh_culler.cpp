@@ -70,54 +70,14 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
   const std::size_t n = boxes.size(), nodes = tree.nodes.size();
   const std::string kind(to_string(kind_of<Volume>()));
   auto bad = [&](const std::string& what) { throw std::invalid_argument("BvhCuller::upload: " + what); };
-  if (tree.objects.size() != n)
-    bad("the tree orders " + std::to_string(tree.objects.size()) + " objects, but " + std::to_string(n) + " " + kind + " volumes were given");
-  if ((nodes == 0) != (n == 0)) bad(nodes ? "a tree over no objects must have no nodes" : "no nodes for " + std::to_string(n) + " objects");
   if (nodes >= std::size_t(UINT32_MAX) || n >= std::size_t(UINT32_MAX)) bad("too many nodes or objects for 32-bit indices");
-  std::vector<char> seen(n, 0);
-  for (std::uint32_t o : tree.objects) {
-    if (o >= n) bad("object id " + std::to_string(o) + " out of range (" + std::to_string(n) + " objects)");
-    if (seen[o]++) bad("object id " + std::to_string(o) + " appears twice");
-  }
-  for (std::size_t i = 0; i < n; ++i)
-    if (const std::string why = invalid_reason(boxes[i]); !why.empty()) bad(kind + " " + std::to_string(i) + ": " + why);
-  using bvh::detail::encloses;
-  // Depth of every node (children follow their parent in depth-first order) and the layout
-  // flatten() gives, which the GPU's work-queue capacities rely on: the root covers every
-  // object; a node's two children split its object range and end where it ends; boxes enclose
-  // their children and objects.
-  std::vector<std::uint32_t> depth(nodes, 0);
+  // The layout flatten() gives, which the GPU's work-queue capacities rely on.
+  std::vector<std::uint32_t> depth;
+  if (const std::string why = bvh::check_flat_tree(tree, boxes, &depth); !why.empty()) bad(why);
   std::vector<GpuBvhNode> packed(nodes);
-  if (nodes) {
-    depth[0] = 1;
-    if (tree.nodes[0].first != 0 || tree.nodes[0].count != n || tree.nodes[0].skip != nodes)
-      bad("the root must cover every object and every node");
-  }
   for (std::size_t i = 0; i < nodes; ++i) {
     const bvh::FlatNode& node = tree.nodes[i];
-    const std::string at = "node " + std::to_string(i) + ": ";
-    if (depth[i] == 0) bad(at + "not reachable from the root in depth-first order");
-    if (node.skip <= i || node.skip > nodes) bad(at + "skip index " + std::to_string(node.skip) + " out of range");
-    if (std::size_t(node.first) + node.count > n) bad(at + "object range past the object list");
-    if (const std::string why = invalid_reason(node.box); !why.empty()) bad(at + "invalid box: " + why);
-    std::uint32_t second = bvh::kNone;
-    if (node.leaf) {
-      if (node.skip != i + 1) bad(at + "leaf whose skip is not the next node");
-      for (std::uint32_t k = node.first; k < node.first + node.count; ++k)
-        if (!encloses(node.box, bvh::enclosing_box(boxes[tree.objects[k]])))
-          bad(at + "box does not enclose " + kind + " " + std::to_string(tree.objects[k]) +
-              (std::is_same_v<Volume, Aabb> ? "" : " (build the tree over bvh::enclosing_boxes)"));
-    } else {
-      if (i + 1 >= node.skip) bad(at + "inner node without children");
-      second = tree.nodes[i + 1].skip;
-      if (second <= i + 1 || second >= node.skip) bad(at + "second child " + std::to_string(second) + " out of range");
-      const bvh::FlatNode &a = tree.nodes[i + 1], &b = tree.nodes[second];
-      if (b.skip != node.skip) bad(at + "more than two children");
-      if (a.first != node.first || b.first != a.first + a.count || std::size_t(a.count) + b.count != node.count)
-        bad(at + "children's object ranges do not split the node's");
-      if (!encloses(node.box, a.box) || !encloses(node.box, b.box)) bad(at + "box does not enclose its children");
-      depth[i + 1] = depth[second] = depth[i] + 1;
-    }
+    const std::uint32_t second = node.leaf ? bvh::kNone : tree.nodes[i + 1].skip;
     packed[i] = {node.box.min, node.first, node.box.max, node.count, node.skip, second, node.leaf ? 1u : 0u, 0u};
   }
   std::uint32_t levels = 0;
