@@ -181,6 +181,10 @@ TEST(Cli, EveryKindFlatAndHierarchicalOnEitherCpuPath) {
         const std::string path = j["cpu_path"];
         EXPECT_EQ(path.find(std::string(cpu) == "fast" ? "fast" : "reference") != std::string::npos, true) << args << ": " << path;
         EXPECT_NE(r.out.find("cpu " + path), std::string::npos) << r.out;
+        // The fast path is itself checked against the reference.
+        if (std::string(cpu) == "fast") {
+          EXPECT_NE(r.out.find("gpu == fast cpu == reference"), std::string::npos) << r.out;
+        }
         if (std::string(cull) == "bvh") {
           EXPECT_GT(j["per_view"][0]["node_tests"].get<int>(), 0) << args;
           EXPECT_LT(j["per_view"][0]["object_tests"].get<int>(), 3000) << args;
@@ -190,6 +194,7 @@ TEST(Cli, EveryKindFlatAndHierarchicalOnEitherCpuPath) {
   const Result r = cullpipe("run --generate uniform:5000 --bv sphere --cull bvh --cpu fast --backend cpu", kNoVulkan);
   EXPECT_EQ(r.code, 0) << r.err;
   EXPECT_NE(r.out.find("cpu fast hierarchical"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("(fast cpu == reference)"), std::string::npos) << r.out;
 }
 
 TEST(Cli, BvhCommandReportsEveryBuilder) {

@@ -32,6 +32,7 @@ struct BackendResults {
   bool gpu_overflow = false;
   double cpu_ns = 0.0;       ///< all views, on the CPU path that ran
   std::string cpu_path;      ///< which: "reference" or "fast (avx512, 2 threads)"
+  bool fast_checked = false; ///< the fast path's answers were compared with the reference's (untimed)
   double gpu_ns = 0.0;       ///< all views, GPU timestamps
   double gpu_wall_ns = 0.0;  ///< all views, including submission and readback
   std::size_t mismatches = 0;
@@ -179,6 +180,17 @@ BackendResults cull_bvh_on_backends(const bvh::FlatTree& tree, std::span<const V
       r.cpu_ns = elapsed_ns(start);
       for (bvh::HierarchicalResult& h : results) take(h);
       r.cpu_path = "fast hierarchical (" + std::to_string(culler.threads()) + " threads)";
+      // The fast traversal is proved against the scalar one (untimed): classes and test counts.
+      for (std::size_t v = 0; v < frusta.size(); ++v) {
+        const bvh::HierarchicalResult h = bvh::cull_hierarchical(tree, boxes, frusta[v]);
+        std::size_t differ = h.node_tests != r.node_tests[v] || h.object_tests != r.object_tests[v] ? 1 : 0;
+        for (std::size_t i = 0; i < h.classes.size(); ++i) differ += h.classes[i] != r.cpu[v][i];
+        if (differ && r.mismatch_reports.size() < max_reports)
+          r.mismatch_reports.push_back("view " + std::to_string(v) + ": the fast CPU traversal differs from the scalar one in " +
+                                       std::to_string(differ) + " places");
+        r.mismatches += differ;
+      }
+      r.fast_checked = true;
     } else {
       const auto start = std::chrono::steady_clock::now();
       for (const Frustum& f : frusta) {
@@ -235,6 +247,21 @@ BackendResults cull_on_backends(std::span<const Volume> volumes, std::span<const
       r.cpu_counts.push_back(view.counts);
     }
     r.cpu_path = "fast (" + std::string(fast::to_string(culler.isa())) + ", " + std::to_string(culler.threads()) + " threads)";
+    // The fast path is itself proved against the scalar oracle, object by object (untimed).
+    std::vector<Classification> ref(volumes.size());
+    for (std::size_t v = 0; v < frusta.size(); ++v) {
+      const reference::CullCounts counts = reference::classify_all(volumes, frusta[v], ref);
+      std::size_t differ = counts == r.cpu_counts[v] ? 0 : 1;
+      for (std::size_t i = 0; i < ref.size(); ++i) {
+        if (ref[i] == r.cpu[v][i]) continue;
+        ++differ;
+        if (r.mismatch_reports.size() < max_reports)
+          r.mismatch_reports.push_back("view " + std::to_string(v) + ", object " + std::to_string(i) + ": fast CPU " +
+                                       std::string(to_string(r.cpu[v][i])) + ", reference " + std::string(to_string(ref[i])));
+      }
+      r.mismatches += differ;
+    }
+    r.fast_checked = true;
   } else if (backend != Backend::Gpu) {
     r.cpu.assign(frusta.size(), std::vector<Classification>(volumes.size()));
     const auto start = std::chrono::steady_clock::now();

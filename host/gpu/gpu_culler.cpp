@@ -142,10 +142,6 @@ void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capac
   detail::ensure_buffer(ctx_, group_counts_, groups, storage, "group count buffer", dirty);
 }
 
-VkDeviceSize GpuCuller::texel_range() const {
-  return VkDeviceSize(ctx_.properties().limits.maxTexelBufferElements) * detail::kTexelBytes;
-}
-
 GpuCuller::SegmentPlan GpuCuller::plan_segments(std::size_t view_count, bool ordered) const {
   // Objects per segment: as many as every per-object binding allows within one storage buffer
   // range (the bounds: one texel buffer view), rounded down to a multiple of 256 so every segment's offset in every buffer is a
@@ -153,7 +149,7 @@ GpuCuller::SegmentPlan GpuCuller::plan_segments(std::size_t view_count, bool ord
   // (at most 256 bytes by the Vulkan spec).
   const VkDeviceSize range = ctx_.properties().limits.maxStorageBufferRange;
   std::size_t s = object_count_;
-  s = std::min<std::size_t>(s, texel_range() / bytes_per_object_);
+  s = std::min<std::size_t>(s, detail::texel_range(ctx_) / bytes_per_object_);
   s = std::min<std::size_t>(s, range / (sizeof(std::uint32_t) * std::max<std::size_t>(view_count, 1)));
   if (template_count_) s = std::min<std::size_t>(s, range / sizeof(DrawCommand));
   if (max_segment_objects_) s = std::min(s, max_segment_objects_);
@@ -180,7 +176,7 @@ void GpuCuller::update_descriptors() {
     // earlier, larger scene may be bigger).
     const VkDeviceSize range = ctx_.properties().limits.maxStorageBufferRange;
     auto whole = [&](const vk::Buffer& b) { return Range{&b, 0, std::min<VkDeviceSize>(b.size(), range)}; };
-    const Range bounds{&bounds_, 0, std::min<VkDeviceSize>(bounds_.size(), texel_range()) / detail::kTexelBytes * detail::kTexelBytes};
+    const Range bounds{&bounds_, 0, std::min<VkDeviceSize>(bounds_.size(), detail::texel_range(ctx_)) / detail::kTexelBytes * detail::kTexelBytes};
     Range ranges[kBindingCount] = {bounds,         whole(classes_),   whole(visible_), whole(counters_),
                                    whole(views_),  whole(templates_), whole(draws_),   whole(group_counts_)};
     if (segment_count_ > 1) {  // one segment binds whole buffers

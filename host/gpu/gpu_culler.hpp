@@ -158,7 +158,6 @@ class GpuCuller {
   SegmentPlan plan_segments(std::size_t view_count, bool ordered) const;
   void prepare(std::span<const Frustum> views, const CullOptions& options);
   void record_passes(VkCommandBuffer cmd, VkQueryPool timestamps);
-  VkDeviceSize texel_range() const;  // bytes one texel buffer view can cover
   const vk::ComputePipeline& pipeline(int shader, std::uint32_t kind, bool ordered, bool draws);
   void update_descriptors();
 

@@ -46,12 +46,17 @@ void check_storage_range(const vk::Context& ctx, VkDeviceSize bytes, const std::
                             std::to_string(limit) + " bytes, " + mib(limit) + ")");
 }
 
+VkDeviceSize texel_range(const vk::Context& ctx) {
+  // The shaders index texels with a signed int.
+  return std::min<VkDeviceSize>(ctx.properties().limits.maxTexelBufferElements, 0x7fffffffu) * kTexelBytes;
+}
+
 void check_texel_range(const vk::Context& ctx, VkDeviceSize bytes, const std::string& what) {
-  const VkDeviceSize limit = VkDeviceSize(ctx.properties().limits.maxTexelBufferElements) * kTexelBytes;
+  const VkDeviceSize limit = texel_range(ctx);
   if (bytes > limit)
     throw std::length_error(what + " needs " + std::to_string(bytes) + " bytes (" + mib(bytes) + "), more than one texel buffer view covers on " +
                             ctx.info().name + " (maxTexelBufferElements " + std::to_string(ctx.properties().limits.maxTexelBufferElements) +
-                            " of 16 bytes, " + mib(limit) + ")");
+                            " of 16 bytes, " + mib(limit) + " usable)");
 }
 
 void check_texel_format(const vk::Context& ctx, const std::string& who) {
@@ -253,6 +258,7 @@ void PassResources::write(std::size_t index, std::span<const Range> ranges) {
   std::vector<VkDescriptorBufferInfo> infos(binding_count_);
   std::vector<VkWriteDescriptorSet> writes(binding_count_);
   if (ranges.size() != binding_count_) throw std::logic_error("PassResources::write: one buffer per binding");
+  if (index >= sets_.size()) throw std::logic_error("PassResources::write: no descriptor set " + std::to_string(index));
   // No pending work uses the set's old views (the cullers' record() contract: one recorded
   // pass at a time). The new views are made first, so a failure leaves the set as it was.
   std::vector<VkBufferView> views(binding_count_, VK_NULL_HANDLE);
@@ -274,7 +280,7 @@ void PassResources::write(std::size_t index, std::span<const Range> ranges) {
   for (std::uint32_t b = 0; b < binding_count_; ++b) {
     infos[b] = {ranges[b].buffer->handle(), ranges[b].offset, ranges[b].size};
     writes[b] = {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
-    writes[b].dstSet = sets_.at(index);
+    writes[b].dstSet = sets_[index];
     writes[b].dstBinding = b;
     writes[b].descriptorCount = 1;
     if (texel(b)) {

@@ -29,8 +29,11 @@ void check_subgroup_operations(const vk::Context& ctx, VkSubgroupFeatureFlags ne
 
 void check_storage_range(const vk::Context& ctx, VkDeviceSize bytes, const std::string& what);
 
+/// Bytes one texel buffer view covers: maxTexelBufferElements texels of kTexelBytes, at most
+/// 2^31 - 1 texels (the shaders index with int).
+VkDeviceSize texel_range(const vk::Context& ctx);
 /// Throws std::length_error naming `what`, its size and the device limit when `bytes` exceed
-/// one texel buffer view (maxTexelBufferElements texels of kTexelBytes).
+/// texel_range().
 void check_texel_range(const vk::Context& ctx, VkDeviceSize bytes, const std::string& what);
 
 /// Throws vk::Error naming `who` unless the device reads kTexelFormat from uniform texel
