@@ -251,6 +251,10 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
         const gpu::CullResult g = gpu.bvh->cull(views);
         ok = g.views[0].classes == h.classes && g.views[0].counts.visible == h.visible && g.views[0].counts.inside == h.inside &&
              g.views[0].node_tests == h.node_tests && g.views[0].object_tests == h.object_tests;
+        gpu::CullResult listed = gpu.bvh->cull(views, list_only);  // the timed mode
+        std::vector<std::uint32_t> ids = listed.views[0].visible_ids;
+        std::sort(ids.begin(), ids.end());
+        ok = *ok && ids == ref_ids && listed.views[0].counts == ref_counts && listed.views[0].node_tests == h.node_tests;
       }
       add("gpu-bvh", gpu_bytes_per_object<Volume>(), ok, note, [&](std::vector<double>& t, std::vector<double>& w) {
         const gpu::CullResult g = gpu.bvh->cull(views, list_only);

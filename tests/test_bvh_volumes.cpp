@@ -19,13 +19,6 @@
 namespace cullpipe {
 namespace {
 
-// A camera at `eye` looking down -z (Vulkan clip space, y flipped), near 0.5, far 200.
-Frustum frustum_at(const glm::vec3& eye, float fov_degrees = 50.0f) {
-  glm::mat4 proj = glm::perspectiveRH_ZO(glm::radians(fov_degrees), 1.5f, 0.5f, 200.0f);
-  proj[1][1] *= -1.0f;
-  return Frustum::from_view_proj(proj * glm::lookAtRH(eye, eye + glm::vec3(0.1f, -0.05f, -1.0f), glm::vec3(0, 1, 0)));
-}
-
 template <class Volume>
 void expect_matches_flat(const std::vector<Volume>& volumes, const std::vector<Frustum>& frusta, const std::string& builder = "binned-sah",
                          std::uint32_t leaf = 4) {
@@ -110,74 +103,21 @@ TEST(BvhVolumes, RandomObbsAndSpheresMatchFlat) {
   }
 }
 
-// Whether the plain p/n-vertex test of `box` (no margin) contradicts the volume's own test on
-// one plane: the box's p-vertex behind while the volume is not wholly behind, or the box's
-// n-vertex in front while the volume straddles. Without the margin such a volume could get a
-// class flat culling does not give it.
-template <class Volume>
-bool box_contradicts(const Volume& volume, const Aabb& box, const Plane& plane) {
-  Frustum one;
-  one.planes[0] = plane;
-  one.plane_count = 1;
-  std::uint32_t straddled = 0;
-  const Classification by_box = bvh::classify_masked(box, one, 1u, straddled);
-  const Classification own = reference::classify(volume, one);
-  return (by_box == Classification::Outside && own != Classification::Outside) ||
-         (by_box == Classification::Inside && own != Classification::Inside);
-}
-
-// Volumes whose own test sits at a plane (touching it from either side, and a few float steps
-// off), near the origin and 10^5 away from it. Among many such candidates, those whose
-// enclosing box the plain p/n-vertex test classifies differently from the volume's own test
-// on some plane (a margin-free hierarchy would get them wrong) are culled with a sample of
-// the rest; far from the origin there must be some, or the test would not be sharp.
+// Volumes touching the planes near the origin and 10^5 away from it; far away there must be
+// some that a margin-free node test would misjudge, or the test would not be sharp.
 TEST(BvhVolumes, VolumesTouchingThePlanesMatchFlat) {
   test::Rng rng{23};
   for (const glm::vec3 eye : {glm::vec3(0, 0, 10), glm::vec3(1.0e5f, -3.0e4f, 2.0e5f), glm::vec3(-4.0e4f, 7.0e4f, -9.0e4f)}) {
-    const Frustum f = frustum_at(eye);
-    std::vector<Sphere> spheres;
-    std::vector<Obb> obbs;
-    std::size_t contradicting = 0;
-    for (std::size_t k = 0; k < f.plane_count; ++k) {
-      const Plane& plane = f.planes[k];
-      const glm::vec3& n = plane.normal;
-      for (int i = 0; i < 40000; ++i) {
-        // A point of the plane in front of the camera, a volume touching the plane there.
-        const float depth = rng.uniform(2.0f, 60.0f);
-        const glm::vec3 q = eye + glm::vec3(0.1f, -0.05f, -1.0f) * depth + glm::vec3(rng.uniform(-0.4f, 0.4f), rng.uniform(-0.3f, 0.3f), 0.0f) * depth;
-        const glm::vec3 on_plane = q - n * plane.distance(q);
-        const float size = std::pow(10.0f, rng.uniform(-3.0f, 0.0f));
-        const float side = (i & 1) ? 1.0f : -1.0f;
-        Sphere s{on_plane + n * (side * size), size};
-        for (int step = i / 2 % 4; step > 0; --step) s.center[i % 3] = std::nextafter(s.center[i % 3], (i & 4) ? 1e30f : -1e30f);
-        Obb b;
-        b.basis = rng.rotation();
-        b.half_extents = glm::vec3(size, size * 0.5f, size * 0.25f);
-        const float r = std::abs(n.x * b.basis[0].x + n.y * b.basis[0].y + n.z * b.basis[0].z) * b.half_extents.x +
-                        std::abs(n.x * b.basis[1].x + n.y * b.basis[1].y + n.z * b.basis[1].z) * b.half_extents.y +
-                        std::abs(n.x * b.basis[2].x + n.y * b.basis[2].y + n.z * b.basis[2].z) * b.half_extents.z;
-        b.center = on_plane + n * (side * r);
-        const bool sphere_hard = box_contradicts(s, bvh::enclosing_box(s), plane);
-        const bool obb_hard = box_contradicts(b, bvh::enclosing_box(b), plane);
-        contradicting += sphere_hard + obb_hard;
-        if (sphere_hard || i % 61 == 0) spheres.push_back(s);
-        if (obb_hard || i % 61 == 0) obbs.push_back(b);
-      }
-    }
+    const Frustum f = test::frustum_at(eye);
+    const test::TouchingVolumes set = test::touching_volumes(f, eye, rng, 40000);
     SCOPED_TRACE("eye " + std::to_string(eye.x) + ", " + std::to_string(eye.y) + ", " + std::to_string(eye.z) + ": " +
-                 std::to_string(contradicting) + " volumes a margin-free node test would misjudge");
+                 std::to_string(set.contradicting) + " volumes a margin-free node test would misjudge");
     if (eye.x != 0.0f) {
-      EXPECT_GT(contradicting, 0u);
+      EXPECT_GT(set.contradicting, 0u);
     }
-    // Every class must occur, or the test is not testing the edges.
-    std::vector<Classification> flat(spheres.size());
-    const reference::CullCounts counts = reference::classify_all(std::span<const Sphere>(spheres), f, flat);
-    ASSERT_GT(counts.inside, 0u);
-    ASSERT_GT(counts.intersecting, 0u);
-    ASSERT_LT(counts.visible, spheres.size());
     for (std::uint32_t leaf : {1u, 4u}) {
-      expect_matches_flat(spheres, {f}, "binned-sah", leaf);
-      expect_matches_flat(obbs, {f}, "binned-sah", leaf);
+      expect_matches_flat(set.spheres, {f}, "binned-sah", leaf);
+      expect_matches_flat(set.obbs, {f}, "binned-sah", leaf);
     }
   }
 }

@@ -20,6 +20,7 @@
 #include "gpu/bvh_culler.hpp"
 #include "scene/generators.hpp"
 #include "scene/gltf_scene.hpp"
+#include "bvh_test_util.hpp"
 #include "gpu_test_env.hpp"
 #include "test_util.hpp"
 #include "vk/check.hpp"
@@ -115,34 +116,17 @@ TEST_F(GpuBvh, ObbAndSphereHierarchiesAgree) {
 }
 
 TEST_F(GpuBvh, VolumesAtThePlanesFarFromTheOriginAgree) {
-  // Spheres and OBBs touching the planes of a camera 10^5 from the origin, where the node
-  // margin decides the most: the GPU must make exactly the CPU's decisions.
+  // Spheres and OBBs touching the planes of a camera 10^5 from the origin, among them volumes
+  // whose node a margin-free test would misjudge: the GPU must make exactly the CPU's
+  // decisions (classes and test counts), which equal flat culling's.
   test::Rng rng{47};
   const glm::vec3 eye(1.0e5f, -3.0e4f, 2.0e5f);
-  glm::mat4 proj = glm::perspectiveRH_ZO(glm::radians(50.0f), 1.5f, 0.5f, 200.0f);
-  proj[1][1] *= -1.0f;
-  const Frustum f = Frustum::from_view_proj(proj * glm::lookAtRH(eye, eye + glm::vec3(0.1f, -0.05f, -1.0f), glm::vec3(0, 1, 0)));
-  std::vector<Sphere> spheres;
-  std::vector<Obb> obbs;
-  for (std::size_t k = 0; k < f.plane_count; ++k) {
-    const Plane& plane = f.planes[k];
-    for (int i = 0; i < 3000; ++i) {
-      const float depth = rng.uniform(2.0f, 60.0f);
-      const glm::vec3 q = eye + glm::vec3(0.1f, -0.05f, -1.0f) * depth + glm::vec3(rng.uniform(-0.4f, 0.4f), rng.uniform(-0.3f, 0.3f), 0.0f) * depth;
-      const glm::vec3 on_plane = q - plane.normal * plane.distance(q);
-      const float size = std::pow(10.0f, rng.uniform(-3.0f, 0.0f));
-      const float side = (i & 1) ? size : -size;
-      spheres.push_back({on_plane + plane.normal * side, size});
-      Obb b;
-      b.center = on_plane + plane.normal * side;
-      b.basis = rng.rotation();
-      b.half_extents = glm::vec3(size, size * 0.5f, size * 0.25f);
-      obbs.push_back(b);
-    }
-  }
+  const Frustum f = test::frustum_at(eye);
+  const test::TouchingVolumes set = test::touching_volumes(f, eye, rng, 20000);
+  EXPECT_GT(set.contradicting, 0u);
   for (std::uint32_t leaf : {1u, 4u}) {
-    expect_agreement(culler(), tree_over(spheres, leaf), spheres, {f});
-    expect_agreement(culler(), tree_over(obbs, leaf), obbs, {f});
+    expect_agreement(culler(), tree_over(set.spheres, leaf), set.spheres, {f});
+    expect_agreement(culler(), tree_over(set.obbs, leaf), set.obbs, {f});
   }
 }
 
