@@ -67,14 +67,11 @@ GpuBvhNode load_node(uint index) {
 
 vec4 volume_word(uint word) { return uintBitsToFloat(texelFetch(boxes, int(word))); }
 
-float plane_distance(vec4 plane, vec3 p) {
-  precise float s = plane.x * p.x + plane.y * p.y + plane.z * p.z + plane.w;
-  return s;
-}
-
 // This invocation's view: its planes, loaded once (load_view) into registers.
 uint view_plane_count;
 vec4 view_planes[MAX_FRUSTUM_PLANES];
+
+#include "shared/classify.glsl"
 
 // Loads the planes of `view`. Called in uniform control flow: when the whole subgroup is on
 // one view (the usual case) the loads use a subgroup-uniform index (one load, not a gather
@@ -88,23 +85,6 @@ void load_view(uint view) {
     view_plane_count = min(views[view].plane_count, MAX_FRUSTUM_PLANES);
     [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = views[view].planes[k];
   }
-}
-
-// The p/n-vertex test of a box on the loaded view's planes in `mask`; `straddled` receives
-// the planes whose n-vertex is behind (meaningful unless OUTSIDE), as in host/bvh
-// classify_masked. Branch-free over a fixed trip count.
-uint classify_masked(vec3 lo, vec3 hi, uint mask, out uint straddled) {
-  bool outside = false;
-  straddled = 0u;
-  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) {
-    vec4 plane = view_planes[k];
-    vec3 p_vertex = vec3(plane.x >= 0.0 ? hi.x : lo.x, plane.y >= 0.0 ? hi.y : lo.y, plane.z >= 0.0 ? hi.z : lo.z);
-    vec3 n_vertex = vec3(plane.x >= 0.0 ? lo.x : hi.x, plane.y >= 0.0 ? lo.y : hi.y, plane.z >= 0.0 ? lo.z : hi.z);
-    bool tested = k < view_plane_count && (mask & (1u << k)) != 0u;
-    outside = outside || (tested && plane_distance(plane, p_vertex) < 0.0);
-    if (tested && plane_distance(plane, n_vertex) < 0.0) straddled |= 1u << k;
-  }
-  return outside ? CLASS_OUTSIDE : straddled != 0u ? CLASS_INTERSECTING : CLASS_INSIDE;
 }
 
 // The node test of hierarchies over OBBs and spheres (bvh::classify_masked_margin): a plane
@@ -121,7 +101,7 @@ uint classify_masked_margin(vec3 lo, vec3 hi, uint mask, out uint straddled) {
     precise float margin = uintBitsToFloat(BVH_MARGIN_SCALE_BITS) * size + uintBitsToFloat(BVH_MARGIN_FLOOR_BITS);
     vec3 p_vertex = vec3(plane.x >= 0.0 ? hi.x : lo.x, plane.y >= 0.0 ? hi.y : lo.y, plane.z >= 0.0 ? hi.z : lo.z);
     vec3 n_vertex = vec3(plane.x >= 0.0 ? lo.x : hi.x, plane.y >= 0.0 ? lo.y : hi.y, plane.z >= 0.0 ? lo.z : hi.z);
-    bool tested = k < view_plane_count && (mask & (1u << k)) != 0u;
+    bool tested = plane_tested(k, mask);
     outside = outside || (tested && certain && plane_distance(plane, p_vertex) < -margin);
     if (tested && (!certain || plane_distance(plane, n_vertex) < margin)) straddled |= 1u << k;
   }
@@ -129,41 +109,21 @@ uint classify_masked_margin(vec3 lo, vec3 hi, uint mask, out uint straddled) {
 }
 
 uint classify_node(vec3 lo, vec3 hi, uint mask, out uint straddled) {
-  if (BV_KIND == BV_KIND_AABB) return classify_masked(lo, hi, mask, straddled);
+  if (BV_KIND == BV_KIND_AABB) return classify_aabb(lo, hi, mask, straddled);
   return classify_masked_margin(lo, hi, mask, straddled);
 }
 
-// The object test of slot `slot` (tree order) on the planes in `mask` (bvh::classify_object):
-// the flat shader's float operations, restricted to the masked planes.
+// The object test of slot `slot` (tree order) on the planes in `mask` (bvh::classify_object).
 uint classify_object(uint slot, uint mask) {
-  bool outside = false, intersecting = false;
   if (BV_KIND == BV_KIND_AABB) {
     uint unused;
-    return classify_masked(volume_word(AABB_VEC4S * slot).xyz, volume_word(AABB_VEC4S * slot + 1u).xyz, mask, unused);
-  } else if (BV_KIND == BV_KIND_OBB) {
-    vec3 center = volume_word(OBB_VEC4S * slot).xyz;
-    vec4 u0 = volume_word(OBB_VEC4S * slot + 1u), u1 = volume_word(OBB_VEC4S * slot + 2u), u2 = volume_word(OBB_VEC4S * slot + 3u);
-    [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) {
-      vec4 plane = view_planes[k];
-      bool tested = k < view_plane_count && (mask & (1u << k)) != 0u;
-      float s = plane_distance(plane, center);
-      precise float n_dot_u0 = plane.x * u0.x + plane.y * u0.y + plane.z * u0.z;
-      precise float n_dot_u1 = plane.x * u1.x + plane.y * u1.y + plane.z * u1.z;
-      precise float n_dot_u2 = plane.x * u2.x + plane.y * u2.y + plane.z * u2.z;
-      precise float r = abs(n_dot_u0) * u0.w + abs(n_dot_u1) * u1.w + abs(n_dot_u2) * u2.w;
-      outside = outside || (tested && s < -r);
-      intersecting = intersecting || (tested && s < r);
-    }
-  } else {
-    vec4 sphere = volume_word(SPHERE_VEC4S * slot);
-    [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) {
-      bool tested = k < view_plane_count && (mask & (1u << k)) != 0u;
-      float s = plane_distance(view_planes[k], sphere.xyz);
-      outside = outside || (tested && s < -sphere.w);
-      intersecting = intersecting || (tested && s < sphere.w);
-    }
+    return classify_aabb(volume_word(AABB_VEC4S * slot).xyz, volume_word(AABB_VEC4S * slot + 1u).xyz, mask, unused);
   }
-  return outside ? CLASS_OUTSIDE : intersecting ? CLASS_INTERSECTING : CLASS_INSIDE;
+  if (BV_KIND == BV_KIND_OBB) {
+    uint b = OBB_VEC4S * slot;
+    return classify_obb(volume_word(b).xyz, volume_word(b + 1u), volume_word(b + 2u), volume_word(b + 3u), mask);
+  }
+  return classify_sphere(volume_word(SPHERE_VEC4S * slot), mask);
 }
 
 // Dispatches larger than max_groups_x workgroups fold into y.

@@ -9,12 +9,8 @@
 // - ORDERED == 1: one object per invocation; writes only each workgroup's visible count;
 //   compact_scan.comp and compact_scatter.comp then write the lists in object order.
 //
-// Bit-exact contract with host/cull/reference.cpp: every distance is computed as
-// ((n.x*p.x + n.y*p.y) + n.z*p.z) + d, written out (not dot()) and marked `precise`, so no
-// reassociation or fused multiply-add can change a result.
-// Tests: p/n-vertex box test (Greene 1994; Assarsson & Moller 2000), the OBB test by
-// projected radius r = sum |n.u_i| h_i (Ericson, Real-Time Collision Detection 5.2.3), the
-// sphere test by signed distance.
+// The plane tests, and their bit-exact contract with the CPU reference, are in
+// shared/classify.glsl.
 #extension GL_GOOGLE_include_directive : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_ballot : require
@@ -54,72 +50,18 @@ uint view;             // this invocation's view (gl_GlobalInvocationID.y)
 uint view_plane_count;
 vec4 view_planes[MAX_FRUSTUM_PLANES];
 
-float plane_distance(vec4 plane, vec3 p) {
-  precise float s = plane.x * p.x + plane.y * p.y + plane.z * p.z + plane.w;
-  return s;
-}
-
-uint classify_aabb(vec3 lo, vec3 hi) {
-  // Branch-free over a fixed trip count (SIMD-friendly); the answer is the reference's:
-  // OUTSIDE if any p-vertex is behind, else INTERSECTING if any n-vertex is behind.
-  bool outside = false, intersecting = false;
-  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) {
-    if (k < view_plane_count) {
-      vec4 plane = view_planes[k];
-      vec3 p_vertex = vec3(plane.x >= 0.0 ? hi.x : lo.x, plane.y >= 0.0 ? hi.y : lo.y, plane.z >= 0.0 ? hi.z : lo.z);
-      vec3 n_vertex = vec3(plane.x >= 0.0 ? lo.x : hi.x, plane.y >= 0.0 ? lo.y : hi.y, plane.z >= 0.0 ? lo.z : hi.z);
-      bool p_behind = plane_distance(plane, p_vertex) < 0.0;
-      bool n_behind = plane_distance(plane, n_vertex) < 0.0;
-      outside = outside || p_behind;
-      intersecting = intersecting || n_behind;
-    }
-  }
-  return outside ? CLASS_OUTSIDE : intersecting ? CLASS_INTERSECTING : CLASS_INSIDE;
-}
-
-uint classify_obb(vec3 center, vec4 u0, vec4 u1, vec4 u2) {
-  bool outside = false, intersecting = false;
-  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) {
-    if (k < view_plane_count) {
-      vec4 plane = view_planes[k];
-      float s = plane_distance(plane, center);
-      precise float n_dot_u0 = plane.x * u0.x + plane.y * u0.y + plane.z * u0.z;
-      precise float n_dot_u1 = plane.x * u1.x + plane.y * u1.y + plane.z * u1.z;
-      precise float n_dot_u2 = plane.x * u2.x + plane.y * u2.y + plane.z * u2.z;
-      precise float r = abs(n_dot_u0) * u0.w + abs(n_dot_u1) * u1.w + abs(n_dot_u2) * u2.w;
-      bool all_behind = s < -r;
-      bool some_behind = s < r;
-      outside = outside || all_behind;
-      intersecting = intersecting || some_behind;
-    }
-  }
-  return outside ? CLASS_OUTSIDE : intersecting ? CLASS_INTERSECTING : CLASS_INSIDE;
-}
-
-uint classify_sphere(vec4 center_radius) {
-  bool outside = false, intersecting = false;
-  float radius = center_radius.w;
-  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) {
-    if (k < view_plane_count) {
-      float s = plane_distance(view_planes[k], center_radius.xyz);
-      bool all_behind = s < -radius;
-      bool some_behind = s < radius;
-      outside = outside || all_behind;
-      intersecting = intersecting || some_behind;
-    }
-  }
-  return outside ? CLASS_OUTSIDE : intersecting ? CLASS_INTERSECTING : CLASS_INSIDE;
-}
+#include "shared/classify.glsl"
 
 vec4 bound(uint word) { return uintBitsToFloat(texelFetch(bounds, int(word))); }
 
 uint classify_object(uint i) {
-  if (BV_KIND == BV_KIND_AABB) return classify_aabb(bound(AABB_VEC4S * i).xyz, bound(AABB_VEC4S * i + 1).xyz);
+  uint unused;
+  if (BV_KIND == BV_KIND_AABB) return classify_aabb(bound(AABB_VEC4S * i).xyz, bound(AABB_VEC4S * i + 1).xyz, ALL_PLANES, unused);
   if (BV_KIND == BV_KIND_OBB) {
     uint b = OBB_VEC4S * i;
-    return classify_obb(bound(b).xyz, bound(b + 1), bound(b + 2), bound(b + 3));
+    return classify_obb(bound(b).xyz, bound(b + 1), bound(b + 2), bound(b + 3), ALL_PLANES);
   }
-  return classify_sphere(bound(SPHERE_VEC4S * i));
+  return classify_sphere(bound(SPHERE_VEC4S * i), ALL_PLANES);
 }
 
 void load_view() {

@@ -21,6 +21,7 @@
 #include "geom/pn_vertex.hpp"
 #include "geom/rounding.hpp"
 #include "geom/validate.hpp"
+#include "geom/volume_tests.hpp"
 
 namespace cullpipe::bvh {
 
@@ -77,37 +78,11 @@ Classification classify_object(const Aabb& box, const Frustum& frustum, std::uin
 }
 
 Classification classify_object(const Obb& box, const Frustum& frustum, std::uint32_t mask) {
-  // cull/reference.cpp classify(const Obb&), on the planes in `mask`.
-  bool intersecting = false;
-  const auto planes = frustum.active();
-  for (std::uint32_t k = 0; k < planes.size(); ++k) {
-    if (!(mask & (1u << k))) continue;
-    const Plane& plane = planes[k];
-    const glm::vec3& n = plane.normal;
-    const float s = plane.distance(box.center);
-    const glm::vec3 &u0 = box.basis[0], &u1 = box.basis[1], &u2 = box.basis[2];
-    const float n_dot_u0 = n.x * u0.x + n.y * u0.y + n.z * u0.z;
-    const float n_dot_u1 = n.x * u1.x + n.y * u1.y + n.z * u1.z;
-    const float n_dot_u2 = n.x * u2.x + n.y * u2.y + n.z * u2.z;
-    const float r = std::abs(n_dot_u0) * box.half_extents.x + std::abs(n_dot_u1) * box.half_extents.y +
-                    std::abs(n_dot_u2) * box.half_extents.z;
-    if (s < -r) return Classification::Outside;
-    if (s < r) intersecting = true;
-  }
-  return intersecting ? Classification::Intersecting : Classification::Inside;
+  return classify_planes(box, frustum, mask);
 }
 
 Classification classify_object(const Sphere& sphere, const Frustum& frustum, std::uint32_t mask) {
-  // cull/reference.cpp classify(const Sphere&), on the planes in `mask`.
-  bool intersecting = false;
-  const auto planes = frustum.active();
-  for (std::uint32_t k = 0; k < planes.size(); ++k) {
-    if (!(mask & (1u << k))) continue;
-    const float s = planes[k].distance(sphere.center);
-    if (s < -sphere.radius) return Classification::Outside;
-    if (s < sphere.radius) intersecting = true;
-  }
-  return intersecting ? Classification::Intersecting : Classification::Inside;
+  return classify_planes(sphere, frustum, mask);
 }
 
 namespace {

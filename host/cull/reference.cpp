@@ -1,6 +1,7 @@
 #include "cull/reference.hpp"
 
 #include "geom/pn_vertex.hpp"
+#include "geom/volume_tests.hpp"
 
 #include <cmath>
 #include <stdexcept>
@@ -29,32 +30,9 @@ Classification classify_corners(const Aabb& box, const Frustum& frustum) {
   return all_inside ? Classification::Inside : Classification::Intersecting;
 }
 
-Classification classify(const Obb& box, const Frustum& frustum) {
-  bool intersecting = false;
-  for (const Plane& plane : frustum.active()) {
-    const glm::vec3& n = plane.normal;
-    const float s = plane.distance(box.center);
-    const glm::vec3 &u0 = box.basis[0], &u1 = box.basis[1], &u2 = box.basis[2];
-    const float n_dot_u0 = n.x * u0.x + n.y * u0.y + n.z * u0.z;
-    const float n_dot_u1 = n.x * u1.x + n.y * u1.y + n.z * u1.z;
-    const float n_dot_u2 = n.x * u2.x + n.y * u2.y + n.z * u2.z;
-    const float r = std::abs(n_dot_u0) * box.half_extents.x + std::abs(n_dot_u1) * box.half_extents.y +
-                    std::abs(n_dot_u2) * box.half_extents.z;
-    if (s < -r) return Classification::Outside;
-    if (s < r) intersecting = true;
-  }
-  return intersecting ? Classification::Intersecting : Classification::Inside;
-}
+Classification classify(const Obb& box, const Frustum& frustum) { return classify_planes(box, frustum, kAllPlanes); }
 
-Classification classify(const Sphere& sphere, const Frustum& frustum) {
-  bool intersecting = false;
-  for (const Plane& plane : frustum.active()) {
-    const float s = plane.distance(sphere.center);
-    if (s < -sphere.radius) return Classification::Outside;
-    if (s < sphere.radius) intersecting = true;
-  }
-  return intersecting ? Classification::Intersecting : Classification::Inside;
-}
+Classification classify(const Sphere& sphere, const Frustum& frustum) { return classify_planes(sphere, frustum, kAllPlanes); }
 
 namespace {
 
