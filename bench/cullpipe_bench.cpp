@@ -49,6 +49,15 @@ using namespace cullpipe::bench;
 
 namespace {
 
+/// A CSV field (RFC 4180): quoted, with quotes doubled, when it holds a comma, quote or newline.
+std::string csv_field(const std::string& text) {
+  if (text.find_first_of(",\"\n") == std::string::npos) return text;
+  std::string quoted = "\"";
+  for (char c : text) quoted += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return quoted + "\"";
+}
+
+
 const char* const kProgram = "cullpipe-bench";
 const std::vector<std::string> kMethods = {"reference", "cpu-fast", "cpu-read", "cpu-bvh", "cpu-fast-bvh", "gpu-flat", "gpu-bvh"};
 
@@ -214,9 +223,11 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
       bool ok = fast_h.classes == h.classes && fast_h.node_tests == h.node_tests && fast_h.object_tests == h.object_tests &&
                 fast_h.visible == h.visible && fast_h.inside == h.inside;
       fast_bvh.cull(f, {false, true}, fast_h, fast_bvh_ids);
-      std::vector<std::uint32_t> sorted = fast_bvh_ids;
-      std::sort(sorted.begin(), sorted.end());
-      ok = ok && sorted == ref_ids && fast_h.visible == ref_counts.visible && fast_h.inside == ref_counts.inside;
+      std::vector<std::uint32_t> in_tree_order;  // the list comes in the tree's object order
+      for (std::uint32_t o : tree.objects)
+        if (is_visible(h.classes[o])) in_tree_order.push_back(o);
+      ok = ok && fast_bvh_ids == in_tree_order && fast_h.visible == ref_counts.visible && fast_h.inside == ref_counts.inside &&
+           fast_h.node_tests == h.node_tests && fast_h.object_tests == h.object_tests;
       add("cpu-fast-bvh", sizeof(Volume), ok, "", [&](std::vector<double>& t, std::vector<double>&) {
         const auto t0 = Clock::now();
         fast_bvh.cull(f, {false, true}, fast_h, fast_bvh_ids);
@@ -254,7 +265,8 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
         gpu::CullResult listed = gpu.bvh->cull(views, list_only);  // the timed mode
         std::vector<std::uint32_t> ids = listed.views[0].visible_ids;
         std::sort(ids.begin(), ids.end());
-        ok = *ok && ids == ref_ids && listed.views[0].counts == ref_counts && listed.views[0].node_tests == h.node_tests;
+        ok = *ok && ids == ref_ids && listed.views[0].counts == ref_counts && listed.views[0].node_tests == h.node_tests &&
+             listed.views[0].object_tests == h.object_tests;
       }
       add("gpu-bvh", gpu_bytes_per_object<Volume>(), ok, note, [&](std::vector<double>& t, std::vector<double>& w) {
         const gpu::CullResult g = gpu.bvh->cull(views, list_only);
@@ -505,7 +517,7 @@ int main(int argc, char** argv) {
       const nlohmann::json j = record(c);
       for (std::size_t k = 0; k < std::size(columns); ++k) {
         const nlohmann::json& v = j[columns[k]];
-        csv << (k ? "," : "") << (v.is_string() ? v.get<std::string>() : v.is_null() ? "" : v.dump());
+        csv << (k ? "," : "") << (v.is_string() ? csv_field(v.get<std::string>()) : v.is_null() ? "" : v.dump());
       }
       csv << "\n";
     }

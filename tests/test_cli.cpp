@@ -229,6 +229,9 @@ TEST(Cli, BadBvhOptionsAreClearErrors) {
   r = cullpipe("run --generate uniform:100 --cpu quick");
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("--cpu"), std::string::npos) << r.err;
+  r = cullpipe("run --generate uniform:100 --cpu fast --backend gpu");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("--cpu fast needs the CPU side"), std::string::npos) << r.err;
   r = cullpipe("run --generate uniform:100 --cull bvh --builder top-down:axis=sideways");
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("sideways"), std::string::npos) << r.err;

@@ -115,6 +115,18 @@ TEST_F(GpuBvh, ObbAndSphereHierarchiesAgree) {
   EXPECT_EQ(culler().kind(), BvKind::Aabb);
 }
 
+TEST_F(GpuBvh, ObbAndSphereHierarchiesRefuseNonUnitNormals) {
+  // The node margin's error bound takes unit normals (boxes need none).
+  test::Rng rng{53};
+  const test::RandomVolumes v = test::random_volumes(rng, 100, 20.0f, 2.0f);
+  Frustum f = Frustum::from_view_proj(test::test_view_proj());
+  f.planes[0].normal *= 0.5f;
+  culler().upload(tree_over(v.spheres), std::span<const Sphere>(v.spheres));
+  EXPECT_THROW(culler().cull(std::span(&f, 1)), std::invalid_argument);
+  culler().upload(flat_tree(v.aabbs), std::span<const Aabb>(v.aabbs));
+  EXPECT_NO_THROW(culler().cull(std::span(&f, 1)));
+}
+
 TEST_F(GpuBvh, VolumesAtThePlanesFarFromTheOriginAgree) {
   // Spheres and OBBs touching the planes of a camera 10^5 from the origin, among them volumes
   // whose node a margin-free test would misjudge: the GPU must make exactly the CPU's

@@ -193,7 +193,10 @@ void CpuBvhCuller::cull_impl(const Frustum& frustum, const CpuBvhCullOptions& op
   offsets_.assign(tasks.size() + 1, 0);
   for (std::size_t t = 0; t < tasks.size(); ++t) offsets_[t + 1] = offsets_[t] + task_ids_[t].size();
   pool_->parallel_for(tasks.size(), [&](std::size_t t) {
-    std::copy(task_ids_[t].begin(), task_ids_[t].end(), visible_ids.begin() + std::ptrdiff_t(offsets_[t]));
+    std::vector<std::uint32_t>& found = task_ids_[t];
+    std::copy(found.begin(), found.end(), visible_ids.begin() + std::ptrdiff_t(offsets_[t]));
+    // Tasks cover other subtrees from view to view: do not let each keep its largest list.
+    if (found.capacity() > 2 * found.size() + 4096) std::vector<std::uint32_t>().swap(found);
   });
 }
 

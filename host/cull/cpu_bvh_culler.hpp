@@ -54,6 +54,8 @@ class CpuBvhCuller {
   /// The kind of the volumes uploaded last.
   BvKind kind() const { return kind_; }
 
+  /// Over OBBs or spheres the frustum needs unit plane normals (bvh::require_unit_normals;
+  /// Frustum's factories make them), else std::invalid_argument.
   bvh::HierarchicalResult cull(const Frustum& frustum);
   /// The same into `result`, reusing its storage.
   void cull(const Frustum& frustum, bvh::HierarchicalResult& result);

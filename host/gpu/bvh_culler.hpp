@@ -48,7 +48,9 @@ class BvhCuller {
   /// One draw template per object, by object id (see GpuCuller::upload_draws).
   void upload_draws(std::span<const DrawCommand> templates);
 
-  /// Culls against every view in one submission and waits (see GpuCuller::cull).
+  /// Culls against every view in one submission and waits (see GpuCuller::cull). Over OBBs or
+  /// spheres the frusta need unit plane normals (bvh::require_unit_normals; Frustum's factories
+  /// make them), else std::invalid_argument.
   CullResult cull(std::span<const Frustum> views, const CullOptions& options = {});
   /// Records the pass into the caller's command buffer (see GpuCuller::record for the rules).
   void record(VkCommandBuffer cmd, std::span<const Frustum> views, const CullOptions& options = {});
