@@ -78,7 +78,7 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
   for (std::size_t i = 0; i < nodes; ++i) {
     const bvh::FlatNode& node = tree.nodes[i];
     const std::uint32_t second = node.leaf ? bvh::kNone : tree.nodes[i + 1].skip;
-    packed[i] = {node.box.min, node.first, node.box.max, node.count, node.skip, second, node.leaf ? 1u : 0u, 0u};
+    packed[i] = {node.box.min, node.first, node.box.max, node.count, node.skip, second, node.leaf ? 1u : 0u, depth[i]};
   }
   std::uint32_t levels = 0;
   std::vector<std::size_t> width;

@@ -17,8 +17,9 @@
 namespace cullpipe::gpu {
 
 /// Hierarchical frustum culling of a flattened BVH on a Vulkan device (shaders/cull_bvh.comp):
-/// one indirect dispatch per tree level over a queue of (node, view, plane mask) items, so
-/// each node box is tested once per view, in parallel; OUTSIDE drops a subtree, INSIDE
+/// one indirect dispatch per BVH_LEVELS_PER_DISPATCH tree levels over a queue of (node, view,
+/// plane mask) items, each invocation walking its item's subtree down those levels, so each
+/// node box is tested once per view, in parallel; OUTSIDE drops a subtree, INSIDE
 /// accepts its object range with no further tests, INTERSECTING descends; objects of
 /// INTERSECTING leaves are tested on the planes the leaf straddles. Any number of views per
 /// pass, each with its own outputs. Classes and test counts equal bvh::cull_hierarchical bit

@@ -128,9 +128,10 @@ struct ViewCounters {
 // (one workgroup per chunk).
 CP_CONST BVH_CULL_GROUP_SIZE = 64u;
 
-// Tree levels one LEVEL dispatch covers: an item's node and, when it is INTERSECTING, its
-// children (fewer dispatches; each node is still tested once).
-CP_CONST BVH_LEVELS_PER_DISPATCH = 2u;
+// Tree levels one LEVEL dispatch covers: each item's invocation walks its node's subtree that
+// many levels deep (each node still tested once); the level below is queued for the next
+// dispatch. At most 10 (the walk keeps a 6-bit plane mask per level in two words).
+CP_CONST BVH_LEVELS_PER_DISPATCH = 5u;
 
 // Passes of cull_bvh.comp, selected by specialization constant 0.
 CP_CONST BVH_PASS_SEED = 0u;    // one root work item per view, counters reset
@@ -158,7 +159,7 @@ struct GpuBvhNode {
   uint skip;          // node after this subtree
   uint second_child;  // inner node: index of its second child (its first is this index + 1)
   uint leaf;          // 1 for a leaf
-  uint reserved;
+  uint depth;         // the root is 1
 };
 
 // A node (level queues) or an object slot (test list) with its view and plane mask:
