@@ -394,8 +394,9 @@ void test() {
     uint mask = item.view_mask & MASK;
     // An empty mask: an object of an INSIDE subtree, accepted without a test.
     c = mask == 0u ? CLASS_INSIDE : classify_object(item.index, mask);
-    if (params.write_classes != 0u) classes[view * params.object_count + object] = c;
   }
+  // emit_visible writes the visible objects' classes; the others stay OUTSIDE, as the host
+  // filled the buffer.
   bool visible = c != CLASS_OUTSIDE;
   if (subgroupAllEqual(view)) {  // the usual case: one atomic per subgroup
     uvec4 ballot = subgroupBallot(visible);

@@ -252,15 +252,12 @@ BackendResults cull_on_backends(std::span<const Volume> volumes, std::span<const
     std::vector<Classification> ref(volumes.size());
     for (std::size_t v = 0; v < frusta.size(); ++v) {
       const reference::CullCounts counts = reference::classify_all(volumes, frusta[v], ref);
-      std::size_t differ = counts == r.cpu_counts[v] ? 0 : 1;
-      for (std::size_t i = 0; i < ref.size(); ++i) {
-        if (ref[i] == r.cpu[v][i]) continue;
-        ++differ;
-        if (r.mismatch_reports.size() < max_reports)
-          r.mismatch_reports.push_back("view " + std::to_string(v) + ", object " + std::to_string(i) + ": fast CPU " +
-                                       std::string(to_string(r.cpu[v][i])) + ", reference " + std::string(to_string(ref[i])));
-      }
-      r.fast_mismatches += differ;
+      r.fast_mismatches += count_mismatches(ref, r.cpu[v]) + (counts == r.cpu_counts[v] ? 0 : 1);
+      for (std::size_t i = 0; i < ref.size() && r.mismatch_reports.size() < max_reports; ++i)
+        if (ref[i] != r.cpu[v][i])
+          r.mismatch_reports.push_back("view " + std::to_string(v) + ", object " + std::to_string(i) + ": " + describe(volumes[i]) +
+                                       "; frustum " + describe(frusta[v]) + "; reference says " + std::string(to_string(ref[i])) +
+                                       ", fast CPU path says " + std::string(to_string(r.cpu[v][i])));
     }
     r.fast_checked = true;
   } else if (backend != Backend::Gpu) {

@@ -139,29 +139,27 @@ void check_count(std::size_t n) {
 }
 }  // namespace
 
-void CpuCuller::upload(std::span<const Aabb> volumes) {
+template <std::size_t Columns, class Volume, class Store>
+void CpuCuller::upload_columns(std::span<const Volume> volumes, Store store) {
   check_count(volumes.size());
-  count_ = 0;
-  impl_->reserve(6, volumes.size());
-  float* c[6];
-  for (std::size_t k = 0; k < 6; ++k) c[k] = impl_->column(k);
-  for (std::size_t i = 0; i < volumes.size(); ++i) {
-    const Aabb& b = volumes[i];
-    c[0][i] = b.min.x, c[1][i] = b.min.y, c[2][i] = b.min.z;
-    c[3][i] = b.max.x, c[4][i] = b.max.y, c[5][i] = b.max.z;
-  }
-  kind_ = BvKind::Aabb;
+  count_ = 0;  // stays 0 if the allocation fails
+  impl_->reserve(Columns, volumes.size());
+  float* c[Columns];
+  for (std::size_t k = 0; k < Columns; ++k) c[k] = impl_->column(k);
+  for (std::size_t i = 0; i < volumes.size(); ++i) store(volumes[i], c, i);
+  kind_ = kind_of<Volume>();
   count_ = volumes.size();
 }
 
+void CpuCuller::upload(std::span<const Aabb> volumes) {
+  upload_columns<6>(volumes, [](const Aabb& b, float* const* c, std::size_t i) {
+    c[0][i] = b.min.x, c[1][i] = b.min.y, c[2][i] = b.min.z;
+    c[3][i] = b.max.x, c[4][i] = b.max.y, c[5][i] = b.max.z;
+  });
+}
+
 void CpuCuller::upload(std::span<const Obb> volumes) {
-  check_count(volumes.size());
-  count_ = 0;
-  impl_->reserve(15, volumes.size());
-  float* c[15];
-  for (std::size_t k = 0; k < 15; ++k) c[k] = impl_->column(k);
-  for (std::size_t i = 0; i < volumes.size(); ++i) {
-    const Obb& b = volumes[i];
+  upload_columns<15>(volumes, [](const Obb& b, float* const* c, std::size_t i) {
     for (int a = 0; a < 3; ++a) {
       c[a][i] = b.center[a];
       c[3 + a][i] = b.basis[0][a];
@@ -169,23 +167,14 @@ void CpuCuller::upload(std::span<const Obb> volumes) {
       c[9 + a][i] = b.basis[2][a];
       c[12 + a][i] = b.half_extents[a];
     }
-  }
-  kind_ = BvKind::Obb;
-  count_ = volumes.size();
+  });
 }
 
 void CpuCuller::upload(std::span<const Sphere> volumes) {
-  check_count(volumes.size());
-  count_ = 0;
-  impl_->reserve(4, volumes.size());
-  float* c[4];
-  for (std::size_t k = 0; k < 4; ++k) c[k] = impl_->column(k);
-  for (std::size_t i = 0; i < volumes.size(); ++i) {
-    c[0][i] = volumes[i].center.x, c[1][i] = volumes[i].center.y, c[2][i] = volumes[i].center.z;
-    c[3][i] = volumes[i].radius;
-  }
-  kind_ = BvKind::Sphere;
-  count_ = volumes.size();
+  upload_columns<4>(volumes, [](const Sphere& s, float* const* c, std::size_t i) {
+    c[0][i] = s.center.x, c[1][i] = s.center.y, c[2][i] = s.center.z;
+    c[3][i] = s.radius;
+  });
 }
 
 std::size_t CpuCuller::bytes_per_object() const { return impl_->arrays.size() * sizeof(float); }

@@ -92,6 +92,10 @@ class CpuCuller {
   unsigned threads() const;
 
  private:
+  // Stores `volumes` as Columns float arrays: `store(volume, columns, i)` writes object i.
+  template <std::size_t Columns, class Volume, class Store>
+  void upload_columns(std::span<const Volume> volumes, Store store);
+
   struct Impl;
   std::unique_ptr<Impl> impl_;
   BvKind kind_ = BvKind::Aabb;
