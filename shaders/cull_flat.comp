@@ -50,6 +50,7 @@ uint view;             // this invocation's view (gl_GlobalInvocationID.y)
 uint view_plane_count;
 vec4 view_planes[MAX_FRUSTUM_PLANES];
 
+#define CP_PLANES_PADDED  // load_view fills the planes past the view's count
 #include "shared/classify.glsl"
 
 vec4 bound(uint word) { return uintBitsToFloat(texelFetch(bounds, int(word))); }
@@ -66,7 +67,8 @@ uint classify_object(uint i) {
 
 void load_view() {
   view_plane_count = min(views[view].plane_count, MAX_FRUSTUM_PLANES);
-  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = views[view].planes[k];
+  const vec4 no_plane = vec4(0.0, 0.0, 0.0, uintBitsToFloat(0x7f800000u));  // see classify.glsl
+  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = k < view_plane_count ? views[view].planes[k] : no_plane;
 }
 
 // Object order: each workgroup counts its visible objects; compact_scan / compact_scatter write
@@ -105,17 +107,20 @@ void main_ordered() {
   }
 }
 
-// Position of the k-th (from 0) set bit of x; x has more than k set bits.
+// Position of the k-th (from 0) set bit of x; x has more than k set bits. Straight-line halving
+// steps (a loop here stayed a loop on lavapipe, with its iteration limiter and spills).
 uint nth_set_bit(uint x, uint k) {
   uint pos = 0;
-  [[unroll]] for (uint w = 16; w > 0; w >>= 1) {
-    if (gl_SubgroupSize <= w) continue;  // no bits that high (a constant on most drivers)
-    uint low = bitCount(x & ((1u << w) - 1u));
-    bool up = k >= low;
-    k = up ? k - low : k;
-    x = up ? x >> w : x;
-    pos = up ? pos + w : pos;
+#define CP_HALVE(w)                                  \
+  if (gl_SubgroupSize > (w)) {                       \
+    uint low = bitCount(x & ((1u << (w)) - 1u));     \
+    bool up = k >= low;                              \
+    k = up ? k - low : k;                            \
+    x = up ? x >> (w) : x;                           \
+    pos = up ? pos + (w) : pos;                      \
   }
+  CP_HALVE(16u) CP_HALVE(8u) CP_HALVE(4u) CP_HALVE(2u) CP_HALVE(1u)
+#undef CP_HALVE
   return pos;
 }
 
@@ -144,6 +149,12 @@ uint nth_set_lane(uvec4 ballot, uint k) {
 // stores are not masked per object: on lavapipe a store is a branch per lane on its mask, which
 // random visibility makes the branch predictor miss.
 void main_arrival() {
+  // The parameters, read once: lavapipe reads push constants like a uniform buffer, one
+  // bounds-checked gather per use, and cannot move a read past the stores to other buffers.
+  uint object_count = params.object_count;
+  bool write_classes = params.write_classes != 0u;
+  uint visible_capacity = params.visible_capacity;
+  uint id_base = params.id_base;
   bool view_ok = view < params.view_count;
   if (view_ok) load_view();
   uint group_first = params.first_object + gl_WorkGroupID.x * gl_WorkGroupSize.x * OBJECTS_PER_INVOCATION;
@@ -155,9 +166,9 @@ void main_arrival() {
   [[unroll]] for (uint j = 0; j < OBJECTS_PER_INVOCATION; ++j) {
     uint i = block + j * gl_WorkGroupSize.x;
     bool visible = false;
-    if (view_ok && i < params.object_count) {
+    if (view_ok && i < object_count) {
       uint c = classify_object(i);
-      if (params.write_classes != 0) classes[view * params.object_count + i] = c;
+      if (write_classes) classes[view * object_count + i] = c;
       visible = c != CLASS_OUTSIDE;
       if (c == CLASS_INSIDE) ++inside;
     }
@@ -204,12 +215,12 @@ void main_arrival() {
     uint lane_block = group_first + subgroupShuffle(gl_LocalInvocationIndex, nth_set_lane(ballot, k - before));
     uint i = lane_block + j * gl_WorkGroupSize.x;
     uint slot = base + t;
-    if (t < vis_total && slot < params.visible_capacity) {
-      visible_ids[view * params.visible_capacity + slot] = params.id_base + i;
+    if (t < vis_total && slot < visible_capacity) {
+      visible_ids[view * visible_capacity + slot] = id_base + i;
       if (WRITE_DRAWS != 0) {
         DrawCommand d = templates[i];
-        d.object_id = params.id_base + i;
-        draws[view * params.visible_capacity + slot] = d;
+        d.object_id = id_base + i;
+        draws[view * visible_capacity + slot] = d;
       }
     }
   }

@@ -253,6 +253,35 @@ TEST_F(Gpu, DegenerateBehindCameraHugeAndTiny) {
   expect_agreement(culler(), obbs, {f});
 }
 
+// The flat pass fills the planes past a view's count with (0, 0, 0, +inf), which must decide
+// nothing for any volume: large, negative and infinite radii, infinite and NaN coordinates.
+TEST_F(Gpu, FrustaOfFewerPlanesWithExtremeVolumes) {
+  const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
+  std::vector<Sphere> spheres = {{{0.5f, 0.5f, 0}, 5},      {{0.5f, 0.5f, 0}, 1e30f}, {{0.5f, 0.5f, 0}, inf},
+                                 {{0.5f, 0.5f, 0}, -2},     {{0.5f, 0.5f, 0}, -inf},  {{inf, 0.5f, 0}, 1},
+                                 {{0.5f, -inf, 0}, 1},      {{nan, 0.5f, 0}, 1},      {{0.5f, 0.5f, 0}, nan},
+                                 {{10, 10, 0}, 5},          {{0.5f, 0.5f, inf}, 0.25f}};
+  std::vector<Aabb> boxes = {{{0.25f, 0.25f, -1}, {0.75f, 0.75f, 1}},  {{0.25f, 0.25f, -inf}, {0.75f, 0.75f, inf}},
+                             {{-inf, -inf, -inf}, {inf, inf, inf}},    {{0.25f, 0.25f, nan}, {0.75f, 0.75f, 1}},
+                             {{0.75f, 0.75f, 1}, {0.25f, 0.25f, -1}},  {{0.25f, 0.25f, -1e30f}, {0.75f, 0.75f, 1e30f}}};
+  std::vector<Obb> obbs(5);
+  for (Obb& o : obbs) o.center = {0.5f, 0.5f, 0};
+  obbs[1].half_extents = {0.25f, 0.25f, inf};
+  obbs[2].half_extents = {0.25f, 0.25f, 1e30f};
+  obbs[3].center.z = inf;
+  obbs[4].basis[2] = {0, 0, nan};
+  const glm::vec4 all[5] = {{1, 0, 0, 0}, {0, 1, 0, 0}, {-1, 0, 0, 1}, {0, -1, 0, 1}, {0, 0, -1, 10}};
+  for (std::size_t count : {1u, 2u, 5u}) {
+    const Frustum f = Frustum::from_planes(std::span(all, count));
+    ASSERT_EQ(f.plane_count, count);
+    const auto sphere_classes = expect_agreement(culler(), spheres, {f});
+    // Inside the first two planes; a filler plane (0, 0, 0, 1) would make it INTERSECTING.
+    EXPECT_EQ(sphere_classes[9], count <= 2 ? Classification::Inside : Classification::Outside);
+    expect_agreement(culler(), boxes, {f});
+    expect_agreement(culler(), obbs, {f});
+  }
+}
+
 // Subnormal inputs and results: Vulkan lets a device flush them to zero unless the shader
 // asks to preserve them (shaderDenormPreserveFloat32). This documents what the device does.
 TEST_F(Gpu, SubnormalCoordinatesAgree) {
