@@ -58,7 +58,9 @@ std::vector<Isa> runnable_isas() {
   return isas;
 }
 
-std::vector<Frustum> test_views() {
+/// `scaled_normals`: also a frustum whose normals are not unit (which hierarchies over OBBs and
+/// spheres refuse).
+std::vector<Frustum> test_views(bool scaled_normals = true) {
   std::vector<Frustum> views;
   views.push_back(Frustum::from_view_proj(test::test_view_proj()));
   views.push_back(Frustum::from_view_proj(test::test_view_proj(20.0f, 1.0f)));
@@ -68,6 +70,15 @@ std::vector<Frustum> test_views() {
                                          {0, -1, 0, 5},    {0, 0, 1, 30},     {-0.0f, -0.0f, -1, 30}};
   views.push_back(Frustum::from_planes(planes));
   views.push_back(Frustum{});  // no planes: everything INSIDE
+  if (!scaled_normals) return views;
+  // Normals of length 2 and 0.5, built by hand (the factories normalise): the OBB kernel's
+  // plane bound assumes unit normals and must not be used here.
+  Frustum scaled;
+  scaled.plane_count = 3;
+  scaled.planes[0] = {{2, 0, 0}, 10};
+  scaled.planes[1] = {{0, -0.5f, 0}, 2.5f};
+  scaled.planes[2] = {{0, 1.2f, -1.6f}, 40};
+  views.push_back(scaled);
   return views;
 }
 
@@ -89,8 +100,7 @@ void expect_equal_to_reference(std::span<const Volume> volumes, const Frustum& f
 }
 
 template <class Volume>
-void check_everywhere(const std::vector<Volume>& volumes, const std::string& what) {
-  const std::vector<Frustum> views = test_views();
+void check_everywhere(const std::vector<Volume>& volumes, const std::string& what, std::vector<Frustum> views = test_views()) {
   for (Isa isa : runnable_isas())
     for (unsigned threads : {1u, 2u, 3u})
       for (std::size_t chunk : {16u, 48u, 16384u}) {
@@ -159,6 +169,99 @@ TEST(CpuCuller, NanInfinityAndDenormalValuesGiveTheReferenceAnswer) {
   check_everywhere(boxes, "aabb special");
   check_everywhere(obbs, "obb special");
   check_everywhere(spheres, "sphere special");
+}
+
+// The OBB kernel settles most objects with a bound b >= |r| on the projected radius and tests
+// the rest in full. OBBs whose centre distance is within float steps of +-r, with an axis along
+// the normal (where the float r can exceed |u| h), axes that are not unit or orthogonal,
+// negative and zero extents; axes so long that n.u overflows (r is NaN: no bound is safe);
+// across more than two runs of the kernel (4096 objects each).
+TEST(CpuCuller, ObbsAtTheEdgeOfTheirPlaneBound) {
+  test::Rng rng(11);
+  // Slanted planes through the origin, one view each: a centre t n has coordinates no larger
+  // than t, so its distance can be set to within a float step of r.
+  std::vector<Frustum> views;
+  for (int k = 0; k < 6; ++k) {
+    const glm::vec4 plane(glm::normalize(rng.vec3(-1, 1) + glm::vec3(0.1f)), 0.0f);
+    views.push_back(Frustum::from_planes({&plane, 1}));
+  }
+  std::vector<Obb> obbs;
+  for (const Frustum& view : views) {
+    const glm::vec3 n = view.planes[0].normal;
+    for (int shape = 0; shape < 4; ++shape)
+      for (int side = -1; side <= 1; side += 2)
+        for (int step = -64; step <= 64; ++step) {
+          Obb o;
+          if (shape == 0) {  // one axis along the normal, the others empty
+            o.basis = glm::mat3(n, glm::vec3(0), glm::vec3(0));
+            o.half_extents = {rng.uniform(0.5f, 2.0f), 0, 0};
+          } else if (shape == 1) {  // a rotated box
+            o.basis = rng.rotation();
+            o.half_extents = rng.vec3(0.0f, 2.0f);
+          } else if (shape == 2) {  // skewed, scaled axes and a negative extent
+            o.basis = glm::mat3(rng.vec3(-3, 3), rng.vec3(-3, 3), 0.001f * rng.vec3(-1, 1));
+            o.half_extents = {rng.uniform(0.0f, 2.0f), -rng.uniform(0.0f, 2.0f), 1e3f};
+          } else {  // a scaled axis along the normal
+            o.basis = glm::mat3(7.0f * n, 0.5f * rng.vec3(-1, 1), glm::vec3(0));
+            o.half_extents = {rng.uniform(0.1f, 1.0f), rng.uniform(0.0f, 0.01f), 3};
+          }
+          // r as the reference computes it for this plane; the centre at distance side * r,
+          // moved by `step` steps of 2^-26 of r (below a float step of the distance).
+          float r = 0;
+          for (int i = 0; i < 3; ++i) {
+            const glm::vec3 u = o.basis[i];
+            const float a = (n.x * u.x + n.y * u.y) + n.z * u.z;
+            r = i == 0 ? std::fabs(a) * o.half_extents[i] : r + std::fabs(a) * o.half_extents[i];
+          }
+          o.center = (float(side) * r * (1.0f + float(step) * 0x1p-26f)) * n;
+          obbs.push_back(o);
+        }
+    // Behind this plane by 1 and by 10^-3, with an axis along which n.u overflows (r = inf x 0 =
+    // NaN: the reference finds nothing behind this plane).
+    for (float behind : {1.0f, 1e-3f}) {
+      Obb o;
+      o.basis = glm::mat3(3e38f * glm::sign(n), glm::vec3(0, 1, 0), glm::vec3(0, 0, 1));
+      o.half_extents = {0, 1e-4f, 1e-4f};
+      o.center = -behind * n;
+      obbs.push_back(o);
+    }
+  }
+  // Where rounding makes the float r exceed the exact |u| h (which the bound's slack covers), a
+  // centre at a distance s strictly between them, on each side: s < r is INTERSECTING, while a
+  // bound of just |u| h would call it INSIDE (or OUTSIDE at -s).
+  std::size_t between = 0;
+  for (int trial = 0; trial < 4000 && between < 200; ++trial) {
+    const Frustum& view = views[static_cast<std::size_t>(trial) % views.size()];
+    const glm::vec3 n = view.planes[0].normal;
+    Obb o;
+    o.basis = glm::mat3(rng.uniform(0.5f, 8.0f) * n, glm::vec3(0), glm::vec3(0));
+    o.half_extents = {rng.uniform(0.5f, 2.0f), 0, 0};
+    const glm::vec3 u = o.basis[0];
+    const float r = std::fabs((n.x * u.x + n.y * u.y) + n.z * u.z) * o.half_extents.x;
+    const double exact = std::sqrt(double(u.x) * u.x + double(u.y) * u.y + double(u.z) * u.z) * o.half_extents.x;
+    if (!(r > exact)) continue;
+    for (float t = std::nextafter(r, 0.0f), stop = r * (1 - 0x1p-20f); t > stop; t = std::nextafter(t, 0.0f)) {
+      const glm::vec3 c = t * n;
+      const float s = (n.x * c.x + n.y * c.y) + n.z * c.z;  // the plane's d is 0
+      if (s > exact && s < r) {
+        o.center = c;
+        obbs.push_back(o);
+        o.center = -c;
+        obbs.push_back(o);
+        ++between;
+        break;
+      }
+    }
+  }
+  EXPECT_GT(between, 50u);
+  const std::size_t sharp = obbs.size();
+  while (obbs.size() < 9000) obbs.push_back(obbs[rng.next() % sharp]);  // more than two runs
+  // The answers are mixed: all three classes occur.
+  std::vector<Classification> classes(obbs.size());
+  reference::classify_all(std::span<const Obb>(obbs), views[0], classes);
+  for (Classification c : {Classification::Outside, Classification::Intersecting, Classification::Inside})
+    EXPECT_GT(std::count(classes.begin(), classes.end(), c), 100) << to_string(c);
+  check_everywhere(obbs, "obb at the bound", views);
 }
 
 #if defined(__SSE__)
@@ -353,7 +456,7 @@ TEST(CpuBvhCuller, RefusesATreeOfOtherBoxes) {
 
 TEST(CpuBvhCuller, ObbsAndSpheresEqualTheScalarTraversalAndFlatCulling) {
   test::Rng rng{17};
-  const std::vector<Frustum> views = test_views();
+  const std::vector<Frustum> views = test_views(false);
   for (std::size_t n : {0u, 1u, 7u, 3000u, 40000u}) {
     const test::RandomVolumes v = test::random_volumes(rng, n, 30.0f, 2.0f);
     const bvh::FlatTree obb_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(v.obbs))));

@@ -1,6 +1,7 @@
 #include "cull/cpu_culler.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <limits>
@@ -39,16 +40,53 @@ detail::KernelTable kernels(Isa isa) {
   return detail::portable_kernels();
 }
 
+constexpr double kUnitNormalLimit = 1.0 + 0x1p-20;  // PlaneSet::unit_normals
+
 detail::PlaneSet plane_set(const Frustum& f) {
   detail::PlaneSet s;
   s.count = static_cast<std::uint32_t>(std::min<std::size_t>(f.plane_count, 6));
+  s.unit_normals = true;
   for (std::uint32_t k = 0; k < s.count; ++k) {
-    s.nx[k] = f.planes[k].normal.x;
-    s.ny[k] = f.planes[k].normal.y;
-    s.nz[k] = f.planes[k].normal.z;
+    const glm::vec3 n = f.planes[k].normal;
+    s.nx[k] = n.x;
+    s.ny[k] = n.y;
+    s.nz[k] = n.z;
     s.d[k] = f.planes[k].d;
+    const double length = std::sqrt(double(n.x) * n.x + double(n.y) * n.y + double(n.z) * n.z);
+    s.unit_normals = s.unit_normals && length <= kUnitNormalLimit;  // false for NaN too
   }
   return s;
+}
+
+/// ObbArrays::bound of `b`: a float b >= |r| for the reference's projected radius
+/// r = (|a0| h0 + |a1| h1) + |a2| h2, a_i = (n.x u_i.x + n.y u_i.y) + n.z u_i.z, computed in float
+/// for every normal n with |n| <= 1 + 2^-20, or NaN where no bound is safe. Why it holds, with
+/// e = 2^-24 and each rounding also off by at most 2^-150 in the subnormal range (flushing to
+/// zero only shrinks a term):
+/// - |a_i| <= (|n.x u.x| + |n.y u.y| + |n.z u.z|)(1 + e)^3 + 6 x 2^-150
+///         <= |n| |u_i| (1 + e)^3 + 6 x 2^-150 (Cauchy-Schwarz);
+/// - the products with h_i and the two sums add (1 + e)^3 and 5 x 2^-150, so
+///   |r| <= [sum_i (|u_i| + 2^-140) |h_i|] (1 + 2^-16) + 2^-140, as (1 + 2^-20)(1 + e)^6 < 1 + 2^-16.
+///   That is computed here in double and rounded up to a float;
+/// - NaN inputs give NaN. An axis component of magnitude 2^125 or more gives NaN: past it
+///   a_i may overflow, and r may be inf - inf = NaN while the bound is finite. Below it a_i
+///   is finite, so r is NaN only from 0 x inf (an infinite h_i, which makes the bound inf) or
+///   inf - inf of two overflowed products (their exact size makes the bound round up to inf).
+///   An infinite bound settles only a centre distance of +inf on every plane, where the
+///   reference also finds nothing behind any plane.
+float obb_plane_bound(const Obb& b) {
+  double sum = 0.0;
+  for (int i = 0; i < 3; ++i) {
+    const glm::vec3 u = b.basis[i];
+    const double x = u.x, y = u.y, z = u.z;
+    if (!(std::fabs(x) < 0x1p125 && std::fabs(y) < 0x1p125 && std::fabs(z) < 0x1p125))  // NaN too
+      return std::numeric_limits<float>::quiet_NaN();
+    sum += (std::sqrt(x * x + y * y + z * z) + 0x1p-140) * std::fabs(double(b.half_extents[i]));
+  }
+  const double bound = sum * (1.0 + 0x1p-16) + 0x1p-140;
+  float f = static_cast<float>(bound);  // NaN stays NaN; past the float range, inf
+  if (static_cast<double>(f) < bound) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+  return f;
 }
 
 struct AlignedFree {
@@ -94,6 +132,8 @@ struct CpuCuller::Impl {
   std::unique_ptr<float[], AlignedFree> data;
   std::size_t capacity = 0;   // floats allocated
   std::vector<const float*> arrays;  // component array starts
+  float* records = nullptr;          // per-object records after the arrays (OBB), or null
+  std::size_t record_size = 0;       // floats per record
   // Per view: visible ids, written per chunk into slots of chunk + kPad, then gathered.
   std::vector<std::unique_ptr<std::uint32_t[]>> scratch;
   std::size_t scratch_size = 0;
@@ -101,10 +141,11 @@ struct CpuCuller::Impl {
   std::vector<std::size_t> offsets;               // [view * chunks + chunk]: first id's index in the view's list
   std::vector<detail::PlaneSet> planes;           // per view of the current pass
 
-  /// Room for `components` arrays of `count` objects, each padded with zeros to kPad.
-  float* reserve(std::size_t components, std::size_t count) {
+  /// Room for `components` arrays of `count` objects, each padded with zeros to kPad, then
+  /// `record_floats` floats per object (records, also padded with zeros).
+  float* reserve(std::size_t components, std::size_t count, std::size_t record_floats = 0) {
     padded = (count + kPad - 1) / kPad * kPad + kPad;  // one spare vector: loads past the end stay in bounds
-    const std::size_t floats = components * padded;
+    const std::size_t floats = (components + record_floats) * padded;
     if (floats > capacity) {
       data.reset(static_cast<float*>(::operator new[](floats * sizeof(float), std::align_val_t(64))));
       capacity = floats;
@@ -114,6 +155,9 @@ struct CpuCuller::Impl {
       arrays[c] = data.get() + c * padded;
       std::memset(data.get() + c * padded + count, 0, (padded - count) * sizeof(float));  // the padding
     }
+    record_size = record_floats;
+    records = record_floats ? data.get() + components * padded : nullptr;  // 64-byte aligned: padded % 16 == 0
+    if (records) std::memset(records + count * record_floats, 0, (padded - count) * record_floats * sizeof(float));
     return data.get();
   }
   float* column(std::size_t c) { return data.get() + c * padded; }
@@ -139,55 +183,64 @@ void check_count(std::size_t n) {
 }
 }  // namespace
 
-template <std::size_t Columns, class Volume, class Store>
+template <std::size_t Columns, std::size_t RecordFloats, class Volume, class Store>
 void CpuCuller::upload_columns(std::span<const Volume> volumes, Store store) {
   check_count(volumes.size());
   count_ = 0;  // stays 0 if the allocation fails
-  impl_->reserve(Columns, volumes.size());
-  float* c[Columns];
+  impl_->reserve(Columns, volumes.size(), RecordFloats);
+  float* c[Columns + 1];
   for (std::size_t k = 0; k < Columns; ++k) c[k] = impl_->column(k);
+  c[Columns] = impl_->records;
   for (std::size_t i = 0; i < volumes.size(); ++i) store(volumes[i], c, i);
   kind_ = kind_of<Volume>();
   count_ = volumes.size();
 }
 
 void CpuCuller::upload(std::span<const Aabb> volumes) {
-  upload_columns<6>(volumes, [](const Aabb& b, float* const* c, std::size_t i) {
+  upload_columns<6, 0>(volumes, [](const Aabb& b, float* const* c, std::size_t i) {
     c[0][i] = b.min.x, c[1][i] = b.min.y, c[2][i] = b.min.z;
     c[3][i] = b.max.x, c[4][i] = b.max.y, c[5][i] = b.max.z;
   });
 }
 
 void CpuCuller::upload(std::span<const Obb> volumes) {
-  upload_columns<15>(volumes, [](const Obb& b, float* const* c, std::size_t i) {
+  static_assert(detail::kObbRecordFloats == 16);
+  upload_columns<4, detail::kObbRecordFloats>(volumes, [](const Obb& b, float* const* c, std::size_t i) {
+    c[0][i] = b.center.x, c[1][i] = b.center.y, c[2][i] = b.center.z;
+    c[3][i] = obb_plane_bound(b);
+    float* record = c[4] + i * detail::kObbRecordFloats;  // as classify_obb_records reads it
     for (int a = 0; a < 3; ++a) {
-      c[a][i] = b.center[a];
-      c[3 + a][i] = b.basis[0][a];
-      c[6 + a][i] = b.basis[1][a];
-      c[9 + a][i] = b.basis[2][a];
-      c[12 + a][i] = b.half_extents[a];
+      record[a] = b.center[a];
+      record[3 + a] = b.basis[0][a];
+      record[6 + a] = b.basis[1][a];
+      record[9 + a] = b.basis[2][a];
+      record[12 + a] = b.half_extents[a];
     }
+    record[15] = 0.0f;
   });
 }
 
 void CpuCuller::upload(std::span<const Sphere> volumes) {
-  upload_columns<4>(volumes, [](const Sphere& s, float* const* c, std::size_t i) {
+  upload_columns<4, 0>(volumes, [](const Sphere& s, float* const* c, std::size_t i) {
     c[0][i] = s.center.x, c[1][i] = s.center.y, c[2][i] = s.center.z;
     c[3][i] = s.radius;
   });
 }
 
-std::size_t CpuCuller::bytes_per_object() const { return impl_->arrays.size() * sizeof(float); }
+std::size_t CpuCuller::bytes_per_object() const { return (impl_->arrays.size() + impl_->record_size) * sizeof(float); }
 
 namespace {
-/// Reads `columns` arrays of `floats` floats each, split into tasks, and ORs what it read.
-std::uint32_t touch_columns(ThreadPool& pool, const detail::KernelTable& table, std::span<const float* const> columns,
-                            std::size_t floats, std::size_t per_task) {
-  const std::size_t per_column = std::max<std::size_t>(1, (floats + per_task - 1) / per_task);
-  std::vector<std::uint32_t> bits(columns.size() * per_column, 0);
+/// Reads each of `spans`, split into tasks of at most `per_task` floats, and ORs what it read.
+std::uint32_t touch_spans(ThreadPool& pool, const detail::KernelTable& table, std::span<const std::span<const float>> spans,
+                          std::size_t per_task) {
+  std::vector<std::size_t> first_task(spans.size() + 1, 0);  // tasks of span s: first_task[s] ..
+  for (std::size_t s = 0; s < spans.size(); ++s)
+    first_task[s + 1] = first_task[s] + std::max<std::size_t>(1, (spans[s].size() + per_task - 1) / per_task);
+  std::vector<std::uint32_t> bits(first_task.back(), 0);
   pool.parallel_for(bits.size(), [&](std::size_t t) {
-    const float* data = columns[t / per_column];
-    const std::size_t begin = t % per_column * per_task, end = std::min(floats, begin + per_task);
+    const std::size_t s = static_cast<std::size_t>(std::upper_bound(first_task.begin(), first_task.end(), t) - first_task.begin()) - 1;
+    const float* data = spans[s].data();
+    const std::size_t begin = (t - first_task[s]) * per_task, end = std::min(spans[s].size(), begin + per_task);
     if (begin >= end) return;
     const std::size_t whole = begin + (end - begin) / kPad * kPad;
     std::uint32_t b = table.touch(data, begin, whole);
@@ -205,14 +258,17 @@ std::uint32_t touch_columns(ThreadPool& pool, const detail::KernelTable& table, 
 }  // namespace
 
 std::uint32_t CpuCuller::touch(std::span<const float> data) {
-  const float* column = data.data();
-  return touch_columns(impl_->pool, impl_->table, {&column, 1}, data.size(), impl_->chunk * 8);
+  return touch_spans(impl_->pool, impl_->table, {&data, 1}, impl_->chunk * 8);
 }
 
 std::uint32_t CpuCuller::touch_bounds() {
   // Only the objects' floats (rounded up to a vector), not the spare padding.
+  if (!count_) return 0;
   const std::size_t used = (count_ + kPad - 1) / kPad * kPad;
-  return count_ ? touch_columns(impl_->pool, impl_->table, impl_->arrays, used, impl_->chunk) : 0;
+  std::vector<std::span<const float>> spans;
+  for (const float* column : impl_->arrays) spans.emplace_back(column, used);
+  if (impl_->records) spans.emplace_back(impl_->records, used * impl_->record_size);
+  return touch_spans(impl_->pool, impl_->table, spans, impl_->chunk);
 }
 
 std::vector<CpuViewResult> CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& options) {
@@ -262,9 +318,7 @@ void CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& optio
         counts = m.table.aabb(detail::AabbArrays{a[0], a[1], a[2], a[3], a[4], a[5]}, begin, end, planes[v], out);
         break;
       case BvKind::Obb:
-        counts = m.table.obb(detail::ObbArrays{a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7], a[8], a[9], a[10], a[11], a[12],
-                                               a[13], a[14]},
-                             begin, end, planes[v], out);
+        counts = m.table.obb(detail::ObbArrays{a[0], a[1], a[2], a[3], m.records}, begin, end, planes[v], out);
         break;
       case BvKind::Sphere:
         counts = m.table.sphere(detail::SphereArrays{a[0], a[1], a[2], a[3]}, begin, end, planes[v], out);

@@ -83,7 +83,9 @@ class CpuCuller {
   /// Reads `data` the same way (e.g. a buffer larger than the caches, to measure read
   /// bandwidth). `data` is read in whole vectors: its size should be a multiple of 16.
   std::uint32_t touch(std::span<const float> data);
-  /// Bytes per object of the uploaded structure-of-arrays bounds (24 AABB, 60 OBB, 16 sphere).
+  /// Bytes per object of the uploaded bounds: 24 AABB, 16 sphere, 80 OBB (16 of centre and
+  /// plane bound in arrays, read for every object; a 64-byte record read for the few the bound
+  /// leaves open).
   std::size_t bytes_per_object() const;
 
   BvKind kind() const { return kind_; }
@@ -92,8 +94,9 @@ class CpuCuller {
   unsigned threads() const;
 
  private:
-  // Stores `volumes` as Columns float arrays: `store(volume, columns, i)` writes object i.
-  template <std::size_t Columns, class Volume, class Store>
+  // Stores `volumes` as Columns float arrays and RecordFloats floats per object:
+  // `store(volume, columns, i)` writes object i; columns[Columns] is the first record.
+  template <std::size_t Columns, std::size_t RecordFloats, class Volume, class Store>
   void upload_columns(std::span<const Volume> volumes, Store store);
 
   struct Impl;

@@ -13,6 +13,8 @@ namespace cullpipe::fast::detail {
 struct PlaneSet {
   std::uint32_t count = 0;
   float nx[6]{}, ny[6]{}, nz[6]{}, d[6]{};
+  /// Every normal's length is at most 1 + 2^-20, so ObbArrays::bound holds for these planes.
+  bool unit_normals = false;
 };
 
 /// Structure-of-arrays bounds; every array holds at least `padded` floats (a multiple of 16),
@@ -20,10 +22,16 @@ struct PlaneSet {
 struct AabbArrays {
   const float *min_x, *min_y, *min_z, *max_x, *max_y, *max_z;
 };
+/// OBBs in two parts: the centres and bounds as arrays, read for every object, and per object
+/// a 64-byte record (kObbRecordFloats floats: centre, axes u0 u1 u2, half extents, a spare),
+/// read only for the objects that the bound does not settle.
+constexpr std::size_t kObbRecordFloats = 16;
 struct ObbArrays {
   const float *c_x, *c_y, *c_z;
-  const float *u0_x, *u0_y, *u0_z, *u1_x, *u1_y, *u1_z, *u2_x, *u2_y, *u2_z;
-  const float *h_x, *h_y, *h_z;
+  /// Per object, obb_plane_bound(): at least |r| for the reference's projected radius r
+  /// against any plane of a unit-normal PlaneSet (or NaN: no bound).
+  const float* bound;
+  const float* records;  ///< object i at records + i * kObbRecordFloats, 64-byte aligned
 };
 struct SphereArrays {
   const float *c_x, *c_y, *c_z, *radius;

@@ -136,23 +136,91 @@ ChunkCounts cull_aabb(const AabbArrays& a, std::size_t begin, std::size_t end, c
   return counts;
 }
 
+// (Not std::min: this file must not instantiate inline functions the rest of the program shares.)
+inline std::size_t smaller(std::size_t x, std::size_t y) { return x < y ? x : y; }
+
+/// Lanes of the set bits of `bits` (0 or -1 per lane).
+inline vi lanes_of(std::uint32_t bits) {
+  vi lane_bit;
+  for (unsigned l = 0; l < W; ++l) lane_bit[l] = static_cast<std::int32_t>(1u << l);
+  return (static_cast<std::int32_t>(bits) & lane_bit) != 0;
+}
+
+/// The reference's OBB test of up to W objects, `objects[0..count)`, read from their records:
+/// bit l of outside / crossing for objects[l].
+void classify_obb_records(const float* records, const std::uint32_t* objects, unsigned count, const PlaneSet& planes,
+                          std::uint32_t& outside_bits, std::uint32_t& crossing_bits) {
+  alignas(64) float lanes[15][W];  // transposed: lanes[c][l] = word c of objects[l]'s record
+  for (unsigned l = 0; l < W; ++l) {
+    const float* rec = records + std::size_t(objects[l < count ? l : 0]) * kObbRecordFloats;
+    for (unsigned c = 0; c < 15; ++c) lanes[c][l] = rec[c];
+  }
+  vf col[15];
+  for (unsigned c = 0; c < 15; ++c) col[c] = load(lanes[c]);
+  vi outside = {}, crossing = {};
+  for (std::uint32_t k = 0; k < planes.count; ++k) {
+    const float nx = planes.nx[k], ny = planes.ny[k], nz = planes.nz[k];
+    const vf s = ((nx * col[0] + ny * col[1]) + nz * col[2]) + planes.d[k];
+    const vf a0 = (nx * col[3] + ny * col[4]) + nz * col[5];
+    const vf a1 = (nx * col[6] + ny * col[7]) + nz * col[8];
+    const vf a2 = (nx * col[9] + ny * col[10]) + nz * col[11];
+    const vf r = (abs(a0) * col[12] + abs(a1) * col[13]) + abs(a2) * col[14];
+    outside |= s < -r;
+    crossing |= s < r;
+  }
+  outside_bits = lane_bits(outside);
+  crossing_bits = lane_bits(crossing);
+}
+
+// The OBB kernel first compares each plane's centre distance s (the reference's own) with the
+// object's bound b >= |r|: s < -b on some plane is OUTSIDE and s >= b on all is INSIDE, as the
+// reference would find with its r. That reads 16 bytes per object, in order. The few objects
+// the bound leaves open (near a plane: measured 0.3-0.9% of random scenes) are gathered per
+// run of kRunBlocks vectors, their 64-byte records prefetched as they are found and then
+// tested in full, and the run's results emitted in object order.
 ChunkCounts cull_obb(const ObbArrays& a, std::size_t begin, std::size_t end, const PlaneSet& planes, ChunkOutput out) {
+  constexpr std::size_t kRunBlocks = 256;
+  std::uint32_t outside_bits[kRunBlocks], crossing_bits[kRunBlocks];
+  std::uint32_t open[kRunBlocks * W];  // objects left open in this run
   ChunkCounts counts;
-  for (std::size_t i = begin; i < end; i += W) {
-    const vf cx = load(a.c_x + i), cy = load(a.c_y + i), cz = load(a.c_z + i);
-    vi outside = {}, crossing = {};
-    for (std::uint32_t k = 0; k < planes.count; ++k) {
-      const float nx = planes.nx[k], ny = planes.ny[k], nz = planes.nz[k], d = planes.d[k];
-      const vf s = ((nx * cx + ny * cy) + nz * cz) + d;
-      const vf a0 = (nx * load(a.u0_x + i) + ny * load(a.u0_y + i)) + nz * load(a.u0_z + i);
-      const vf a1 = (nx * load(a.u1_x + i) + ny * load(a.u1_y + i)) + nz * load(a.u1_z + i);
-      const vf a2 = (nx * load(a.u2_x + i) + ny * load(a.u2_y + i)) + nz * load(a.u2_z + i);
-      const vf r = (abs(a0) * load(a.h_x + i) + abs(a1) * load(a.h_y + i)) + abs(a2) * load(a.h_z + i);
-      outside |= s < -r;
-      crossing |= s < r;
-      if (lane_bits(outside) == kAllLanes) break;
+  const vi none = {}, all = ~none;
+  for (std::size_t run = begin; run < end; run += kRunBlocks * W) {
+    const std::size_t run_end = smaller(end, run + kRunBlocks * W);
+    unsigned open_count = 0;
+    for (std::size_t i = run, b = 0; i < run_end; i += W, ++b) {
+      const vf cx = load(a.c_x + i), cy = load(a.c_y + i), cz = load(a.c_z + i), bound = load(a.bound + i);
+      vi beyond = none, within = none;  // a NaN bound (or distance) settles neither
+      if (planes.unit_normals) {  // else the bound does not hold: every object is tested in full
+        within = all;
+        for (std::uint32_t k = 0; k < planes.count; ++k) {
+          const vf s = ((planes.nx[k] * cx + planes.ny[k] * cy) + planes.nz[k] * cz) + planes.d[k];
+          beyond |= s < -bound;
+          within &= s >= bound;
+        }
+      }
+      const unsigned valid = static_cast<unsigned>(smaller(W, run_end - i));
+      const std::uint32_t lanes = valid >= W ? kAllLanes : (1u << valid) - 1u;
+      outside_bits[b] = lane_bits(beyond);
+      crossing_bits[b] = 0;
+      for (std::uint32_t rest = ~lane_bits(beyond | within) & lanes; rest != 0; rest &= rest - 1) {
+        const std::uint32_t object = static_cast<std::uint32_t>(i + static_cast<unsigned>(__builtin_ctz(rest)));
+        __builtin_prefetch(a.records + std::size_t(object) * kObbRecordFloats);
+        open[open_count++] = object;
+      }
     }
-    emit(i, begin, static_cast<unsigned>(end - i), outside, crossing, out, counts);
+    for (unsigned o = 0; o < open_count; o += W) {
+      const unsigned count = static_cast<unsigned>(smaller(W, open_count - o));
+      std::uint32_t outside, crossing;
+      classify_obb_records(a.records, open + o, count, planes, outside, crossing);
+      for (unsigned l = 0; l < count; ++l) {
+        const std::size_t at = open[o + l] - run;
+        const std::uint32_t bit = 1u << (at % W);
+        if (outside >> l & 1u) outside_bits[at / W] |= bit;
+        if (crossing >> l & 1u) crossing_bits[at / W] |= bit;
+      }
+    }
+    for (std::size_t i = run, b = 0; i < run_end; i += W, ++b)
+      emit(i, begin, static_cast<unsigned>(end - i), lanes_of(outside_bits[b]), lanes_of(crossing_bits[b]), out, counts);
   }
   return counts;
 }
