@@ -42,6 +42,11 @@ detail::KernelTable kernels(Isa isa) {
 
 constexpr double kUnitNormalLimit = 1.0 + 0x1p-20;  // PlaneSet::unit_normals
 
+/// A float >= x, for x >= 2^-126 (no subnormal result) or NaN (stays NaN); past the float
+/// range, inf. Rounding x (1 + 2^-23) to nearest loses at most a factor 1 - 2^-24. (No
+/// nextafter: a library call per object made uploads 7x slower.)
+float round_up(double x) { return static_cast<float>(x * (1.0 + 0x1p-23)); }
+
 detail::PlaneSet plane_set(const Frustum& f) {
   detail::PlaneSet s;
   s.count = static_cast<std::uint32_t>(std::min<std::size_t>(f.plane_count, 6));
@@ -54,6 +59,8 @@ detail::PlaneSet plane_set(const Frustum& f) {
     s.d[k] = f.planes[k].d;
     const double length = std::sqrt(double(n.x) * n.x + double(n.y) * n.y + double(n.z) * n.z);
     s.unit_normals = s.unit_normals && length <= kUnitNormalLimit;  // false for NaN too
+    const double d = std::fabs(double(f.planes[k].d));
+    s.margin[k] = d <= 0x1p120 ? round_up(0x1p-20 * d + 0x1p-100) : std::numeric_limits<float>::quiet_NaN();
   }
   return s;
 }
@@ -67,7 +74,8 @@ detail::PlaneSet plane_set(const Frustum& f) {
 ///         <= |n| |u_i| (1 + e)^3 + 6 x 2^-150 (Cauchy-Schwarz);
 /// - the products with h_i and the two sums add (1 + e)^3 and 5 x 2^-150, so
 ///   |r| <= [sum_i (|u_i| + 2^-140) |h_i|] (1 + 2^-16) + 2^-140, as (1 + 2^-20)(1 + e)^6 < 1 + 2^-16.
-///   That is computed here in double and rounded up to a float;
+///   That is computed here in double, with 2^-100 for the last term (the bound stays a normal
+///   float: DAZ would read a subnormal one as 0), and rounded up to a float;
 /// - NaN inputs give NaN. An axis component of magnitude 2^125 or more gives NaN: past it
 ///   a_i may overflow, and r may be inf - inf = NaN while the bound is finite. Below it a_i
 ///   is finite, so r is NaN only from 0 x inf (an infinite h_i, which makes the bound inf) or
@@ -83,10 +91,35 @@ float obb_plane_bound(const Obb& b) {
       return std::numeric_limits<float>::quiet_NaN();
     sum += (std::sqrt(x * x + y * y + z * z) + 0x1p-140) * std::fabs(double(b.half_extents[i]));
   }
-  const double bound = sum * (1.0 + 0x1p-16) + 0x1p-140;
-  float f = static_cast<float>(bound);  // NaN stays NaN; past the float range, inf
-  if (static_cast<double>(f) < bound) f = std::nextafter(f, std::numeric_limits<float>::infinity());
-  return f;
+  return round_up(sum * (1.0 + 0x1p-16) + 0x1p-100);
+}
+
+/// AabbArrays::bound of `b`, and its centre (min + max) / 2 rounded to a float. With
+/// PlaneSet::margin m = 2^-20 |d| it settles the reference's p/n-vertex test for every plane of
+/// normal |n| <= 1 + 2^-20: s < -(bound + m) means d_p < 0 and s >= bound + m means d_n >= 0
+/// and d_p >= 0, for s = n.centre + d computed in float in any order, fused or not. Why, with
+/// C and E the exact centre and half extent (E < 0 for an inverted box) and e = 2^-24:
+/// - the exact vertex distances are D_c +- sum |n_i| E_i, D_c = n.C + d, within |n| |E| of D_c;
+/// - the reference's four roundings put d_p and d_n within 4e(|n|(|C|_1 + |E|_1) + |d|) of them;
+///   s is within 6e(|n| |centre|_1 + |d|) of n.centre + d, which is within |n| (e + 2^-53)|C|_1 of
+///   D_c; the sums of the float bound and margin round down by at most e;
+/// - so |d_p - s| and |d_n - s| stay below |E| (1 + 2^-16) + 2^-20 (|C|_1 + |E|_1 + |d|): every
+///   coefficient has over 30% to spare. 2^-100 covers subnormal roundings, and inputs and
+///   results flushed to zero by FTZ / DAZ (at most a few 2^-126).
+/// Non-finite coordinates, or |C|_1 + |E|_1 past 2^120 (where s may overflow), give NaN.
+float aabb_plane_bound(const Aabb& b, glm::vec3& centre) {
+  double size = 0.0, diagonal = 0.0;
+  centre = glm::vec3(0.0f);
+  for (int a = 0; a < 3; ++a) {
+    const double lo = b.min[a], hi = b.max[a];
+    if (!std::isfinite(lo) || !std::isfinite(hi)) return std::numeric_limits<float>::quiet_NaN();
+    const double c = (lo + hi) / 2, e = (hi - lo) / 2;
+    centre[a] = static_cast<float>(c);
+    size += std::fabs(c) + std::fabs(e);
+    diagonal += e * e;
+  }
+  if (!(size <= 0x1p120)) return std::numeric_limits<float>::quiet_NaN();
+  return round_up(std::sqrt(diagonal) * (1.0 + 0x1p-16) + 0x1p-20 * size + 0x1p-100);
 }
 
 struct AlignedFree {
@@ -191,15 +224,28 @@ void CpuCuller::upload_columns(std::span<const Volume> volumes, Store store) {
   float* c[Columns + 1];
   for (std::size_t k = 0; k < Columns; ++k) c[k] = impl_->column(k);
   c[Columns] = impl_->records;
-  for (std::size_t i = 0; i < volumes.size(); ++i) store(volumes[i], c, i);
+  // In tasks of `chunk` objects on the pool: the bounds take a few square roots per object.
+  const std::size_t n = volumes.size(), per_task = impl_->chunk;
+  impl_->pool.parallel_for((n + per_task - 1) / per_task, [&](std::size_t t) {
+    const std::size_t end = std::min(n, (t + 1) * per_task);
+    for (std::size_t i = t * per_task; i < end; ++i) store(volumes[i], c, i);
+  });
   kind_ = kind_of<Volume>();
   count_ = volumes.size();
 }
 
 void CpuCuller::upload(std::span<const Aabb> volumes) {
-  upload_columns<6, 0>(volumes, [](const Aabb& b, float* const* c, std::size_t i) {
-    c[0][i] = b.min.x, c[1][i] = b.min.y, c[2][i] = b.min.z;
-    c[3][i] = b.max.x, c[4][i] = b.max.y, c[5][i] = b.max.z;
+  static_assert(detail::kAabbRecordFloats == 8);
+  upload_columns<4, detail::kAabbRecordFloats>(volumes, [](const Aabb& b, float* const* c, std::size_t i) {
+    glm::vec3 centre;
+    c[3][i] = aabb_plane_bound(b, centre);
+    c[0][i] = centre.x, c[1][i] = centre.y, c[2][i] = centre.z;
+    float* record = c[4] + i * detail::kAabbRecordFloats;  // as cull_aabb's resolve reads it
+    for (int a = 0; a < 3; ++a) {
+      record[a] = b.min[a];
+      record[3 + a] = b.max[a];
+    }
+    record[6] = record[7] = 0.0f;
   });
 }
 
@@ -315,7 +361,7 @@ void CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& optio
     detail::ChunkCounts& counts = m.chunk_counts[task];
     switch (kind_) {
       case BvKind::Aabb:
-        counts = m.table.aabb(detail::AabbArrays{a[0], a[1], a[2], a[3], a[4], a[5]}, begin, end, planes[v], out);
+        counts = m.table.aabb(detail::AabbArrays{a[0], a[1], a[2], a[3], m.records}, begin, end, planes[v], out);
         break;
       case BvKind::Obb:
         counts = m.table.obb(detail::ObbArrays{a[0], a[1], a[2], a[3], m.records}, begin, end, planes[v], out);

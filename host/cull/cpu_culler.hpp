@@ -83,9 +83,9 @@ class CpuCuller {
   /// Reads `data` the same way (e.g. a buffer larger than the caches, to measure read
   /// bandwidth). `data` is read in whole vectors: its size should be a multiple of 16.
   std::uint32_t touch(std::span<const float> data);
-  /// Bytes per object of the uploaded bounds: 24 AABB, 16 sphere, 80 OBB (16 of centre and
-  /// plane bound in arrays, read for every object; a 64-byte record read for the few the bound
-  /// leaves open).
+  /// Bytes per object of the uploaded bounds: 16 sphere; 48 AABB and 80 OBB: 16 of centre and
+  /// plane bound in arrays, read for every object, and a 32- or 64-byte record read for the
+  /// few objects the bound leaves open.
   std::size_t bytes_per_object() const;
 
   BvKind kind() const { return kind_; }

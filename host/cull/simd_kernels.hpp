@@ -13,14 +13,25 @@ namespace cullpipe::fast::detail {
 struct PlaneSet {
   std::uint32_t count = 0;
   float nx[6]{}, ny[6]{}, nz[6]{}, d[6]{};
-  /// Every normal's length is at most 1 + 2^-20, so ObbArrays::bound holds for these planes.
+  /// Every normal's length is at most 1 + 2^-20, so the AABB and OBB bounds hold for these planes.
   bool unit_normals = false;
+  /// Per plane, the share of the AABB settling margin that depends on the plane: 2^-20 |d|
+  /// rounded up (NaN past |d| = 2^120: such a plane settles nothing).
+  float margin[6]{};
 };
 
 /// Structure-of-arrays bounds; every array holds at least `padded` floats (a multiple of 16),
 /// the padding zeros, so a kernel may load whole vectors past the last object.
+/// AABBs in two parts, as OBBs below: centres and bounds as arrays, read for every box, and
+/// per box a 32-byte record (min x y z, max x y z, two spare), read only for the boxes that the
+/// bound does not settle.
+constexpr std::size_t kAabbRecordFloats = 8;
 struct AabbArrays {
-  const float *min_x, *min_y, *min_z, *max_x, *max_y, *max_z;
+  const float *c_x, *c_y, *c_z;  ///< centres, (min + max) / 2 rounded to nearest
+  /// Per box, aabb_plane_bound(): with PlaneSet::margin, covers the half diagonal and every
+  /// rounding of the reference's and the kernel's distances (or NaN: no bound).
+  const float* bound;
+  const float* records;  ///< box i at records + i * kAabbRecordFloats, 32-byte aligned
 };
 /// OBBs in two parts: the centres and bounds as arrays, read for every object, and per object
 /// a 64-byte record (kObbRecordFloats floats: centre, axes u0 u1 u2, half extents, a spare),

@@ -6,12 +6,10 @@
 // reference's order ((n.x*p.x + n.y*p.y) + n.z*p.z) + d, with contraction off (-ffp-contract=off
 // is global), and the same comparisons. The reference's early exit at the first plane that
 // rejects does not change its answer (OUTSIDE wins over everything found before or after), so
-// the kernels OR the per-plane masks over all planes. Only the OBB kernel, whose per-plane work
-// is large, stops early when every lane of a vector is OUTSIDE; for AABBs and spheres the
-// mispredicted exits cost more than they save (measured: AABB, 1% visible, 0.69 -> 0.52 ns
-// per object without them).
-// The p/n-vertex choice depends only on the plane (the sign of each normal component, -0 as
-// positive, as pn_vertices), so it is made once per plane by picking the min or max array.
+// the kernels OR the per-plane masks over all planes (early exits per vector, measured on
+// AABBs and spheres, cost more in mispredictions than they saved).
+// AABBs and OBBs are first settled by a bound (cull_settled): only the objects it leaves open
+// get the reference's test, so no answer depends on the bound's own arithmetic.
 #include <cstddef>
 #include <cstdint>
 
@@ -111,31 +109,6 @@ inline void emit(std::size_t i, std::size_t begin, unsigned valid, vi outside, v
   if (out.ids) out.ids = append_ids(out.ids, static_cast<std::uint32_t>(i), visible);
 }
 
-ChunkCounts cull_aabb(const AabbArrays& a, std::size_t begin, std::size_t end, const PlaneSet& planes, ChunkOutput out) {
-  // Per plane, the arrays that hold the p-vertex (farthest along the normal) and n-vertex.
-  const float *p_x[6], *p_y[6], *p_z[6], *n_x[6], *n_y[6], *n_z[6];
-  for (std::uint32_t k = 0; k < planes.count; ++k) {
-    const bool sx = planes.nx[k] >= 0.0f, sy = planes.ny[k] >= 0.0f, sz = planes.nz[k] >= 0.0f;
-    p_x[k] = sx ? a.max_x : a.min_x, n_x[k] = sx ? a.min_x : a.max_x;
-    p_y[k] = sy ? a.max_y : a.min_y, n_y[k] = sy ? a.min_y : a.max_y;
-    p_z[k] = sz ? a.max_z : a.min_z, n_z[k] = sz ? a.min_z : a.max_z;
-  }
-  ChunkCounts counts;
-  const vf zero = {};
-  for (std::size_t i = begin; i < end; i += W) {
-    vi outside = {}, crossing = {};
-    for (std::uint32_t k = 0; k < planes.count; ++k) {
-      const float nx = planes.nx[k], ny = planes.ny[k], nz = planes.nz[k], d = planes.d[k];
-      const vf dp = ((nx * load(p_x[k] + i) + ny * load(p_y[k] + i)) + nz * load(p_z[k] + i)) + d;
-      const vf dn = ((nx * load(n_x[k] + i) + ny * load(n_y[k] + i)) + nz * load(n_z[k] + i)) + d;
-      outside |= dp < zero;
-      crossing |= dn < zero;
-    }
-    emit(i, begin, static_cast<unsigned>(end - i), outside, crossing, out, counts);
-  }
-  return counts;
-}
-
 // (Not std::min: this file must not instantiate inline functions the rest of the program shares.)
 inline std::size_t smaller(std::size_t x, std::size_t y) { return x < y ? x : y; }
 
@@ -146,72 +119,62 @@ inline vi lanes_of(std::uint32_t bits) {
   return (static_cast<std::int32_t>(bits) & lane_bit) != 0;
 }
 
-/// The reference's OBB test of up to W objects, `objects[0..count)`, read from their records:
-/// bit l of outside / crossing for objects[l].
-void classify_obb_records(const float* records, const std::uint32_t* objects, unsigned count, const PlaneSet& planes,
-                          std::uint32_t& outside_bits, std::uint32_t& crossing_bits) {
-  alignas(64) float lanes[15][W];  // transposed: lanes[c][l] = word c of objects[l]'s record
+/// Transposes the first `words` floats of the records of up to W objects, objects[0..count),
+/// into vectors: col[c] lane l = word c of objects[l] (lanes past count repeat objects[0]).
+template <unsigned Words>
+void gather_records(const float* records, std::size_t record_floats, const std::uint32_t* objects, unsigned count, vf (&col)[Words]) {
+  alignas(64) float lanes[Words][W];
   for (unsigned l = 0; l < W; ++l) {
-    const float* rec = records + std::size_t(objects[l < count ? l : 0]) * kObbRecordFloats;
-    for (unsigned c = 0; c < 15; ++c) lanes[c][l] = rec[c];
+    const float* rec = records + std::size_t(objects[l < count ? l : 0]) * record_floats;
+    for (unsigned c = 0; c < Words; ++c) lanes[c][l] = rec[c];
   }
-  vf col[15];
-  for (unsigned c = 0; c < 15; ++c) col[c] = load(lanes[c]);
-  vi outside = {}, crossing = {};
-  for (std::uint32_t k = 0; k < planes.count; ++k) {
-    const float nx = planes.nx[k], ny = planes.ny[k], nz = planes.nz[k];
-    const vf s = ((nx * col[0] + ny * col[1]) + nz * col[2]) + planes.d[k];
-    const vf a0 = (nx * col[3] + ny * col[4]) + nz * col[5];
-    const vf a1 = (nx * col[6] + ny * col[7]) + nz * col[8];
-    const vf a2 = (nx * col[9] + ny * col[10]) + nz * col[11];
-    const vf r = (abs(a0) * col[12] + abs(a1) * col[13]) + abs(a2) * col[14];
-    outside |= s < -r;
-    crossing |= s < r;
-  }
-  outside_bits = lane_bits(outside);
-  crossing_bits = lane_bits(crossing);
+  for (unsigned c = 0; c < Words; ++c) col[c] = load(lanes[c]);
 }
 
-// The OBB kernel first compares each plane's centre distance s (the reference's own) with the
-// object's bound b >= |r|: s < -b on some plane is OUTSIDE and s >= b on all is INSIDE, as the
-// reference would find with its r. That reads 16 bytes per object, in order. The few objects
-// the bound leaves open (near a plane: measured 0.3-0.9% of random scenes) are gathered per
-// run of kRunBlocks vectors, their 64-byte records prefetched as they are found and then
-// tested in full, and the run's results emitted in object order.
-ChunkCounts cull_obb(const ObbArrays& a, std::size_t begin, std::size_t end, const PlaneSet& planes, ChunkOutput out) {
+/// a * b + c, fused where the instruction set has it. Only for bounds, never for a distance
+/// the reference computes (those are written out in its order).
+inline vf mul_add(float a, vf b, vf c) {
+#if CULLPIPE_SIMD_LANES == 16 && defined(__AVX512F__)
+  return reinterpret_cast<vf>(_mm512_fmadd_ps(_mm512_set1_ps(a), reinterpret_cast<__m512>(b), reinterpret_cast<__m512>(c)));
+#else
+  return a * b + c;
+#endif
+}
+
+// The AABB and OBB kernels first settle what a cheap bound decides: `settle(i, beyond,
+// within)` gives the lanes of the vector of objects from i that the reference would find
+// OUTSIDE (beyond) or INSIDE (within), from 16 bytes per object read in order. The few
+// objects the bound leaves open (those near a plane: about 1% of random scenes) are gathered
+// per run of kRunBlocks vectors, their records prefetched as they are found, tested in full by
+// `resolve(objects, count, outside_bits, crossing_bits)`, and the run's results emitted in
+// object order.
+template <class Settle, class Resolve>
+ChunkCounts cull_settled(std::size_t begin, std::size_t end, const float* records, std::size_t record_floats, Settle settle,
+                         Resolve resolve, ChunkOutput out) {
   constexpr std::size_t kRunBlocks = 256;
   std::uint32_t outside_bits[kRunBlocks], crossing_bits[kRunBlocks];
   std::uint32_t open[kRunBlocks * W];  // objects left open in this run
   ChunkCounts counts;
-  const vi none = {}, all = ~none;
   for (std::size_t run = begin; run < end; run += kRunBlocks * W) {
     const std::size_t run_end = smaller(end, run + kRunBlocks * W);
     unsigned open_count = 0;
     for (std::size_t i = run, b = 0; i < run_end; i += W, ++b) {
-      const vf cx = load(a.c_x + i), cy = load(a.c_y + i), cz = load(a.c_z + i), bound = load(a.bound + i);
-      vi beyond = none, within = none;  // a NaN bound (or distance) settles neither
-      if (planes.unit_normals) {  // else the bound does not hold: every object is tested in full
-        within = all;
-        for (std::uint32_t k = 0; k < planes.count; ++k) {
-          const vf s = ((planes.nx[k] * cx + planes.ny[k] * cy) + planes.nz[k] * cz) + planes.d[k];
-          beyond |= s < -bound;
-          within &= s >= bound;
-        }
-      }
+      vi beyond, within;
+      settle(i, beyond, within);
       const unsigned valid = static_cast<unsigned>(smaller(W, run_end - i));
       const std::uint32_t lanes = valid >= W ? kAllLanes : (1u << valid) - 1u;
       outside_bits[b] = lane_bits(beyond);
       crossing_bits[b] = 0;
       for (std::uint32_t rest = ~lane_bits(beyond | within) & lanes; rest != 0; rest &= rest - 1) {
         const std::uint32_t object = static_cast<std::uint32_t>(i + static_cast<unsigned>(__builtin_ctz(rest)));
-        __builtin_prefetch(a.records + std::size_t(object) * kObbRecordFloats);
+        __builtin_prefetch(records + std::size_t(object) * record_floats);
         open[open_count++] = object;
       }
     }
     for (unsigned o = 0; o < open_count; o += W) {
       const unsigned count = static_cast<unsigned>(smaller(W, open_count - o));
       std::uint32_t outside, crossing;
-      classify_obb_records(a.records, open + o, count, planes, outside, crossing);
+      resolve(open + o, count, outside, crossing);
       for (unsigned l = 0; l < count; ++l) {
         const std::size_t at = open[o + l] - run;
         const std::uint32_t bit = 1u << (at % W);
@@ -223,6 +186,80 @@ ChunkCounts cull_obb(const ObbArrays& a, std::size_t begin, std::size_t end, con
       emit(i, begin, static_cast<unsigned>(end - i), lanes_of(outside_bits[b]), lanes_of(crossing_bits[b]), out, counts);
   }
   return counts;
+}
+
+// AABBs: the bound b (aabb_plane_bound) covers the half diagonal and every rounding of both
+// the reference's p/n-vertex distances and the centre distance s computed here (in any order,
+// fused where possible); with the plane's share m_k = PlaneSet::margin, s < -(b + m_k) makes
+// the p-vertex distance negative (OUTSIDE) and s >= b + m_k on every plane makes both vertex
+// distances non-negative (INSIDE). The open boxes get the reference's p/n-vertex test.
+ChunkCounts cull_aabb(const AabbArrays& a, std::size_t begin, std::size_t end, const PlaneSet& planes, ChunkOutput out) {
+  const vi none = {}, all = ~none;
+  auto settle = [&](std::size_t i, vi& beyond, vi& within) {
+    beyond = within = none;
+    if (!planes.unit_normals) return;  // the bound assumes unit normals: test every box in full
+    const vf cx = load(a.c_x + i), cy = load(a.c_y + i), cz = load(a.c_z + i), bound = load(a.bound + i);
+    within = all;
+    for (std::uint32_t k = 0; k < planes.count; ++k) {
+      const vf s = mul_add(planes.nz[k], cz, mul_add(planes.ny[k], cy, mul_add(planes.nx[k], cx, vf{} + planes.d[k])));
+      const vf reach = bound + planes.margin[k];
+      beyond |= s < -reach;
+      within &= s >= reach;  // a NaN bound or margin settles neither
+    }
+  };
+  auto resolve = [&](const std::uint32_t* objects, unsigned count, std::uint32_t& outside_bits, std::uint32_t& crossing_bits) {
+    vf box[6];  // min x y z, max x y z
+    gather_records(a.records, kAabbRecordFloats, objects, count, box);
+    const vf zero = {};
+    vi outside = {}, crossing = {};
+    for (std::uint32_t k = 0; k < planes.count; ++k) {
+      const float nx = planes.nx[k], ny = planes.ny[k], nz = planes.nz[k], d = planes.d[k];
+      // The p-vertex (farthest along the normal) and n-vertex, as pn_vertices (-0 as positive).
+      const bool sx = nx >= 0.0f, sy = ny >= 0.0f, sz = nz >= 0.0f;
+      const vf dp = ((nx * box[sx ? 3 : 0] + ny * box[sy ? 4 : 1]) + nz * box[sz ? 5 : 2]) + d;
+      const vf dn = ((nx * box[sx ? 0 : 3] + ny * box[sy ? 1 : 4]) + nz * box[sz ? 2 : 5]) + d;
+      outside |= dp < zero;
+      crossing |= dn < zero;
+    }
+    outside_bits = lane_bits(outside);
+    crossing_bits = lane_bits(crossing);
+  };
+  return cull_settled(begin, end, a.records, kAabbRecordFloats, settle, resolve, out);
+}
+
+// OBBs: the bound b >= |r| (obb_plane_bound) on the projected radius; s is the reference's own
+// centre distance, so s < -b on some plane is OUTSIDE and s >= b on all is INSIDE.
+ChunkCounts cull_obb(const ObbArrays& a, std::size_t begin, std::size_t end, const PlaneSet& planes, ChunkOutput out) {
+  const vi none = {}, all = ~none;
+  auto settle = [&](std::size_t i, vi& beyond, vi& within) {
+    beyond = within = none;
+    if (!planes.unit_normals) return;  // the bound assumes unit normals: test every box in full
+    const vf cx = load(a.c_x + i), cy = load(a.c_y + i), cz = load(a.c_z + i), bound = load(a.bound + i);
+    within = all;
+    for (std::uint32_t k = 0; k < planes.count; ++k) {
+      const vf s = ((planes.nx[k] * cx + planes.ny[k] * cy) + planes.nz[k] * cz) + planes.d[k];
+      beyond |= s < -bound;
+      within &= s >= bound;  // a NaN bound settles neither
+    }
+  };
+  auto resolve = [&](const std::uint32_t* objects, unsigned count, std::uint32_t& outside_bits, std::uint32_t& crossing_bits) {
+    vf col[15];  // centre, axes u0 u1 u2, half extents
+    gather_records(a.records, kObbRecordFloats, objects, count, col);
+    vi outside = {}, crossing = {};
+    for (std::uint32_t k = 0; k < planes.count; ++k) {
+      const float nx = planes.nx[k], ny = planes.ny[k], nz = planes.nz[k];
+      const vf s = ((nx * col[0] + ny * col[1]) + nz * col[2]) + planes.d[k];
+      const vf a0 = (nx * col[3] + ny * col[4]) + nz * col[5];
+      const vf a1 = (nx * col[6] + ny * col[7]) + nz * col[8];
+      const vf a2 = (nx * col[9] + ny * col[10]) + nz * col[11];
+      const vf r = (abs(a0) * col[12] + abs(a1) * col[13]) + abs(a2) * col[14];
+      outside |= s < -r;
+      crossing |= s < r;
+    }
+    outside_bits = lane_bits(outside);
+    crossing_bits = lane_bits(crossing);
+  };
+  return cull_settled(begin, end, a.records, kObbRecordFloats, settle, resolve, out);
 }
 
 ChunkCounts cull_sphere(const SphereArrays& a, std::size_t begin, std::size_t end, const PlaneSet& planes, ChunkOutput out) {
