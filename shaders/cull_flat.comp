@@ -50,7 +50,6 @@ uint view;             // this invocation's view (gl_GlobalInvocationID.y)
 uint view_plane_count;
 vec4 view_planes[MAX_FRUSTUM_PLANES];
 
-#define CP_PLANES_PADDED  // load_view fills the planes past the view's count
 #include "shared/classify.glsl"
 
 vec4 bound(uint word) { return uintBitsToFloat(texelFetch(bounds, int(word))); }
@@ -67,8 +66,7 @@ uint classify_object(uint i) {
 
 void load_view() {
   view_plane_count = min(views[view].plane_count, MAX_FRUSTUM_PLANES);
-  const vec4 no_plane = vec4(0.0, 0.0, 0.0, uintBitsToFloat(0x7f800000u));  // see classify.glsl
-  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = k < view_plane_count ? views[view].planes[k] : no_plane;
+  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = views[view].planes[k];
 }
 
 // Object order: each workgroup counts its visible objects; compact_scan / compact_scatter write

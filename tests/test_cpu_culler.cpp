@@ -177,18 +177,25 @@ TEST(CpuCuller, NanInfinityAndDenormalValuesGiveTheReferenceAnswer) {
 // the normal (where the float r can exceed |u| h), axes that are not unit or orthogonal,
 // negative and zero extents; axes so long that n.u overflows (r is NaN: no bound is safe);
 // across more than two runs of the kernel (4096 objects each).
-TEST(CpuCuller, ObbsAtTheEdgeOfTheirPlaneBound) {
+template <class Volume>
+struct EdgeSet {
+  std::vector<Volume> volumes;
+  std::vector<Frustum> views;  // one plane each
+};
+
+EdgeSet<Obb> obb_edge_set() {
   test::Rng rng(11);
-  // Slanted planes through the origin, one view each: a centre t n has coordinates no larger
-  // than t, so its distance can be set to within a float step of r.
+  // Slanted planes, one view each; through the origin for the first six: a centre t n has
+  // coordinates no larger than t, so its distance can be set to within a float step of r.
   std::vector<Frustum> views;
-  for (int k = 0; k < 6; ++k) {
-    const glm::vec4 plane(glm::normalize(rng.vec3(-1, 1) + glm::vec3(0.1f)), 0.0f);
+  for (float d : {0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 900.0f, -3000.0f, 1e6f}) {
+    const glm::vec4 plane(glm::normalize(rng.vec3(-1, 1) + glm::vec3(0.1f)), d);
     views.push_back(Frustum::from_planes({&plane, 1}));
   }
   std::vector<Obb> obbs;
   for (const Frustum& view : views) {
     const glm::vec3 n = view.planes[0].normal;
+    const glm::vec3 on_plane = -view.planes[0].d * n;
     for (int shape = 0; shape < 4; ++shape)
       for (int side = -1; side <= 1; side += 2)
         for (int step = -64; step <= 64; ++step) {
@@ -214,7 +221,7 @@ TEST(CpuCuller, ObbsAtTheEdgeOfTheirPlaneBound) {
             const float a = (n.x * u.x + n.y * u.y) + n.z * u.z;
             r = i == 0 ? std::fabs(a) * o.half_extents[i] : r + std::fabs(a) * o.half_extents[i];
           }
-          o.center = (float(side) * r * (1.0f + float(step) * 0x1p-26f)) * n;
+          o.center = on_plane + (float(side) * r * (1.0f + float(step) * 0x1p-26f)) * n;
           obbs.push_back(o);
         }
     // Behind this plane by 1 and by 10^-3, with an axis along which n.u overflows (r = inf x 0 =
@@ -223,7 +230,7 @@ TEST(CpuCuller, ObbsAtTheEdgeOfTheirPlaneBound) {
       Obb o;
       o.basis = glm::mat3(3e38f * glm::sign(n), glm::vec3(0, 1, 0), glm::vec3(0, 0, 1));
       o.half_extents = {0, 1e-4f, 1e-4f};
-      o.center = -behind * n;
+      o.center = on_plane - behind * n;
       obbs.push_back(o);
     }
   }
@@ -232,7 +239,7 @@ TEST(CpuCuller, ObbsAtTheEdgeOfTheirPlaneBound) {
   // bound of just |u| h would call it INSIDE (or OUTSIDE at -s).
   std::size_t between = 0;
   for (int trial = 0; trial < 4000 && between < 200; ++trial) {
-    const Frustum& view = views[static_cast<std::size_t>(trial) % views.size()];
+    const Frustum& view = views[static_cast<std::size_t>(trial) % 6];  // d = 0
     const glm::vec3 n = view.planes[0].normal;
     Obb o;
     o.basis = glm::mat3(rng.uniform(0.5f, 8.0f) * n, glm::vec3(0), glm::vec3(0));
@@ -255,14 +262,32 @@ TEST(CpuCuller, ObbsAtTheEdgeOfTheirPlaneBound) {
     }
   }
   EXPECT_GT(between, 50u);
+  // Subnormal extents on huge axes and the reverse: under DAZ they would read as 0.
+  for (const Frustum& view : views) {
+    const glm::vec3 n = view.planes[0].normal;
+    Obb o;
+    o.basis = glm::mat3(0x1p124f * n, glm::vec3(0), glm::vec3(0));
+    o.half_extents = {0x1p-127f, 0, 0};  // r = 0.125
+    o.center = -view.planes[0].d * n + 0.01f * n;
+    obbs.push_back(o);
+    o.basis = glm::mat3(0x1p-127f * n, glm::vec3(0), glm::vec3(0));
+    o.half_extents = {0x1p100f, 0, 0};  // r = 2^-27
+    o.center = -view.planes[0].d * n + 0x1p-30f * n;
+    obbs.push_back(o);
+  }
   const std::size_t sharp = obbs.size();
   while (obbs.size() < 9000) obbs.push_back(obbs[rng.next() % sharp]);  // more than two runs
+  return {obbs, views};
+}
+
+TEST(CpuCuller, ObbsAtTheEdgeOfTheirPlaneBound) {
+  const EdgeSet<Obb> set = obb_edge_set();
   // The answers are mixed: all three classes occur.
-  std::vector<Classification> classes(obbs.size());
-  reference::classify_all(std::span<const Obb>(obbs), views[0], classes);
+  std::vector<Classification> classes(set.volumes.size());
+  reference::classify_all(std::span<const Obb>(set.volumes), set.views[0], classes);
   for (Classification c : {Classification::Outside, Classification::Intersecting, Classification::Inside})
     EXPECT_GT(std::count(classes.begin(), classes.end(), c), 100) << to_string(c);
-  check_everywhere(obbs, "obb at the bound", views);
+  check_everywhere(set.volumes, "obb at the bound", set.views);
 }
 
 // The AABB kernel settles most boxes by their centre distance against a bound on the half
@@ -270,7 +295,7 @@ TEST(CpuCuller, ObbsAtTheEdgeOfTheirPlaneBound) {
 // extents follow the normal (so the half diagonal is exactly the projected radius and only the
 // margins separate the bound from the answer), with a vertex within float steps of slanted
 // planes far from the origin; inverted, flat and point boxes; huge and non-finite coordinates.
-TEST(CpuCuller, AabbsAtTheEdgeOfTheirPlaneBound) {
+EdgeSet<Aabb> aabb_edge_set() {
   test::Rng rng(23);
   std::vector<Frustum> views;
   for (float d : {0.0f, 900.0f, -3000.0f, 1e6f}) {
@@ -305,18 +330,30 @@ TEST(CpuCuller, AabbsAtTheEdgeOfTheirPlaneBound) {
     }
   }
   const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
-  for (float v : {inf, -inf, nan, 3e38f, -3e38f, 1e36f}) {
+  for (float v : {inf, -inf, nan, 3e38f, -3e38f, 1e36f, 1e-40f, -1e-40f}) {
     boxes.push_back({{v, 0, 0}, {1, 1, 1}});
     boxes.push_back({{-1, -1, -1}, {1, v, 1}});
     boxes.push_back({{v, v, v}, {v, v, v}});
   }
   const std::size_t sharp = boxes.size();
   while (boxes.size() < 9000) boxes.push_back(boxes[rng.next() % sharp]);  // more than two runs
-  std::vector<Classification> classes(boxes.size());
-  reference::classify_all(std::span<const Aabb>(boxes), views[1], classes);
+  // The same planes with normals of length 2, built by hand: no bound may settle anything.
+  for (std::size_t v = 0, count = views.size(); v < count; ++v) {
+    Frustum scaled = views[v];
+    scaled.planes[0].normal *= 2.0f;
+    scaled.planes[0].d *= 2.0f;
+    views.push_back(scaled);
+  }
+  return {boxes, views};
+}
+
+TEST(CpuCuller, AabbsAtTheEdgeOfTheirPlaneBound) {
+  const EdgeSet<Aabb> set = aabb_edge_set();
+  std::vector<Classification> classes(set.volumes.size());
+  reference::classify_all(std::span<const Aabb>(set.volumes), set.views[1], classes);
   for (Classification c : {Classification::Outside, Classification::Intersecting, Classification::Inside})
     EXPECT_GT(std::count(classes.begin(), classes.end(), c), 100) << to_string(c);
-  check_everywhere(boxes, "aabb at the bound", views);
+  check_everywhere(set.volumes, "aabb at the bound", set.views);
 }
 
 #if defined(__SSE__)
@@ -352,6 +389,47 @@ TEST(CpuCuller, AgreesUnderFlushToZeroSetAfterThePoolStarted) {
                        << to_string(with_daz[i]) << ", fast CPU says " << to_string(r[0].classes[i]);
     EXPECT_EQ(r[0].counts, counts);
   }
+}
+
+// The bounds are computed at upload; the engine's float mode then (FTZ / DAZ, rounding) must
+// not matter, and culling in any mode must give what the reference gives in that mode.
+// (Under DAZ at upload, a subnormal extent read as 0 once left its part of the radius out of
+// the OBB bound.)
+template <class Volume>
+void expect_mode_independent(const EdgeSet<Volume>& set, const std::string& what) {
+  const unsigned saved = _mm_getcsr();
+  const unsigned rounding[4] = {0x0000, 0x2000, 0x4000, 0x6000};  // nearest, down, up, toward zero
+  const unsigned flush[2] = {0x0000, 0x8040};                     // none, FTZ | DAZ
+  CpuCullerConfig config;
+  config.threads = 2;
+  config.chunk_objects = 1024;
+  for (unsigned upload_mode : {0x0000u, 0x8040u, 0x2000u, 0x6000u | 0x8040u}) {
+    CpuCuller culler(config);
+    _mm_setcsr((saved & ~0xE040u) | upload_mode);
+    culler.upload(std::span<const Volume>(set.volumes));
+    for (unsigned r : rounding)
+      for (unsigned f : flush) {
+        _mm_setcsr((saved & ~0xE040u) | r | f);
+        const std::vector<CpuViewResult> results = culler.cull(set.views);
+        std::vector<std::vector<Classification>> expected(set.views.size(), std::vector<Classification>(set.volumes.size()));
+        for (std::size_t v = 0; v < set.views.size(); ++v)
+          reference::classify_all(std::span<const Volume>(set.volumes), set.views[v], expected[v]);
+        _mm_setcsr(saved);
+        for (std::size_t v = 0; v < set.views.size(); ++v) {
+          const std::size_t i = first_mismatch(expected[v], results[v].classes);
+          ASSERT_EQ(i, npos) << what << ": upload mode " << std::hex << upload_mode << ", cull mode " << (r | f) << std::dec
+                             << ", view " << v << ", object " << i << " " << describe(set.volumes[i]) << "; frustum "
+                             << describe(set.views[v]) << ": reference says " << to_string(expected[v][i]) << ", fast CPU says "
+                             << to_string(results[v].classes[i]);
+        }
+      }
+  }
+  _mm_setcsr(saved);
+}
+
+TEST(CpuCuller, BoundsHoldInEveryFloatModeAtUploadAndCull) {
+  expect_mode_independent(obb_edge_set(), "obb");
+  expect_mode_independent(aabb_edge_set(), "aabb");
 }
 #endif
 

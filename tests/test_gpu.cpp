@@ -253,8 +253,8 @@ TEST_F(Gpu, DegenerateBehindCameraHugeAndTiny) {
   expect_agreement(culler(), obbs, {f});
 }
 
-// The flat pass fills the planes past a view's count with (0, 0, 0, +inf), which must decide
-// nothing for any volume: large, negative and infinite radii, infinite and NaN coordinates.
+// Frusta of fewer than six planes against large, negative and infinite radii, infinite and NaN
+// coordinates: the planes past a view's count decide nothing, whatever the shader keeps there.
 TEST_F(Gpu, FrustaOfFewerPlanesWithExtremeVolumes) {
   const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
   std::vector<Sphere> spheres = {{{0.5f, 0.5f, 0}, 5},      {{0.5f, 0.5f, 0}, 1e30f}, {{0.5f, 0.5f, 0}, inf},
@@ -275,7 +275,8 @@ TEST_F(Gpu, FrustaOfFewerPlanesWithExtremeVolumes) {
     const Frustum f = Frustum::from_planes(std::span(all, count));
     ASSERT_EQ(f.plane_count, count);
     const auto sphere_classes = expect_agreement(culler(), spheres, {f});
-    // Inside the first two planes; a filler plane (0, 0, 0, 1) would make it INTERSECTING.
+    // Inside the first two planes; a stale or filler plane such as (0, 0, 0, 1) would make it
+    // INTERSECTING.
     EXPECT_EQ(sphere_classes[9], count <= 2 ? Classification::Inside : Classification::Outside);
     expect_agreement(culler(), boxes, {f});
     expect_agreement(culler(), obbs, {f});

@@ -8,6 +8,9 @@
 #include <new>
 #include <stdexcept>
 #include <string>
+#if defined(__SSE__)
+#include <xmmintrin.h>
+#endif
 
 #include "cull/simd_kernels.hpp"
 #include "cull/thread_pool.hpp"
@@ -45,7 +48,24 @@ constexpr double kUnitNormalLimit = 1.0 + 0x1p-20;  // PlaneSet::unit_normals
 /// A float >= x, for x >= 2^-126 (no subnormal result) or NaN (stays NaN); past the float
 /// range, inf. Rounding x (1 + 2^-23) to nearest loses at most a factor 1 - 2^-24. (No
 /// nextafter: a library call per object made uploads 7x slower.)
-float round_up(double x) { return static_cast<float>(x * (1.0 + 0x1p-23)); }
+float round_up(double x) {
+  const double up = x * (1.0 + 0x1p-23);
+  return up > double(std::numeric_limits<float>::max()) ? std::numeric_limits<float>::infinity() : static_cast<float>(up);
+}
+
+/// Round to nearest without flushing subnormals, for the scope: the bounds are computed in
+/// that mode whatever the caller's (under DAZ a subnormal extent would read as 0 and the
+/// bound would leave out what it adds to the radius; the proofs assume round to nearest).
+/// The pool runs tasks in the caller's mode, so each upload task sets its own.
+struct NearestNoFlush {
+#if defined(__SSE__)
+  unsigned saved = _mm_getcsr();
+  NearestNoFlush() { _mm_setcsr(0x1F80); }  // all exceptions masked, nearest, no FTZ / DAZ
+  ~NearestNoFlush() { _mm_setcsr(saved); }
+#endif
+  NearestNoFlush(const NearestNoFlush&) = delete;
+  NearestNoFlush& operator=(const NearestNoFlush&) = delete;
+};
 
 detail::PlaneSet plane_set(const Frustum& f) {
   detail::PlaneSet s;
@@ -60,7 +80,7 @@ detail::PlaneSet plane_set(const Frustum& f) {
     const double length = std::sqrt(double(n.x) * n.x + double(n.y) * n.y + double(n.z) * n.z);
     s.unit_normals = s.unit_normals && length <= kUnitNormalLimit;  // false for NaN too
     const double d = std::fabs(double(f.planes[k].d));
-    s.margin[k] = d <= 0x1p120 ? round_up(0x1p-20 * d + 0x1p-100) : std::numeric_limits<float>::quiet_NaN();
+    s.margin[k] = d <= 0x1p120 ? round_up(0x1p-18 * d + 0x1p-100) : std::numeric_limits<float>::quiet_NaN();
   }
   return s;
 }
@@ -68,11 +88,11 @@ detail::PlaneSet plane_set(const Frustum& f) {
 /// ObbArrays::bound of `b`: a float b >= |r| for the reference's projected radius
 /// r = (|a0| h0 + |a1| h1) + |a2| h2, a_i = (n.x u_i.x + n.y u_i.y) + n.z u_i.z, computed in float
 /// for every normal n with |n| <= 1 + 2^-20, or NaN where no bound is safe. Why it holds, with
-/// e = 2^-24 and each rounding also off by at most 2^-150 in the subnormal range (flushing to
-/// zero only shrinks a term):
-/// - |a_i| <= (|n.x u.x| + |n.y u.y| + |n.z u.z|)(1 + e)^3 + 6 x 2^-150
-///         <= |n| |u_i| (1 + e)^3 + 6 x 2^-150 (Cauchy-Schwarz);
-/// - the products with h_i and the two sums add (1 + e)^3 and 5 x 2^-150, so
+/// e = 2^-23 (a float rounding in any rounding mode) and each rounding also off by at most
+/// 2^-149 in the subnormal range (flushing to zero at cull time only shrinks a term):
+/// - |a_i| <= (|n.x u.x| + |n.y u.y| + |n.z u.z|)(1 + e)^3 + 6 x 2^-149
+///         <= |n| |u_i| (1 + e)^3 + 6 x 2^-149 (Cauchy-Schwarz);
+/// - the products with h_i and the two sums add (1 + e)^3 and 5 x 2^-149, so
 ///   |r| <= [sum_i (|u_i| + 2^-140) |h_i|] (1 + 2^-16) + 2^-140, as (1 + 2^-20)(1 + e)^6 < 1 + 2^-16.
 ///   That is computed here in double, with 2^-100 for the last term (the bound stays a normal
 ///   float: DAZ would read a subnormal one as 0), and rounded up to a float;
@@ -95,17 +115,19 @@ float obb_plane_bound(const Obb& b) {
 }
 
 /// AabbArrays::bound of `b`, and its centre (min + max) / 2 rounded to a float. With
-/// PlaneSet::margin m = 2^-20 |d| it settles the reference's p/n-vertex test for every plane of
+/// PlaneSet::margin m = 2^-18 |d| it settles the reference's p/n-vertex test for every plane of
 /// normal |n| <= 1 + 2^-20: s < -(bound + m) means d_p < 0 and s >= bound + m means d_n >= 0
-/// and d_p >= 0, for s = n.centre + d computed in float in any order, fused or not. Why, with
-/// C and E the exact centre and half extent (E < 0 for an inverted box) and e = 2^-24:
+/// and d_p >= 0, for s = n.centre + d computed in float in any order, fused or not, in any
+/// rounding mode. Why, with C and E the exact centre and half extent (E < 0 for an inverted
+/// box) and e = 2^-23 (a float rounding in any mode; 2^-24 to nearest, as here at upload):
 /// - the exact vertex distances are D_c +- sum |n_i| E_i, D_c = n.C + d, within |n| |E| of D_c;
 /// - the reference's four roundings put d_p and d_n within 4e(|n|(|C|_1 + |E|_1) + |d|) of them;
-///   s is within 6e(|n| |centre|_1 + |d|) of n.centre + d, which is within |n| (e + 2^-53)|C|_1 of
+///   s is within 6e(|n| |centre|_1 + |d|) of n.centre + d, which is within |n| 2^-24 |C|_1 of
 ///   D_c; the sums of the float bound and margin round down by at most e;
-/// - so |d_p - s| and |d_n - s| stay below |E| (1 + 2^-16) + 2^-20 (|C|_1 + |E|_1 + |d|): every
-///   coefficient has over 30% to spare. 2^-100 covers subnormal roundings, and inputs and
-///   results flushed to zero by FTZ / DAZ (at most a few 2^-126).
+/// - so |d_p - s| and |d_n - s| stay below |E| (1 + 2^-16) + 2^-18 (|C|_1 + |E|_1 + |d|): the
+///   coefficients needed are at most 11e and 10e, 2^-18 = 32e. 2^-100 covers subnormal
+///   roundings, and inputs and results flushed to zero by FTZ / DAZ at cull time (at most a
+///   few 2^-126).
 /// Non-finite coordinates, or |C|_1 + |E|_1 past 2^120 (where s may overflow), give NaN.
 float aabb_plane_bound(const Aabb& b, glm::vec3& centre) {
   double size = 0.0, diagonal = 0.0;
@@ -119,7 +141,7 @@ float aabb_plane_bound(const Aabb& b, glm::vec3& centre) {
     diagonal += e * e;
   }
   if (!(size <= 0x1p120)) return std::numeric_limits<float>::quiet_NaN();
-  return round_up(std::sqrt(diagonal) * (1.0 + 0x1p-16) + 0x1p-20 * size + 0x1p-100);
+  return round_up(std::sqrt(diagonal) * (1.0 + 0x1p-16) + 0x1p-18 * size + 0x1p-100);
 }
 
 struct AlignedFree {
@@ -227,6 +249,7 @@ void CpuCuller::upload_columns(std::span<const Volume> volumes, Store store) {
   // In tasks of `chunk` objects on the pool: the bounds take a few square roots per object.
   const std::size_t n = volumes.size(), per_task = impl_->chunk;
   impl_->pool.parallel_for((n + per_task - 1) / per_task, [&](std::size_t t) {
+    const NearestNoFlush mode;
     const std::size_t end = std::min(n, (t + 1) * per_task);
     for (std::size_t i = t * per_task; i < end; ++i) store(volumes[i], c, i);
   });

@@ -15,7 +15,7 @@ struct PlaneSet {
   float nx[6]{}, ny[6]{}, nz[6]{}, d[6]{};
   /// Every normal's length is at most 1 + 2^-20, so the AABB and OBB bounds hold for these planes.
   bool unit_normals = false;
-  /// Per plane, the share of the AABB settling margin that depends on the plane: 2^-20 |d|
+  /// Per plane, the share of the AABB settling margin that depends on the plane: 2^-18 |d|
   /// rounded up (NaN past |d| = 2^120: such a plane settles nothing).
   float margin[6]{};
 };

@@ -21,14 +21,7 @@ float plane_distance(vec4 plane, vec3 p) {
   return s;
 }
 
-#ifdef CP_PLANES_PADDED
-// The includer fills every plane past the view's count with (0, 0, 0, +inf): its distance is
-// +inf or NaN for any volume, and no test here is other than `distance < x`, which neither
-// satisfies, so such a plane decides nothing and needs no per-plane check.
-bool plane_tested(uint k, uint mask) { return (mask & (1u << k)) != 0u; }
-#else
 bool plane_tested(uint k, uint mask) { return k < view_plane_count && (mask & (1u << k)) != 0u; }
-#endif
 
 // The p/n-vertex test; `straddled` receives the tested planes whose n-vertex is behind
 // (meaningful unless OUTSIDE).
