@@ -280,15 +280,18 @@ EdgeSet<Obb> obb_edge_set() {
   return {obbs, views};
 }
 
-TEST(CpuCuller, ObbsAtTheEdgeOfTheirPlaneBound) {
-  const EdgeSet<Obb> set = obb_edge_set();
-  // The answers are mixed: all three classes occur.
+/// Checks an edge set everywhere, after checking that its answers against `views[mixed]` are
+/// mixed: all three classes occur.
+template <class Volume>
+void check_edge_set(const EdgeSet<Volume>& set, std::size_t mixed, const std::string& what) {
   std::vector<Classification> classes(set.volumes.size());
-  reference::classify_all(std::span<const Obb>(set.volumes), set.views[0], classes);
+  reference::classify_all(std::span<const Volume>(set.volumes), set.views[mixed], classes);
   for (Classification c : {Classification::Outside, Classification::Intersecting, Classification::Inside})
-    EXPECT_GT(std::count(classes.begin(), classes.end(), c), 100) << to_string(c);
-  check_everywhere(set.volumes, "obb at the bound", set.views);
+    EXPECT_GT(std::count(classes.begin(), classes.end(), c), 100) << what << ": " << to_string(c);
+  check_everywhere(set.volumes, what, set.views);
 }
+
+TEST(CpuCuller, ObbsAtTheEdgeOfTheirPlaneBound) { check_edge_set(obb_edge_set(), 0, "obb at the bound"); }
 
 // The AABB kernel settles most boxes by their centre distance against a bound on the half
 // diagonal plus margins for every rounding; the rest get the p/n-vertex test. Boxes whose
@@ -347,14 +350,7 @@ EdgeSet<Aabb> aabb_edge_set() {
   return {boxes, views};
 }
 
-TEST(CpuCuller, AabbsAtTheEdgeOfTheirPlaneBound) {
-  const EdgeSet<Aabb> set = aabb_edge_set();
-  std::vector<Classification> classes(set.volumes.size());
-  reference::classify_all(std::span<const Aabb>(set.volumes), set.views[1], classes);
-  for (Classification c : {Classification::Outside, Classification::Intersecting, Classification::Inside})
-    EXPECT_GT(std::count(classes.begin(), classes.end(), c), 100) << to_string(c);
-  check_everywhere(set.volumes, "aabb at the bound", set.views);
-}
+TEST(CpuCuller, AabbsAtTheEdgeOfTheirPlaneBound) { check_edge_set(aabb_edge_set(), 1, "aabb at the bound"); }
 
 #if defined(__SSE__)
 TEST(CpuCuller, AgreesUnderFlushToZeroSetAfterThePoolStarted) {
