@@ -34,27 +34,23 @@ BvhCuller::BvhCuller(const vk::Context& ctx) : ctx_(ctx) {
     throw vk::Error("hierarchical culling needs " + std::to_string(kStorageBindings) + " storage buffers per stage; " +
                     ctx_.info().name + " allows " + std::to_string(limits.maxPerStageDescriptorStorageBuffers));
   detail::check_texel_format(ctx_, "hierarchical culling");
-  detail::check_subgroup_operations(ctx_, VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_VOTE_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT |
+  detail::check_subgroup_operations(ctx_, VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT |
                                               VK_SUBGROUP_FEATURE_BALLOT_BIT | VK_SUBGROUP_FEATURE_SHUFFLE_BIT,
                                     "hierarchical culling");
-  resources_ = std::make_unique<detail::PassResources>(ctx_, pipeline(BVH_PASS_LEVEL, false).set_layout(), BVH_BINDING_COUNT,
+  resources_ = std::make_unique<detail::PassResources>(ctx_, pipeline(false).set_layout(), BVH_BINDING_COUNT,
                                                       kTexelBindings);
 }
 
 BvhCuller::~BvhCuller() = default;
 
-const vk::ComputePipeline& BvhCuller::pipeline(std::uint32_t pass, bool draws) {
-  if (pass != BVH_PASS_ACCEPT && pass != BVH_PASS_TEST) draws = false;
-  // The kind matters to the passes that test (LEVEL: the node margin; TEST: the object test).
-  const std::uint32_t kind = pass == BVH_PASS_LEVEL || pass == BVH_PASS_TEST ? std::uint32_t(kind_) : 0u;
-  std::unique_ptr<vk::ComputePipeline>& slot = pipelines_[kind][pass][draws];
+const vk::ComputePipeline& BvhCuller::pipeline(bool draws) {
+  const auto kind = std::uint32_t(kind_);
+  std::unique_ptr<vk::ComputePipeline>& slot = pipelines_[kind][draws];
   if (slot) return *slot;
-  static const char* names[BVH_PASS_COUNT] = {"seed", "level", "finish", "accept", "test"};
-  const std::string name = std::string("hierarchical cull (") + names[pass] + ", " + std::string(to_string(BvKind(kind))) +
-                           (draws ? ", draws" : "") + ")";
-  // Specialization constants: 0 pass, 1 group size, 2 volume kind, 3 draws.
+  const std::string name = "hierarchical cull (" + std::string(to_string(kind_)) + (draws ? ", draws" : "") + ")";
+  // Specialization constants: 1 group size, 2 volume kind, 3 draws.
   static_assert(BV_KIND_AABB == 0 && BV_KIND_OBB == 1 && BV_KIND_SPHERE == 2, "BvKind order must match the shader");
-  const std::uint32_t spec[4] = {pass, group_size_, kind, draws ? 1u : 0u};
+  const std::uint32_t spec[4] = {0u, group_size_, kind, draws ? 1u : 0u};
   slot = std::make_unique<vk::ComputePipeline>(
       ctx_, vk::ComputePipelineDesc{std::span<const std::uint32_t>(cullpipe_cull_bvh_spv),
                                     BVH_BINDING_COUNT, sizeof(BvhCullParams), spec, name.c_str(), kTexelBindings});
@@ -71,7 +67,7 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
   const std::string kind(to_string(kind_of<Volume>()));
   auto bad = [&](const std::string& what) { throw std::invalid_argument("BvhCuller::upload: " + what); };
   if (nodes >= std::size_t(UINT32_MAX) || n >= std::size_t(UINT32_MAX)) bad("too many nodes or objects for 32-bit indices");
-  // The layout flatten() gives, which the GPU's work-queue capacities rely on.
+  // The layout flatten() gives, which the traversal relies on (skip links, nested ranges).
   std::vector<std::uint32_t> depth;
   if (const std::string why = bvh::check_flat_tree(tree, boxes, &depth); !why.empty()) bad(why);
   std::vector<GpuBvhNode> packed(nodes);
@@ -80,32 +76,47 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
     const std::uint32_t second = node.leaf ? bvh::kNone : tree.nodes[i + 1].skip;
     packed[i] = {node.box.min, node.first, node.box.max, node.count, node.skip, second, node.leaf ? 1u : 0u, depth[i]};
   }
-  std::uint32_t levels = 0;
-  std::vector<std::size_t> width;
-  for (std::uint32_t d : depth) {
-    levels = std::max(levels, d);
-    if (width.size() < d) width.resize(d, 0);
-    ++width[d - 1];
+  // The cut: the highest subtrees of at most BVH_CUT_MAX_OBJECTS objects and
+  // BVH_CUT_MAX_HEIGHT levels below their root, and the leaves above them (see cull_bvh.comp).
+  std::vector<std::uint32_t> height(nodes, 0), cuts;
+  for (std::size_t i = nodes; i-- > 0;) {
+    const bvh::FlatNode& node = tree.nodes[i];
+    if (node.leaf && node.count >= BVH_RECORD_MAX_COUNT)
+      throw std::length_error("BvhCuller::upload: a leaf of " + std::to_string(node.count) + " objects (at most " +
+                              std::to_string(BVH_RECORD_MAX_COUNT - 1) + ")");
+    if (!node.leaf) height[i] = 1 + std::max(height[i + 1], height[tree.nodes[i + 1].skip]);
   }
+  for (std::size_t i = 0; i < nodes;) {
+    const bvh::FlatNode& node = tree.nodes[i];
+    if (node.leaf || (node.count <= BVH_CUT_MAX_OBJECTS && height[i] <= BVH_CUT_MAX_HEIGHT)) {
+      cuts.push_back(std::uint32_t(i));
+      i = node.skip;
+    } else {
+      ++i;
+    }
+  }
+  const std::uint32_t levels = depth.empty() ? 0 : *std::max_element(depth.begin(), depth.end());
 
   using Packed = decltype(pack(boxes[0]));
   const VkDeviceSize box_bytes = VkDeviceSize(n) * sizeof(Packed), node_bytes = VkDeviceSize(nodes) * sizeof(GpuBvhNode);
   detail::check_texel_range(ctx_, box_bytes, std::to_string(n) + " " + kind + " volumes");
   detail::check_texel_range(ctx_, node_bytes, std::to_string(nodes) + " BVH nodes");
-  object_count_ = node_count_ = 0;  // stay 0 if an allocation below fails
+  object_count_ = node_count_ = cut_count_ = 0;  // stay 0 if an allocation below fails
   bool& dirty = descriptors_dirty_;
   detail::ensure_buffer(ctx_, bounds_, box_bytes, kTexel, "object volume buffer", dirty);
   detail::ensure_buffer(ctx_, nodes_, node_bytes, kTexel, "BVH node buffer", dirty);
   detail::ensure_buffer(ctx_, objects_, VkDeviceSize(n) * sizeof(std::uint32_t), kStorage, "BVH object order buffer", dirty);
+  detail::ensure_buffer(ctx_, cuts_, VkDeviceSize(cuts.size()) * sizeof(std::uint32_t), kStorage, "BVH cut buffer", dirty);
   auto gpu_boxes = bounds_.as<Packed>();
   for (std::size_t i = 0; i < n; ++i) gpu_boxes[i] = pack(boxes[tree.objects[i]]);  // tree order
   if (nodes) std::memcpy(nodes_.data(), packed.data(), node_bytes);
   if (n) std::memcpy(objects_.data(), tree.objects.data(), n * sizeof(std::uint32_t));
+  if (!cuts.empty()) std::memcpy(cuts_.data(), cuts.data(), cuts.size() * sizeof(std::uint32_t));
   object_count_ = n;
   node_count_ = nodes;
+  cut_count_ = cuts.size();
   levels_ = levels;
   kind_ = kind_of<Volume>();
-  widest_level_ = width.empty() ? 0 : *std::max_element(width.begin(), width.end());
 }
 
 void BvhCuller::upload_draws(std::span<const DrawCommand> templates) {
@@ -121,11 +132,9 @@ void BvhCuller::update_descriptors() {
   if (!descriptors_dirty_) return;
   static_assert(BINDING_BOUNDS == 0 && BINDING_CLASSES == 1 && BINDING_VISIBLE == 2 && BINDING_COUNTERS == 3 &&
                 BINDING_VIEWS == 4 && BINDING_DRAW_TEMPLATES == 5 && BINDING_DRAWS == 6 && BVH_BINDING_NODES == 7 &&
-                BVH_BINDING_OBJECTS == 8 && BVH_BINDING_QUEUE == 9 && BVH_BINDING_RANGES == 10 && BVH_BINDING_TESTS == 11 &&
-                BVH_BINDING_TRAVERSAL == 12 && BVH_BINDING_COUNT == 13);
-  const vk::Buffer* const buffers[BVH_BINDING_COUNT] = {&bounds_, &classes_, &visible_, &counters_, &views_,
-                                                        &templates_, &draws_, &nodes_, &objects_, &queue_,
-                                                        &ranges_, &tests_, &traversal_};
+                BVH_BINDING_OBJECTS == 8 && BVH_BINDING_CUTS == 9 && BVH_BINDING_RECORDS == 10 && BVH_BINDING_COUNT == 11);
+  const vk::Buffer* const buffers[BVH_BINDING_COUNT] = {&bounds_, &classes_, &visible_, &counters_, &views_, &templates_,
+                                                        &draws_,  &nodes_,   &objects_, &cuts_,     &records_};
   resources_->write(buffers);
   descriptors_dirty_ = false;
 }
@@ -137,38 +146,38 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
     throw std::invalid_argument("draw commands requested, but " + std::to_string(template_count_) + " draw templates were uploaded for " +
                                 std::to_string(object_count_) + " objects (call upload_draws)");
   const std::size_t v = views.size();
-  if (v >= (std::size_t(1) << (32 - BVH_MASK_BITS))) throw std::length_error(std::to_string(v) + " views are too many for one pass");
   for (const Frustum& f : views) {
     if (f.plane_count > MAX_FRUSTUM_PLANES) throw std::invalid_argument("a frustum has more than 6 planes");
     if (kind_ != BvKind::Aabb) bvh::require_unit_normals(f, "BvhCuller");
   }
   const std::size_t capacity = options.visible_capacity ? options.visible_capacity : object_count_;
-  // Work-queue capacities that cannot overflow: a level holds at most its nodes per view; the
-  // accepted subtrees of a view are disjoint, so their full chunks number at most objects /
-  // group size; each object is in the test list at most once per view.
-  queue_capacity_ = v * widest_level_;
-  range_capacity_ = v * (object_count_ / group_size_ + 1);
-  test_capacity_ = v * object_count_;
+  // Workgroups never straddle views; the dispatch folds into y past maxComputeWorkGroupCount[0].
+  const VkPhysicalDeviceLimits& limits = ctx_.properties().limits;
+  groups_per_view_ = (cut_count_ + group_size_ - 1) / group_size_;
+  const std::size_t groups = groups_per_view_ * v;
+  group_x_ = std::min<std::size_t>(std::max<std::size_t>(groups, 1), limits.maxComputeWorkGroupCount[0]);
+  group_y_ = (groups + group_x_ - 1) / group_x_;
+  if (group_y_ > limits.maxComputeWorkGroupCount[1])
+    throw std::length_error(std::to_string(v) + " views of " + std::to_string(cut_count_) + " BVH subtrees need more workgroups than " +
+                            ctx_.info().name + " dispatches");
   const std::string views_x = std::to_string(v) + " views x ";
   auto check = [&](VkDeviceSize bytes, const std::string& what) { detail::check_storage_range(ctx_, bytes, what); };
   const VkDeviceSize outputs = VkDeviceSize(object_count_) * v * sizeof(std::uint32_t);
   const VkDeviceSize visible = VkDeviceSize(capacity) * v * sizeof(std::uint32_t);
   const VkDeviceSize draw_bytes = options.draws ? VkDeviceSize(capacity) * v * sizeof(DrawCommand) : 0;
-  const VkDeviceSize queue_bytes = 2 * VkDeviceSize(queue_capacity_) * sizeof(BvhWorkItem);
-  const VkDeviceSize range_bytes = VkDeviceSize(range_capacity_) * sizeof(BvhRange);
-  const VkDeviceSize test_bytes = VkDeviceSize(test_capacity_) * sizeof(BvhWorkItem);
+  // A cut subtree has at most as many records as objects: one scratch slot per object and view.
+  const VkDeviceSize record_bytes = VkDeviceSize(object_count_) * v * 2 * sizeof(std::uint32_t);
   check(VkDeviceSize(v) * sizeof(GpuFrustum), std::to_string(v) + " views");
   check(VkDeviceSize(v) * sizeof(ViewCounters), std::to_string(v) + " view counters");
   check(outputs, views_x + std::to_string(object_count_) + " objects of output");
   check(visible, views_x + std::to_string(capacity) + " visible ids");
   check(draw_bytes, views_x + std::to_string(capacity) + " draw commands");
-  check(queue_bytes, views_x + std::to_string(widest_level_) + " nodes of one BVH level (work queue)");
-  check(range_bytes, views_x + "accepted ranges");
-  check(test_bytes, views_x + std::to_string(object_count_) + " object tests (work queue)");
+  check(record_bytes, views_x + std::to_string(object_count_) + " objects of traversal records");
   bool& dirty = descriptors_dirty_;
   detail::ensure_buffer(ctx_, bounds_, 0, kTexel, "object volume buffer", dirty);
   detail::ensure_buffer(ctx_, nodes_, 0, kTexel, "BVH node buffer", dirty);
   detail::ensure_buffer(ctx_, objects_, 0, kStorage, "BVH object order buffer", dirty);
+  detail::ensure_buffer(ctx_, cuts_, 0, kStorage, "BVH cut buffer", dirty);
   detail::ensure_buffer(ctx_, templates_, 0, kStorage, "draw template buffer", dirty);
   detail::ensure_buffer(ctx_, classes_, outputs, kStorage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, "classification buffer", dirty);
   detail::ensure_buffer(ctx_, visible_, visible, kStorage, "visible-id buffer", dirty);
@@ -176,18 +185,14 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
                         kStorage | VK_BUFFER_USAGE_TRANSFER_DST_BIT | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "counter buffer", dirty);
   detail::ensure_buffer(ctx_, views_, v * sizeof(GpuFrustum), kStorage, "view buffer", dirty);
   detail::ensure_buffer(ctx_, draws_, draw_bytes, kStorage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "draw buffer", dirty);
-  detail::ensure_buffer(ctx_, queue_, queue_bytes, kStorage, "BVH level queue", dirty);
-  detail::ensure_buffer(ctx_, ranges_, range_bytes, kStorage, "BVH accepted-range list", dirty);
-  detail::ensure_buffer(ctx_, tests_, test_bytes, kStorage, "BVH object-test list", dirty);
-  detail::ensure_buffer(ctx_, traversal_, sizeof(BvhTraversal), kStorage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT,
-                        "BVH traversal state", dirty);
+  detail::ensure_buffer(ctx_, records_, record_bytes, kStorage, "BVH traversal record buffer", dirty);
   update_descriptors();
   auto gpu_views = views_.as<GpuFrustum>();
   for (std::size_t i = 0; i < v; ++i) gpu_views[i] = pack(views[i]);
   last_capacity_ = capacity;
   last_view_count_ = v;
   last_options_ = options;
-  for (std::uint32_t pass = BVH_PASS_SEED; pass <= BVH_PASS_TEST; ++pass) pipeline(pass, options.draws);
+  pipeline(options.draws);
 }
 
 void BvhCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
@@ -199,45 +204,22 @@ void BvhCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
   detail::record_transfer_to_compute(cmd);
   if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, timestamps, 0);
 
-  BvhCullParams params{};
-  params.object_count = std::uint32_t(object_count_);
-  params.node_count = std::uint32_t(node_count_);
-  params.view_count = std::uint32_t(view_count);
-  params.visible_capacity = std::uint32_t(last_capacity_);
-  params.queue_capacity = std::uint32_t(queue_capacity_);
-  params.range_capacity = std::uint32_t(range_capacity_);
-  params.test_capacity = std::uint32_t(test_capacity_);
-  params.max_groups_x = ctx_.properties().limits.maxComputeWorkGroupCount[0];
-  params.write_classes = last_options_.classes ? 1u : 0u;
-  const bool draws = last_options_.draws;
-  VkDescriptorSet set = resources_->set();
-  auto bind = [&](std::uint32_t pass) {
-    const vk::ComputePipeline& pipe = pipeline(pass, draws);
+  if (cut_count_ != 0) {
+    BvhCullParams params{};
+    params.object_count = std::uint32_t(object_count_);
+    params.node_count = std::uint32_t(node_count_);
+    params.view_count = std::uint32_t(view_count);
+    params.visible_capacity = std::uint32_t(last_capacity_);
+    params.cut_count = std::uint32_t(cut_count_);
+    params.groups_per_view = std::uint32_t(groups_per_view_);
+    params.write_classes = last_options_.classes ? 1u : 0u;
+    const vk::ComputePipeline& pipe = pipeline(last_options_.draws);
+    VkDescriptorSet set = resources_->set();
     vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.pipeline());
     vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.layout(), 0, 1, &set, 0, nullptr);
     vkCmdPushConstants(cmd, pipe.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
-  };
-  // Every barrier also covers indirect-argument reads: validation counts each writable buffer
-  // bound to a dispatch (the traversal state among them) as written by it.
-  auto barrier = [&] { detail::record_compute_to_compute(cmd, true); };
-  VkBuffer state = traversal_.handle();
-  bind(BVH_PASS_SEED);
-  vkCmdDispatch(cmd, 1, 1, 1);
-  for (std::uint32_t level = 0; level * BVH_LEVELS_PER_DISPATCH < levels_; ++level) {
-    params.level = level;
-    barrier();
-    bind(BVH_PASS_LEVEL);
-    vkCmdDispatchIndirect(cmd, state, offsetof(BvhTraversal, level));
+    vkCmdDispatch(cmd, std::uint32_t(group_x_), std::uint32_t(group_y_), 1);
   }
-  barrier();
-  bind(BVH_PASS_FINISH);
-  vkCmdDispatch(cmd, 1, 1, 1);
-  barrier();
-  bind(BVH_PASS_ACCEPT);
-  vkCmdDispatchIndirect(cmd, state, offsetof(BvhTraversal, accept));
-  barrier();  // both passes write classes, ids and counters
-  bind(BVH_PASS_TEST);
-  vkCmdDispatchIndirect(cmd, state, offsetof(BvhTraversal, test));
   if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps, 1);
   detail::record_exit_barrier(ctx_, cmd);
 }
@@ -249,8 +231,6 @@ void BvhCuller::record(VkCommandBuffer cmd, std::span<const Frustum> views, cons
 }
 
 CullResult BvhCuller::read_results() const {
-  if (last_view_count_ && traversal_.as<const BvhTraversal>()[0].overflow)
-    throw std::runtime_error("hierarchical culling: a GPU work queue overflowed (a bug in cullpipe; please report it)");
   return detail::read_outputs({counters_, classes_, visible_, draws_}, object_count_, last_view_count_, last_capacity_,
                               last_options_);
 }

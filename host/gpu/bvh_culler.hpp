@@ -16,10 +16,10 @@
 
 namespace cullpipe::gpu {
 
-/// Hierarchical frustum culling of a flattened BVH on a Vulkan device (shaders/cull_bvh.comp):
-/// one indirect dispatch per BVH_LEVELS_PER_DISPATCH tree levels over a queue of (node, view,
-/// plane mask) items, each invocation walking its item's subtree down those levels, so each
-/// node box is tested once per view, in parallel; OUTSIDE drops a subtree, INSIDE
+/// Hierarchical frustum culling of a flattened BVH on a Vulkan device (shaders/cull_bvh.comp),
+/// in one dispatch: the tree is cut into subtrees of at most BVH_CUT_MAX_OBJECTS objects, one
+/// invocation per subtree and view, which tests the nodes from the root down to its subtree
+/// and then walks it; every node test is counted once per view. OUTSIDE drops a subtree, INSIDE
 /// accepts its object range with no further tests, INTERSECTING descends; objects of
 /// INTERSECTING leaves are tested on the planes the leaf straddles. Any number of views per
 /// pass, each with its own outputs. Classes and test counts equal bvh::cull_hierarchical bit
@@ -55,8 +55,7 @@ class BvhCuller {
   CullResult cull(std::span<const Frustum> views, const CullOptions& options = {});
   /// Records the pass into the caller's command buffer (see GpuCuller::record for the rules).
   void record(VkCommandBuffer cmd, std::span<const Frustum> views, const CullOptions& options = {});
-  /// The results of the last recorded pass, once its submission has completed. Throws
-  /// std::runtime_error if the GPU reported a work-queue overflow (a bug, never expected).
+  /// The results of the last recorded pass, once its submission has completed.
   CullResult read_results() const;
 
   /// Output buffers of the last pass, laid out as GpuCuller's.
@@ -66,29 +65,30 @@ class BvhCuller {
 
   std::size_t object_count() const { return object_count_; }
   std::size_t node_count() const { return node_count_; }
-  /// Levels of the tree; the traversal makes one indirect dispatch per BVH_LEVELS_PER_DISPATCH of them.
+  /// Levels of the tree.
   std::uint32_t levels() const { return levels_; }
+  /// Subtrees of the cut, one invocation each per view.
+  std::size_t cut_count() const { return cut_count_; }
 
  private:
   void prepare(std::span<const Frustum> views, const CullOptions& options);
   void record_passes(VkCommandBuffer cmd, VkQueryPool timestamps);
-  const vk::ComputePipeline& pipeline(std::uint32_t pass, bool draws);
+  const vk::ComputePipeline& pipeline(bool draws);
   template <class Volume>
   void upload_impl(const bvh::FlatTree& tree, std::span<const Volume> volumes);
   void update_descriptors();
 
   const vk::Context& ctx_;
   std::uint32_t group_size_ = BVH_CULL_GROUP_SIZE;
-  std::unique_ptr<vk::ComputePipeline> pipelines_[3][BVH_PASS_COUNT][2];  // [kind][pass][draws]
+  std::unique_ptr<vk::ComputePipeline> pipelines_[3][2];  // [kind][draws]
   BvKind kind_ = BvKind::Aabb;
   vk::Buffer bounds_, classes_, visible_, counters_, views_, templates_, draws_;
-  vk::Buffer nodes_, objects_, queue_, ranges_, tests_, traversal_;
+  vk::Buffer nodes_, objects_, cuts_, records_;
   // After the buffers: destroyed first, it waits for the device (own devices) before they go.
   std::unique_ptr<detail::PassResources> resources_;
   std::size_t object_count_ = 0, node_count_ = 0, template_count_ = 0;
   std::uint32_t levels_ = 0;
-  std::size_t widest_level_ = 0;  // most nodes on one level
-  std::size_t queue_capacity_ = 0, range_capacity_ = 0, test_capacity_ = 0;
+  std::size_t cut_count_ = 0, groups_per_view_ = 0, group_x_ = 0, group_y_ = 0;
   std::size_t last_capacity_ = 0, last_view_count_ = 0;
   CullOptions last_options_;
   bool descriptors_dirty_ = true;

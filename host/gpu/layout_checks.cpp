@@ -56,23 +56,12 @@ static_assert(offsetof(GpuBvhNode, count) == 28);
 static_assert(offsetof(GpuBvhNode, skip) == 32);
 static_assert(offsetof(GpuBvhNode, second_child) == 36);
 static_assert(offsetof(GpuBvhNode, leaf) == 40);
-static_assert(sizeof(BvhWorkItem) == 8 && offsetof(BvhWorkItem, view_mask) == 4);
-static_assert(sizeof(BvhRange) == 16 && offsetof(BvhRange, view) == 8 && offsetof(BvhRange, slot) == 12);
-static_assert(sizeof(BvhDispatch) == 16);
-static_assert(offsetof(BvhDispatch, x) == offsetof(VkDispatchIndirectCommand, x));
-static_assert(offsetof(BvhDispatch, y) == offsetof(VkDispatchIndirectCommand, y));
-static_assert(offsetof(BvhDispatch, z) == offsetof(VkDispatchIndirectCommand, z));
-static_assert(sizeof(BvhTraversal) == 96);
-static_assert(offsetof(BvhTraversal, range_count) == 8 && offsetof(BvhTraversal, test_count) == 12);
-static_assert(offsetof(BvhTraversal, overflow) == 16);
-static_assert(offsetof(BvhTraversal, level) == 32);
-static_assert(offsetof(BvhTraversal, accept) == 64);
-static_assert(offsetof(BvhTraversal, test) == 80);
-static_assert(sizeof(BvhCullParams) == 48);
-static_assert(offsetof(BvhCullParams, level) == 28);
-static_assert(offsetof(BvhCullParams, max_groups_x) == 32);
-static_assert(offsetof(BvhCullParams, write_classes) == 36);
-static_assert(MAX_FRUSTUM_PLANES <= BVH_MASK_BITS, "plane masks must fit their bits");
+static_assert(sizeof(BvhCullParams) == 32);
+static_assert(offsetof(BvhCullParams, cut_count) == 16 && offsetof(BvhCullParams, write_classes) == 24);
+static_assert(MAX_FRUSTUM_PLANES == 6 && BVH_RECORD_TEST == 1u << MAX_FRUSTUM_PLANES && BVH_RECORD_COUNT_SHIFT == MAX_FRUSTUM_PLANES + 1,
+              "records hold a 6-bit plane mask, the test flag, then the count");
+static_assert(BVH_CUT_MAX_HEIGHT + 1 <= 20, "a subtree walk keeps 20 levels of plane masks");
+static_assert(BVH_CUT_MAX_OBJECTS < BVH_RECORD_MAX_COUNT);
 
 // DrawCommand starts with exactly VkDrawIndexedIndirectCommand.
 static_assert(sizeof(DrawCommand) == 24);

@@ -124,32 +124,26 @@ struct ViewCounters {
 // is the index of the node after its subtree, and every subtree's objects are the range
 // [first, first + count) of the object-order buffer.
 
-// Invocations per workgroup of the hierarchical passes, and objects per accepted-range chunk
-// (one workgroup per chunk).
+// Invocations per workgroup of the hierarchical pass.
 CP_CONST BVH_CULL_GROUP_SIZE = 64u;
 
-// Tree levels one LEVEL dispatch covers: each item's invocation walks its node's subtree that
-// many levels deep (each node still tested once); the level below is queued for the next
-// dispatch. At most 10 (the walk keeps a 6-bit plane mask per level in two words).
-CP_CONST BVH_LEVELS_PER_DISPATCH = 5u;
+// The host cuts the tree into the highest subtrees of at most this many objects and levels
+// below their root (or leaves), one per invocation. The height bound keeps a subtree walk's
+// plane masks (6 bits per level) in four words: at most 19.
+CP_CONST BVH_CUT_MAX_OBJECTS = 256u;
+CP_CONST BVH_CUT_MAX_HEIGHT = 16u;
 
-// Passes of cull_bvh.comp, selected by specialization constant 0.
-CP_CONST BVH_PASS_SEED = 0u;    // one root work item per view, counters reset
-CP_CONST BVH_PASS_LEVEL = 1u;   // test one level's work items, queue the next level; the last
-                                // workgroup to finish writes the next level's dispatch arguments
-CP_CONST BVH_PASS_FINISH = 2u;  // dispatch arguments for the accept and test passes
-CP_CONST BVH_PASS_ACCEPT = 3u;  // INSIDE ranges: every object INSIDE, no tests
-CP_CONST BVH_PASS_TEST = 4u;    // objects of INTERSECTING leaves, tested on the straddled planes
-CP_CONST BVH_PASS_COUNT = 5u;
+// A record of the scratch buffer (uvec2): x = first object slot, y = count << 7 | TEST | the
+// planes to test (an INTERSECTING leaf's objects), or count << 7 (an accepted range).
+CP_CONST BVH_RECORD_COUNT_SHIFT = 7u;
+CP_CONST BVH_RECORD_TEST = 64u;
+CP_CONST BVH_RECORD_MAX_COUNT = 1u << 25u;  // counts must stay below: a leaf of more is refused
 
 // The node-test margin of hierarchies over OBBs and spheres, as float bits: 2^-16 and 2^-120
 // (bvh::kBvhMarginScale, kBvhMarginFloor, kBvhMarginLimit; checked in host/gpu/layout_checks.cpp).
 CP_CONST BVH_MARGIN_SCALE_BITS = 0x37800000u;
 CP_CONST BVH_MARGIN_FLOOR_BITS = 0x03800000u;
 CP_CONST BVH_MARGIN_LIMIT_BITS = 0x7b800000u;  // 2^120 (bvh::kBvhMarginLimit)
-
-// Plane masks (Assarsson & Moller 2000) take the low 8 bits of a work item's view_mask.
-CP_CONST BVH_MASK_BITS = 8u;
 
 struct GpuBvhNode {
   vec3 box_min;
@@ -162,77 +156,26 @@ struct GpuBvhNode {
   uint depth;         // the root is 1
 };
 
-// A node (level queues) or an object slot (test list) with its view and plane mask:
-// view_mask = view << BVH_MASK_BITS | planes still to test.
-struct BvhWorkItem {
-  uint index;
-  uint view_mask;
-};
-
-// BVH_CULL_GROUP_SIZE objects of an INSIDE subtree, accepted by one workgroup. Their slots in
-// the view's visible list were reserved when the range was queued.
-struct BvhRange {
-  uint first;  // index into the object-order buffer
-  uint count;
-  uint view;
-  uint slot;   // visible-list slot of the range's first object
-};
-
-// Most workgroups an ACCEPT dispatch uses; each loops over every so-many-th chunk (on lavapipe
-// a workgroup costs about as much to start as its 64 objects cost to accept).
-CP_CONST BVH_ACCEPT_MAX_GROUPS = 256u;
-
-// Indirect dispatch arguments (x, y, z = VkDispatchIndirectCommand) and the items they cover.
-struct BvhDispatch {
-  uint x;
-  uint y;
-  uint z;
-  uint items;
-};
-
-// Queue state of one hierarchical pass, written only by the GPU.
-struct BvhTraversal {
-  uint queue_count[2];  // work items in each half of the level queue (ping-pong by level parity)
-  uint range_count;     // accepted chunks
-  uint test_count;      // object tests queued
-  uint overflow;        // nonzero when a queue was too small (never, with the host's capacities)
-  uint groups_done;     // workgroups of the running level that have finished
-  uint reserved0;
-  uint reserved1;
-  BvhDispatch level;    // arguments of the next LEVEL dispatch, written by the last workgroup
-                        // of the one before (its own arguments were read before it ran, in
-                        // the DRAW_INDIRECT stage); a dispatch of 0 groups leaves them 0
-  uint reserved2[4];
-  BvhDispatch accept;   // arguments of the accept pass
-  BvhDispatch test;     // arguments of the test pass
-};
-
-// Push constants of every hierarchical pass.
+// Push constants of the hierarchical pass.
 struct BvhCullParams {
   uint object_count;
   uint node_count;
   uint view_count;
   uint visible_capacity;  // per view
-  uint queue_capacity;    // work items per half of the level queue
-  uint range_capacity;    // accepted chunks
-  uint test_capacity;     // object tests
-  uint level;             // LEVEL: which LEVEL dispatch this is (its input queue half = level & 1)
-  uint max_groups_x;      // maxComputeWorkGroupCount[0]: larger dispatches fold into y
+  uint cut_count;         // cut subtrees (one invocation each, per view)
+  uint groups_per_view;   // workgroups per view: cut_count / BVH_CULL_GROUP_SIZE rounded up
   uint write_classes;     // 0: per-object classes are not read back and not written
-  uint reserved1;
-  uint reserved2;
+  uint reserved;
 };
 
-// Storage-buffer bindings of the hierarchical passes (set 0). 0..6 mean what they mean for
+// Storage-buffer bindings of the hierarchical pass (set 0). 0..6 mean what they mean for
 // the flat pass, except that BINDING_BOUNDS holds the GpuAabb of each object in tree order (the
 // order of BVH_BINDING_OBJECTS), so a leaf's boxes are read together.
 CP_CONST BVH_BINDING_NODES = 7u;      // GpuBvhNode, depth first (a uniform texel buffer, like BINDING_BOUNDS)
 CP_CONST BVH_BINDING_OBJECTS = 8u;    // object ids in tree order
-CP_CONST BVH_BINDING_QUEUE = 9u;      // BvhWorkItem: two halves of queue_capacity
-CP_CONST BVH_BINDING_RANGES = 10u;    // BvhRange
-CP_CONST BVH_BINDING_TESTS = 11u;     // BvhWorkItem (index = object slot)
-CP_CONST BVH_BINDING_TRAVERSAL = 12u; // BvhTraversal (also the indirect dispatch buffer)
-CP_CONST BVH_BINDING_COUNT = 13u;
+CP_CONST BVH_BINDING_CUTS = 9u;       // uint: the cut nodes, depth first
+CP_CONST BVH_BINDING_RECORDS = 10u;   // uvec2 scratch: views x objects records (each cut subtree's slice)
+CP_CONST BVH_BINDING_COUNT = 11u;
 
 // ---- host/render: the headless rasteriser that draws the culled objects ----
 
