@@ -1,25 +1,28 @@
 #version 460
 // Hierarchical frustum culling of a depth-first BVH in one dispatch. The host cuts the tree
-// into subtrees of at most BVH_CUT_MAX_OBJECTS objects and BVH_CUT_MAX_HEIGHT levels (the
-// highest nodes that fit, and leaves), and one invocation takes one such cut subtree of one
-// view:
+// into subtrees of at most BvhCuller::subtree_objects() objects and BVH_CUT_MAX_HEIGHT levels
+// (the highest nodes that fit, and leaves), and one invocation takes one such cut subtree of
+// one view:
 //   1. it descends from the root to its cut node, testing each node on the path on the planes
 //      its parent straddles (plane masking, Assarsson & Moller 2000); an OUTSIDE node ends the
 //      work, an INSIDE one accepts the cut subtree's whole object range. Invocations whose cut
 //      nodes share an ancestor all test it (same answer); only the one whose cut node is its
 //      first-child descendant counts the test, so every node test is counted once;
 //   2. it walks its cut subtree depth first (skip indices, a 6-bit plane mask per level):
-//      OUTSIDE skips a subtree, INSIDE records its object range (adjacent ranges merged),
-//      an INTERSECTING leaf records its objects with the planes it straddles;
-//   3. the subgroup then emits every lane's records together, lane after lane: an accepted
-//      range's objects are INSIDE (one atomic reserves their list slots), a leaf's objects
-//      are tested on the recorded planes (one atomic per subgroup for the visible ones).
+//      OUTSIDE skips a subtree, INSIDE records its object range (adjacent ranges merged), and
+//      the objects of an INTERSECTING leaf are tested there, on the planes the leaf straddles,
+//      the visible ones recorded with their class;
+//   3. the workgroup reserves the list slots of all its visible objects with one atomic per
+//      counter (the counters' cache line is shared by every core);
+//   4. the subgroup writes every lane's records together, lane after lane, one object per
+//      lane: no atomics, and no lane idles through another's long accepted range.
 // Records go to the invocation's own slice of a scratch buffer (its cut subtree's object
-// range: a subtree has no more records than objects), so the walk needs no atomics and no
-// work queues. (On lavapipe every branch runs under a mask and only loops skip work, so the
-// walk loop holds the tests and the record store alone; the earlier design, an indirect
-// dispatch per five tree levels over node queues with appends at every walk step, took 9
-// dispatches and measured several times slower.)
+// range: one record per accepted range or visible tested object, so they fit), so the walk
+// needs no atomics and no work queues. (On lavapipe every branch runs under a mask and only
+// loops skip work: the walk loop holds the tests and record stores alone, and nothing in it
+// waits on other lanes. The design before this one, an indirect dispatch per five tree
+// levels over node queues with appends at every walk step, took 9 dispatches and 2.7-4x as
+// long at 10-50% visible.)
 // The result equals host/bvh cull_hierarchical bit for bit: same p/n-vertex test, distances as
 // ((n.x*p.x + n.y*p.y) + n.z*p.z) + d marked `precise`, same masks, and the same counts of
 // node and object tests.
@@ -47,7 +50,7 @@ layout(std430, set = 0, binding = BINDING_VIEWS) readonly buffer Views { GpuFrus
 layout(std430, set = 0, binding = BINDING_DRAW_TEMPLATES) readonly buffer DrawTemplates { DrawCommand templates[]; };
 layout(std430, set = 0, binding = BINDING_DRAWS) writeonly buffer Draws { DrawCommand draws[]; };
 layout(set = 0, binding = BVH_BINDING_NODES) uniform usamplerBuffer nodes;
-layout(std430, set = 0, binding = BVH_BINDING_OBJECTS) readonly buffer Objects { uint object_ids[]; };
+layout(set = 0, binding = BVH_BINDING_OBJECTS) uniform usamplerBuffer object_order;  // four ids per texel
 layout(std430, set = 0, binding = BVH_BINDING_CUTS) readonly buffer Cuts { uint cuts[]; };
 layout(std430, set = 0, binding = BVH_BINDING_RECORDS) buffer Records { uvec2 records[]; };
 
@@ -59,6 +62,13 @@ GpuBvhNode load_node(uint index) {
 }
 
 vec4 volume_word(uint word) { return uintBitsToFloat(texelFetch(boxes, int(word))); }
+
+// The id of the object at tree-order slot `slot`.
+uint object_at(uint slot) {
+  uvec4 t = texelFetch(object_order, int(slot >> 2u));
+  uint c = slot & 3u;
+  return c == 0u ? t.x : c == 1u ? t.y : c == 2u ? t.z : t.w;
+}
 
 // The workgroup's view: its planes, loaded once into registers (the view is uniform across
 // the workgroup: plain loads).
@@ -111,15 +121,20 @@ uint classify_object(uint slot, uint mask) {
   return classify_sphere(volume_word(SPHERE_VEC4S * slot), mask);
 }
 
+// The parameters, read once (lavapipe reads a push constant like a uniform buffer at each use:
+// a bounds-checked gather).
+uint object_count, visible_capacity;
+bool write_classes;
+
 // Writes a visible object's outputs: class, list slot, draw.
 void emit_visible(uint view, uint object, uint slot, uint c) {
-  if (params.write_classes != 0u) classes[view * params.object_count + object] = c;
-  if (slot < params.visible_capacity) {
-    visible_ids[view * params.visible_capacity + slot] = object;
+  if (write_classes) classes[view * object_count + object] = c;
+  if (slot < visible_capacity) {
+    visible_ids[view * visible_capacity + slot] = object;
     if (WRITE_DRAWS != 0) {
       DrawCommand d = templates[object];
       d.object_id = object;
-      draws[view * params.visible_capacity + slot] = d;
+      draws[view * visible_capacity + slot] = d;
     }
   }
 }
@@ -139,7 +154,8 @@ uvec4 with_level_mask(uvec4 masks, uint level, uint mask) {
   return masks;
 }
 
-uint record_word(uint count, bool test, uint mask) { return (count << BVH_RECORD_COUNT_SHIFT) | (test ? BVH_RECORD_TEST | mask : 0u); }
+
+shared uint group_visible, group_inside, group_base, group_node_tests, group_object_tests;
 
 void main() {
   // Workgroups are view-major and never straddle views (groups_per_view per view); larger
@@ -147,6 +163,9 @@ void main() {
   uint group = gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x;
   uint view = group / params.groups_per_view;
   if (view >= params.view_count) return;
+  object_count = params.object_count;
+  visible_capacity = params.visible_capacity;
+  write_classes = params.write_classes != 0u;
   uint i = (group - view * params.groups_per_view) * gl_WorkGroupSize.x + gl_LocalInvocationIndex;
   bool has_cut = i < params.cut_count;
   load_view(view);
@@ -154,7 +173,7 @@ void main() {
   uint cut = has_cut ? cuts[i] : 0u;
   uvec4 cut_lo = texelFetch(nodes, int(3u * cut)), cut_hi = texelFetch(nodes, int(3u * cut + 1u));
   uvec4 cut_links = texelFetch(nodes, int(3u * cut + 2u));  // skip, second child, leaf, depth
-  uint cut_first = cut_lo.w, cut_count = cut_hi.w, cut_end = cut_links.x, cut_depth = cut_links.w;
+  uint cut_first = cut_lo.w, cut_count = has_cut ? cut_hi.w : 0u, cut_end = cut_links.x, cut_depth = cut_links.w;
   uint mask = (1u << view_plane_count) - 1u;
   uvec2 tests = uvec2(0u);  // node tests, object tests (counted as host/bvh counts them)
 
@@ -177,8 +196,12 @@ void main() {
     }
   }
 
-  // 2. The cut subtree, depth first, recording into this invocation's slice of the scratch.
-  uint base = view * params.object_count + cut_first, record_count = 0u;
+  // 2. The cut subtree, depth first, recording into this invocation's slice of the scratch
+  // (cut_count records; one per accepted range or visible tested object, so they fit):
+  // accepted ranges from its front, the visible objects of INTERSECTING leaves, tested here,
+  // from its back.
+  uint base = view * object_count + cut_first, back = base + cut_count - 1u;
+  uint accept_records = 0u, tested_visible = 0u, accepted = 0u, tested_inside = 0u;
   uint open_first = cut_first, open_count = accept_all ? cut_count : 0u;  // the accepted range being grown
   uvec4 masks = uvec4(mask, 0u, 0u, 0u);
   node = cut;
@@ -188,15 +211,22 @@ void main() {
     uint c = classify_node(n.box_min, n.box_max, level_mask(masks, level), straddled);
     tests.x += 1u;
     bool leaf_test = c == CLASS_INTERSECTING && n.leaf != 0u;
-    tests.y += leaf_test ? n.count : 0u;
-    // One record store per step at most: a leaf's test, or the accepted range so far when an
-    // INSIDE node does not continue it.
+    uint to_test = leaf_test ? n.count : 0u;
+    tests.y += to_test;
+    for (uint k = 0u; k < to_test; ++k) {
+      uint object_class = classify_object(n.first + k, straddled);
+      if (object_class != CLASS_OUTSIDE) {
+        records[back - tested_visible] = uvec2(n.first + k, object_class);
+        tested_visible += 1u;
+        tested_inside += object_class == CLASS_INSIDE ? 1u : 0u;
+      }
+    }
+    // An INSIDE node continues the accepted range being grown, or closes it and starts one.
     bool extend = c == CLASS_INSIDE && open_count != 0u && open_first + open_count == n.first;
-    bool close = c == CLASS_INSIDE && !extend && open_count != 0u;
-    if (leaf_test || close) {
-      records[base + record_count] = leaf_test ? uvec2(n.first, record_word(n.count, true, straddled))
-                                               : uvec2(open_first, record_word(open_count, false, 0u));
-      record_count += 1u;
+    if (c == CLASS_INSIDE && !extend && open_count != 0u) {
+      records[base + accept_records] = uvec2(open_first, open_count);
+      accept_records += 1u;
+      accepted += open_count;
     }
     if (c == CLASS_INSIDE) {
       open_first = extend ? open_first : n.first;
@@ -208,53 +238,63 @@ void main() {
     walk = node != cut_end;
   }
   if (open_count != 0u) {
-    records[base + record_count] = uvec2(open_first, record_word(open_count, false, 0u));
-    record_count += 1u;
-  }
-  uint node_tests = subgroupAdd(tests.x), object_tests = subgroupAdd(tests.y);
-  if (subgroupElect()) {
-    if (node_tests != 0u) atomicAdd(counters[view].node_tests, node_tests);
-    if (object_tests != 0u) atomicAdd(counters[view].object_tests, object_tests);
+    records[base + accept_records] = uvec2(open_first, open_count);
+    accept_records += 1u;
+    accepted += open_count;
   }
 
-  // 3. Every lane's records, lane after lane, by the whole subgroup.
-  uvec4 todo = subgroupBallot(record_count != 0u);
+  // 3. The list slots and the counts: one global atomic per workgroup and counter (as the
+  // flat pass: the counters' cache line bounces between cores).
+  uint visible = accepted + tested_visible, inside = accepted + tested_inside;
+  if (gl_LocalInvocationIndex == 0u) {
+    group_visible = 0u;
+    group_inside = 0u;
+    group_node_tests = 0u;
+    group_object_tests = 0u;
+  }
+  barrier();
+  uint subgroup_visible = subgroupAdd(visible), subgroup_inside = subgroupAdd(inside);
+  uint node_tests = subgroupAdd(tests.x), object_tests = subgroupAdd(tests.y);
+  uint offset = 0u;
+  if (subgroupElect()) {
+    if (subgroup_visible != 0u) {
+      offset = atomicAdd(group_visible, subgroup_visible);
+      atomicAdd(group_inside, subgroup_inside);
+    }
+    atomicAdd(group_node_tests, node_tests);
+    if (object_tests != 0u) atomicAdd(group_object_tests, object_tests);
+  }
+  offset = subgroupBroadcastFirst(offset) + subgroupExclusiveAdd(visible);
+  barrier();
+  if (gl_LocalInvocationIndex == 0u) {
+    if (group_visible != 0u) {
+      group_base = atomicAdd(counters[view].visible_count, group_visible);
+      atomicAdd(counters[view].inside_count, group_inside);
+    }
+    if (group_node_tests != 0u) atomicAdd(counters[view].node_tests, group_node_tests);
+    if (group_object_tests != 0u) atomicAdd(counters[view].object_tests, group_object_tests);
+  }
+  barrier();
+  uint slot = group_base + offset;
+
+  // 4. Every lane's records, lane after lane, by the whole subgroup: its accepted ranges (every
+  // object INSIDE), then its tested visible objects.
+  uvec4 todo = subgroupBallot(visible != 0u);
   for (uint left = subgroupBallotBitCount(todo); left > 0u; --left) {
     uint lane = subgroupBallotFindLSB(todo);
     todo[lane / 32u] &= ~(1u << (lane % 32u));
-    uint lane_base = subgroupShuffle(base, lane), lane_records = subgroupShuffle(record_count, lane);
+    uint lane_base = subgroupShuffle(base, lane), lane_records = subgroupShuffle(accept_records, lane);
+    uint lane_slot = subgroupShuffle(slot, lane);
     for (uint r = 0u; r < lane_records; ++r) {
-      uvec2 record = records[lane_base + r];
-      uint first = record.x, count = record.y >> BVH_RECORD_COUNT_SHIFT;
-      if ((record.y & BVH_RECORD_TEST) == 0u) {
-        // An accepted range: every object INSIDE; one atomic reserves the slots.
-        uint slot = 0u;
-        if (subgroupElect()) {
-          slot = atomicAdd(counters[view].visible_count, count);
-          atomicAdd(counters[view].inside_count, count);
-        }
-        slot = subgroupBroadcastFirst(slot);
-        for (uint k = gl_SubgroupInvocationID; k < count; k += gl_SubgroupSize)
-          emit_visible(view, object_ids[first + k], slot + k, CLASS_INSIDE);
-      } else {
-        // A leaf's objects, tested on the planes it straddles.
-        uint plane_mask = record.y & ((1u << MAX_FRUSTUM_PLANES) - 1u);
-        for (uint k0 = 0u; k0 < count; k0 += gl_SubgroupSize) {
-          uint k = k0 + gl_SubgroupInvocationID;
-          uint c = k < count ? classify_object(first + k, plane_mask) : CLASS_OUTSIDE;
-          bool visible = c != CLASS_OUTSIDE;
-          uvec4 ballot = subgroupBallot(visible);
-          uint total = subgroupBallotBitCount(ballot);
-          uint inside_total = subgroupBallotBitCount(subgroupBallot(c == CLASS_INSIDE));
-          uint slot = 0u;
-          if (subgroupElect() && total != 0u) {
-            slot = atomicAdd(counters[view].visible_count, total);
-            if (inside_total != 0u) atomicAdd(counters[view].inside_count, inside_total);
-          }
-          slot = subgroupBroadcastFirst(slot);
-          if (visible) emit_visible(view, object_ids[first + k], slot + subgroupBallotExclusiveBitCount(ballot), c);
-        }
-      }
+      uvec2 range = records[lane_base + r];
+      for (uint k = gl_SubgroupInvocationID; k < range.y; k += gl_SubgroupSize)
+        emit_visible(view, object_at(range.x + k), lane_slot + k, CLASS_INSIDE);
+      lane_slot += range.y;
+    }
+    uint lane_back = subgroupShuffle(back, lane), lane_tested = subgroupShuffle(tested_visible, lane);
+    for (uint k = gl_SubgroupInvocationID; k < lane_tested; k += gl_SubgroupSize) {
+      uvec2 tested = records[lane_back - k];
+      emit_visible(view, object_at(tested.x), lane_slot + k, tested.y);
     }
   }
 }

@@ -183,7 +183,7 @@ TEST_F(GpuBvh, EverythingInsideEverythingOutsideAndDeepTrees) {
   EXPECT_EQ(r.views[0].object_tests, 0u);
   EXPECT_EQ(r.views[1].counts.visible, 0u);
   EXPECT_EQ(r.views[1].node_tests, 1u);
-  // Points on a line with one object per leaf: the tree is deep (many level dispatches).
+  // Points on a line with one object per leaf: the tree is deep.
   std::vector<Aabb> line;
   for (int i = 0; i < 3000; ++i) line.push_back({glm::vec3(float(i) * 0.02f - 30.0f, 0, 0), glm::vec3(float(i) * 0.02f - 30.0f, 0.1f, 0)});
   expect_agreement(culler(), flat_tree(line, 1), line, test_frusta());
@@ -191,6 +191,63 @@ TEST_F(GpuBvh, EverythingInsideEverythingOutsideAndDeepTrees) {
   // All boxes identical.
   const std::vector<Aabb> same(777, Aabb{glm::vec3(-1), glm::vec3(1)});
   expect_agreement(culler(), flat_tree(same, 2), same, test_frusta());
+}
+
+// A chain: every inner node holds one object's leaf and the rest of the chain, so the tree is
+// as deep as it has objects (far deeper than a cut subtree may be).
+bvh::Tree chain_tree(const std::vector<Aabb>& boxes) {
+  const auto n = std::uint32_t(boxes.size());
+  bvh::Tree t;
+  for (std::uint32_t k = 0; k < n; ++k) t.objects.push_back(k);
+  if (n == 0) return t;
+  t.nodes.resize(2 * std::size_t(n) - 1);
+  Aabb rest = boxes[n - 1];
+  t.nodes[2 * (n - 1)] = {rest, bvh::kNone, bvh::kNone, n - 1, 1};
+  for (std::uint32_t k = n - 1; k-- > 0;) {
+    t.nodes[2 * k + 1] = {boxes[k], bvh::kNone, bvh::kNone, k, 1};
+    rest = {glm::min(rest.min, boxes[k].min), glm::max(rest.max, boxes[k].max)};
+    t.nodes[2 * k] = {rest, 2 * k + 1, 2 * k + 2, k, n - k};
+  }
+  return t;
+}
+
+// The traversal's cut at every size, several views in one pass: one invocation per leaf (the
+// nodes above tested by many invocations, each test counted once), small and large subtrees,
+// the whole tree in one invocation, leaves larger than the cut, and a chain far deeper than
+// BVH_CUT_MAX_HEIGHT (cut into short subtrees whatever the size).
+TEST_F(GpuBvh, EveryCutSizeAgrees) {
+  test::Rng rng{59};
+  std::vector<Aabb> boxes(6000);
+  for (Aabb& b : boxes) b = test::random_aabb(rng, 40.0f, 3.0f);
+  std::vector<Aabb> line;
+  for (int i = 0; i < 400; ++i) line.push_back({glm::vec3(float(i) * 0.2f - 40.0f, -1.0f, -20.0f), glm::vec3(float(i) * 0.2f - 39.9f, 1.0f, -19.0f)});
+  const bvh::FlatTree chain = bvh::flatten(chain_tree(line));
+  ASSERT_EQ(bvh::check_flat_tree(chain, std::span<const Aabb>(line)), "");
+  const test::RandomVolumes v = test::random_volumes(rng, 3000, 40.0f, 3.0f);
+  const std::uint32_t before = culler().subtree_objects();
+  for (std::uint32_t cut : {1u, 3u, 64u, 1000u, 1u << 30}) {
+    SCOPED_TRACE("subtrees of <= " + std::to_string(cut) + " objects");
+    culler().set_subtree_objects(cut);
+    for (std::uint32_t leaf : {1u, 4u, 300u}) {
+      SCOPED_TRACE("leaf " + std::to_string(leaf));
+      const bvh::FlatTree flat = flat_tree(boxes, leaf);
+      expect_agreement(culler(), flat, boxes, test_frusta());
+      std::size_t leaves = 0;
+      for (const bvh::FlatNode& node : flat.nodes) leaves += node.leaf ? 1 : 0;
+      if (cut == 1) {
+        EXPECT_EQ(culler().cut_count(), leaves);
+      }
+      if (cut == 1u << 30 && leaf == 4) {
+        EXPECT_EQ(culler().cut_count(), 1u);
+      }
+    }
+    expect_agreement(culler(), chain, line, test_frusta());
+    EXPECT_GE(culler().cut_count(), line.size() / (gpu::BVH_CUT_MAX_HEIGHT + 1));
+    expect_agreement(culler(), tree_over(v.obbs), v.obbs, test_frusta());
+    expect_agreement(culler(), tree_over(v.spheres), v.spheres, test_frusta());
+  }
+  culler().set_subtree_objects(before);
+  EXPECT_THROW(culler().set_subtree_objects(0), std::invalid_argument);
 }
 
 // The camera inside objects (a room around the eye, boxes the eye sits in), next to objects

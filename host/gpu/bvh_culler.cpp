@@ -19,13 +19,15 @@ namespace {
 
 constexpr VkBufferUsageFlags kStorage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
 constexpr VkBufferUsageFlags kTexel = VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT;
-// Object boxes and nodes are read through uniform texel buffers (see cull_bvh.comp).
-constexpr std::uint32_t kTexelBindings = 1u << BINDING_BOUNDS | 1u << BVH_BINDING_NODES;
+// Object volumes, nodes and the object order are read through uniform texel buffers (see cull_bvh.comp).
+constexpr std::uint32_t kTexelBindings = 1u << BINDING_BOUNDS | 1u << BVH_BINDING_NODES | 1u << BVH_BINDING_OBJECTS;
 constexpr std::uint32_t kStorageBindings = BVH_BINDING_COUNT - std::uint32_t(std::popcount(kTexelBindings));
 
 }  // namespace
 
-BvhCuller::BvhCuller(const vk::Context& ctx) : ctx_(ctx) {
+BvhCuller::BvhCuller(const vk::Context& ctx)
+    : ctx_(ctx),
+      subtree_objects_(ctx.properties().deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU ? kCpuSubtreeObjects : kGpuSubtreeObjects) {
   const VkPhysicalDeviceLimits& limits = ctx_.properties().limits;
   if (limits.maxComputeWorkGroupSize[0] < BVH_CULL_GROUP_SIZE || limits.maxComputeWorkGroupInvocations < BVH_CULL_GROUP_SIZE)
     throw vk::Error("hierarchical culling needs workgroups of " + std::to_string(BVH_CULL_GROUP_SIZE) + " invocations; " +
@@ -76,19 +78,14 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
     const std::uint32_t second = node.leaf ? bvh::kNone : tree.nodes[i + 1].skip;
     packed[i] = {node.box.min, node.first, node.box.max, node.count, node.skip, second, node.leaf ? 1u : 0u, depth[i]};
   }
-  // The cut: the highest subtrees of at most BVH_CUT_MAX_OBJECTS objects and
-  // BVH_CUT_MAX_HEIGHT levels below their root, and the leaves above them (see cull_bvh.comp).
+  // The cut: the highest subtrees of at most subtree_objects_ objects and BVH_CUT_MAX_HEIGHT
+  // levels below their root, and the leaves above them (see cull_bvh.comp).
   std::vector<std::uint32_t> height(nodes, 0), cuts;
-  for (std::size_t i = nodes; i-- > 0;) {
-    const bvh::FlatNode& node = tree.nodes[i];
-    if (node.leaf && node.count >= BVH_RECORD_MAX_COUNT)
-      throw std::length_error("BvhCuller::upload: a leaf of " + std::to_string(node.count) + " objects (at most " +
-                              std::to_string(BVH_RECORD_MAX_COUNT - 1) + ")");
-    if (!node.leaf) height[i] = 1 + std::max(height[i + 1], height[tree.nodes[i + 1].skip]);
-  }
+  for (std::size_t i = nodes; i-- > 0;)
+    if (!tree.nodes[i].leaf) height[i] = 1 + std::max(height[i + 1], height[tree.nodes[i + 1].skip]);
   for (std::size_t i = 0; i < nodes;) {
     const bvh::FlatNode& node = tree.nodes[i];
-    if (node.leaf || (node.count <= BVH_CUT_MAX_OBJECTS && height[i] <= BVH_CUT_MAX_HEIGHT)) {
+    if (node.leaf || (node.count <= subtree_objects_ && height[i] <= BVH_CUT_MAX_HEIGHT)) {
       cuts.push_back(std::uint32_t(i));
       i = node.skip;
     } else {
@@ -101,12 +98,16 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
   const VkDeviceSize box_bytes = VkDeviceSize(n) * sizeof(Packed), node_bytes = VkDeviceSize(nodes) * sizeof(GpuBvhNode);
   detail::check_texel_range(ctx_, box_bytes, std::to_string(n) + " " + kind + " volumes");
   detail::check_texel_range(ctx_, node_bytes, std::to_string(nodes) + " BVH nodes");
+  // The object order as texels of four ids (padded).
+  const VkDeviceSize order_bytes = (VkDeviceSize(n) + 3) / 4 * 16, cut_bytes = VkDeviceSize(cuts.size()) * sizeof(std::uint32_t);
+  detail::check_texel_range(ctx_, order_bytes, std::to_string(n) + " object ids");
+  detail::check_storage_range(ctx_, cut_bytes, std::to_string(cuts.size()) + " BVH subtrees");
   object_count_ = node_count_ = cut_count_ = 0;  // stay 0 if an allocation below fails
   bool& dirty = descriptors_dirty_;
   detail::ensure_buffer(ctx_, bounds_, box_bytes, kTexel, "object volume buffer", dirty);
   detail::ensure_buffer(ctx_, nodes_, node_bytes, kTexel, "BVH node buffer", dirty);
-  detail::ensure_buffer(ctx_, objects_, VkDeviceSize(n) * sizeof(std::uint32_t), kStorage, "BVH object order buffer", dirty);
-  detail::ensure_buffer(ctx_, cuts_, VkDeviceSize(cuts.size()) * sizeof(std::uint32_t), kStorage, "BVH cut buffer", dirty);
+  detail::ensure_buffer(ctx_, objects_, order_bytes, kTexel, "BVH object order buffer", dirty);
+  detail::ensure_buffer(ctx_, cuts_, cut_bytes, kStorage, "BVH cut buffer", dirty);
   auto gpu_boxes = bounds_.as<Packed>();
   for (std::size_t i = 0; i < n; ++i) gpu_boxes[i] = pack(boxes[tree.objects[i]]);  // tree order
   if (nodes) std::memcpy(nodes_.data(), packed.data(), node_bytes);
@@ -117,6 +118,11 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
   cut_count_ = cuts.size();
   levels_ = levels;
   kind_ = kind_of<Volume>();
+}
+
+void BvhCuller::set_subtree_objects(std::uint32_t objects) {
+  if (objects == 0) throw std::invalid_argument("BvhCuller::set_subtree_objects: 0 objects");
+  subtree_objects_ = objects;
 }
 
 void BvhCuller::upload_draws(std::span<const DrawCommand> templates) {
@@ -176,7 +182,7 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   bool& dirty = descriptors_dirty_;
   detail::ensure_buffer(ctx_, bounds_, 0, kTexel, "object volume buffer", dirty);
   detail::ensure_buffer(ctx_, nodes_, 0, kTexel, "BVH node buffer", dirty);
-  detail::ensure_buffer(ctx_, objects_, 0, kStorage, "BVH object order buffer", dirty);
+  detail::ensure_buffer(ctx_, objects_, 0, kTexel, "BVH object order buffer", dirty);
   detail::ensure_buffer(ctx_, cuts_, 0, kStorage, "BVH cut buffer", dirty);
   detail::ensure_buffer(ctx_, templates_, 0, kStorage, "draw template buffer", dirty);
   detail::ensure_buffer(ctx_, classes_, outputs, kStorage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, "classification buffer", dirty);

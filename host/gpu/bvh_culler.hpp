@@ -17,7 +17,7 @@
 namespace cullpipe::gpu {
 
 /// Hierarchical frustum culling of a flattened BVH on a Vulkan device (shaders/cull_bvh.comp),
-/// in one dispatch: the tree is cut into subtrees of at most BVH_CUT_MAX_OBJECTS objects, one
+/// in one dispatch: the tree is cut into subtrees of at most subtree_objects() objects, one
 /// invocation per subtree and view, which tests the nodes from the root down to its subtree
 /// and then walks it; every node test is counted once per view. OUTSIDE drops a subtree, INSIDE
 /// accepts its object range with no further tests, INTERSECTING descends; objects of
@@ -43,6 +43,15 @@ class BvhCuller {
   /// The same for OBBs or spheres; the tree's boxes must enclose bvh::enclosing_box of each.
   void upload(const bvh::FlatTree& tree, std::span<const Obb> obbs);
   void upload(const bvh::FlatTree& tree, std::span<const Sphere> spheres);
+  /// The cut's size: the traversal's invocations take subtrees of at most this many objects
+  /// (and BVH_CUT_MAX_HEIGHT levels), or single leaves. Fewer, larger subtrees mean fewer
+  /// redundant tests of the nodes above them and longer walks per invocation. Default:
+  /// kCpuSubtreeObjects on a CPU device (lavapipe: measured best in bench_bvh), else
+  /// kGpuSubtreeObjects (more invocations for a wide GPU; not measured on one). Takes effect
+  /// at the next upload; throws std::invalid_argument for 0.
+  static constexpr std::uint32_t kCpuSubtreeObjects = 1024, kGpuSubtreeObjects = 128;
+  void set_subtree_objects(std::uint32_t objects);
+  std::uint32_t subtree_objects() const { return subtree_objects_; }
   /// The kind of the volumes uploaded last.
   BvKind kind() const { return kind_; }
 
@@ -80,6 +89,7 @@ class BvhCuller {
 
   const vk::Context& ctx_;
   std::uint32_t group_size_ = BVH_CULL_GROUP_SIZE;
+  std::uint32_t subtree_objects_;
   std::unique_ptr<vk::ComputePipeline> pipelines_[3][2];  // [kind][draws]
   BvKind kind_ = BvKind::Aabb;
   vk::Buffer bounds_, classes_, visible_, counters_, views_, templates_, draws_;

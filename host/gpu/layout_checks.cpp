@@ -58,10 +58,7 @@ static_assert(offsetof(GpuBvhNode, second_child) == 36);
 static_assert(offsetof(GpuBvhNode, leaf) == 40);
 static_assert(sizeof(BvhCullParams) == 32);
 static_assert(offsetof(BvhCullParams, cut_count) == 16 && offsetof(BvhCullParams, write_classes) == 24);
-static_assert(MAX_FRUSTUM_PLANES == 6 && BVH_RECORD_TEST == 1u << MAX_FRUSTUM_PLANES && BVH_RECORD_COUNT_SHIFT == MAX_FRUSTUM_PLANES + 1,
-              "records hold a 6-bit plane mask, the test flag, then the count");
-static_assert(BVH_CUT_MAX_HEIGHT + 1 <= 20, "a subtree walk keeps 20 levels of plane masks");
-static_assert(BVH_CUT_MAX_OBJECTS < BVH_RECORD_MAX_COUNT);
+static_assert(MAX_FRUSTUM_PLANES == 6 && BVH_CUT_MAX_HEIGHT + 1 <= 20, "a subtree walk keeps 20 levels of 6-bit plane masks");
 
 // DrawCommand starts with exactly VkDrawIndexedIndirectCommand.
 static_assert(sizeof(DrawCommand) == 24);

@@ -127,17 +127,10 @@ struct ViewCounters {
 // Invocations per workgroup of the hierarchical pass.
 CP_CONST BVH_CULL_GROUP_SIZE = 64u;
 
-// The host cuts the tree into the highest subtrees of at most this many objects and levels
-// below their root (or leaves), one per invocation. The height bound keeps a subtree walk's
-// plane masks (6 bits per level) in four words: at most 19.
-CP_CONST BVH_CUT_MAX_OBJECTS = 256u;
-CP_CONST BVH_CUT_MAX_HEIGHT = 16u;
-
-// A record of the scratch buffer (uvec2): x = first object slot, y = count << 7 | TEST | the
-// planes to test (an INTERSECTING leaf's objects), or count << 7 (an accepted range).
-CP_CONST BVH_RECORD_COUNT_SHIFT = 7u;
-CP_CONST BVH_RECORD_TEST = 64u;
-CP_CONST BVH_RECORD_MAX_COUNT = 1u << 25u;  // counts must stay below: a leaf of more is refused
+// The host cuts the tree into the highest subtrees of at most so many objects (a BvhCuller
+// setting) and at most BVH_CUT_MAX_HEIGHT levels below their root, or leaves; one invocation
+// walks one. The height bound keeps a walk's plane masks (6 bits per level) in four words.
+CP_CONST BVH_CUT_MAX_HEIGHT = 19u;
 
 // The node-test margin of hierarchies over OBBs and spheres, as float bits: 2^-16 and 2^-120
 // (bvh::kBvhMarginScale, kBvhMarginFloor, kBvhMarginLimit; checked in host/gpu/layout_checks.cpp).
@@ -174,7 +167,7 @@ struct BvhCullParams {
 CP_CONST BVH_BINDING_NODES = 7u;      // GpuBvhNode, depth first (a uniform texel buffer, like BINDING_BOUNDS)
 CP_CONST BVH_BINDING_OBJECTS = 8u;    // object ids in tree order
 CP_CONST BVH_BINDING_CUTS = 9u;       // uint: the cut nodes, depth first
-CP_CONST BVH_BINDING_RECORDS = 10u;   // uvec2 scratch: views x objects records (each cut subtree's slice)
+CP_CONST BVH_BINDING_RECORDS = 10u;   // uvec2 scratch: a record per object and view (each cut subtree's slice)
 CP_CONST BVH_BINDING_COUNT = 11u;
 
 // ---- host/render: the headless rasteriser that draws the culled objects ----
