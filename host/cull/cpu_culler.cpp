@@ -25,7 +25,7 @@ bool cpu_runs(Isa isa) {
 #if defined(CULLPIPE_HAVE_X86_KERNELS)
   switch (isa) {
     case Isa::Portable: return true;
-    case Isa::Avx2: return __builtin_cpu_supports("avx2");
+    case Isa::Avx2: return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
     case Isa::Avx512: return __builtin_cpu_supports("avx512f");
   }
   return false;
@@ -80,7 +80,8 @@ detail::PlaneSet plane_set(const Frustum& f) {
     const double length = std::sqrt(double(n.x) * n.x + double(n.y) * n.y + double(n.z) * n.z);
     s.unit_normals = s.unit_normals && length <= kUnitNormalLimit;  // false for NaN too
     const double d = std::fabs(double(f.planes[k].d));
-    s.margin[k] = d <= 0x1p120 ? round_up(0x1p-18 * d + 0x1p-100) : std::numeric_limits<float>::quiet_NaN();
+    const float margin = d <= 0x1p120 ? round_up(0x1p-18 * d + 0x1p-100) : std::numeric_limits<float>::quiet_NaN();
+    s.max_margin = std::isnan(s.max_margin) || std::isnan(margin) ? std::numeric_limits<float>::quiet_NaN() : std::max(s.max_margin, margin);
   }
   return s;
 }
@@ -114,8 +115,8 @@ float obb_plane_bound(const Obb& b) {
   return round_up(sum * (1.0 + 0x1p-16) + 0x1p-100);
 }
 
-/// AabbArrays::bound of `b`, and its centre (min + max) / 2 rounded to a float. With
-/// PlaneSet::margin m = 2^-18 |d| it settles the reference's p/n-vertex test for every plane of
+/// AabbArrays::bound of `b`, and its centre (min + max) / 2 rounded to a float. With a margin
+/// m >= 2^-18 |d| (PlaneSet::max_margin, the largest over the planes) it settles the reference's p/n-vertex test for every plane of
 /// normal |n| <= 1 + 2^-20: s < -(bound + m) means d_p < 0 and s >= bound + m means d_n >= 0
 /// and d_p >= 0, for s = n.centre + d computed in float in any order, fused or not, in any
 /// rounding mode. Why, with C and E the exact centre and half extent (E < 0 for an inverted

@@ -1,5 +1,5 @@
-// The AVX2 kernels: 8 lanes. Built with -mavx2 (not -mfma: no contraction either way); called
-// only when the CPU reports AVX2.
+// The AVX2 kernels: 8 lanes. Built with -mavx2 -mfma (fused only where mul_add asks for it:
+// -ffp-contract=off holds here too); called only when the CPU reports AVX2 and FMA.
 #define CULLPIPE_SIMD_NS avx2
 #define CULLPIPE_SIMD_LANES 8
 #include "cull/simd_kernels.inl"

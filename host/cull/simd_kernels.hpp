@@ -15,9 +15,9 @@ struct PlaneSet {
   float nx[6]{}, ny[6]{}, nz[6]{}, d[6]{};
   /// Every normal's length is at most 1 + 2^-20, so the AABB and OBB bounds hold for these planes.
   bool unit_normals = false;
-  /// Per plane, the share of the AABB settling margin that depends on the plane: 2^-18 |d|
-  /// rounded up (NaN past |d| = 2^120: such a plane settles nothing).
-  float margin[6]{};
+  /// The share of the AABB settling margin that depends on the plane, 2^-18 |d| rounded up,
+  /// at its largest over the planes (NaN past |d| = 2^120: nothing is settled).
+  float max_margin = 0.0f;
 };
 
 /// Structure-of-arrays bounds; every array holds at least `padded` floats (a multiple of 16),
@@ -28,7 +28,7 @@ struct PlaneSet {
 constexpr std::size_t kAabbRecordFloats = 8;
 struct AabbArrays {
   const float *c_x, *c_y, *c_z;  ///< centres, (min + max) / 2 rounded to nearest
-  /// Per box, aabb_plane_bound(): with PlaneSet::margin, covers the half diagonal and every
+  /// Per box, aabb_plane_bound(): with PlaneSet::max_margin, covers the half diagonal and every
   /// rounding of the reference's and the kernel's distances (or NaN: no bound).
   const float* bound;
   const float* records;  ///< box i at records + i * kAabbRecordFloats, 32-byte aligned

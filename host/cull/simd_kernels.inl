@@ -136,6 +136,8 @@ void gather_records(const float* records, std::size_t record_floats, const std::
 inline vf mul_add(float a, vf b, vf c) {
 #if CULLPIPE_SIMD_LANES == 16 && defined(__AVX512F__)
   return reinterpret_cast<vf>(_mm512_fmadd_ps(_mm512_set1_ps(a), reinterpret_cast<__m512>(b), reinterpret_cast<__m512>(c)));
+#elif CULLPIPE_SIMD_LANES == 8 && defined(__FMA__)
+  return reinterpret_cast<vf>(_mm256_fmadd_ps(_mm256_set1_ps(a), reinterpret_cast<__m256>(b), reinterpret_cast<__m256>(c)));
 #else
   return a * b + c;
 #endif
@@ -190,20 +192,22 @@ ChunkCounts cull_settled(std::size_t begin, std::size_t end, const float* record
 
 // AABBs: the bound b (aabb_plane_bound) covers the half diagonal and every rounding of both
 // the reference's p/n-vertex distances and the centre distance s computed here (in any order,
-// fused where possible); with the plane's share m_k = PlaneSet::margin, s < -(b + m_k) makes
-// the p-vertex distance negative (OUTSIDE) and s >= b + m_k on every plane makes both vertex
-// distances non-negative (INSIDE). The open boxes get the reference's p/n-vertex test.
+// fused where possible); with the plane's share m_k <= m = PlaneSet::max_margin, s < -(b + m)
+// makes the p-vertex distance negative (OUTSIDE) and s >= b + m on every plane makes both
+// vertex distances non-negative (INSIDE). The open boxes get the reference's p/n-vertex test.
 ChunkCounts cull_aabb(const AabbArrays& a, std::size_t begin, std::size_t end, const PlaneSet& planes, ChunkOutput out) {
   const vi none = {}, all = ~none;
   auto settle = [&](std::size_t i, vi& beyond, vi& within) {
     beyond = within = none;
     if (!planes.unit_normals) return;  // the bound assumes unit normals: test every box in full
-    const vf cx = load(a.c_x + i), cy = load(a.c_y + i), cz = load(a.c_z + i), bound = load(a.bound + i);
+    const vf cx = load(a.c_x + i), cy = load(a.c_y + i), cz = load(a.c_z + i);
+    // Every plane's margin share is at most max_margin: a reach that covers them all (rounding
+    // is monotonic), added once per vector instead of once per plane.
+    const vf reach = load(a.bound + i) + planes.max_margin, neg_reach = -reach;
     within = all;
     for (std::uint32_t k = 0; k < planes.count; ++k) {
       const vf s = mul_add(planes.nz[k], cz, mul_add(planes.ny[k], cy, mul_add(planes.nx[k], cx, vf{} + planes.d[k])));
-      const vf reach = bound + planes.margin[k];
-      beyond |= s < -reach;
+      beyond |= s < neg_reach;
       within &= s >= reach;  // a NaN bound or margin settles neither
     }
   };
