@@ -22,7 +22,7 @@ shared uint scan[MAX_CULL_GROUP_SIZE];
 
 void main() {
   uint i = params.first_object + gl_GlobalInvocationID.x;
-  uint view = gl_GlobalInvocationID.y;
+  uint view = gl_WorkGroupID.y;  // = gl_GlobalInvocationID.y (local size 1 in y), visibly uniform
   uint t = gl_LocalInvocationIndex;
   bool visible = i < params.object_count && view < params.view_count &&
                  classes[view * params.object_count + i] != CLASS_OUTSIDE;

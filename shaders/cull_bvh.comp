@@ -46,7 +46,7 @@ layout(set = 0, binding = BINDING_BOUNDS) uniform usamplerBuffer boxes;
 layout(std430, set = 0, binding = BINDING_CLASSES) writeonly buffer Classes { uint classes[]; };
 layout(std430, set = 0, binding = BINDING_VISIBLE) writeonly buffer Visible { uint visible_ids[]; };
 layout(std430, set = 0, binding = BINDING_COUNTERS) buffer Counters { ViewCounters counters[]; };
-layout(std430, set = 0, binding = BINDING_VIEWS) readonly buffer Views { GpuFrustum views[]; };
+layout(set = 0, binding = BINDING_VIEWS) uniform usamplerBuffer views;  // GpuFrustum, FRUSTUM_TEXELS texels each
 layout(std430, set = 0, binding = BINDING_DRAW_TEMPLATES) readonly buffer DrawTemplates { DrawCommand templates[]; };
 layout(std430, set = 0, binding = BINDING_DRAWS) writeonly buffer Draws { DrawCommand draws[]; };
 layout(set = 0, binding = BVH_BINDING_NODES) uniform usamplerBuffer nodes;
@@ -78,8 +78,9 @@ vec4 view_planes[MAX_FRUSTUM_PLANES];
 #include "shared/classify.glsl"
 
 void load_view(uint view) {
-  view_plane_count = min(views[view].plane_count, MAX_FRUSTUM_PLANES);
-  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = views[view].planes[k];
+  int first = int(FRUSTUM_TEXELS * view);
+  view_plane_count = min(texelFetch(views, first + int(MAX_FRUSTUM_PLANES)).x, MAX_FRUSTUM_PLANES);
+  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = uintBitsToFloat(texelFetch(views, first + int(k)));
 }
 
 // The node test of hierarchies over OBBs and spheres (bvh::classify_masked_margin): a plane

@@ -35,7 +35,7 @@ layout(set = 0, binding = BINDING_BOUNDS) uniform usamplerBuffer bounds;
 layout(std430, set = 0, binding = BINDING_CLASSES) writeonly buffer Classes { uint classes[]; };
 layout(std430, set = 0, binding = BINDING_VISIBLE) writeonly buffer Visible { uint visible_ids[]; };
 layout(std430, set = 0, binding = BINDING_COUNTERS) buffer Counters { ViewCounters counters[]; };
-layout(std430, set = 0, binding = BINDING_VIEWS) readonly buffer Views { GpuFrustum views[]; };
+layout(set = 0, binding = BINDING_VIEWS) uniform usamplerBuffer views;  // GpuFrustum, FRUSTUM_TEXELS texels each
 layout(std430, set = 0, binding = BINDING_DRAW_TEMPLATES) readonly buffer DrawTemplates { DrawCommand templates[]; };
 layout(std430, set = 0, binding = BINDING_DRAWS) writeonly buffer Draws { DrawCommand draws[]; };
 layout(std430, set = 0, binding = BINDING_GROUP_COUNTS) writeonly buffer GroupCounts { uint group_counts[]; };
@@ -46,7 +46,7 @@ shared uint group_base;
 
 layout(push_constant, std430) uniform Push { FlatCullParams params; };
 
-uint view;             // this invocation's view (gl_GlobalInvocationID.y)
+uint view;             // this invocation's view (gl_WorkGroupID.y)
 uint view_plane_count;
 vec4 view_planes[MAX_FRUSTUM_PLANES];
 
@@ -65,8 +65,9 @@ uint classify_object(uint i) {
 }
 
 void load_view() {
-  view_plane_count = min(views[view].plane_count, MAX_FRUSTUM_PLANES);
-  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = views[view].planes[k];
+  int first = int(FRUSTUM_TEXELS * view);
+  view_plane_count = min(texelFetch(views, first + int(MAX_FRUSTUM_PLANES)).x, MAX_FRUSTUM_PLANES);
+  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = uintBitsToFloat(texelFetch(views, first + int(k)));
 }
 
 // Object order: each workgroup counts its visible objects; compact_scan / compact_scatter write
@@ -225,7 +226,7 @@ void main_arrival() {
 }
 
 void main() {
-  view = gl_GlobalInvocationID.y;
+  view = gl_WorkGroupID.y;  // = gl_GlobalInvocationID.y (local size 1 in y), and visibly uniform: lavapipe then loads the planes once, not per lane
   if (ORDERED != 0) main_ordered();
   else main_arrival();
 }

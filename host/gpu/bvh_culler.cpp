@@ -19,8 +19,8 @@ namespace {
 
 constexpr VkBufferUsageFlags kStorage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
 constexpr VkBufferUsageFlags kTexel = VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT;
-// Object volumes, nodes and the object order are read through uniform texel buffers (see cull_bvh.comp).
-constexpr std::uint32_t kTexelBindings = 1u << BINDING_BOUNDS | 1u << BVH_BINDING_NODES | 1u << BVH_BINDING_OBJECTS;
+// Object volumes, views, nodes and the object order are read through uniform texel buffers (see cull_bvh.comp).
+constexpr std::uint32_t kTexelBindings = 1u << BINDING_BOUNDS | 1u << BINDING_VIEWS | 1u << BVH_BINDING_NODES | 1u << BVH_BINDING_OBJECTS;
 constexpr std::uint32_t kStorageBindings = BVH_BINDING_COUNT - std::uint32_t(std::popcount(kTexelBindings));
 
 }  // namespace
@@ -173,7 +173,7 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   const VkDeviceSize draw_bytes = options.draws ? VkDeviceSize(capacity) * v * sizeof(DrawCommand) : 0;
   // A cut subtree has at most as many records as objects: one scratch slot per object and view.
   const VkDeviceSize record_bytes = VkDeviceSize(object_count_) * v * 2 * sizeof(std::uint32_t);
-  check(VkDeviceSize(v) * sizeof(GpuFrustum), std::to_string(v) + " views");
+  detail::check_texel_range(ctx_, VkDeviceSize(v) * sizeof(GpuFrustum), std::to_string(v) + " views");
   check(VkDeviceSize(v) * sizeof(ViewCounters), std::to_string(v) + " view counters");
   check(outputs, views_x + std::to_string(object_count_) + " objects of output");
   check(visible, views_x + std::to_string(capacity) + " visible ids");
@@ -189,7 +189,7 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   detail::ensure_buffer(ctx_, visible_, visible, kStorage, "visible-id buffer", dirty);
   detail::ensure_buffer(ctx_, counters_, v * sizeof(ViewCounters),
                         kStorage | VK_BUFFER_USAGE_TRANSFER_DST_BIT | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "counter buffer", dirty);
-  detail::ensure_buffer(ctx_, views_, v * sizeof(GpuFrustum), kStorage, "view buffer", dirty);
+  detail::ensure_buffer(ctx_, views_, v * sizeof(GpuFrustum), kTexel, "view buffer", dirty);
   detail::ensure_buffer(ctx_, draws_, draw_bytes, kStorage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "draw buffer", dirty);
   detail::ensure_buffer(ctx_, records_, record_bytes, kStorage, "BVH traversal record buffer", dirty);
   update_descriptors();

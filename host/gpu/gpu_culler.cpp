@@ -22,7 +22,8 @@ constexpr std::uint32_t kBindingCount = CULL_BINDING_COUNT;  // one descriptor s
 // The volumes are read through a uniform texel buffer: on lavapipe a texel fetch loads a whole
 // 16-byte texel per lane, where a storage-buffer load is a bounds-checked branch per lane and
 // per component (AABBs: 8.0 -> 5.5 ns/object); on GPUs both are ordinary typed loads.
-constexpr std::uint32_t kTexelBindings = 1u << BINDING_BOUNDS;
+// The views too (see GpuFrustum).
+constexpr std::uint32_t kTexelBindings = 1u << BINDING_BOUNDS | 1u << BINDING_VIEWS;
 constexpr VkBufferUsageFlags kBoundsUsage = VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT;
 
 std::uint32_t kind_index(BvKind k) { return static_cast<std::uint32_t>(k); }
@@ -130,13 +131,14 @@ void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capac
   detail::check_allocation_size(ctx_, outputs, std::to_string(view_count) + " views x " + std::to_string(object_count_) + " objects of output");
   detail::check_storage_range(ctx_, visible, std::to_string(view_count) + " views x " + std::to_string(visible_capacity) + " visible ids");
   detail::check_storage_range(ctx_, draw_bytes, std::to_string(view_count) + " views x " + std::to_string(visible_capacity) + " draw commands");
+  detail::check_texel_range(ctx_, VkDeviceSize(view_count) * sizeof(GpuFrustum), std::to_string(view_count) + " views");
   constexpr VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
   bool& dirty = descriptors_dirty_;
   detail::ensure_buffer(ctx_, classes_, outputs, storage, "classification buffer", dirty);
   detail::ensure_buffer(ctx_, visible_, visible, storage, "visible-id buffer", dirty);
   detail::ensure_buffer(ctx_, counters_, view_count * sizeof(ViewCounters),
                 storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "counter buffer", dirty);
-  detail::ensure_buffer(ctx_, views_, view_count * sizeof(GpuFrustum), storage, "view buffer", dirty);
+  detail::ensure_buffer(ctx_, views_, view_count * sizeof(GpuFrustum), kBoundsUsage, "view buffer", dirty);
   detail::ensure_buffer(ctx_, draws_, draw_bytes, storage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "draw buffer", dirty);
   detail::ensure_buffer(ctx_, templates_, 0, storage, "draw template buffer", dirty);
   detail::ensure_buffer(ctx_, group_counts_, groups, storage, "group count buffer", dirty);

@@ -29,7 +29,7 @@ static_assert(offsetof(GpuObb, axis_z) == 48);
 static_assert(sizeof(GpuSphere) == SPHERE_VEC4S * 16);
 static_assert(offsetof(GpuSphere, center_radius) == 0);
 
-static_assert(sizeof(GpuFrustum) == 112);
+static_assert(sizeof(GpuFrustum) == 112 && sizeof(GpuFrustum) == FRUSTUM_TEXELS * 16 && offsetof(GpuFrustum, plane_count) == MAX_FRUSTUM_PLANES * 16);
 static_assert(offsetof(GpuFrustum, planes) == 0);
 static_assert(offsetof(GpuFrustum, plane_count) == 96);
 static_assert(offsetof(GpuFrustum, reserved2) == 108);

@@ -61,6 +61,10 @@ struct GpuSphere {
 };
 
 // One view's frustum, as stored in the views buffer (one entry per view).
+// The culling shaders read the views as integer texels of a uniform texel buffer, FRUSTUM_TEXELS
+// per view: on lavapipe a storage-buffer load at an index it cannot prove uniform (the view
+// index comes from the workgroup id) is a loop over the lanes, each inserting one component
+// through the stack; 25 such loads per invocation made most of the flat pass's time on Zen 3.
 struct GpuFrustum {
   vec4 planes[MAX_FRUSTUM_PLANES];  // xyz = unit inward normal, w = d; inside when dot(n,p)+d >= 0
   uint plane_count;                 // planes actually used (5 when the far plane is at infinity)
@@ -68,6 +72,7 @@ struct GpuFrustum {
   uint reserved1;
   uint reserved2;
 };
+CP_CONST FRUSTUM_TEXELS = 7u;
 
 // Push constants of the flat culling pass. One dispatch covers every view (y = view index)
 // and up to maxComputeWorkGroupCount[0] groups of objects, starting at first_object. Scenes
