@@ -1,8 +1,8 @@
 #version 460
 // Hierarchical frustum culling of a depth-first BVH in one dispatch. The host cuts the tree
 // into subtrees of at most BvhCuller::subtree_objects() objects and BVH_CUT_MAX_HEIGHT levels
-// (the highest nodes that fit, and leaves), and one invocation takes one such cut subtree of
-// one view:
+// below their root (the highest nodes that fit, and leaves), and one invocation takes one
+// such cut subtree of one view:
 //   1. it descends from the root to its cut node, testing each node on the path on the planes
 //      its parent straddles (plane masking, Assarsson & Moller 2000); an OUTSIDE node ends the
 //      work, an INSIDE one accepts the cut subtree's whole object range. Invocations whose cut
@@ -52,7 +52,9 @@ layout(std430, set = 0, binding = BINDING_DRAWS) writeonly buffer Draws { DrawCo
 layout(set = 0, binding = BVH_BINDING_NODES) uniform usamplerBuffer nodes;
 layout(set = 0, binding = BVH_BINDING_OBJECTS) uniform usamplerBuffer object_order;  // four ids per texel
 layout(std430, set = 0, binding = BVH_BINDING_CUTS) readonly buffer Cuts { uint cuts[]; };
-layout(std430, set = 0, binding = BVH_BINDING_RECORDS) buffer Records { uvec2 records[]; };
+// Written by each invocation in its walk, read by the other lanes of its subgroup after the
+// workgroup barrier (with memoryBarrierBuffer: barrier() alone orders shared memory only).
+layout(std430, set = 0, binding = BVH_BINDING_RECORDS) coherent buffer Records { uvec2 records[]; };
 
 layout(push_constant, std430) uniform Push { BvhCullParams params; };
 
@@ -250,9 +252,11 @@ void main() {
   if (gl_LocalInvocationIndex == 0u) {
     group_visible = 0u;
     group_inside = 0u;
+    group_base = 0u;
     group_node_tests = 0u;
     group_object_tests = 0u;
   }
+  memoryBarrierBuffer();  // the records, for step 4
   barrier();
   uint subgroup_visible = subgroupAdd(visible), subgroup_inside = subgroupAdd(inside);
   uint node_tests = subgroupAdd(tests.x), object_tests = subgroupAdd(tests.y);

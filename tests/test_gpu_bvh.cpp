@@ -211,10 +211,11 @@ bvh::Tree chain_tree(const std::vector<Aabb>& boxes) {
   return t;
 }
 
-// The traversal's cut at every size, several views in one pass: one invocation per leaf (the
-// nodes above tested by many invocations, each test counted once), small and large subtrees,
-// the whole tree in one invocation, leaves larger than the cut, and a chain far deeper than
-// BVH_CUT_MAX_HEIGHT (cut into short subtrees whatever the size).
+// The traversal's cut at every size, several views of 6, 5 and 1 planes in one pass: one
+// invocation per leaf (the nodes above tested by many invocations, each test counted once),
+// with the dispatch folded into y; small and large subtrees, the whole tree in one
+// invocation, leaves larger than the cut, a chain far deeper than BVH_CUT_MAX_HEIGHT (cut
+// into short subtrees whatever the size), and a visible list too short for the objects.
 TEST_F(GpuBvh, EveryCutSizeAgrees) {
   test::Rng rng{59};
   std::vector<Aabb> boxes(6000);
@@ -224,14 +225,34 @@ TEST_F(GpuBvh, EveryCutSizeAgrees) {
   const bvh::FlatTree chain = bvh::flatten(chain_tree(line));
   ASSERT_EQ(bvh::check_flat_tree(chain, std::span<const Aabb>(line)), "");
   const test::RandomVolumes v = test::random_volumes(rng, 3000, 40.0f, 3.0f);
-  const std::uint32_t before = culler().subtree_objects();
+  // Views of 6, 5 (no far plane) and 1 plane: unused plane slots must never count.
+  std::vector<Frustum> frusta = test_frusta();
+  std::vector<glm::vec4> planes;
+  for (const Plane& p : frusta[0].active()) planes.emplace_back(p.normal, p.d);
+  frusta.push_back(Frustum::from_planes(std::span(planes).first(5)));
+  frusta.push_back(Frustum::from_planes(std::span(planes).first(1)));
+  // The culler is shared by the suite's tests: its settings come back whatever happens here.
+  struct Restore {
+    gpu::BvhCuller& c;
+    std::uint32_t objects;
+    ~Restore() {
+      c.set_subtree_objects(objects);
+      c.set_max_groups_per_dispatch(0);
+    }
+  } restore{culler(), culler().subtree_objects()};
   for (std::uint32_t cut : {1u, 3u, 64u, 1000u, 1u << 30}) {
     SCOPED_TRACE("subtrees of <= " + std::to_string(cut) + " objects");
     culler().set_subtree_objects(cut);
+    // With one object per subtree, thousands of workgroups per view: fold them into y, three
+    // along x, so that groups past the last view exist (and return).
+    culler().set_max_groups_per_dispatch(cut == 1 ? 3 : 0);
     for (std::uint32_t leaf : {1u, 4u, 300u}) {
       SCOPED_TRACE("leaf " + std::to_string(leaf));
       const bvh::FlatTree flat = flat_tree(boxes, leaf);
-      expect_agreement(culler(), flat, boxes, test_frusta());
+      expect_agreement(culler(), flat, boxes, frusta);
+      gpu::CullOptions short_list;  // many workgroups filling a short list
+      short_list.visible_capacity = 50;
+      expect_agreement(culler(), flat, boxes, frusta, short_list);
       std::size_t leaves = 0;
       for (const bvh::FlatNode& node : flat.nodes) leaves += node.leaf ? 1 : 0;
       if (cut == 1) {
@@ -241,12 +262,11 @@ TEST_F(GpuBvh, EveryCutSizeAgrees) {
         EXPECT_EQ(culler().cut_count(), 1u);
       }
     }
-    expect_agreement(culler(), chain, line, test_frusta());
+    expect_agreement(culler(), chain, line, frusta);
     EXPECT_GE(culler().cut_count(), line.size() / (gpu::BVH_CUT_MAX_HEIGHT + 1));
-    expect_agreement(culler(), tree_over(v.obbs), v.obbs, test_frusta());
-    expect_agreement(culler(), tree_over(v.spheres), v.spheres, test_frusta());
+    expect_agreement(culler(), tree_over(v.obbs), v.obbs, frusta);
+    expect_agreement(culler(), tree_over(v.spheres), v.spheres, frusta);
   }
-  culler().set_subtree_objects(before);
   EXPECT_THROW(culler().set_subtree_objects(0), std::invalid_argument);
 }
 
@@ -399,7 +419,7 @@ TEST_F(GpuBvh, BadTreesAndOptionsAreClearErrors) {
   nan_boxes[3].max.y = NAN;
   EXPECT_THROW(culler().upload(flat, nan_boxes), std::invalid_argument);
   // Two leaves that both claim every object: ids and links are in range, but the ranges do
-  // not split the root's (the GPU's queue capacities assume they do).
+  // not split the root's (the traversal's scratch slices assume they do).
   bvh::FlatTree overlapping;
   overlapping.objects.resize(boxes.size());
   for (std::uint32_t i = 0; i < boxes.size(); ++i) overlapping.objects[i] = i;
@@ -415,9 +435,10 @@ TEST_F(GpuBvh, BadTreesAndOptionsAreClearErrors) {
   draws.draws = true;
   culler().upload_draws(std::vector<gpu::DrawCommand>(99));
   EXPECT_THROW(culler().cull(test_frusta(), draws), std::invalid_argument);
-  // More views than one buffer holds: a clear length_error before anything is allocated.
+  // More views than the buffers hold (here the traversal records, 8 bytes per object and
+  // view, give out first): a clear length_error before anything is allocated.
   const std::size_t too_many_views =
-      GpuBvhEnvironment::context->properties().limits.maxStorageBufferRange / sizeof(gpu::GpuFrustum) + 1;
+      GpuBvhEnvironment::context->properties().limits.maxStorageBufferRange / (8 * boxes.size()) + 1;
   if (too_many_views < 5'000'000) {
     const std::vector<Frustum> views(too_many_views, test_frusta()[0]);
     EXPECT_THROW(culler().cull(views), std::length_error);

@@ -21,7 +21,7 @@
 /// contraction.
 namespace cullpipe::fast {
 
-/// Instruction set of the kernels.
+/// Instruction set of the kernels (Avx2: AVX2 with FMA).
 enum class Isa : std::uint8_t { Portable, Avx2, Avx512 };
 
 std::string_view to_string(Isa isa);

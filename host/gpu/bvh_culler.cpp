@@ -161,11 +161,13 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   const VkPhysicalDeviceLimits& limits = ctx_.properties().limits;
   groups_per_view_ = (cut_count_ + group_size_ - 1) / group_size_;
   const std::size_t groups = groups_per_view_ * v;
-  group_x_ = std::min<std::size_t>(std::max<std::size_t>(groups, 1), limits.maxComputeWorkGroupCount[0]);
+  const std::size_t max_x = max_groups_x_ ? std::min(max_groups_x_, limits.maxComputeWorkGroupCount[0]) : limits.maxComputeWorkGroupCount[0];
+  group_x_ = std::min<std::size_t>(std::max<std::size_t>(groups, 1), max_x);
   group_y_ = (groups + group_x_ - 1) / group_x_;
   if (group_y_ > limits.maxComputeWorkGroupCount[1])
-    throw std::length_error(std::to_string(v) + " views of " + std::to_string(cut_count_) + " BVH subtrees need more workgroups than " +
-                            ctx_.info().name + " dispatches");
+    throw std::length_error(std::to_string(v) + " views of " + std::to_string(cut_count_) + " BVH subtrees need " + std::to_string(groups) +
+                            " workgroups; " + ctx_.info().name + " dispatches at most " + std::to_string(max_x) + " x " +
+                            std::to_string(limits.maxComputeWorkGroupCount[1]));
   const std::string views_x = std::to_string(v) + " views x ";
   auto check = [&](VkDeviceSize bytes, const std::string& what) { detail::check_storage_range(ctx_, bytes, what); };
   const VkDeviceSize outputs = VkDeviceSize(object_count_) * v * sizeof(std::uint32_t);

@@ -38,13 +38,14 @@ class BvhCuller {
   /// earlier upload; call again after a refit. Throws std::invalid_argument when the tree is
   /// not one over these boxes (ids out of range or repeated, links or object ranges not nested
   /// as flatten nests them, boxes invalid or not enclosing), std::length_error when a buffer
-  /// would exceed one texel buffer view (maxTexelBufferElements). O(nodes + objects).
+  /// would exceed one texel buffer view (maxTexelBufferElements) or, for the cut's list of
+  /// subtrees, one storage buffer. O(nodes + objects).
   void upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes);
   /// The same for OBBs or spheres; the tree's boxes must enclose bvh::enclosing_box of each.
   void upload(const bvh::FlatTree& tree, std::span<const Obb> obbs);
   void upload(const bvh::FlatTree& tree, std::span<const Sphere> spheres);
   /// The cut's size: the traversal's invocations take subtrees of at most this many objects
-  /// (and BVH_CUT_MAX_HEIGHT levels), or single leaves. Fewer, larger subtrees mean fewer
+  /// (and BVH_CUT_MAX_HEIGHT levels below their root), or single leaves. Fewer, larger subtrees mean fewer
   /// redundant tests of the nodes above them and longer walks per invocation. Default:
   /// kCpuSubtreeObjects on a CPU device (lavapipe: measured best in bench_bvh), else
   /// kGpuSubtreeObjects (more invocations for a wide GPU; not measured on one). Takes effect
@@ -52,6 +53,9 @@ class BvhCuller {
   static constexpr std::uint32_t kCpuSubtreeObjects = 1024, kGpuSubtreeObjects = 128;
   void set_subtree_objects(std::uint32_t objects);
   std::uint32_t subtree_objects() const { return subtree_objects_; }
+  /// Workgroups along x before the dispatch folds into y; 0 means the device limit
+  /// (maxComputeWorkGroupCount[0]). Tests set it low to exercise the fold.
+  void set_max_groups_per_dispatch(std::uint32_t groups) { max_groups_x_ = groups; }
   /// The kind of the volumes uploaded last.
   BvKind kind() const { return kind_; }
 
@@ -90,6 +94,7 @@ class BvhCuller {
   const vk::Context& ctx_;
   std::uint32_t group_size_ = BVH_CULL_GROUP_SIZE;
   std::uint32_t subtree_objects_;
+  std::uint32_t max_groups_x_ = 0;
   std::unique_ptr<vk::ComputePipeline> pipelines_[3][2];  // [kind][draws]
   BvKind kind_ = BvKind::Aabb;
   vk::Buffer bounds_, classes_, visible_, counters_, views_, templates_, draws_;

@@ -133,8 +133,9 @@ struct ViewCounters {
 CP_CONST BVH_CULL_GROUP_SIZE = 64u;
 
 // The host cuts the tree into the highest subtrees of at most so many objects (a BvhCuller
-// setting) and at most BVH_CUT_MAX_HEIGHT levels below their root, or leaves; one invocation
-// walks one. The height bound keeps a walk's plane masks (6 bits per level) in four words.
+// setting) and at most BVH_CUT_MAX_HEIGHT levels below their root (20 levels in all), or
+// leaves; one invocation walks one. The height bound keeps a walk's plane masks (6 bits per
+// level) in four words.
 CP_CONST BVH_CUT_MAX_HEIGHT = 19u;
 
 // The node-test margin of hierarchies over OBBs and spheres, as float bits: 2^-16 and 2^-120
@@ -166,11 +167,12 @@ struct BvhCullParams {
   uint reserved;
 };
 
-// Storage-buffer bindings of the hierarchical pass (set 0). 0..6 mean what they mean for
-// the flat pass, except that BINDING_BOUNDS holds the GpuAabb of each object in tree order (the
-// order of BVH_BINDING_OBJECTS), so a leaf's boxes are read together.
-CP_CONST BVH_BINDING_NODES = 7u;      // GpuBvhNode, depth first (a uniform texel buffer, like BINDING_BOUNDS)
-CP_CONST BVH_BINDING_OBJECTS = 8u;    // object ids in tree order
+// Bindings of the hierarchical pass (set 0). 0..6 mean what they mean for the flat pass,
+// except that BINDING_BOUNDS holds each object's volume (GpuAabb, GpuObb or GpuSphere) in tree
+// order (the order of BVH_BINDING_OBJECTS), so a leaf's volumes are read together. Bounds,
+// views, nodes and the object order are uniform texel buffers; the rest storage buffers.
+CP_CONST BVH_BINDING_NODES = 7u;      // GpuBvhNode, depth first, three texels each
+CP_CONST BVH_BINDING_OBJECTS = 8u;    // object ids in tree order, four per texel
 CP_CONST BVH_BINDING_CUTS = 9u;       // uint: the cut nodes, depth first
 CP_CONST BVH_BINDING_RECORDS = 10u;   // uvec2 scratch: a record per object and view (each cut subtree's slice)
 CP_CONST BVH_BINDING_COUNT = 11u;
