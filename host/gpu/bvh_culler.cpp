@@ -215,7 +215,6 @@ void BvhCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
   if (cut_count_ != 0) {
     BvhCullParams params{};
     params.object_count = std::uint32_t(object_count_);
-    params.node_count = std::uint32_t(node_count_);
     params.view_count = std::uint32_t(view_count);
     params.visible_capacity = std::uint32_t(last_capacity_);
     params.cut_count = std::uint32_t(cut_count_);

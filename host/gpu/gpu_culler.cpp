@@ -178,10 +178,12 @@ void GpuCuller::update_descriptors() {
     // earlier, larger scene may be bigger).
     const VkDeviceSize range = ctx_.properties().limits.maxStorageBufferRange;
     auto whole = [&](const vk::Buffer& b) { return Range{&b, 0, std::min<VkDeviceSize>(b.size(), range)}; };
-    const Range bounds{&bounds_, 0, std::min<VkDeviceSize>(bounds_.size(), detail::texel_range(ctx_)) / detail::kTexelBytes * detail::kTexelBytes};
-    const Range view_texels{&views_, 0, std::min<VkDeviceSize>(views_.size(), detail::texel_range(ctx_)) / detail::kTexelBytes * detail::kTexelBytes};
-    Range ranges[kBindingCount] = {bounds, whole(classes_),   whole(visible_), whole(counters_),
-                                   view_texels, whole(templates_), whole(draws_), whole(group_counts_)};
+    // Texel views: whole texels within one texel buffer view.
+    auto texels = [&](const vk::Buffer& b) {
+      return Range{&b, 0, std::min<VkDeviceSize>(b.size(), detail::texel_range(ctx_)) / detail::kTexelBytes * detail::kTexelBytes};
+    };
+    Range ranges[kBindingCount] = {texels(bounds_), whole(classes_),   whole(visible_), whole(counters_),
+                                   texels(views_),  whole(templates_), whole(draws_),   whole(group_counts_)};
     if (segment_count_ > 1) {  // one segment binds whole buffers
       const VkDeviceSize first = VkDeviceSize(seg) * segment_objects_;
       const VkDeviceSize n = std::min<VkDeviceSize>(segment_objects_, object_count_ - first);

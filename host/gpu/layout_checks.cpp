@@ -56,8 +56,8 @@ static_assert(offsetof(GpuBvhNode, count) == 28);
 static_assert(offsetof(GpuBvhNode, skip) == 32);
 static_assert(offsetof(GpuBvhNode, second_child) == 36);
 static_assert(offsetof(GpuBvhNode, leaf) == 40);
-static_assert(sizeof(BvhCullParams) == 32);
-static_assert(offsetof(BvhCullParams, cut_count) == 16 && offsetof(BvhCullParams, write_classes) == 24);
+static_assert(sizeof(BvhCullParams) == 24);
+static_assert(offsetof(BvhCullParams, cut_count) == 12 && offsetof(BvhCullParams, write_classes) == 20);
 static_assert(MAX_FRUSTUM_PLANES == 6 && BVH_CUT_MAX_HEIGHT + 1 <= 20, "a subtree walk keeps 20 levels of 6-bit plane masks");
 
 // DrawCommand starts with exactly VkDrawIndexedIndirectCommand.

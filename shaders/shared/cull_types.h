@@ -158,13 +158,11 @@ struct GpuBvhNode {
 // Push constants of the hierarchical pass.
 struct BvhCullParams {
   uint object_count;
-  uint node_count;
   uint view_count;
   uint visible_capacity;  // per view
   uint cut_count;         // cut subtrees (one invocation each, per view)
   uint groups_per_view;   // workgroups per view: cut_count / BVH_CULL_GROUP_SIZE rounded up
   uint write_classes;     // 0: per-object classes are not read back and not written
-  uint reserved;
 };
 
 // Bindings of the hierarchical pass (set 0). 0..6 mean what they mean for the flat pass,
