@@ -431,7 +431,7 @@ int main(int argc, char** argv) {
   fast_config.threads = config.threads;
   fast_config.isa = config.isa;
   fast::CpuCuller fast_culler(fast_config);
-  fast::CpuBvhCuller fast_bvh(config.threads);
+  fast::CpuBvhCuller fast_bvh(config.threads, config.isa);
   Gpu gpu;
   if (wants(config, "gpu-flat") || wants(config, "gpu-bvh")) {
     try {

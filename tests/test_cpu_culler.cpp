@@ -529,13 +529,14 @@ TEST(CpuBvhCuller, EqualsTheScalarTraversalExactly) {
       bvh::BuildOptions options;
       options.max_leaf_size = n % 2 ? 1 : 6;
       const bvh::FlatTree tree = bvh::flatten(bvh::build(builder, boxes, options));
+      for (Isa isa : runnable_isas())
       for (unsigned threads : {1u, 2u, 3u}) {
-        fast::CpuBvhCuller culler(threads);
+        fast::CpuBvhCuller culler(threads, isa);
         culler.upload(tree, boxes);
         bvh::HierarchicalResult reused;
         for (std::size_t v = 0; v < views.size(); ++v) {
-          const std::string what = std::string(builder) + " n=" + std::to_string(n) + " threads=" + std::to_string(threads) + " view " +
-                                   std::to_string(v);
+          const std::string what = std::string(builder) + " n=" + std::to_string(n) + " isa=" + std::string(to_string(isa)) +
+                                   " threads=" + std::to_string(threads) + " view " + std::to_string(v);
           const bvh::HierarchicalResult expected = bvh::cull_hierarchical(tree, boxes, views[v]);
           culler.cull(views[v], reused);
           expect_same_traversal(expected, reused, what);
@@ -559,6 +560,56 @@ TEST(CpuBvhCuller, EqualsTheScalarTraversalExactly) {
       }
     }
   }
+}
+
+// Boxes on integer coordinates against axis-aligned planes through integers: many boxes
+// touch a plane exactly (distance +0 or -0), some are points, some have -0 corners; leaves of
+// 1, 7 and 300 objects (one lane, part of a vector, many vectors). Every instruction set's
+// walk must give the scalar traversal's classes, counts and list.
+TEST(CpuBvhCuller, TouchingBoxesAndLargeLeavesEqualTheScalarTraversal) {
+  test::Rng rng{23};
+  std::vector<Aabb> boxes(5000);
+  for (Aabb& b : boxes) {
+    const glm::vec3 lo = glm::floor(rng.vec3(-12.0f, 12.0f));
+    const glm::vec3 size = glm::floor(rng.vec3(0.0f, 3.0f));
+    b = {lo, lo + size};
+    for (int a = 0; a < 3; ++a) {
+      if (b.min[a] == 0.0f && rng.uniform(0.0f, 1.0f) < 0.5f) b.min[a] = -0.0f;
+      if (b.max[a] == 0.0f && rng.uniform(0.0f, 1.0f) < 0.5f) b.max[a] = -0.0f;
+    }
+  }
+  std::vector<Frustum> views = test_views();
+  const std::vector<glm::vec4> slab = {{1, 0, 0, 4}, {-1, 0, 0, 3}, {0, 1, 0, 0}, {0, -1, 0, 6}, {0, 0, 1, 2}, {0, 0, -1, 2}};
+  views.push_back(Frustum::from_planes(slab));
+  const std::vector<glm::vec4> corner = {{1, 0, 0, -0.0f}, {0, -1, 0, 0}, {0, 0, -1, 1}};
+  views.push_back(Frustum::from_planes(corner));
+  for (std::uint32_t leaf : {1u, 7u, 300u}) {
+    bvh::BuildOptions options;
+    options.max_leaf_size = leaf;
+    const bvh::FlatTree tree = bvh::flatten(bvh::build("binned-sah", boxes, options));
+    for (Isa isa : runnable_isas()) {
+      fast::CpuBvhCuller culler(2, isa);
+      culler.upload(tree, boxes);
+      for (std::size_t v = 0; v < views.size(); ++v) {
+        const std::string what = "leaf " + std::to_string(leaf) + " isa=" + std::string(to_string(isa)) + " view " + std::to_string(v);
+        const bvh::HierarchicalResult expected = bvh::cull_hierarchical(tree, boxes, views[v]);
+        std::vector<std::uint32_t> ids;
+        bvh::HierarchicalResult got;
+        culler.cull(views[v], {true, true}, got, ids);
+        expect_same_traversal(expected, got, what);
+        expect_visible_list(expected, tree, ids, what);
+        if (HasFatalFailure()) return;
+      }
+    }
+  }
+}
+
+TEST(CpuBvhCuller, RejectsKernelsTheCpuLacks) {
+  for (Isa isa : {Isa::Avx2, Isa::Avx512})
+    if (!fast::isa_supported(isa)) {
+      EXPECT_THROW(fast::CpuBvhCuller(2, isa), std::invalid_argument);
+    }
+  EXPECT_EQ(fast::CpuBvhCuller(2).isa(), fast::best_isa());
 }
 
 TEST(CpuBvhCuller, RefusesATreeOfOtherBoxes) {
@@ -590,11 +641,13 @@ TEST(CpuBvhCuller, ObbsAndSpheresEqualTheScalarTraversalAndFlatCulling) {
     const test::RandomVolumes v = test::random_volumes(rng, n, 30.0f, 2.0f);
     const bvh::FlatTree obb_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(v.obbs))));
     const bvh::FlatTree sphere_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Sphere>(v.spheres))));
+    for (Isa isa : runnable_isas())
     for (unsigned threads : {1u, 2u, 3u}) {
-      fast::CpuBvhCuller culler(threads);
+      fast::CpuBvhCuller culler(threads, isa);
       bvh::HierarchicalResult got;
       for (std::size_t view = 0; view < views.size(); ++view) {
-        const std::string what = "n=" + std::to_string(n) + " threads=" + std::to_string(threads) + " view " + std::to_string(view);
+        const std::string what = "n=" + std::to_string(n) + " isa=" + std::string(to_string(isa)) + " threads=" + std::to_string(threads) +
+                                 " view " + std::to_string(view);
         culler.upload(obb_tree, std::span<const Obb>(v.obbs));
         EXPECT_EQ(culler.kind(), BvKind::Obb);
         culler.cull(views[view], got);

@@ -1,10 +1,13 @@
 #include "cull/cpu_bvh_culler.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <deque>
+#include <iterator>
 #include <stdexcept>
 #include <string>
 
+#include "cull/kernel_select.hpp"
 #include "cull/thread_pool.hpp"
 
 namespace cullpipe::fast {
@@ -13,13 +16,13 @@ namespace {
 
 constexpr std::uint32_t kRangeChunk = 16384;  // objects per accepted-range task
 
-
 }  // namespace
 
-/// What one task found; summed at the end. Kept between passes with its stack's storage.
+/// What one task found; summed at the end.
 struct CpuBvhCuller::Tally {
-  std::size_t node_tests = 0, object_tests = 0, visible = 0, inside = 0;
-  std::vector<std::pair<std::uint32_t, std::uint32_t>> stack;  // (node, planes to test)
+  std::uint64_t node_tests = 0, object_tests = 0;
+  std::size_t visible = 0, inside = 0;
+  std::size_t marks = 0;  // a subtree task's first word in marks_
 };
 
 /// Work for one thread: a subtree to walk (node, planes to test) or part of an accepted range.
@@ -29,30 +32,83 @@ struct CpuBvhCuller::Task {
   std::uint32_t mask_or_count;
 };
 
-CpuBvhCuller::CpuBvhCuller(unsigned threads) : pool_(std::make_unique<ThreadPool>(threads)) {}
+CpuBvhCuller::CpuBvhCuller(unsigned threads, std::optional<Isa> isa) : isa_(isa.value_or(best_isa())) {
+  if (!isa_supported(isa_))
+    throw std::invalid_argument("CpuBvhCuller: this CPU (or build) cannot run the " + std::string(to_string(isa_)) + " kernels");
+  kernels_ = std::make_unique<detail::KernelTable>(detail::kernels(isa_));
+  pool_ = std::make_unique<ThreadPool>(threads);
+}
 CpuBvhCuller::~CpuBvhCuller() = default;
 
 unsigned CpuBvhCuller::threads() const { return pool_->size(); }
 
+namespace {
+
+/// A volume as the walk kernels read it (detail::kWalk*Floats).
+void walk_record(const Aabb& b, float* out) {
+  const float r[detail::kWalkAabbFloats] = {b.min.x, b.min.y, b.min.z, 0.0f, b.max.x, b.max.y, b.max.z, 0.0f};
+  std::copy(std::begin(r), std::end(r), out);
+}
+void walk_record(const Obb& b, float* out) {
+  const float r[detail::kWalkObbFloats] = {b.center.x,       b.center.y,       b.center.z,       b.basis[0].x, b.basis[0].y, b.basis[0].z,
+                                           b.basis[1].x,     b.basis[1].y,     b.basis[1].z,     b.basis[2].x, b.basis[2].y, b.basis[2].z,
+                                           b.half_extents.x, b.half_extents.y, b.half_extents.z, 0.0f};
+  std::copy(std::begin(r), std::end(r), out);
+}
+void walk_record(const Sphere& s, float* out) {
+  const float r[detail::kWalkSphereFloats] = {s.center.x, s.center.y, s.center.z, s.radius};
+  std::copy(std::begin(r), std::end(r), out);
+}
 template <class Volume>
-void CpuBvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> volumes, std::vector<Volume>& out) {
+constexpr std::size_t walk_floats() {
+  if constexpr (std::is_same_v<Volume, Obb>)
+    return detail::kWalkObbFloats;
+  else if constexpr (std::is_same_v<Volume, Sphere>)
+    return detail::kWalkSphereFloats;
+  else
+    return detail::kWalkAabbFloats;
+}
+
+float float_bits(std::uint32_t u) { return std::bit_cast<float>(u); }
+
+}  // namespace
+
+template <class Volume>
+void CpuBvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> volumes) {
   if (const std::string why = bvh::check_flat_tree(tree, volumes); !why.empty())
     throw std::invalid_argument("CpuBvhCuller::upload: " + why);
   // Each id exactly once (checked): the threads write classes by id without racing.
-  std::vector<Volume> ordered(volumes.size());
-  for (std::size_t k = 0; k < tree.objects.size(); ++k) ordered[k] = volumes[tree.objects[k]];
-  bvh::FlatTree copy = tree;  // copied before anything changes, so a failure leaves the old upload
+  // Everything is built before anything changes, so a failure leaves the old upload.
+  const std::size_t nodes = tree.nodes.size();
+  std::vector<float> walk_nodes(nodes * detail::kWalkNodeFloats);
+  std::vector<std::uint32_t> counts(nodes);
+  for (std::size_t i = 0; i < nodes; ++i) {
+    const bvh::FlatNode& node = tree.nodes[i];
+    if (node.leaf && node.count >= detail::kWalkLeaf)
+      throw std::length_error("CpuBvhCuller::upload: a leaf of " + std::to_string(node.count) + " objects (at most 2^31 - 1)");
+    // Checked: an inner node has two children, the next node and the one at that one's skip.
+    const std::uint32_t link = node.leaf ? detail::kWalkLeaf | node.count : tree.nodes[i + 1].skip;
+    float* out = walk_nodes.data() + i * detail::kWalkNodeFloats;
+    const float r[detail::kWalkNodeFloats] = {node.box.min.x, node.box.min.y, node.box.min.z, float_bits(node.first),
+                                              node.box.max.x, node.box.max.y, node.box.max.z, float_bits(link)};
+    std::copy(std::begin(r), std::end(r), out);
+    counts[i] = node.count;
+  }
+  constexpr std::size_t floats = walk_floats<Volume>();
+  std::vector<float> walk_volumes(tree.objects.size() * floats);
+  for (std::size_t k = 0; k < tree.objects.size(); ++k) walk_record(volumes[tree.objects[k]], walk_volumes.data() + k * floats);
+  bvh::FlatTree copy = tree;
+
   tree_ = std::move(copy);
-  boxes_.clear();
-  obbs_.clear();
-  spheres_.clear();
-  out = std::move(ordered);
+  walk_nodes_ = std::move(walk_nodes);
+  counts_ = std::move(counts);
+  walk_volumes_ = std::move(walk_volumes);
   kind_ = kind_of<Volume>();
 }
 
-void CpuBvhCuller::upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes) { upload_impl(tree, boxes, boxes_); }
-void CpuBvhCuller::upload(const bvh::FlatTree& tree, std::span<const Obb> obbs) { upload_impl(tree, obbs, obbs_); }
-void CpuBvhCuller::upload(const bvh::FlatTree& tree, std::span<const Sphere> spheres) { upload_impl(tree, spheres, spheres_); }
+void CpuBvhCuller::upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes) { upload_impl(tree, boxes); }
+void CpuBvhCuller::upload(const bvh::FlatTree& tree, std::span<const Obb> obbs) { upload_impl(tree, obbs); }
+void CpuBvhCuller::upload(const bvh::FlatTree& tree, std::span<const Sphere> spheres) { upload_impl(tree, spheres); }
 
 bvh::HierarchicalResult CpuBvhCuller::cull(const Frustum& frustum) {
   bvh::HierarchicalResult r;
@@ -67,25 +123,13 @@ void CpuBvhCuller::cull(const Frustum& frustum, bvh::HierarchicalResult& r) {
 
 void CpuBvhCuller::cull(const Frustum& frustum, const CpuBvhCullOptions& options, bvh::HierarchicalResult& r,
                         std::vector<std::uint32_t>& visible_ids) {
-  if (kind_ == BvKind::Obb)
-    cull_impl(frustum, options, r, visible_ids, obbs_);
-  else if (kind_ == BvKind::Sphere)
-    cull_impl(frustum, options, r, visible_ids, spheres_);
-  else
-    cull_impl(frustum, options, r, visible_ids, boxes_);
-}
-
-template <class Volume>
-void CpuBvhCuller::cull_impl(const Frustum& frustum, const CpuBvhCullOptions& options, bvh::HierarchicalResult& r,
-                             std::vector<std::uint32_t>& visible_ids, const std::vector<Volume>& volumes) {
-  if constexpr (!std::is_same_v<Volume, Aabb>) bvh::require_unit_normals(frustum, "CpuBvhCuller");
-  const std::size_t n = volumes.size();
+  if (kind_ != BvKind::Aabb) bvh::require_unit_normals(frustum, "CpuBvhCuller");
+  const std::size_t n = tree_.objects.size();
   const std::vector<bvh::FlatNode>& nodes = tree_.nodes;
   const std::vector<std::uint32_t>& objects = tree_.objects;
   const bool classes = options.classes, ids = options.visible_ids;
   r.classes.resize(classes ? n : 0);
   r.node_tests = r.object_tests = r.visible = r.inside = 0;
-  visible_ids.clear();
 
   // Everything starts OUTSIDE, in parallel chunks.
   const std::size_t fill_tasks = classes ? (n + kRangeChunk - 1) / kRangeChunk : 0;
@@ -93,15 +137,22 @@ void CpuBvhCuller::cull_impl(const Frustum& frustum, const CpuBvhCullOptions& op
     const std::size_t begin = t * kRangeChunk, end = std::min(n, begin + kRangeChunk);
     std::fill(r.classes.begin() + std::ptrdiff_t(begin), r.classes.begin() + std::ptrdiff_t(end), Classification::Outside);
   });
-  if (nodes.empty()) return;
+  if (nodes.empty()) {
+    visible_ids.clear();
+    return;
+  }
 
   // The top of the tree, breadth first, until there are subtrees enough for the threads.
+  auto classify_node = [&](const Aabb& box, std::uint32_t mask, std::uint32_t& straddled) {
+    return kind_ == BvKind::Aabb ? bvh::classify_node<Aabb>(box, frustum, mask, straddled)
+                                 : bvh::classify_masked_margin(box, frustum, mask, straddled);
+  };
   const std::uint32_t all = (1u << frustum.active().size()) - 1u;
   const std::size_t wanted = std::size_t(pool_->size()) * 16;
   std::deque<Task> frontier{{Task::Subtree, 0, all}};
   std::vector<Task>& tasks = tasks_;
   tasks.clear();
-  Tally top;
+  std::uint64_t top_node_tests = 0;
   auto accept = [&](std::uint32_t first, std::uint32_t count) {
     for (std::uint32_t k = 0; k < count; k += kRangeChunk) tasks.push_back({Task::Inside, first + k, std::min(kRangeChunk, count - k)});
   };
@@ -113,9 +164,9 @@ void CpuBvhCuller::cull_impl(const Frustum& frustum, const CpuBvhCullOptions& op
       tasks.push_back(t);
       continue;
     }
-    ++top.node_tests;
+    ++top_node_tests;
     std::uint32_t straddled = 0;
-    const Classification c = bvh::classify_node<Volume>(node.box, frustum, t.mask_or_count, straddled);
+    const Classification c = classify_node(node.box, t.mask_or_count, straddled);
     if (c == Classification::Outside) continue;
     if (c == Classification::Inside) {
       accept(node.first, node.count);
@@ -131,72 +182,82 @@ void CpuBvhCuller::cull_impl(const Frustum& frustum, const CpuBvhCullOptions& op
   if (ids) std::sort(tasks.begin(), tasks.end(), [&](const Task& a, const Task& b) { return first_object(a) < first_object(b); });
 
   std::vector<Tally>& tallies = tallies_;
-  if (tallies.size() < tasks.size()) tallies.resize(tasks.size());
-  for (std::size_t t = 0; t < tasks.size(); ++t) tallies[t].node_tests = tallies[t].object_tests = tallies[t].visible = tallies[t].inside = 0;
-  if (task_ids_.size() < tasks.size()) task_ids_.resize(tasks.size());
+  tallies.assign(tasks.size(), Tally{});
+  // Each subtree task marks its visible objects in its own words of marks_ (a bit per object
+  // of its range), from which the last step lists them.
+  std::size_t mark_words = 0;
+  for (std::size_t t = 0; t < tasks.size(); ++t) {
+    if (tasks[t].kind != Task::Subtree) continue;
+    tallies[t].marks = mark_words;
+    mark_words += (std::size_t(nodes[tasks[t].node_or_first].count) + 63) / 64;
+  }
+  if (ids && marks_.size() < mark_words) marks_.resize(mark_words);
+  const detail::PlaneSet planes = detail::plane_set(frustum);
+  const detail::WalkTree walk_tree{walk_nodes_.data(), counts_.data(), walk_volumes_.data(), objects.data(),
+                                   bvh::kBvhMarginScale,  bvh::kBvhMarginFloor, bvh::kBvhMarginLimit};
+  const detail::WalkKernel walk = kind_ == BvKind::Obb      ? kernels_->walk_obb
+                                  : kind_ == BvKind::Sphere ? kernels_->walk_sphere
+                                                            : kernels_->walk_aabb;
+  auto* const class_bytes = classes ? reinterpret_cast<std::uint8_t*>(r.classes.data()) : nullptr;
   pool_->parallel_for(tasks.size(), [&](std::size_t index) {
     const Task& task = tasks[index];
     Tally& tally = tallies[index];
-    std::vector<std::uint32_t>& found = task_ids_[index];
-    found.clear();
-    auto accept_range = [&](std::uint32_t first, std::uint32_t count) {
+    if (task.kind == Task::Inside) {
+      const std::uint32_t first = task.node_or_first, count = task.mask_or_count;
       if (classes)
         for (std::uint32_t k = first; k < first + count; ++k) r.classes[objects[k]] = Classification::Inside;
-      if (ids) found.insert(found.end(), objects.begin() + first, objects.begin() + first + count);
-      tally.visible += count;
-      tally.inside += count;
-    };
-    if (task.kind == Task::Inside) {
-      accept_range(task.node_or_first, task.mask_or_count);
+      tally.visible = tally.inside = count;
       return;
     }
-    // Depth first, as bvh::cull_hierarchical.
-    std::vector<std::pair<std::uint32_t, std::uint32_t>>& stack = tally.stack;
-    stack.assign(1, {task.node_or_first, task.mask_or_count});
-    while (!stack.empty()) {
-      const auto [i, mask] = stack.back();
-      stack.pop_back();
-      const bvh::FlatNode& node = nodes[i];
-      ++tally.node_tests;
-      std::uint32_t straddled = 0;
-      const Classification c = bvh::classify_node<Volume>(node.box, frustum, mask, straddled);
-      if (c == Classification::Outside) continue;
-      if (c == Classification::Inside) {
-        accept_range(node.first, node.count);
-        continue;
-      }
-      if (node.leaf) {
-        for (std::uint32_t k = node.first; k < node.first + node.count; ++k) {
-          const Classification oc = bvh::classify_object(volumes[k], frustum, straddled);
-          if (classes) r.classes[objects[k]] = oc;
-          if (ids && oc != Classification::Outside) found.push_back(objects[k]);
-          ++tally.object_tests;
-          tally.visible += oc != Classification::Outside;
-          tally.inside += oc == Classification::Inside;
-        }
-        continue;
-      }
-      stack.push_back({nodes[i + 1].skip, straddled});
-      stack.push_back({i + 1, straddled});
+    thread_local std::vector<std::uint32_t> work;  // kept by the pool's threads
+    const bvh::FlatNode& root = nodes[task.node_or_first];
+    const std::size_t subtree_nodes = root.skip - task.node_or_first;
+    const std::size_t work_words = 2 * (subtree_nodes + root.count) + 16;  // + the widest vector
+    if (work.size() < work_words) work.resize(work_words);
+    detail::WalkOutput out;
+    out.classes = class_bytes;
+    if (ids) {
+      out.marks = marks_.data() + tally.marks;
+      std::fill_n(out.marks, (std::size_t(root.count) + 63) / 64, std::uint64_t{0});
     }
+    out.work = work.data();
+    out.work_capacity = subtree_nodes;
+    const detail::WalkCounts c = walk(walk_tree, task.node_or_first, task.mask_or_count, planes, out);
+    tally.node_tests = c.node_tests;
+    tally.object_tests = c.object_tests;
+    tally.visible = c.visible;
+    tally.inside = c.inside;
   });
-  r.node_tests = top.node_tests;
-  for (std::size_t index = 0; index < tasks.size(); ++index) {
-    const Tally& t = tallies[index];
+  r.node_tests = top_node_tests;
+  for (const Tally& t : tallies) {
     r.node_tests += t.node_tests;
     r.object_tests += t.object_tests;
     r.visible += t.visible;
     r.inside += t.inside;
   }
   if (!ids) return;
+  // The tasks' lists, in task order (tree order), straight from the ranges and the marks.
   visible_ids.resize(r.visible);
   offsets_.assign(tasks.size() + 1, 0);
-  for (std::size_t t = 0; t < tasks.size(); ++t) offsets_[t + 1] = offsets_[t] + task_ids_[t].size();
-  pool_->parallel_for(tasks.size(), [&](std::size_t t) {
-    std::vector<std::uint32_t>& found = task_ids_[t];
-    std::copy(found.begin(), found.end(), visible_ids.begin() + std::ptrdiff_t(offsets_[t]));
-    // Tasks cover other subtrees from view to view: do not let each keep its largest list.
-    if (found.capacity() > 2 * found.size() + 4096) std::vector<std::uint32_t>().swap(found);
+  for (std::size_t t = 0; t < tasks.size(); ++t) offsets_[t + 1] = offsets_[t] + tallies[t].visible;
+  pool_->parallel_for(tasks.size(), [&](std::size_t index) {
+    const Task& task = tasks[index];
+    std::uint32_t* out = visible_ids.data() + offsets_[index];
+    if (task.kind == Task::Inside) {
+      std::copy_n(objects.data() + task.node_or_first, task.mask_or_count, out);
+      return;
+    }
+    const bvh::FlatNode& root = nodes[task.node_or_first];
+    const std::uint32_t* from = objects.data() + root.first;
+    const std::uint64_t* marks = marks_.data() + tallies[index].marks;
+    for (std::size_t w = 0; w < (std::size_t(root.count) + 63) / 64; ++w, from += 64) {
+      std::uint64_t word = marks[w];
+      if (word == ~std::uint64_t{0}) {  // (no bit is set past the range)
+        out = std::copy_n(from, 64, out);
+        continue;
+      }
+      for (; word != 0; word &= word - 1) *out++ = from[std::countr_zero(word)];
+    }
   });
 }
 

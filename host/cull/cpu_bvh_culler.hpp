@@ -1,10 +1,12 @@
 #pragma once
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <span>
 #include <vector>
 
 #include "bvh/bvh.hpp"
+#include "cull/cpu_culler.hpp"
 #include "geom/aabb.hpp"
 #include "geom/bv_kind.hpp"
 #include "geom/frustum.hpp"
@@ -14,6 +16,9 @@
 namespace cullpipe::fast {
 
 class ThreadPool;
+namespace detail {
+struct KernelTable;
+}
 
 /// What a CpuBvhCuller pass fills.
 struct CpuBvhCullOptions {
@@ -29,17 +34,20 @@ struct CpuBvhCullOptions {
 ///
 /// The top of the tree is walked breadth first on the calling thread until there are enough
 /// subtrees for the threads (about 16 per thread); each subtree is then walked depth first by
-/// one thread. INSIDE ranges are split into chunks so one large accepted subtree still uses
-/// every core. Objects are written by id, and a subtree's objects are its own, so no two
-/// threads write the same class.
+/// one thread, with the SIMD kernels of CpuCuller's instruction set: a node or object is
+/// tested against every plane at once, one plane per lane, each lane doing the scalar test's
+/// float operations in its order. INSIDE ranges are split into chunks so one large accepted
+/// subtree still uses every core. Objects are written by id, and a subtree's objects are its
+/// own, so no two threads write the same class.
 ///
 /// The objects may be AABBs, OBBs or spheres (bvh::cull_hierarchical's three forms: a tree
 /// over OBBs or spheres is built over bvh::enclosing_boxes and its nodes are tested with a
 /// margin, so every class still equals flat culling's).
 class CpuBvhCuller {
  public:
-  /// threads = 0: every core.
-  explicit CpuBvhCuller(unsigned threads = 0);
+  /// threads = 0: every core. isa: the kernels (default best_isa()); one the machine cannot
+  /// run throws std::invalid_argument.
+  explicit CpuBvhCuller(unsigned threads = 0, std::optional<Isa> isa = std::nullopt);
   ~CpuBvhCuller();
   CpuBvhCuller(const CpuBvhCuller&) = delete;
   CpuBvhCuller& operator=(const CpuBvhCuller&) = delete;
@@ -67,27 +75,28 @@ class CpuBvhCuller {
             std::vector<std::uint32_t>& visible_ids);
 
   unsigned threads() const;
+  Isa isa() const { return isa_; }
 
  private:
   template <class Volume>
-  void upload_impl(const bvh::FlatTree& tree, std::span<const Volume> volumes, std::vector<Volume>& ordered);
-  template <class Volume>
-  void cull_impl(const Frustum& frustum, const CpuBvhCullOptions& options, bvh::HierarchicalResult& result,
-                 std::vector<std::uint32_t>& visible_ids, const std::vector<Volume>& volumes);
+  void upload_impl(const bvh::FlatTree& tree, std::span<const Volume> volumes);
   struct Task;
   struct Tally;
 
   std::unique_ptr<ThreadPool> pool_;
+  Isa isa_;
+  std::unique_ptr<detail::KernelTable> kernels_;
   bvh::FlatTree tree_;
   BvKind kind_ = BvKind::Aabb;
-  // The uploaded volumes in tree order (only the vector of kind_ is used).
-  std::vector<Aabb> boxes_;
-  std::vector<Obb> obbs_;
-  std::vector<Sphere> spheres_;
+  // The tree as the walk kernels read it (detail::WalkTree): nodes, their object counts, and
+  // the volumes in tree order (a leaf's are adjacent), as records of kind_.
+  std::vector<float> walk_nodes_;
+  std::vector<std::uint32_t> counts_;
+  std::vector<float> walk_volumes_;
   // Per-pass working storage, kept so passes reuse it.
   std::vector<Task> tasks_;
   std::vector<Tally> tallies_;
-  std::vector<std::vector<std::uint32_t>> task_ids_;
+  std::vector<std::uint64_t> marks_;  // the subtree tasks' visible objects, a bit each
   std::vector<std::size_t> offsets_;
 };
 

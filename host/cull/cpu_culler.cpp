@@ -12,6 +12,7 @@
 #include <xmmintrin.h>
 #endif
 
+#include "cull/kernel_select.hpp"
 #include "cull/simd_kernels.hpp"
 #include "cull/thread_pool.hpp"
 
@@ -32,15 +33,6 @@ bool cpu_runs(Isa isa) {
 #else
   return isa == Isa::Portable;
 #endif
-}
-
-detail::KernelTable kernels(Isa isa) {
-#if defined(CULLPIPE_HAVE_X86_KERNELS)
-  if (isa == Isa::Avx512) return detail::avx512_kernels();
-  if (isa == Isa::Avx2) return detail::avx2_kernels();
-#endif
-  (void)isa;
-  return detail::portable_kernels();
 }
 
 constexpr double kUnitNormalLimit = 1.0 + 0x1p-20;  // PlaneSet::unit_normals
@@ -67,8 +59,21 @@ struct NearestNoFlush {
   NearestNoFlush& operator=(const NearestNoFlush&) = delete;
 };
 
-detail::PlaneSet plane_set(const Frustum& f) {
-  detail::PlaneSet s;
+}  // namespace
+
+namespace detail {
+
+KernelTable kernels(Isa isa) {
+#if defined(CULLPIPE_HAVE_X86_KERNELS)
+  if (isa == Isa::Avx512) return avx512_kernels();
+  if (isa == Isa::Avx2) return avx2_kernels();
+#endif
+  (void)isa;
+  return portable_kernels();
+}
+
+PlaneSet plane_set(const Frustum& f) {
+  PlaneSet s;
   s.count = static_cast<std::uint32_t>(std::min<std::size_t>(f.plane_count, 6));
   s.unit_normals = true;
   for (std::uint32_t k = 0; k < s.count; ++k) {
@@ -85,6 +90,10 @@ detail::PlaneSet plane_set(const Frustum& f) {
   }
   return s;
 }
+
+}  // namespace detail
+
+namespace {
 
 /// ObbArrays::bound of `b`: a float b >= |r| for the reference's projected radius
 /// r = (|a0| h0 + |a1| h1) + |a2| h2, a_i = (n.x u_i.x + n.y u_i.y) + n.z u_i.z, computed in float
@@ -224,7 +233,7 @@ CpuCuller::CpuCuller(const CpuCullerConfig& config) {
   if (!isa_supported(isa_))
     throw std::invalid_argument("CpuCuller: this CPU (or build) cannot run the " + std::string(to_string(isa_)) + " kernels");
   impl_ = std::make_unique<Impl>(config.threads);
-  impl_->table = kernels(isa_);
+  impl_->table = detail::kernels(isa_);
   impl_->chunk = std::max<std::size_t>(kPad, (config.chunk_objects + kPad - 1) / kPad * kPad);
 }
 
@@ -354,7 +363,7 @@ void CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& optio
   results.resize(views.size());
   std::vector<detail::PlaneSet>& planes = m.planes;  // kept between calls: no allocation per pass
   planes.clear();
-  for (const Frustum& f : views) planes.push_back(plane_set(f));
+  for (const Frustum& f : views) planes.push_back(detail::plane_set(f));
   // Each chunk writes its visible ids at its own slot of the view's scratch (chunk size plus
   // the kernels' slack), then they are gathered in chunk order.
   const std::size_t slot = m.chunk + kPad;

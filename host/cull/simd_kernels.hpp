@@ -70,11 +70,53 @@ using SphereKernel = ChunkCounts (*)(const SphereArrays&, std::size_t begin, std
 /// the OR of its bits: the memory floor of a pass, with the same loads as the kernels.
 using TouchKernel = std::uint32_t (*)(const float* data, std::size_t begin, std::size_t end);
 
+/// A hierarchy as the walk kernels read it (fast::CpuBvhCuller builds it on upload from a
+/// bvh::FlatTree; node and object order are the flat tree's).
+constexpr std::size_t kWalkNodeFloats = 8;     ///< min x y z, first object (bits), max x y z, link (bits)
+/// A node's link: for a leaf kWalkLeaf | its object count, else its second child (the first is
+/// the next node).
+constexpr std::uint32_t kWalkLeaf = 0x80000000u;
+constexpr std::size_t kWalkAabbFloats = 8;     ///< min x y z, 0, max x y z, 0
+constexpr std::size_t kWalkObbFloats = 16;     ///< centre, u0, u1, u2, half extents, 0
+constexpr std::size_t kWalkSphereFloats = 4;   ///< centre, radius
+struct WalkTree {
+  const float* nodes;           ///< kWalkNodeFloats per node
+  const std::uint32_t* counts;  ///< per node its object count
+  const float* volumes;         ///< per object in tree order, kWalk*Floats for the kind
+  const std::uint32_t* ids;     ///< per object in tree order, its id
+  /// The node test of hierarchies over OBBs and spheres (bvh::classify_masked_margin): the
+  /// bvh constants, passed in so this header stays plain data.
+  float margin_scale, margin_floor, margin_limit;
+};
+
+/// Where one walk's results go. `classes` (may be null): per object id. `marks` (may be
+/// null): a bitmap of (the subtree's object count + 63) / 64 words, zero, that gets bit p set
+/// for each visible object at position first + p of the subtree's range (first: the root's
+/// first object). `work`: 2 (work_capacity + the subtree's object count) + W words,
+/// work_capacity at least the number of nodes in the subtree.
+struct WalkOutput {
+  std::uint8_t* classes = nullptr;
+  std::uint64_t* marks = nullptr;
+  std::uint32_t* work = nullptr;
+  std::size_t work_capacity = 0;
+};
+
+/// What one walk did: bvh::cull_hierarchical's counts for its subtree.
+struct WalkCounts {
+  std::uint64_t node_tests = 0, object_tests = 0;
+  std::uint32_t visible = 0, inside = 0;
+};
+
+/// Tests the subtree at `node`, whose parent straddles the planes in `mask`, as
+/// bvh::cull_hierarchical does: the same tests, results and counts (not in the same order).
+using WalkKernel = WalkCounts (*)(const WalkTree&, std::uint32_t node, std::uint32_t mask, const PlaneSet&, WalkOutput);
+
 struct KernelTable {
   AabbKernel aabb;
   ObbKernel obb;
   SphereKernel sphere;
   TouchKernel touch;
+  WalkKernel walk_aabb, walk_obb, walk_sphere;
   unsigned lanes;
 };
 

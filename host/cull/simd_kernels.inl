@@ -36,6 +36,11 @@ inline vf load(const float* p) {
   __builtin_memcpy(&v, p, sizeof v);
   return v;
 }
+inline vi load_ints(const std::uint32_t* p) {
+  vi v;
+  __builtin_memcpy(&v, p, sizeof v);
+  return v;
+}
 
 /// Bit l set when lane l of `mask` (0 or -1 per lane) is set.
 inline std::uint32_t lane_bits(vi mask) {
@@ -295,6 +300,267 @@ std::uint32_t touch(const float* data, std::size_t begin, std::size_t end) {
   std::uint32_t bits = 0;
   for (unsigned l = 0; l < W; ++l) bits |= static_cast<std::uint32_t>(all[l]);
   return bits;
+}
+
+// ---- Hierarchy walks (fast::CpuBvhCuller) ----
+// bvh::cull_hierarchical's tests of one subtree, W at a time: a work list of (node, planes to
+// test) pairs is taken W pairs per step, their records transposed into vectors (one node per
+// lane) and tested against the planes one by one; the leaves' objects go to a second list,
+// tested W at a time the same way. Every lane does the scalar test's float operations in its
+// order (bvh::classify_masked for boxes, classify_masked_margin for the nodes of OBB and
+// sphere trees, classify_planes for OBBs and spheres) and the planes outside its mask count
+// for nothing. The scalar tests stop at the first plane that rejects, which does not change
+// their answer (OUTSIDE wins over anything found before or after), so testing every plane
+// gives the same class, and the same straddled planes whenever the class is not OUTSIDE.
+// Every node and object the depth-first traversal tests is tested here once, so the counts
+// are its counts. The order of the tests is not its order, so the visible objects are marked
+// in a bitmap (by position in the subtree's range), from which the caller lists them in tree
+// order.
+
+inline std::uint32_t bits_of(float word) {
+  std::uint32_t bits;
+  __builtin_memcpy(&bits, &word, sizeof bits);
+  return bits;
+}
+
+inline vf larger(vf a, vf b) { return a < b ? b : a; }  // std::max's choice, per lane
+
+/// Transposes W records of `Floats` floats (4, 8 or 16), the records at records + at[l] *
+/// Floats (lanes past `count` repeat the first): col[c] lane l = word c of record l. With
+/// AVX2 or SSE by register shuffles; otherwise through memory (narrow stores read back wide
+/// stall store forwarding: a cost the shuffles avoid).
+template <unsigned Floats>
+inline void gather_columns(const float* records, const std::uint32_t* at, unsigned count, vf (&col)[Floats]) {
+  static_assert(Floats == 4 || Floats == 8 || Floats == 16);
+  const float* row[W];
+  for (unsigned l = 0; l < W; ++l) row[l] = records + std::size_t(at[l < count ? l : 0]) * Floats;
+#if CULLPIPE_SIMD_LANES == 8 && defined(__AVX2__)
+  if constexpr (Floats == 4) {
+    __m256 a[4];
+    for (unsigned i = 0; i < 4; ++i) a[i] = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(row[i])), _mm_loadu_ps(row[i + 4]), 1);
+    const __m256 t0 = _mm256_unpacklo_ps(a[0], a[1]), t1 = _mm256_unpackhi_ps(a[0], a[1]);
+    const __m256 t2 = _mm256_unpacklo_ps(a[2], a[3]), t3 = _mm256_unpackhi_ps(a[2], a[3]);
+    col[0] = reinterpret_cast<vf>(_mm256_shuffle_ps(t0, t2, 0x44));
+    col[1] = reinterpret_cast<vf>(_mm256_shuffle_ps(t0, t2, 0xEE));
+    col[2] = reinterpret_cast<vf>(_mm256_shuffle_ps(t1, t3, 0x44));
+    col[3] = reinterpret_cast<vf>(_mm256_shuffle_ps(t1, t3, 0xEE));
+  } else {
+    for (unsigned base = 0; base < Floats; base += 8) {
+      __m256 a[8];
+      for (unsigned i = 0; i < 8; ++i) a[i] = _mm256_loadu_ps(row[i] + base);
+      __m256 u[8];
+      for (unsigned h = 0; h < 8; h += 4) {  // records h..h+3: columns c (low half) and c + 4 (high half)
+        const __m256 t0 = _mm256_unpacklo_ps(a[h], a[h + 1]), t1 = _mm256_unpackhi_ps(a[h], a[h + 1]);
+        const __m256 t2 = _mm256_unpacklo_ps(a[h + 2], a[h + 3]), t3 = _mm256_unpackhi_ps(a[h + 2], a[h + 3]);
+        u[h] = _mm256_shuffle_ps(t0, t2, 0x44);
+        u[h + 1] = _mm256_shuffle_ps(t0, t2, 0xEE);
+        u[h + 2] = _mm256_shuffle_ps(t1, t3, 0x44);
+        u[h + 3] = _mm256_shuffle_ps(t1, t3, 0xEE);
+      }
+      for (unsigned c = 0; c < 4; ++c) {
+        col[base + c] = reinterpret_cast<vf>(_mm256_permute2f128_ps(u[c], u[c + 4], 0x20));
+        col[base + c + 4] = reinterpret_cast<vf>(_mm256_permute2f128_ps(u[c], u[c + 4], 0x31));
+      }
+    }
+  }
+#elif CULLPIPE_SIMD_LANES == 4 && defined(__SSE2__)
+  for (unsigned base = 0; base < Floats; base += 4) {
+    __m128 r0 = _mm_loadu_ps(row[0] + base), r1 = _mm_loadu_ps(row[1] + base), r2 = _mm_loadu_ps(row[2] + base),
+           r3 = _mm_loadu_ps(row[3] + base);
+    _MM_TRANSPOSE4_PS(r0, r1, r2, r3);
+    col[base] = reinterpret_cast<vf>(r0);
+    col[base + 1] = reinterpret_cast<vf>(r1);
+    col[base + 2] = reinterpret_cast<vf>(r2);
+    col[base + 3] = reinterpret_cast<vf>(r3);
+  }
+#else
+  alignas(64) float lanes[Floats][W];
+  for (unsigned l = 0; l < W; ++l)
+    for (unsigned c = 0; c < Floats; ++c) lanes[c][l] = row[l][c];
+  for (unsigned c = 0; c < Floats; ++c) col[c] = load(lanes[c]);
+#endif
+}
+
+/// bvh::classify_masked of W boxes (min x y z in box[0..2], max in box[4..6]) against the
+/// planes in each lane's `mask`: `outside` nonzero where a p-vertex is behind, `straddled` the
+/// planes whose n-vertex is behind. With `margin` (OBB and sphere trees),
+/// classify_masked_margin.
+inline void test_boxes(const vf* box, vi mask, const PlaneSet& planes, const WalkTree* margin, vi& outside, vi& straddled) {
+  outside = straddled = vi{};
+  const vf zero = {};
+  vf reach = {};
+  if (margin) {
+    reach = (larger(abs(box[0]), abs(box[4])) + larger(abs(box[1]), abs(box[5]))) + larger(abs(box[2]), abs(box[6]));
+  }
+  for (std::uint32_t k = 0; k < planes.count; ++k) {
+    const float nx = planes.nx[k], ny = planes.ny[k], nz = planes.nz[k], d = planes.d[k];
+    // The p-vertex (farthest along the normal) and n-vertex, as pn_vertices (-0 as positive).
+    const bool sx = nx >= 0.0f, sy = ny >= 0.0f, sz = nz >= 0.0f;
+    const vf dp = ((nx * box[sx ? 4 : 0] + ny * box[sy ? 5 : 1]) + nz * box[sz ? 6 : 2]) + d;
+    const vf dn = ((nx * box[sx ? 0 : 4] + ny * box[sy ? 1 : 5]) + nz * box[sz ? 2 : 6]) + d;
+    const vi bit = mask & static_cast<std::int32_t>(1u << k);
+    if (margin) {
+      const vf size = reach + __builtin_fabsf(d);
+      const vi certain = size <= margin->margin_limit;  // false for NaN
+      const vf m = margin->margin_scale * size + margin->margin_floor;
+      outside |= (certain & (dp < -m)) & bit;
+      straddled |= (~certain | (dn < m)) & bit;
+    } else {
+      outside |= (dp < zero) & bit;
+      straddled |= (dn < zero) & bit;
+    }
+  }
+}
+
+/// classify_planes of W OBBs (centre, u0, u1, u2, half extents in col[0..14]).
+inline void test_obbs(const vf* col, vi mask, const PlaneSet& planes, vi& outside, vi& crossing) {
+  outside = crossing = vi{};
+  for (std::uint32_t k = 0; k < planes.count; ++k) {
+    const float nx = planes.nx[k], ny = planes.ny[k], nz = planes.nz[k];
+    const vf s = ((nx * col[0] + ny * col[1]) + nz * col[2]) + planes.d[k];
+    const vf a0 = (nx * col[3] + ny * col[4]) + nz * col[5];
+    const vf a1 = (nx * col[6] + ny * col[7]) + nz * col[8];
+    const vf a2 = (nx * col[9] + ny * col[10]) + nz * col[11];
+    const vf r = (abs(a0) * col[12] + abs(a1) * col[13]) + abs(a2) * col[14];
+    const vi bit = mask & static_cast<std::int32_t>(1u << k);
+    outside |= (s < -r) & bit;
+    crossing |= (s < r) & bit;
+  }
+}
+
+/// classify_planes of W spheres (centre, radius in col[0..3]).
+inline void test_spheres(const vf* col, vi mask, const PlaneSet& planes, vi& outside, vi& crossing) {
+  outside = crossing = vi{};
+  for (std::uint32_t k = 0; k < planes.count; ++k) {
+    const vf s = ((planes.nx[k] * col[0] + planes.ny[k] * col[1]) + planes.nz[k] * col[2]) + planes.d[k];
+    const vi bit = mask & static_cast<std::int32_t>(1u << k);
+    outside |= (s < -col[3]) & bit;
+    crossing |= (s < col[3]) & bit;
+  }
+}
+
+enum class WalkKind { Aabb, Obb, Sphere };
+
+template <WalkKind Kind>
+WalkCounts walk(const WalkTree& t, std::uint32_t root, std::uint32_t root_mask, const PlaneSet& planes, WalkOutput out) {
+  constexpr unsigned object_floats = Kind == WalkKind::Obb ? kWalkObbFloats : Kind == WalkKind::Sphere ? kWalkSphereFloats : kWalkAabbFloats;
+  const WalkTree* margin = Kind == WalkKind::Aabb ? nullptr : &t;
+  WalkCounts counts;
+  const std::uint32_t range_first = bits_of(t.nodes[std::size_t(root) * kWalkNodeFloats + 3]);
+  const std::uint32_t root_link = bits_of(t.nodes[std::size_t(root) * kWalkNodeFloats + 7]);
+  const std::uint32_t range_count = root_link & kWalkLeaf ? root_link & ~kWalkLeaf : t.counts[root];
+  // Visible objects, one bit per position in the subtree's range.
+  std::uint64_t* const marks = out.marks;
+  auto mark_range = [&](std::uint32_t first, std::uint32_t count) {
+    const std::uint32_t a = first - range_first, b = a + count - 1;  // count > 0
+    const std::uint64_t low = ~std::uint64_t{0} << (a & 63), high = ~std::uint64_t{0} >> (63 - (b & 63));
+    if (a / 64 == b / 64) {
+      marks[a / 64] |= low & high;
+      return;
+    }
+    marks[a / 64] |= low;
+    for (std::uint32_t w = a / 64 + 1; w < b / 64; ++w) marks[w] = ~std::uint64_t{0};
+    marks[b / 64] |= high;
+  };
+
+  // The objects of straddling leaves, listed (position, planes) as their leaves are found and
+  // tested W at a time at the end; their records are prefetched when listed.
+  std::uint32_t* const object_at = out.work + 2 * out.work_capacity;
+  std::uint32_t* const object_mask = object_at + range_count;
+  std::size_t objects = 0;
+
+  // Breadth first: a node's children are tested a level later, after their records were
+  // prefetched when they were listed (each node is listed once: work_capacity suffices).
+  std::uint32_t* const work_node = out.work;
+  std::uint32_t* const work_mask = out.work + out.work_capacity;
+  std::size_t head = 0, tail = 1;
+  work_node[0] = root;
+  work_mask[0] = root_mask;
+  while (head != tail) {
+    const unsigned take = static_cast<unsigned>(smaller(tail - head, W));
+    alignas(64) std::uint32_t node[W];
+    for (unsigned l = 0; l < W; ++l) node[l] = work_node[head + (l < take ? l : 0)];
+    const vi mask = load_ints(work_mask + head);  // lanes past take: read but not used (work has the room)
+    head += take;
+    vf col[8];  // min x y z, first, max x y z, link
+    gather_columns<kWalkNodeFloats>(t.nodes, node, take, col);
+    vi outside, straddled;
+    test_boxes(col, mask, planes, margin, outside, straddled);
+    counts.node_tests += take;
+    alignas(64) std::int32_t straddled_lanes[W];
+    __builtin_memcpy(straddled_lanes, &straddled, sizeof straddled);
+    const std::uint32_t valid = take >= W ? kAllLanes : (1u << take) - 1u;
+    for (std::uint32_t live = ~lane_bits(outside != 0) & valid; live != 0; live &= live - 1) {
+      const unsigned l = static_cast<unsigned>(__builtin_ctz(live));
+      const std::uint32_t planes_left = static_cast<std::uint32_t>(straddled_lanes[l]);
+      const std::uint32_t first = bits_of(col[3][l]), link = bits_of(col[7][l]);
+      const bool leaf = link & kWalkLeaf;
+      if (planes_left == 0) {  // INSIDE: the whole range, no further tests
+        const std::uint32_t count = leaf ? link & ~kWalkLeaf : t.counts[node[l]];
+        if (out.classes)
+          for (std::uint32_t k = first; k < first + count; ++k) out.classes[t.ids[k]] = kInside;
+        if (marks && count) mark_range(first, count);
+        counts.visible += count;
+        counts.inside += count;
+        continue;
+      }
+      if (leaf) {  // its objects, against the planes it straddles
+        const std::uint32_t count = link & ~kWalkLeaf;
+        const float* record = t.volumes + std::size_t(first) * object_floats;
+        for (std::size_t b = 0; b < count * object_floats; b += 16) __builtin_prefetch(record + b);
+        for (std::uint32_t k = first; k < first + count; ++k) {
+          object_at[objects] = k;
+          object_mask[objects++] = planes_left;
+        }
+        continue;
+      }
+      __builtin_prefetch(t.nodes + std::size_t(node[l] + 1) * kWalkNodeFloats);
+      __builtin_prefetch(t.nodes + std::size_t(link) * kWalkNodeFloats);
+      work_node[tail] = node[l] + 1;
+      work_mask[tail] = planes_left;
+      work_node[tail + 1] = link;
+      work_mask[tail + 1] = planes_left;
+      tail += 2;
+    }
+  }
+
+  for (std::size_t o = 0; o < objects; o += W) {
+    const unsigned take = static_cast<unsigned>(smaller(W, objects - o));
+    vf col[object_floats];
+    gather_columns<object_floats>(t.volumes, object_at + o, take, col);
+    const vi mask = load_ints(object_mask + o);  // lanes past take: read but not used
+    vi outside, crossing;
+    if constexpr (Kind == WalkKind::Obb)
+      test_obbs(col, mask, planes, outside, crossing);
+    else if constexpr (Kind == WalkKind::Sphere)
+      test_spheres(col, mask, planes, outside, crossing);
+    else
+      test_boxes(col, mask, planes, nullptr, outside, crossing);
+    const vi cls = (kInside - ((crossing != 0) & 1)) & ~(outside != 0);  // 2 inside, 1 intersecting, 0 outside
+    const std::uint32_t valid = take >= W ? kAllLanes : (1u << take) - 1u;
+    counts.visible += static_cast<std::uint32_t>(__builtin_popcount(lane_bits(cls != 0) & valid));
+    counts.inside += static_cast<std::uint32_t>(__builtin_popcount(lane_bits(cls == kInside) & valid));
+    for (unsigned l = 0; l < take; ++l) {
+      if (out.classes) out.classes[t.ids[object_at[o + l]]] = static_cast<std::uint8_t>(cls[l]);
+      if (marks) {
+        const std::uint32_t at = object_at[o + l] - range_first;
+        marks[at / 64] |= std::uint64_t(cls[l] != 0) << (at % 64);
+      }
+    }
+  }
+  counts.object_tests = objects;
+
+  return counts;
+}
+
+WalkCounts walk_aabb(const WalkTree& t, std::uint32_t node, std::uint32_t mask, const PlaneSet& planes, WalkOutput out) {
+  return walk<WalkKind::Aabb>(t, node, mask, planes, out);
+}
+WalkCounts walk_obb(const WalkTree& t, std::uint32_t node, std::uint32_t mask, const PlaneSet& planes, WalkOutput out) {
+  return walk<WalkKind::Obb>(t, node, mask, planes, out);
+}
+WalkCounts walk_sphere(const WalkTree& t, std::uint32_t node, std::uint32_t mask, const PlaneSet& planes, WalkOutput out) {
+  return walk<WalkKind::Sphere>(t, node, mask, planes, out);
 }
 
 }  // namespace

@@ -4,5 +4,6 @@
 #include "cull/simd_kernels.inl"
 
 namespace cullpipe::fast::detail {
-KernelTable portable_kernels() { return {portable::cull_aabb, portable::cull_obb, portable::cull_sphere, portable::touch, 4}; }
+KernelTable portable_kernels() { return {portable::cull_aabb, portable::cull_obb, portable::cull_sphere, portable::touch,
+          portable::walk_aabb, portable::walk_obb, portable::walk_sphere, 4}; }
 }  // namespace cullpipe::fast::detail
