@@ -381,11 +381,26 @@ inline void gather_columns(const float* records, const std::uint32_t* at, unsign
 #endif
 }
 
+/// For the box tests: each plane's p-vertex columns (4 + axis where the normal component is
+/// >= 0, -0 too, as pn_vertices; else the axis), chosen once per walk. The n-vertex column is
+/// the other one (p ^ 4).
+struct BoxPlanes {
+  std::uint32_t p[6][3];
+  explicit BoxPlanes(const PlaneSet& planes) : p{} {
+    for (std::uint32_t k = 0; k < planes.count; ++k) {
+      p[k][0] = planes.nx[k] >= 0.0f ? 4 : 0;
+      p[k][1] = planes.ny[k] >= 0.0f ? 5 : 1;
+      p[k][2] = planes.nz[k] >= 0.0f ? 6 : 2;
+    }
+  }
+};
+
 /// bvh::classify_masked of W boxes (min x y z in box[0..2], max in box[4..6]) against the
 /// planes in each lane's `mask`: `outside` nonzero where a p-vertex is behind, `straddled` the
 /// planes whose n-vertex is behind. With `margin` (OBB and sphere trees),
 /// classify_masked_margin.
-inline void test_boxes(const vf* box, vi mask, const PlaneSet& planes, const WalkTree* margin, vi& outside, vi& straddled) {
+inline void test_boxes(const vf* box, vi mask, const PlaneSet& planes, const BoxPlanes& columns, const WalkTree* margin, vi& outside,
+                       vi& straddled) {
   outside = straddled = vi{};
   const vf zero = {};
   vf reach = {};
@@ -394,10 +409,9 @@ inline void test_boxes(const vf* box, vi mask, const PlaneSet& planes, const Wal
   }
   for (std::uint32_t k = 0; k < planes.count; ++k) {
     const float nx = planes.nx[k], ny = planes.ny[k], nz = planes.nz[k], d = planes.d[k];
-    // The p-vertex (farthest along the normal) and n-vertex, as pn_vertices (-0 as positive).
-    const bool sx = nx >= 0.0f, sy = ny >= 0.0f, sz = nz >= 0.0f;
-    const vf dp = ((nx * box[sx ? 4 : 0] + ny * box[sy ? 5 : 1]) + nz * box[sz ? 6 : 2]) + d;
-    const vf dn = ((nx * box[sx ? 0 : 4] + ny * box[sy ? 1 : 5]) + nz * box[sz ? 2 : 6]) + d;
+    const std::uint32_t* p = columns.p[k];
+    const vf dp = ((nx * box[p[0]] + ny * box[p[1]]) + nz * box[p[2]]) + d;
+    const vf dn = ((nx * box[p[0] ^ 4] + ny * box[p[1] ^ 4]) + nz * box[p[2] ^ 4]) + d;
     const vi bit = mask & static_cast<std::int32_t>(1u << k);
     if (margin) {
       const vf size = reach + __builtin_fabsf(d);
@@ -445,6 +459,7 @@ template <WalkKind Kind>
 WalkCounts walk(const WalkTree& t, std::uint32_t root, std::uint32_t root_mask, const PlaneSet& planes, WalkOutput out) {
   constexpr unsigned object_floats = Kind == WalkKind::Obb ? kWalkObbFloats : Kind == WalkKind::Sphere ? kWalkSphereFloats : kWalkAabbFloats;
   const WalkTree* margin = Kind == WalkKind::Aabb ? nullptr : &t;
+  const BoxPlanes columns(planes);
   WalkCounts counts;
   const std::uint32_t range_first = bits_of(t.nodes[std::size_t(root) * kWalkNodeFloats + 3]);
   const std::uint32_t root_link = bits_of(t.nodes[std::size_t(root) * kWalkNodeFloats + 7]);
@@ -485,7 +500,7 @@ WalkCounts walk(const WalkTree& t, std::uint32_t root, std::uint32_t root_mask, 
     vf col[8];  // min x y z, first, max x y z, link
     gather_columns<kWalkNodeFloats>(t.nodes, node, take, col);
     vi outside, straddled;
-    test_boxes(col, mask, planes, margin, outside, straddled);
+    test_boxes(col, mask, planes, columns, margin, outside, straddled);
     counts.node_tests += take;
     alignas(64) std::int32_t straddled_lanes[W];
     __builtin_memcpy(straddled_lanes, &straddled, sizeof straddled);
@@ -535,7 +550,7 @@ WalkCounts walk(const WalkTree& t, std::uint32_t root, std::uint32_t root_mask, 
     else if constexpr (Kind == WalkKind::Sphere)
       test_spheres(col, mask, planes, outside, crossing);
     else
-      test_boxes(col, mask, planes, nullptr, outside, crossing);
+      test_boxes(col, mask, planes, columns, nullptr, outside, crossing);
     const vi cls = (kInside - ((crossing != 0) & 1)) & ~(outside != 0);  // 2 inside, 1 intersecting, 0 outside
     const std::uint32_t valid = take >= W ? kAllLanes : (1u << take) - 1u;
     counts.visible += static_cast<std::uint32_t>(__builtin_popcount(lane_bits(cls != 0) & valid));
