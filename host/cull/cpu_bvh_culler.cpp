@@ -212,7 +212,7 @@ void CpuBvhCuller::cull(const Frustum& frustum, const CpuBvhCullOptions& options
     thread_local std::vector<std::uint32_t> work;  // kept by the pool's threads
     const bvh::FlatNode& root = nodes[task.node_or_first];
     const std::size_t subtree_nodes = root.skip - task.node_or_first;
-    const std::size_t work_words = 2 * (subtree_nodes + root.count) + 16;  // + the widest vector
+    const std::size_t work_words = 2 * (subtree_nodes + 16 + root.count) + 16;  // detail::WalkOutput
     if (work.size() < work_words) work.resize(work_words);
     detail::WalkOutput out;
     out.classes = class_bytes;

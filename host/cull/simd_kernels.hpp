@@ -92,7 +92,7 @@ struct WalkTree {
 /// Where one walk's results go. `classes` (may be null): per object id. `marks` (may be
 /// null): a bitmap of (the subtree's object count + 63) / 64 words, zero, that gets bit p set
 /// for each visible object at position first + p of the subtree's range (first: the root's
-/// first object). `work`: 2 (work_capacity + the subtree's object count) + W words,
+/// first object). `work`: 2 (work_capacity + 16 + the subtree's object count) + 16 words,
 /// work_capacity at least the number of nodes in the subtree.
 struct WalkOutput {
   std::uint8_t* classes = nullptr;

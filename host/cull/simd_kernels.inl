@@ -98,6 +98,22 @@ inline std::uint32_t* append_ids(std::uint32_t* ids, std::uint32_t base, std::ui
   return ids + __builtin_popcount(lanes);
 }
 
+/// Writes the lanes of `values` whose bit is set in `lanes` to out[0..], in lane order; may
+/// write up to W values (the caller has that room).
+inline void compress_store(std::uint32_t* out, vi values, std::uint32_t lanes) {
+#if CULLPIPE_SIMD_LANES == 16 && defined(__AVX512F__)
+  _mm512_storeu_si512(out, _mm512_maskz_compress_epi32(static_cast<__mmask16>(lanes), reinterpret_cast<__m512i>(values)));
+#elif CULLPIPE_SIMD_LANES == 8 && defined(__AVX2__)
+  const __m256i order = _mm256_cvtepu8_epi32(_mm_cvtsi64_si128(static_cast<long long>(kCompress.entry[lanes])));
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(out), _mm256_permutevar8x32_epi32(reinterpret_cast<__m256i>(values), order));
+#else
+  for (unsigned l = 0; l < W; ++l) {
+    *out = static_cast<std::uint32_t>(values[l]);
+    out += (lanes >> l) & 1u;
+  }
+#endif
+}
+
 /// Writes the classes and visible ids of the W objects at `i` (of which `valid` are real) and
 /// counts them. outside / crossing: lanes behind a plane / straddling one.
 inline void emit(std::size_t i, std::size_t begin, unsigned valid, vi outside, vi crossing, ChunkOutput& out,
@@ -480,14 +496,15 @@ WalkCounts walk(const WalkTree& t, std::uint32_t root, std::uint32_t root_mask, 
 
   // The objects of straddling leaves, listed (position, planes) as their leaves are found and
   // tested W at a time at the end; their records are prefetched when listed.
-  std::uint32_t* const object_at = out.work + 2 * out.work_capacity;
+  const std::size_t span = out.work_capacity + W;  // a list and the room a vector store may write past it
+  std::uint32_t* const object_at = out.work + 2 * span;
   std::uint32_t* const object_mask = object_at + range_count;
   std::size_t objects = 0;
 
   // Breadth first: a node's children are tested a level later, after their records were
   // prefetched when they were listed (each node is listed once: work_capacity suffices).
   std::uint32_t* const work_node = out.work;
-  std::uint32_t* const work_mask = out.work + out.work_capacity;
+  std::uint32_t* const work_mask = out.work + span;
   std::size_t head = 0, tail = 1;
   work_node[0] = root;
   work_mask[0] = root_mask;
@@ -502,16 +519,29 @@ WalkCounts walk(const WalkTree& t, std::uint32_t root, std::uint32_t root_mask, 
     vi outside, straddled;
     test_boxes(col, mask, planes, columns, margin, outside, straddled);
     counts.node_tests += take;
+    const vi link = reinterpret_cast<vi>(col[7]);
+    const std::uint32_t valid = take >= W ? kAllLanes : (1u << take) - 1u;
+    const std::uint32_t live = ~lane_bits(outside != 0) & valid, leaves = lane_bits(link < 0);  // kWalkLeaf: the sign bit
+    const std::uint32_t inner = live & ~leaves & ~lane_bits(straddled == 0);
+    // Straddling inner nodes: both children listed, with the planes still to test.
+    if (inner) {
+      const unsigned listed = static_cast<unsigned>(__builtin_popcount(inner));
+      compress_store(work_node + tail, load_ints(node) + 1, inner);
+      compress_store(work_mask + tail, straddled, inner);
+      compress_store(work_node + tail + listed, link, inner);
+      compress_store(work_mask + tail + listed, straddled, inner);
+      for (std::size_t k = tail; k < tail + 2 * listed; ++k) __builtin_prefetch(t.nodes + std::size_t(work_node[k]) * kWalkNodeFloats);
+      tail += 2 * listed;
+    }
     alignas(64) std::int32_t straddled_lanes[W];
     __builtin_memcpy(straddled_lanes, &straddled, sizeof straddled);
-    const std::uint32_t valid = take >= W ? kAllLanes : (1u << take) - 1u;
-    for (std::uint32_t live = ~lane_bits(outside != 0) & valid; live != 0; live &= live - 1) {
-      const unsigned l = static_cast<unsigned>(__builtin_ctz(live));
+    for (std::uint32_t rest = live & ~inner; rest != 0; rest &= rest - 1) {
+      const unsigned l = static_cast<unsigned>(__builtin_ctz(rest));
       const std::uint32_t planes_left = static_cast<std::uint32_t>(straddled_lanes[l]);
-      const std::uint32_t first = bits_of(col[3][l]), link = bits_of(col[7][l]);
-      const bool leaf = link & kWalkLeaf;
+      const std::uint32_t first = bits_of(col[3][l]), lane_link = bits_of(col[7][l]);
+      const bool leaf = lane_link & kWalkLeaf;
+      const std::uint32_t count = leaf ? lane_link & ~kWalkLeaf : t.counts[node[l]];
       if (planes_left == 0) {  // INSIDE: the whole range, no further tests
-        const std::uint32_t count = leaf ? link & ~kWalkLeaf : t.counts[node[l]];
         if (out.classes)
           for (std::uint32_t k = first; k < first + count; ++k) out.classes[t.ids[k]] = kInside;
         if (marks && count) mark_range(first, count);
@@ -519,23 +549,13 @@ WalkCounts walk(const WalkTree& t, std::uint32_t root, std::uint32_t root_mask, 
         counts.inside += count;
         continue;
       }
-      if (leaf) {  // its objects, against the planes it straddles
-        const std::uint32_t count = link & ~kWalkLeaf;
-        const float* record = t.volumes + std::size_t(first) * object_floats;
-        for (std::size_t b = 0; b < count * object_floats; b += 16) __builtin_prefetch(record + b);
-        for (std::uint32_t k = first; k < first + count; ++k) {
-          object_at[objects] = k;
-          object_mask[objects++] = planes_left;
-        }
-        continue;
+      // A straddling leaf: its objects, against the planes it straddles.
+      const float* record = t.volumes + std::size_t(first) * object_floats;
+      for (std::size_t b = 0; b < count * object_floats; b += 16) __builtin_prefetch(record + b);
+      for (std::uint32_t k = first; k < first + count; ++k) {
+        object_at[objects] = k;
+        object_mask[objects++] = planes_left;
       }
-      __builtin_prefetch(t.nodes + std::size_t(node[l] + 1) * kWalkNodeFloats);
-      __builtin_prefetch(t.nodes + std::size_t(link) * kWalkNodeFloats);
-      work_node[tail] = node[l] + 1;
-      work_mask[tail] = planes_left;
-      work_node[tail + 1] = link;
-      work_mask[tail + 1] = planes_left;
-      tail += 2;
     }
   }
 
