@@ -415,15 +415,16 @@ struct BoxPlanes {
 /// planes in each lane's `mask`: `outside` nonzero where a p-vertex is behind, `straddled` the
 /// planes whose n-vertex is behind. With `margin` (OBB and sphere trees),
 /// classify_masked_margin.
-inline void test_boxes(const vf* box, vi mask, const PlaneSet& planes, const BoxPlanes& columns, const WalkTree* margin, vi& outside,
-                       vi& straddled) {
+inline void test_boxes(const vf* box, vi mask, std::uint32_t any, const PlaneSet& planes, const BoxPlanes& columns, const WalkTree* margin,
+                       vi& outside, vi& straddled) {
   outside = straddled = vi{};
   const vf zero = {};
   vf reach = {};
   if (margin) {
     reach = (larger(abs(box[0]), abs(box[4])) + larger(abs(box[1]), abs(box[5]))) + larger(abs(box[2]), abs(box[6]));
   }
-  for (std::uint32_t k = 0; k < planes.count; ++k) {
+  for (; any != 0; any &= any - 1) {
+    const std::uint32_t k = static_cast<std::uint32_t>(__builtin_ctz(any));
     const float nx = planes.nx[k], ny = planes.ny[k], nz = planes.nz[k], d = planes.d[k];
     const std::uint32_t* p = columns.p[k];
     const vf dp = ((nx * box[p[0]] + ny * box[p[1]]) + nz * box[p[2]]) + d;
@@ -443,9 +444,10 @@ inline void test_boxes(const vf* box, vi mask, const PlaneSet& planes, const Box
 }
 
 /// classify_planes of W OBBs (centre, u0, u1, u2, half extents in col[0..14]).
-inline void test_obbs(const vf* col, vi mask, const PlaneSet& planes, vi& outside, vi& crossing) {
+inline void test_obbs(const vf* col, vi mask, std::uint32_t any, const PlaneSet& planes, vi& outside, vi& crossing) {
   outside = crossing = vi{};
-  for (std::uint32_t k = 0; k < planes.count; ++k) {
+  for (; any != 0; any &= any - 1) {
+    const std::uint32_t k = static_cast<std::uint32_t>(__builtin_ctz(any));
     const float nx = planes.nx[k], ny = planes.ny[k], nz = planes.nz[k];
     const vf s = ((nx * col[0] + ny * col[1]) + nz * col[2]) + planes.d[k];
     const vf a0 = (nx * col[3] + ny * col[4]) + nz * col[5];
@@ -459,9 +461,10 @@ inline void test_obbs(const vf* col, vi mask, const PlaneSet& planes, vi& outsid
 }
 
 /// classify_planes of W spheres (centre, radius in col[0..3]).
-inline void test_spheres(const vf* col, vi mask, const PlaneSet& planes, vi& outside, vi& crossing) {
+inline void test_spheres(const vf* col, vi mask, std::uint32_t any, const PlaneSet& planes, vi& outside, vi& crossing) {
   outside = crossing = vi{};
-  for (std::uint32_t k = 0; k < planes.count; ++k) {
+  for (; any != 0; any &= any - 1) {
+    const std::uint32_t k = static_cast<std::uint32_t>(__builtin_ctz(any));
     const vf s = ((planes.nx[k] * col[0] + planes.ny[k] * col[1]) + planes.nz[k] * col[2]) + planes.d[k];
     const vi bit = mask & static_cast<std::int32_t>(1u << k);
     outside |= (s < -col[3]) & bit;
@@ -512,12 +515,14 @@ WalkCounts walk(const WalkTree& t, std::uint32_t root, std::uint32_t root_mask, 
     const unsigned take = static_cast<unsigned>(smaller(tail - head, W));
     alignas(64) std::uint32_t node[W];
     for (unsigned l = 0; l < W; ++l) node[l] = work_node[head + (l < take ? l : 0)];
+    std::uint32_t any = 0;  // the planes some lane tests (deep nodes straddle few)
+    for (unsigned l = 0; l < take; ++l) any |= work_mask[head + l];
     const vi mask = load_ints(work_mask + head);  // lanes past take: read but not used (work has the room)
     head += take;
     vf col[8];  // min x y z, first, max x y z, link
     gather_columns<kWalkNodeFloats>(t.nodes, node, take, col);
     vi outside, straddled;
-    test_boxes(col, mask, planes, columns, margin, outside, straddled);
+    test_boxes(col, mask, any, planes, columns, margin, outside, straddled);
     counts.node_tests += take;
     const vi link = reinterpret_cast<vi>(col[7]);
     const std::uint32_t valid = take >= W ? kAllLanes : (1u << take) - 1u;
@@ -564,13 +569,15 @@ WalkCounts walk(const WalkTree& t, std::uint32_t root, std::uint32_t root_mask, 
     vf col[object_floats];
     gather_columns<object_floats>(t.volumes, object_at + o, take, col);
     const vi mask = load_ints(object_mask + o);  // lanes past take: read but not used
+    std::uint32_t any = 0;
+    for (unsigned l = 0; l < take; ++l) any |= object_mask[o + l];
     vi outside, crossing;
     if constexpr (Kind == WalkKind::Obb)
-      test_obbs(col, mask, planes, outside, crossing);
+      test_obbs(col, mask, any, planes, outside, crossing);
     else if constexpr (Kind == WalkKind::Sphere)
-      test_spheres(col, mask, planes, outside, crossing);
+      test_spheres(col, mask, any, planes, outside, crossing);
     else
-      test_boxes(col, mask, planes, columns, nullptr, outside, crossing);
+      test_boxes(col, mask, any, planes, columns, nullptr, outside, crossing);
     const vi cls = (kInside - ((crossing != 0) & 1)) & ~(outside != 0);  // 2 inside, 1 intersecting, 0 outside
     const std::uint32_t valid = take >= W ? kAllLanes : (1u << take) - 1u;
     counts.visible += static_cast<std::uint32_t>(__builtin_popcount(lane_bits(cls != 0) & valid));
