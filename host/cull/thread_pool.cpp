@@ -1,6 +1,7 @@
 #include "cull/thread_pool.hpp"
 
 #include <algorithm>
+#include <chrono>
 
 #if defined(__SSE__)
 #include <xmmintrin.h>
@@ -40,10 +41,33 @@ void ThreadPool::run_tasks() {
   }
 }
 
+namespace {
+
+/// Spins until done() or about kSpin has passed: a pass of several parallel_for calls (or the
+/// next frame's pass) finds the threads awake instead of paying a sleep and wake-up each
+/// (tens of microseconds on a virtual machine, a large part of a hierarchical pass).
+template <class Done>
+bool spin_until(Done done) {
+  constexpr auto kSpin = std::chrono::microseconds(200);
+  const auto start = std::chrono::steady_clock::now();
+  for (unsigned i = 1;; ++i) {
+    if (done()) return true;
+#if defined(__SSE__)
+    _mm_pause();
+#endif
+    if (i % 64 == 0 && std::chrono::steady_clock::now() - start > kSpin) return done();
+  }
+}
+
+}  // namespace
+
 void ThreadPool::worker_loop() {
   std::size_t seen = 0;
   std::unique_lock lock(mutex_);
   for (;;) {
+    lock.unlock();
+    spin_until([&] { return stop_.load(std::memory_order_relaxed) || generation_.load(std::memory_order_relaxed) != seen; });
+    lock.lock();
     wake_.wait(lock, [&] { return stop_ || generation_ != seen; });
     if (stop_) return;
     seen = generation_;
@@ -81,6 +105,7 @@ void ThreadPool::parallel_for(std::size_t tasks, TaskRef task) {
   }
   wake_.notify_all();
   run_tasks();
+  spin_until([&] { return busy_.load(std::memory_order_relaxed) == 0; });
   std::unique_lock lock(mutex_);
   // Every task has been taken; wait for workers still running one (or about to look).
   done_.wait(lock, [&] { return busy_ == 0; });

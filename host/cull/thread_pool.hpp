@@ -1,4 +1,5 @@
 #pragma once
+#include <atomic>
 #include <condition_variable>
 #include <cstddef>
 #include <cstdint>
@@ -26,7 +27,9 @@ class TaskRef {
 /// on the caller. Tasks are handed out one at a time from a shared counter, so uneven tasks
 /// balance themselves. Tasks run with the caller's floating-point mode (on x86, its MXCSR:
 /// flush-to-zero, denormals-are-zero, rounding), so a result does not depend on which thread
-/// ran it. Not reentrant: call parallel_for from one thread at a time.
+/// ran it. After a parallel_for the workers (and, while it waits for them, the caller) spin
+/// for up to 200 microseconds before they sleep, so the next call finds them awake. Not
+/// reentrant: call parallel_for from one thread at a time.
 class ThreadPool {
  public:
   /// threads = 0: std::thread::hardware_concurrency() (at least 1).
@@ -55,11 +58,12 @@ class ThreadPool {
   const TaskRef* task_ = nullptr;
   std::size_t task_count_ = 0;
   std::size_t next_task_ = 0;      // guarded by mutex_ (tasks are coarse: one lock per task is cheap)
-  std::size_t generation_ = 0;     // bumped per parallel_for
-  unsigned busy_ = 0;              // workers inside the current generation
+  // Written under mutex_; atomic so that threads may spin on them before they sleep.
+  std::atomic<std::size_t> generation_ = 0;  // bumped per parallel_for
+  std::atomic<unsigned> busy_ = 0;           // workers inside the current generation
   std::exception_ptr error_;
   std::uint32_t fp_mode_ = 0;  // the caller's MXCSR for this parallel_for (x86)
-  bool stop_ = false;
+  std::atomic<bool> stop_ = false;
 };
 
 }  // namespace cullpipe::fast
