@@ -5,10 +5,11 @@
 //   reference  scalar CPU reference, one thread, per-object classes (reference::classify_all)
 //   cpu-fast   SIMD + threads (fast::CpuCuller), per-object classes and the visible list
 //   cpu-read   the memory floor: cpu-fast's loads of the same bytes with no tests
-//   cpu-bvh    scalar hierarchical traversal (bvh::cull_hierarchical), AABBs only
-//   cpu-fast-bvh  the same traversal on every core (fast::CpuBvhCuller), AABBs only
+//   cpu-bvh    scalar hierarchical traversal (bvh::cull_hierarchical), a class per object
+//   cpu-fast-bvh  the same tests on every core with SIMD kernels (fast::CpuBvhCuller), the visible list
 //   gpu-flat   GpuCuller, visible list compacted on the device (time between timestamps)
-//   gpu-bvh    BvhCuller, visible list, AABBs only
+//   gpu-bvh    BvhCuller, visible list
+// The hierarchies (binned SAH, leaves of 4) are built over the volumes' enclosing boxes.
 // Scenes: the first N objects of one uniform random scene, in shuffled order or sorted along the
 // Morton curve; the camera's field of view is chosen so that about 1%, 10%, 50% are visible.
 // Every cell's answers are checked once against the reference before it is timed; ns/object
