@@ -15,6 +15,7 @@ namespace cullpipe::fast {
 namespace {
 
 constexpr std::uint32_t kRangeChunk = 16384;  // objects per accepted-range task
+constexpr std::size_t kTaskObjects = 8192;     // objects per subtree task, about, at the least
 
 }  // namespace
 
@@ -148,7 +149,9 @@ void CpuBvhCuller::cull(const Frustum& frustum, const CpuBvhCullOptions& options
                                  : bvh::classify_masked_margin(box, frustum, mask, straddled);
   };
   const std::uint32_t all = (1u << frustum.active().size()) - 1u;
-  const std::size_t wanted = std::size_t(pool_->size()) * 16;
+  // About 16 subtrees per thread, but none much smaller than kTaskObjects: a small tree is
+  // one task on the calling thread (a task costs more than walking a few hundred nodes).
+  const std::size_t wanted = std::clamp<std::size_t>(n / kTaskObjects, 1, std::size_t(pool_->size()) * 16);
   std::deque<Task> frontier{{Task::Subtree, 0, all}};
   std::vector<Task>& tasks = tasks_;
   tasks.clear();
