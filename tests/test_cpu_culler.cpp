@@ -5,11 +5,15 @@
 
 #include <atomic>
 #include <cfenv>
+#include <chrono>
 #include <cstdlib>
 #include <new>
 #include <cmath>
 #include <limits>
+#include <map>
+#include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
 #if defined(__SSE__)
 #include <xmmintrin.h>
@@ -568,9 +572,9 @@ TEST(CpuBvhCuller, EqualsTheScalarTraversalExactly) {
 // walk must give the scalar traversal's classes, counts and list.
 TEST(CpuBvhCuller, TouchingBoxesAndLargeLeavesEqualTheScalarTraversal) {
   test::Rng rng{23};
-  std::vector<Aabb> boxes(5000);
+  std::vector<Aabb> boxes(60000);  // several subtree tasks (one per 8192 objects at most)
   for (Aabb& b : boxes) {
-    const glm::vec3 lo = glm::floor(rng.vec3(-12.0f, 12.0f));
+    const glm::vec3 lo = glm::floor(rng.vec3(-24.0f, 24.0f));
     const glm::vec3 size = glm::floor(rng.vec3(0.0f, 3.0f));
     b = {lo, lo + size};
     for (int a = 0; a < 3; ++a) {
@@ -600,6 +604,55 @@ TEST(CpuBvhCuller, TouchingBoxesAndLargeLeavesEqualTheScalarTraversal) {
         expect_visible_list(expected, tree, ids, what);
         if (HasFatalFailure()) return;
       }
+    }
+  }
+}
+
+// OBB and sphere hierarchies at the node margin's edges: volumes touching axis planes (and a
+// float step inside them), and volumes past 2^120 where the margin decides nothing. Every
+// instruction set's walk must give the scalar traversal's classes, counts and list.
+TEST(CpuBvhCuller, MarginEdgesAndHugeCoordinatesEqualTheScalarTraversal) {
+  test::Rng rng{29};
+  std::vector<Sphere> spheres;
+  std::vector<Obb> obbs;
+  for (int i = 0; i < 40000; ++i) {
+    glm::vec3 c = glm::floor(rng.vec3(-20.0f, 20.0f));
+    const float r = std::floor(rng.uniform(0.0f, 4.0f));
+    if (i % 3 == 0) c.x = r;  // touching x = 0 from inside
+    if (i % 5 == 0) c.y = -r;  // touching y = 0 from inside
+    if (i % 7 == 0) c.x = std::nextafter(r, 0.0f);  // a float step across
+    if (i % 97 == 0) c = glm::vec3(0x1p121f * float(1 + i % 3), -0x1p122f, 0x1p121f);  // past 2^120
+    spheres.push_back({c, r});
+    Obb b;
+    b.center = c;
+    b.basis = i % 2 ? glm::mat3(1.0f) : rng.rotation();
+    b.half_extents = glm::vec3(r, r * 0.5f, r);
+    obbs.push_back(b);
+  }
+  std::vector<Frustum> views = test_views(false);
+  const std::vector<glm::vec4> axis_planes = {{1, 0, 0, 0}, {0, -1, 0, 0}, {0, 0, 1, 10}, {0, 0, -1, 10}};
+  views.push_back(Frustum::from_planes(axis_planes));
+  const std::vector<glm::vec4> far_planes = {{1, 0, 0, -0x1p121f}, {0, -1, 0, 0}};
+  views.push_back(Frustum::from_planes(far_planes));
+  const bvh::FlatTree sphere_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Sphere>(spheres))));
+  const bvh::FlatTree obb_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(obbs))));
+  for (Isa isa : runnable_isas()) {
+    fast::CpuBvhCuller culler(2, isa);
+    for (std::size_t v = 0; v < views.size(); ++v) {
+      const std::string what = "isa=" + std::string(to_string(isa)) + " view " + std::to_string(v);
+      std::vector<std::uint32_t> ids;
+      bvh::HierarchicalResult got;
+      culler.upload(sphere_tree, std::span<const Sphere>(spheres));
+      const bvh::HierarchicalResult s = bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(spheres), views[v]);
+      culler.cull(views[v], {true, true}, got, ids);
+      expect_same_traversal(s, got, "spheres " + what);
+      expect_visible_list(s, sphere_tree, ids, "spheres " + what);
+      culler.upload(obb_tree, std::span<const Obb>(obbs));
+      const bvh::HierarchicalResult o = bvh::cull_hierarchical(obb_tree, std::span<const Obb>(obbs), views[v]);
+      culler.cull(views[v], {true, true}, got, ids);
+      expect_same_traversal(o, got, "obbs " + what);
+      expect_visible_list(o, obb_tree, ids, "obbs " + what);
+      if (HasFatalFailure()) return;
     }
   }
 }
@@ -685,6 +738,58 @@ TEST(CpuBvhCuller, RefusesLeavesThatDoNotEncloseTheirVolumes) {
     ADD_FAILURE() << "a tree over the centres was accepted";
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("enclosing_boxes"), std::string::npos) << e.what();
+  }
+}
+
+// A worker that wakes late, after the caller finished a call and started the next, must not
+// run the next call's tasks in the float mode it loaded for the first: every task runs in the
+// mode of the call that issued it, even when it changes every call.
+TEST(ThreadPool, EveryTaskRunsInItsCallersFloatMode) {
+#if defined(__SSE__)
+  fast::ThreadPool pool(3);
+  const unsigned saved = _mm_getcsr();
+  constexpr unsigned kControl = 0xFFC0u;  // rounding, FTZ, DAZ and the exception masks (not the flags)
+  for (int round = 0; round < 3000; ++round) {
+    const unsigned mode = round % 2 ? saved | 0x8040u : saved & ~0x8040u;  // flush-to-zero and denormals-are-zero
+    std::vector<unsigned> seen(16);
+    _mm_setcsr(mode);
+    pool.parallel_for(seen.size(), [&](std::size_t t) { seen[t] = _mm_getcsr(); });
+    _mm_setcsr(saved);
+    for (unsigned m : seen) ASSERT_EQ(m & kControl, mode & kControl) << "round " << round;
+  }
+#else
+  GTEST_SKIP() << "no MXCSR";
+#endif
+}
+
+// The workers sleep after their spin and wake for the next call; thread_index() names the
+// running thread (the same index always the same thread), and a pool destroyed while its
+// workers spin shuts down.
+TEST(ThreadPool, WakesAfterSleepingAndIndexesItsThreads) {
+  fast::ThreadPool pool(3);
+  std::map<unsigned, std::thread::id> owner;
+  std::mutex m;
+  for (int round = 0; round < 6; ++round) {
+    if (round % 2) std::this_thread::sleep_for(std::chrono::milliseconds(2));  // past the spin
+    std::vector<int> hits(64, 0);
+    pool.parallel_for(hits.size(), [&](std::size_t t) {
+      const unsigned index = pool.thread_index();
+      std::lock_guard lock(m);
+      ++hits[t];
+      EXPECT_LT(index, pool.size());
+      const auto [it, fresh] = owner.emplace(index, std::this_thread::get_id());
+      EXPECT_EQ(it->second, std::this_thread::get_id()) << "index " << index << " on two threads";
+      (void)fresh;
+    });
+    for (int h : hits) ASSERT_EQ(h, 1);
+  }
+  EXPECT_EQ(owner.at(0), std::this_thread::get_id());
+  EXPECT_EQ(pool.thread_index(), 0u);
+  for (int k = 0; k < 20; ++k) {
+    fast::ThreadPool short_lived(2);
+    std::atomic<int> ran{0};
+    short_lived.parallel_for(8, [&](std::size_t) { ++ran; });
+    EXPECT_EQ(ran.load(), 8);
   }
 }
 

@@ -15,7 +15,7 @@ namespace cullpipe::fast {
 namespace {
 
 constexpr std::uint32_t kRangeChunk = 16384;  // objects per accepted-range task
-constexpr std::size_t kTaskObjects = 8192;     // objects per subtree task, about, at the least
+constexpr std::size_t kTaskObjects = 8192;     // at most one subtree task per this many objects
 
 }  // namespace
 
@@ -81,6 +81,8 @@ void CpuBvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume
   // Each id exactly once (checked): the threads write classes by id without racing.
   // Everything is built before anything changes, so a failure leaves the old upload.
   const std::size_t nodes = tree.nodes.size();
+  if (nodes >= detail::kWalkLeaf)  // a link at or past the leaf bit would read as a leaf
+    throw std::length_error("CpuBvhCuller::upload: " + std::to_string(nodes) + " nodes (at most 2^31 - 1)");
   std::vector<float> walk_nodes(nodes * detail::kWalkNodeFloats);
   std::vector<std::uint32_t> counts(nodes);
   for (std::size_t i = 0; i < nodes; ++i) {
@@ -149,7 +151,7 @@ void CpuBvhCuller::cull(const Frustum& frustum, const CpuBvhCullOptions& options
                                  : bvh::classify_masked_margin(box, frustum, mask, straddled);
   };
   const std::uint32_t all = (1u << frustum.active().size()) - 1u;
-  // About 16 subtrees per thread, but none much smaller than kTaskObjects: a small tree is
+  // About 16 subtrees per thread, but at most one per kTaskObjects objects: a small tree is
   // one task on the calling thread (a task costs more than walking a few hundred nodes).
   const std::size_t wanted = std::clamp<std::size_t>(n / kTaskObjects, 1, std::size_t(pool_->size()) * 16);
   std::deque<Task> frontier{{Task::Subtree, 0, all}};
@@ -186,6 +188,7 @@ void CpuBvhCuller::cull(const Frustum& frustum, const CpuBvhCullOptions& options
 
   std::vector<Tally>& tallies = tallies_;
   tallies.assign(tasks.size(), Tally{});
+  work_.resize(pool_->size());
   // Each subtree task marks its visible objects in its own words of marks_ (a bit per object
   // of its range), from which the last step lists them.
   std::size_t mark_words = 0;
@@ -212,7 +215,7 @@ void CpuBvhCuller::cull(const Frustum& frustum, const CpuBvhCullOptions& options
       tally.visible = tally.inside = count;
       return;
     }
-    thread_local std::vector<std::uint32_t> work;  // kept by the pool's threads
+    std::vector<std::uint32_t>& work = work_[pool_->thread_index()];  // kept between passes
     const bvh::FlatNode& root = nodes[task.node_or_first];
     const std::size_t subtree_nodes = root.skip - task.node_or_first;
     const std::size_t work_words = 2 * (subtree_nodes + 16 + root.count) + 16;  // detail::WalkOutput

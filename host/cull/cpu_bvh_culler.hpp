@@ -33,12 +33,14 @@ struct CpuBvhCullOptions {
 /// visible and inside counts.
 ///
 /// The top of the tree is walked breadth first on the calling thread until there are enough
-/// subtrees for the threads (about 16 per thread); each subtree is then walked depth first by
-/// one thread, with the SIMD kernels of CpuCuller's instruction set: a node or object is
-/// tested against every plane at once, one plane per lane, each lane doing the scalar test's
-/// float operations in its order. INSIDE ranges are split into chunks so one large accepted
-/// subtree still uses every core. Objects are written by id, and a subtree's objects are its
-/// own, so no two threads write the same class.
+/// subtrees for the threads (about 16 per thread, fewer for small trees: one per 8192
+/// objects); each subtree is then tested by one thread with the SIMD walk kernels of the
+/// culler's instruction set (detail::WalkKernel): W nodes or objects at a time, one per lane,
+/// tested plane by plane, each lane doing the scalar test's float operations in its order on
+/// the planes of its own mask. The tests are the scalar traversal's, in another order; the
+/// visible objects are marked in a bitmap and listed in tree order. INSIDE ranges are split
+/// into chunks so one large accepted subtree still uses every core. Objects are written by
+/// id, and a subtree's objects are its own, so no two threads write the same class.
 ///
 /// The objects may be AABBs, OBBs or spheres (bvh::cull_hierarchical's three forms: a tree
 /// over OBBs or spheres is built over bvh::enclosing_boxes and its nodes are tested with a
@@ -97,6 +99,7 @@ class CpuBvhCuller {
   std::vector<Task> tasks_;
   std::vector<Tally> tallies_;
   std::vector<std::uint64_t> marks_;  // the subtree tasks' visible objects, a bit each
+  std::vector<std::vector<std::uint32_t>> work_;  // per pool thread: a walk's work lists
   std::vector<std::size_t> offsets_;
 };
 

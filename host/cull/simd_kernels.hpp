@@ -1,9 +1,9 @@
 #pragma once
-// Internal interface between cpu_culler.cpp and the SIMD kernels. The kernels are compiled
-// three times from simd_kernels.inl with different instruction sets (simd_portable.cpp,
-// simd_avx2.cpp, simd_avx512.cpp), so this header holds plain data only: a kernel translation
-// unit must not instantiate inline functions it shares with the rest of the program (the
-// linker could keep its AVX-512 copy for everyone).
+// Internal interface between the CPU cullers (cpu_culler.cpp, cpu_bvh_culler.cpp) and the SIMD
+// kernels. The kernels are compiled three times from simd_kernels.inl with different
+// instruction sets (simd_portable.cpp, simd_avx2.cpp, simd_avx512.cpp), so this header holds
+// plain data only: a kernel translation unit must not instantiate inline functions it shares
+// with the rest of the program (the linker could keep its AVX-512 copy for everyone).
 #include <cstddef>
 #include <cstdint>
 

@@ -9,10 +9,21 @@
 
 namespace cullpipe::fast {
 
+namespace {
+// The pool whose worker this thread is, and its index there (workers only).
+thread_local const ThreadPool* tls_pool = nullptr;
+thread_local unsigned tls_index = 0;
+}  // namespace
+
 ThreadPool::ThreadPool(unsigned threads) {
   if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
   workers_.reserve(threads - 1);
-  for (unsigned t = 1; t < threads; ++t) workers_.emplace_back([this] { worker_loop(); });
+  for (unsigned t = 1; t < threads; ++t)
+    workers_.emplace_back([this, t] {
+      tls_pool = this;
+      tls_index = t;
+      worker_loop();
+    });
 }
 
 ThreadPool::~ThreadPool() {
@@ -24,9 +35,15 @@ ThreadPool::~ThreadPool() {
   for (std::thread& w : workers_) w.join();
 }
 
-void ThreadPool::run_tasks() {
+
+unsigned ThreadPool::thread_index() const { return tls_pool == this ? tls_index : 0u; }
+
+void ThreadPool::run_tasks(std::size_t generation) {
   std::unique_lock lock(mutex_);
-  while (next_task_ < task_count_) {
+  // Only the tasks of `generation`: a worker that woke late, after the caller had finished
+  // that generation and started the next, must not run the next one's tasks in the float
+  // mode it loaded for this one.
+  while (generation_ == generation && next_task_ < task_count_) {
     const std::size_t t = next_task_++;
     const TaskRef task = *task_;
     lock.unlock();
@@ -48,7 +65,7 @@ namespace {
 /// (tens of microseconds on a virtual machine, a large part of a hierarchical pass).
 template <class Done>
 bool spin_until(Done done) {
-  constexpr auto kSpin = std::chrono::microseconds(200);
+  constexpr auto kSpin = std::chrono::microseconds(50);
   const auto start = std::chrono::steady_clock::now();
   for (unsigned i = 1;; ++i) {
     if (done()) return true;
@@ -77,7 +94,7 @@ void ThreadPool::worker_loop() {
     _mm_setcsr(fp_mode_);
 #endif
     lock.unlock();
-    run_tasks();
+    run_tasks(seen);
 #if defined(__SSE__)
     _mm_setcsr(own_mode);
 #endif
@@ -92,6 +109,7 @@ void ThreadPool::parallel_for(std::size_t tasks, TaskRef task) {
     for (std::size_t t = 0; t < tasks; ++t) task(t);
     return;
   }
+  std::size_t generation = 0;
   {
     std::lock_guard lock(mutex_);
     task_ = &task;
@@ -101,10 +119,10 @@ void ThreadPool::parallel_for(std::size_t tasks, TaskRef task) {
 #endif
     next_task_ = 0;
     error_ = nullptr;
-    ++generation_;
+    generation = ++generation_;
   }
   wake_.notify_all();
-  run_tasks();
+  run_tasks(generation);
   spin_until([&] { return busy_.load(std::memory_order_relaxed) == 0; });
   std::unique_lock lock(mutex_);
   // Every task has been taken; wait for workers still running one (or about to look).

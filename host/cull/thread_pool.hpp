@@ -28,7 +28,7 @@ class TaskRef {
 /// balance themselves. Tasks run with the caller's floating-point mode (on x86, its MXCSR:
 /// flush-to-zero, denormals-are-zero, rounding), so a result does not depend on which thread
 /// ran it. After a parallel_for the workers (and, while it waits for them, the caller) spin
-/// for up to 200 microseconds before they sleep, so the next call finds them awake. Not
+/// for up to 50 microseconds before they sleep, so the next call finds them awake. Not
 /// reentrant: call parallel_for from one thread at a time.
 class ThreadPool {
  public:
@@ -39,6 +39,9 @@ class ThreadPool {
   ThreadPool& operator=(const ThreadPool&) = delete;
 
   unsigned size() const { return static_cast<unsigned>(workers_.size()) + 1; }
+  /// Inside a task: which of the pool's threads runs it, 0 (the caller of parallel_for) to
+  /// size() - 1, so that a task may use per-thread scratch. Outside the pool's workers, 0.
+  unsigned thread_index() const;
 
   /// Runs task(t) for t = 0..tasks-1 across the pool and returns when all have finished.
   /// The first exception thrown by a task is rethrown here (the remaining tasks still run).
@@ -50,7 +53,7 @@ class ThreadPool {
 
  private:
   void worker_loop();
-  void run_tasks();
+  void run_tasks(std::size_t generation);
 
   std::vector<std::thread> workers_;
   std::mutex mutex_;
