@@ -3,9 +3,11 @@
 // Part "build": for each builder and object count, the median build time (one thread),
 // objects per second and the tree's SAH cost, also as a ratio to binned SAH's cost.
 // Part "cull": flat against hierarchical culling of the same objects, on the CPU (scalar
-// reference vs scalar traversal) and on the GPU (flat pass vs hierarchical passes, timestamps),
-// with the camera's field of view chosen so that about 1%, 10%, 50%, ... of the objects are
-// visible. Every hierarchical answer is checked: CPU traversal == flat reference, GPU == CPU.
+// reference vs scalar traversal; fast::CpuCuller vs fast::CpuBvhCuller, both writing the
+// visible list) and on the GPU (flat pass vs hierarchical pass, timestamps), with the camera's
+// field of view chosen so that about 1%, 10%, 50%, ... of the objects are visible. Every
+// hierarchical answer is checked: CPU traversal == flat reference, GPU and fast CPU == CPU
+// traversal (classes or list, and test counts).
 //
 // usage: bench_bvh [--part build|cull|all] [--sizes 1000,...] [--builders a,b|all]
 //                  [--cull-size N] [--leaf-size L] [--fractions 0.01,0.1,0.5] [--repeats R] [--device NAME]
@@ -23,6 +25,8 @@
 
 #include "bvh/builders.hpp"
 #include "bvh/bvh.hpp"
+#include "cull/cpu_bvh_culler.hpp"
+#include "cull/cpu_culler.hpp"
 #include "cull/reference.hpp"
 #include "gpu/bvh_culler.hpp"
 #include "gpu/gpu_culler.hpp"
@@ -94,11 +98,21 @@ nlohmann::json bench_cull(std::size_t n, std::uint32_t leaf_size, const std::vec
   const double build_ns = since(t0);
   flat_culler.upload(std::span<const Aabb>(boxes));
   bvh_culler.upload(flat, boxes);
+  fast::CpuCuller fast_flat;  // every core, the widest kernels
+  fast::CpuBvhCuller fast_bvh;
+  fast_flat.upload(std::span<const Aabb>(boxes));
+  fast_bvh.upload(flat, boxes);
+  fast::CpuCullOptions list_only;
+  list_only.classes = false;
+  std::vector<fast::CpuViewResult> fast_results;
+  bvh::HierarchicalResult fast_h;
+  std::vector<std::uint32_t> fast_ids;
   std::printf("Hierarchical vs flat culling: %zu uniform random AABBs, binned-SAH tree, leaves of <= %u (%zu nodes, built in %.0f ms)\n", n,
               leaf_size, flat.nodes.size(), build_ns / 1e6);
-  std::printf("gpu: %s, %s\n\n", ctx.info().name.c_str(), ctx.info().driver.c_str());
-  std::printf("%8s %8s %12s %12s %7s %12s %12s %7s %11s %11s %6s\n", "target", "visible", "cpu flat ms", "cpu bvh ms", "cpu x",
-              "gpu flat ms", "gpu bvh ms", "gpu x", "node tests", "obj tests", "agree");
+  std::printf("gpu: %s, %s; fast CPU: %s kernels, %u threads\n\n", ctx.info().name.c_str(), ctx.info().driver.c_str(),
+              std::string(fast::to_string(fast_flat.isa())).c_str(), fast_flat.threads());
+  std::printf("%8s %8s %12s %12s %7s %12s %12s %7s %12s %12s %7s %11s %11s %6s\n", "target", "visible", "cpu flat ms", "cpu bvh ms",
+              "cpu x", "fast flat ms", "fast bvh ms", "fast x", "gpu flat ms", "gpu bvh ms", "gpu x", "node tests", "obj tests", "agree");
   nlohmann::json cells = nlohmann::json::array();
   const int reps = repeats_override > 0 ? repeats_override : 7;
   for (double fraction : fractions) {
@@ -107,7 +121,7 @@ nlohmann::json bench_cull(std::size_t n, std::uint32_t leaf_size, const std::vec
                                            [&](const Frustum& v) { return bvh::cull_hierarchical(flat, boxes, v).visible; }, achieved);
     const Frustum views[1] = {f};
     std::vector<Classification> ref(boxes.size());
-    std::vector<double> cpu_flat, cpu_bvh, gpu_flat, gpu_bvh;
+    std::vector<double> cpu_flat, cpu_bvh, fast_flat_ns, fast_bvh_ns, gpu_flat, gpu_bvh;
     bvh::HierarchicalResult h;
     reference::CullCounts counts;
     const gpu::CullOptions counters_only{false, false, 0};
@@ -120,18 +134,32 @@ nlohmann::json bench_cull(std::size_t n, std::uint32_t leaf_size, const std::vec
       t = Clock::now();
       h = bvh::cull_hierarchical(flat, boxes, f);
       cpu_bvh.push_back(since(t));
+      t = Clock::now();
+      fast_flat.cull(views, list_only, fast_results);
+      fast_flat_ns.push_back(since(t));
+      t = Clock::now();
+      fast_bvh.cull(f, {false, true}, fast_h, fast_ids);
+      fast_bvh_ns.push_back(since(t));
       gpu_flat.push_back(flat_culler.cull(views, counters_only).timings.gpu_ns);
       gpu_bvh.push_back(bvh_culler.cull(views, counters_only).timings.gpu_ns);
     }
     const gpu::CullResult g = bvh_culler.cull(views);
+    std::vector<std::uint32_t> tree_order;  // the fast hierarchy's list: the visible ids in the tree's object order
+    for (std::uint32_t o : flat.objects)
+      if (is_visible(h.classes[o])) tree_order.push_back(o);
     const bool agree = h.classes == ref && g.views[0].classes == h.classes && g.views[0].node_tests == h.node_tests &&
-                       g.views[0].object_tests == h.object_tests && g.views[0].counts == counts;
+                       g.views[0].object_tests == h.object_tests && g.views[0].counts == counts &&
+                       fast_results[0].counts == counts && fast_h.node_tests == h.node_tests && fast_h.object_tests == h.object_tests &&
+                       fast_ids == tree_order;
     all_agree &= agree;
     const double cf = median(cpu_flat), cb = median(cpu_bvh), gf = median(gpu_flat), gb = median(gpu_bvh);
-    std::printf("%7.1f%% %7.1f%% %12.3f %12.3f %7.2f %12.3f %12.3f %7.2f %11zu %11zu %6s\n", 100 * fraction, 100 * achieved, cf / 1e6,
-                cb / 1e6, cf / cb, gf / 1e6, gb / 1e6, gf / std::max(gb, 1.0), h.node_tests, h.object_tests, agree ? "yes" : "NO");
+    const double ff = median(fast_flat_ns), fb = median(fast_bvh_ns);
+    std::printf("%7.1f%% %7.1f%% %12.3f %12.3f %7.2f %12.3f %12.3f %7.2f %12.3f %12.3f %7.2f %11zu %11zu %6s\n", 100 * fraction,
+                100 * achieved, cf / 1e6, cb / 1e6, cf / cb, ff / 1e6, fb / 1e6, ff / fb, gf / 1e6, gb / 1e6, gf / std::max(gb, 1.0),
+                h.node_tests, h.object_tests, agree ? "yes" : "NO");
     std::fflush(stdout);
     cells.push_back({{"target_fraction", fraction}, {"visible_fraction", achieved}, {"cpu_flat_ns", cf}, {"cpu_bvh_ns", cb},
+                     {"fast_flat_ns", ff}, {"fast_bvh_ns", fb},
                      {"gpu_flat_ns", gf}, {"gpu_bvh_ns", gb}, {"node_tests", h.node_tests}, {"object_tests", h.object_tests},
                      {"agree", agree}});
   }
