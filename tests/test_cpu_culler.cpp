@@ -657,6 +657,59 @@ TEST(CpuBvhCuller, MarginEdgesAndHugeCoordinatesEqualTheScalarTraversal) {
   }
 }
 
+// Several views in one pass: each view's classes, counts and list equal the scalar
+// traversal's for that view alone (views of 6, 4, 1 and no planes, everything and nothing
+// visible), for every volume kind, with and without classes and list.
+TEST(CpuBvhCuller, SeveralViewsInOnePassEqualOnePassEach) {
+  test::Rng rng{37};
+  const test::RandomVolumes v = test::random_volumes(rng, 50000, 30.0f, 2.0f);
+  std::vector<Frustum> views = test_views(false);
+  const glm::vec4 everything[1] = {{0, 0, 1, 1e6f}};
+  const glm::vec4 nothing[1] = {{0, 0, 1, -1e6f}};
+  views.push_back(Frustum::from_planes(everything));
+  views.push_back(Frustum::from_planes(nothing));
+  views.push_back(Frustum::from_view_proj(test::test_view_proj(5.0f, 1.0f)));
+  const bvh::FlatTree box_tree = bvh::flatten(bvh::build("binned-sah", v.aabbs));
+  const bvh::FlatTree obb_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(v.obbs))));
+  const bvh::FlatTree sphere_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Sphere>(v.spheres))));
+  std::vector<fast::CpuBvhViewResult> results(2);  // resized by the pass
+  for (unsigned threads : {1u, 3u}) {
+    fast::CpuBvhCuller culler(threads);
+    for (int kind = 0; kind < 3; ++kind) {
+      const bvh::FlatTree& tree = kind == 0 ? box_tree : kind == 1 ? obb_tree : sphere_tree;
+      if (kind == 0) culler.upload(tree, std::span<const Aabb>(v.aabbs));
+      if (kind == 1) culler.upload(tree, std::span<const Obb>(v.obbs));
+      if (kind == 2) culler.upload(tree, std::span<const Sphere>(v.spheres));
+      for (const fast::CpuBvhCullOptions options : {fast::CpuBvhCullOptions{true, true}, fast::CpuBvhCullOptions{false, true},
+                                                    fast::CpuBvhCullOptions{true, false}}) {
+        culler.cull(views, options, results);
+        ASSERT_EQ(results.size(), views.size());
+        for (std::size_t view = 0; view < views.size(); ++view) {
+          const std::string what = "kind " + std::to_string(kind) + " threads=" + std::to_string(threads) + " view " + std::to_string(view) +
+                                   (options.classes ? " classes" : "") + (options.visible_ids ? " list" : "");
+          const bvh::HierarchicalResult expected = kind == 0   ? bvh::cull_hierarchical(tree, std::span<const Aabb>(v.aabbs), views[view])
+                                                   : kind == 1 ? bvh::cull_hierarchical(tree, std::span<const Obb>(v.obbs), views[view])
+                                                               : bvh::cull_hierarchical(tree, std::span<const Sphere>(v.spheres), views[view]);
+          const bvh::HierarchicalResult& got = results[view].result;
+          if (options.classes) {
+            expect_same_traversal(expected, got, what);
+          } else {
+            EXPECT_TRUE(got.classes.empty()) << what;
+            EXPECT_EQ(got.node_tests, expected.node_tests) << what;
+            EXPECT_EQ(got.object_tests, expected.object_tests) << what;
+            EXPECT_EQ(got.visible, expected.visible) << what;
+            EXPECT_EQ(got.inside, expected.inside) << what;
+          }
+          if (options.visible_ids) expect_visible_list(expected, tree, results[view].visible_ids, what);
+          if (HasFatalFailure()) return;
+        }
+      }
+    }
+    culler.cull(std::span<const Frustum>(), {}, results);
+    EXPECT_TRUE(results.empty());
+  }
+}
+
 TEST(CpuBvhCuller, RejectsKernelsTheCpuLacks) {
   for (Isa isa : {Isa::Avx2, Isa::Avx512})
     if (!fast::isa_supported(isa)) {

@@ -174,12 +174,13 @@ BackendResults cull_bvh_on_backends(const bvh::FlatTree& tree, std::span<const V
     if (cpu == CpuPath::Fast) {
       fast::CpuBvhCuller culler;
       culler.upload(tree, boxes);
-      std::vector<bvh::HierarchicalResult> results(frusta.size());
-      if (warm_up && !frusta.empty()) culler.cull(frusta[0], results[0]);
+      std::vector<fast::CpuBvhViewResult> results;
+      const fast::CpuBvhCullOptions classes_only{true, false};
+      if (warm_up && !frusta.empty()) culler.cull(frusta.first(1), classes_only, results);
       const auto start = std::chrono::steady_clock::now();
-      for (std::size_t v = 0; v < frusta.size(); ++v) culler.cull(frusta[v], results[v]);
+      culler.cull(frusta, classes_only, results);  // every view in one pass
       r.cpu_ns = elapsed_ns(start);
-      for (bvh::HierarchicalResult& h : results) take(h);
+      for (fast::CpuBvhViewResult& v : results) take(v.result);
       r.cpu_path = "fast hierarchical (" + std::to_string(culler.threads()) + " threads)";
       // The fast traversal is proved against the scalar one (untimed): classes and test counts.
       for (std::size_t v = 0; v < frusta.size(); ++v) {

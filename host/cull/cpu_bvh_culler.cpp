@@ -31,6 +31,7 @@ struct CpuBvhCuller::Task {
   enum Kind : std::uint8_t { Subtree, Inside } kind;
   std::uint32_t node_or_first;
   std::uint32_t mask_or_count;
+  std::uint32_t view;
 };
 
 CpuBvhCuller::CpuBvhCuller(unsigned threads, std::optional<Isa> isa) : isa_(isa.value_or(best_isa())) {
@@ -126,65 +127,83 @@ void CpuBvhCuller::cull(const Frustum& frustum, bvh::HierarchicalResult& r) {
 
 void CpuBvhCuller::cull(const Frustum& frustum, const CpuBvhCullOptions& options, bvh::HierarchicalResult& r,
                         std::vector<std::uint32_t>& visible_ids) {
-  if (kind_ != BvKind::Aabb) bvh::require_unit_normals(frustum, "CpuBvhCuller");
-  const std::size_t n = tree_.objects.size();
+  const Output out{&r, &visible_ids};
+  cull_views(std::span<const Frustum>(&frustum, 1), options, std::span<const Output>(&out, 1));
+}
+
+void CpuBvhCuller::cull(std::span<const Frustum> views, const CpuBvhCullOptions& options, std::vector<CpuBvhViewResult>& results) {
+  results.resize(views.size());
+  outputs_.clear();
+  for (CpuBvhViewResult& v : results) outputs_.push_back({&v.result, &v.visible_ids});
+  cull_views(views, options, outputs_);
+}
+
+void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOptions& options, std::span<const Output> outs) {
+  if (kind_ != BvKind::Aabb)
+    for (const Frustum& f : views) bvh::require_unit_normals(f, "CpuBvhCuller");
+  const std::size_t n = tree_.objects.size(), view_count = views.size();
   const std::vector<bvh::FlatNode>& nodes = tree_.nodes;
   const std::vector<std::uint32_t>& objects = tree_.objects;
   const bool classes = options.classes, ids = options.visible_ids;
-  r.classes.resize(classes ? n : 0);
-  r.node_tests = r.object_tests = r.visible = r.inside = 0;
+  for (const Output& o : outs) {
+    o.result->classes.resize(classes ? n : 0);
+    o.result->node_tests = o.result->object_tests = o.result->visible = o.result->inside = 0;
+  }
 
   // Everything starts OUTSIDE, in parallel chunks.
-  const std::size_t fill_tasks = classes ? (n + kRangeChunk - 1) / kRangeChunk : 0;
-  pool_->parallel_for(fill_tasks, [&](std::size_t t) {
-    const std::size_t begin = t * kRangeChunk, end = std::min(n, begin + kRangeChunk);
-    std::fill(r.classes.begin() + std::ptrdiff_t(begin), r.classes.begin() + std::ptrdiff_t(end), Classification::Outside);
+  const std::size_t chunks = classes ? (n + kRangeChunk - 1) / kRangeChunk : 0;
+  pool_->parallel_for(chunks * view_count, [&](std::size_t t) {
+    std::vector<Classification>& c = outs[t / chunks].result->classes;
+    const std::size_t begin = t % chunks * kRangeChunk, end = std::min(n, begin + kRangeChunk);
+    std::fill(c.begin() + std::ptrdiff_t(begin), c.begin() + std::ptrdiff_t(end), Classification::Outside);
   });
   if (nodes.empty()) {
-    visible_ids.clear();
+    for (const Output& o : outs) o.visible_ids->clear();
     return;
   }
 
-  // The top of the tree, breadth first, until there are subtrees enough for the threads.
-  auto classify_node = [&](const Aabb& box, std::uint32_t mask, std::uint32_t& straddled) {
-    return kind_ == BvKind::Aabb ? bvh::classify_node<Aabb>(box, frustum, mask, straddled)
-                                 : bvh::classify_masked_margin(box, frustum, mask, straddled);
-  };
-  const std::uint32_t all = (1u << frustum.active().size()) - 1u;
-  // About 16 subtrees per thread, but at most one per kTaskObjects objects: a small tree is
-  // one task on the calling thread (a task costs more than walking a few hundred nodes).
+  // The top of each view's tree, breadth first, until there are subtrees enough for the
+  // threads: about 16 per thread, but at most one per kTaskObjects objects (a small tree is
+  // one task on the calling thread: a task costs more than walking a few hundred nodes).
   const std::size_t wanted = std::clamp<std::size_t>(n / kTaskObjects, 1, std::size_t(pool_->size()) * 16);
-  std::deque<Task> frontier{{Task::Subtree, 0, all}};
   std::vector<Task>& tasks = tasks_;
   tasks.clear();
-  std::uint64_t top_node_tests = 0;
-  auto accept = [&](std::uint32_t first, std::uint32_t count) {
-    for (std::uint32_t k = 0; k < count; k += kRangeChunk) tasks.push_back({Task::Inside, first + k, std::min(kRangeChunk, count - k)});
-  };
-  while (!frontier.empty() && frontier.size() + tasks.size() < wanted) {
-    const Task t = frontier.front();
-    frontier.pop_front();
-    const bvh::FlatNode& node = nodes[t.node_or_first];
-    if (node.leaf) {  // leaves go to the threads whole
-      tasks.push_back(t);
-      continue;
+  for (std::uint32_t v = 0; v < view_count; ++v) {
+    const Frustum& frustum = views[v];
+    const std::size_t first_task = tasks.size();
+    std::deque<Task> frontier{{Task::Subtree, 0, (1u << frustum.active().size()) - 1u, v}};
+    auto accept = [&](std::uint32_t first, std::uint32_t count) {
+      for (std::uint32_t k = 0; k < count; k += kRangeChunk) tasks.push_back({Task::Inside, first + k, std::min(kRangeChunk, count - k), v});
+    };
+    while (!frontier.empty() && frontier.size() + tasks.size() - first_task < wanted) {
+      const Task t = frontier.front();
+      frontier.pop_front();
+      const bvh::FlatNode& node = nodes[t.node_or_first];
+      if (node.leaf) {  // leaves go to the threads whole
+        tasks.push_back(t);
+        continue;
+      }
+      ++outs[v].result->node_tests;
+      std::uint32_t straddled = 0;
+      const Classification c = kind_ == BvKind::Aabb ? bvh::classify_node<Aabb>(node.box, frustum, t.mask_or_count, straddled)
+                                                     : bvh::classify_masked_margin(node.box, frustum, t.mask_or_count, straddled);
+      if (c == Classification::Outside) continue;
+      if (c == Classification::Inside) {
+        accept(node.first, node.count);
+        continue;
+      }
+      frontier.push_back({Task::Subtree, t.node_or_first + 1, straddled, v});
+      frontier.push_back({Task::Subtree, nodes[t.node_or_first + 1].skip, straddled, v});
     }
-    ++top_node_tests;
-    std::uint32_t straddled = 0;
-    const Classification c = classify_node(node.box, t.mask_or_count, straddled);
-    if (c == Classification::Outside) continue;
-    if (c == Classification::Inside) {
-      accept(node.first, node.count);
-      continue;
-    }
-    frontier.push_back({Task::Subtree, t.node_or_first + 1, straddled});
-    frontier.push_back({Task::Subtree, nodes[t.node_or_first + 1].skip, straddled});
+    tasks.insert(tasks.end(), frontier.begin(), frontier.end());
   }
-  tasks.insert(tasks.end(), frontier.begin(), frontier.end());
-  // Each task covers its own contiguous part of the tree's object order (a subtree's range or
-  // part of one): in that order, the tasks' visible lists concatenate into tree order.
+  // Each task covers its own contiguous part of its view's tree object order (a subtree's
+  // range or part of one): in that order, a view's task lists concatenate into tree order.
   auto first_object = [&](const Task& t) { return t.kind == Task::Inside ? t.node_or_first : nodes[t.node_or_first].first; };
-  if (ids) std::sort(tasks.begin(), tasks.end(), [&](const Task& a, const Task& b) { return first_object(a) < first_object(b); });
+  if (ids)
+    std::sort(tasks.begin(), tasks.end(), [&](const Task& a, const Task& b) {
+      return a.view != b.view ? a.view < b.view : first_object(a) < first_object(b);
+    });
 
   std::vector<Tally>& tallies = tallies_;
   tallies.assign(tasks.size(), Tally{});
@@ -198,20 +217,21 @@ void CpuBvhCuller::cull(const Frustum& frustum, const CpuBvhCullOptions& options
     mark_words += (std::size_t(nodes[tasks[t].node_or_first].count) + 63) / 64;
   }
   if (ids && marks_.size() < mark_words) marks_.resize(mark_words);
-  const detail::PlaneSet planes = detail::plane_set(frustum);
+  planes_.clear();
+  for (const Frustum& f : views) planes_.push_back(detail::plane_set(f));
   const detail::WalkTree walk_tree{walk_nodes_.data(), counts_.data(), walk_volumes_.data(), objects.data(),
                                    bvh::kBvhMarginScale,  bvh::kBvhMarginFloor, bvh::kBvhMarginLimit};
   const detail::WalkKernel walk = kind_ == BvKind::Obb      ? kernels_->walk_obb
                                   : kind_ == BvKind::Sphere ? kernels_->walk_sphere
                                                             : kernels_->walk_aabb;
-  auto* const class_bytes = classes ? reinterpret_cast<std::uint8_t*>(r.classes.data()) : nullptr;
   pool_->parallel_for(tasks.size(), [&](std::size_t index) {
     const Task& task = tasks[index];
     Tally& tally = tallies[index];
+    std::vector<Classification>& view_classes = outs[task.view].result->classes;
     if (task.kind == Task::Inside) {
       const std::uint32_t first = task.node_or_first, count = task.mask_or_count;
       if (classes)
-        for (std::uint32_t k = first; k < first + count; ++k) r.classes[objects[k]] = Classification::Inside;
+        for (std::uint32_t k = first; k < first + count; ++k) view_classes[objects[k]] = Classification::Inside;
       tally.visible = tally.inside = count;
       return;
     }
@@ -221,34 +241,36 @@ void CpuBvhCuller::cull(const Frustum& frustum, const CpuBvhCullOptions& options
     const std::size_t work_words = 2 * (subtree_nodes + 16 + root.count) + 16;  // detail::WalkOutput
     if (work.size() < work_words) work.resize(work_words);
     detail::WalkOutput out;
-    out.classes = class_bytes;
+    out.classes = classes ? reinterpret_cast<std::uint8_t*>(view_classes.data()) : nullptr;
     if (ids) {
       out.marks = marks_.data() + tally.marks;
       std::fill_n(out.marks, (std::size_t(root.count) + 63) / 64, std::uint64_t{0});
     }
     out.work = work.data();
     out.work_capacity = subtree_nodes;
-    const detail::WalkCounts c = walk(walk_tree, task.node_or_first, task.mask_or_count, planes, out);
+    const detail::WalkCounts c = walk(walk_tree, task.node_or_first, task.mask_or_count, planes_[task.view], out);
     tally.node_tests = c.node_tests;
     tally.object_tests = c.object_tests;
     tally.visible = c.visible;
     tally.inside = c.inside;
   });
-  r.node_tests = top_node_tests;
-  for (const Tally& t : tallies) {
-    r.node_tests += t.node_tests;
-    r.object_tests += t.object_tests;
-    r.visible += t.visible;
-    r.inside += t.inside;
+  for (std::size_t t = 0; t < tasks.size(); ++t) {
+    bvh::HierarchicalResult& r = *outs[tasks[t].view].result;
+    r.node_tests += tallies[t].node_tests;
+    r.object_tests += tallies[t].object_tests;
+    r.visible += tallies[t].visible;
+    r.inside += tallies[t].inside;
   }
   if (!ids) return;
-  // The tasks' lists, in task order (tree order), straight from the ranges and the marks.
-  visible_ids.resize(r.visible);
-  offsets_.assign(tasks.size() + 1, 0);
-  for (std::size_t t = 0; t < tasks.size(); ++t) offsets_[t + 1] = offsets_[t] + tallies[t].visible;
+  // Each view's list, its tasks' lists in task order (tree order), straight from the ranges
+  // and the marks.
+  for (const Output& o : outs) o.visible_ids->resize(o.result->visible);
+  offsets_.assign(tasks.size(), 0);
+  for (std::size_t t = 1; t < tasks.size(); ++t)
+    offsets_[t] = tasks[t].view == tasks[t - 1].view ? offsets_[t - 1] + tallies[t - 1].visible : 0;
   pool_->parallel_for(tasks.size(), [&](std::size_t index) {
     const Task& task = tasks[index];
-    std::uint32_t* out = visible_ids.data() + offsets_[index];
+    std::uint32_t* out = outs[task.view].visible_ids->data() + offsets_[index];
     if (task.kind == Task::Inside) {
       std::copy_n(objects.data() + task.node_or_first, task.mask_or_count, out);
       return;

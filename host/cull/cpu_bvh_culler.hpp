@@ -18,12 +18,19 @@ namespace cullpipe::fast {
 class ThreadPool;
 namespace detail {
 struct KernelTable;
+struct PlaneSet;
 }
 
 /// What a CpuBvhCuller pass fills.
 struct CpuBvhCullOptions {
   bool classes = true;       ///< bvh::HierarchicalResult::classes, one per object id
   bool visible_ids = false;  ///< the ids of the visible objects, in the tree's object order
+};
+
+/// One view's result of a multi-view CpuBvhCuller pass.
+struct CpuBvhViewResult {
+  bvh::HierarchicalResult result;          ///< classes (with CpuBvhCullOptions::classes), counts
+  std::vector<std::uint32_t> visible_ids;  ///< with CpuBvhCullOptions::visible_ids, in the tree's object order
 };
 
 /// Hierarchical culling on the CPU with every core: the traversal of bvh::cull_hierarchical
@@ -75,6 +82,10 @@ class CpuBvhCuller {
   /// skips the per-id class writes, which are scattered when the ids are not in tree order.
   void cull(const Frustum& frustum, const CpuBvhCullOptions& options, bvh::HierarchicalResult& result,
             std::vector<std::uint32_t>& visible_ids);
+  /// Several views in one pass (a camera and its shadow cascades, say): one result per view,
+  /// each as a pass of its own would give; the threads share the views' subtrees, so the pool
+  /// wakes once and small views keep every core busy. `results` is resized and reused.
+  void cull(std::span<const Frustum> views, const CpuBvhCullOptions& options, std::vector<CpuBvhViewResult>& results);
 
   unsigned threads() const;
   Isa isa() const { return isa_; }
@@ -82,6 +93,11 @@ class CpuBvhCuller {
  private:
   template <class Volume>
   void upload_impl(const bvh::FlatTree& tree, std::span<const Volume> volumes);
+  struct Output {
+    bvh::HierarchicalResult* result;
+    std::vector<std::uint32_t>* visible_ids;
+  };
+  void cull_views(std::span<const Frustum> views, const CpuBvhCullOptions& options, std::span<const Output> outs);
   struct Task;
   struct Tally;
 
@@ -101,6 +117,8 @@ class CpuBvhCuller {
   std::vector<std::uint64_t> marks_;  // the subtree tasks' visible objects, a bit each
   std::vector<std::vector<std::uint32_t>> work_;  // per pool thread: a walk's work lists
   std::vector<std::size_t> offsets_;
+  std::vector<detail::PlaneSet> planes_;  // per view
+  std::vector<Output> outputs_;
 };
 
 }  // namespace cullpipe::fast
