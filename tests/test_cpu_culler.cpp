@@ -534,34 +534,34 @@ TEST(CpuBvhCuller, EqualsTheScalarTraversalExactly) {
       options.max_leaf_size = n % 2 ? 1 : 6;
       const bvh::FlatTree tree = bvh::flatten(bvh::build(builder, boxes, options));
       for (Isa isa : runnable_isas())
-      for (unsigned threads : {1u, 2u, 3u}) {
-        fast::CpuBvhCuller culler(threads, isa);
-        culler.upload(tree, boxes);
-        bvh::HierarchicalResult reused;
-        for (std::size_t v = 0; v < views.size(); ++v) {
-          const std::string what = std::string(builder) + " n=" + std::to_string(n) + " isa=" + std::string(to_string(isa)) +
-                                   " threads=" + std::to_string(threads) + " view " + std::to_string(v);
-          const bvh::HierarchicalResult expected = bvh::cull_hierarchical(tree, boxes, views[v]);
-          culler.cull(views[v], reused);
-          expect_same_traversal(expected, reused, what);
-          if (HasFatalFailure()) return;
-          // The visible list, with and without the classes.
-          std::vector<std::uint32_t> ids{7, 7, 7};
-          for (bool classes : {true, false}) {
-            bvh::HierarchicalResult listed;
-            culler.cull(views[v], {classes, true}, listed, ids);
-            expect_visible_list(expected, tree, ids, what + (classes ? " (list and classes)" : " (list only)"));
-            EXPECT_EQ(listed.classes.size(), classes ? n : 0u) << what;
-            if (classes) {
-              EXPECT_EQ(listed.classes, expected.classes) << what;
+        for (unsigned threads : {1u, 2u, 3u}) {
+          fast::CpuBvhCuller culler(threads, isa);
+          culler.upload(tree, boxes);
+          bvh::HierarchicalResult reused;
+          for (std::size_t v = 0; v < views.size(); ++v) {
+            const std::string what = std::string(builder) + " n=" + std::to_string(n) + " isa=" + std::string(to_string(isa)) +
+                                     " threads=" + std::to_string(threads) + " view " + std::to_string(v);
+            const bvh::HierarchicalResult expected = bvh::cull_hierarchical(tree, boxes, views[v]);
+            culler.cull(views[v], reused);
+            expect_same_traversal(expected, reused, what);
+            if (HasFatalFailure()) return;
+            // The visible list, with and without the classes.
+            std::vector<std::uint32_t> ids{7, 7, 7};
+            for (bool classes : {true, false}) {
+              bvh::HierarchicalResult listed;
+              culler.cull(views[v], {classes, true}, listed, ids);
+              expect_visible_list(expected, tree, ids, what + (classes ? " (list and classes)" : " (list only)"));
+              EXPECT_EQ(listed.classes.size(), classes ? n : 0u) << what;
+              if (classes) {
+                EXPECT_EQ(listed.classes, expected.classes) << what;
+              }
+              EXPECT_EQ(listed.node_tests, expected.node_tests) << what;
+              EXPECT_EQ(listed.object_tests, expected.object_tests) << what;
+              EXPECT_EQ(listed.visible, expected.visible) << what;
+              EXPECT_EQ(listed.inside, expected.inside) << what;
             }
-            EXPECT_EQ(listed.node_tests, expected.node_tests) << what;
-            EXPECT_EQ(listed.object_tests, expected.object_tests) << what;
-            EXPECT_EQ(listed.visible, expected.visible) << what;
-            EXPECT_EQ(listed.inside, expected.inside) << what;
           }
         }
-      }
     }
   }
 }
@@ -748,33 +748,33 @@ TEST(CpuBvhCuller, ObbsAndSpheresEqualTheScalarTraversalAndFlatCulling) {
     const bvh::FlatTree obb_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(v.obbs))));
     const bvh::FlatTree sphere_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Sphere>(v.spheres))));
     for (Isa isa : runnable_isas())
-    for (unsigned threads : {1u, 2u, 3u}) {
-      fast::CpuBvhCuller culler(threads, isa);
-      bvh::HierarchicalResult got;
-      for (std::size_t view = 0; view < views.size(); ++view) {
-        const std::string what = "n=" + std::to_string(n) + " isa=" + std::string(to_string(isa)) + " threads=" + std::to_string(threads) +
-                                 " view " + std::to_string(view);
-        culler.upload(obb_tree, std::span<const Obb>(v.obbs));
-        EXPECT_EQ(culler.kind(), BvKind::Obb);
-        culler.cull(views[view], got);
-        expect_same_traversal(bvh::cull_hierarchical(obb_tree, std::span<const Obb>(v.obbs), views[view]), got, "obb " + what);
-        std::vector<Classification> flat(n);
-        reference::classify_all(std::span<const Obb>(v.obbs), views[view], flat);
-        EXPECT_EQ(got.classes, flat) << "obb " << what;
-        std::vector<std::uint32_t> ids;
-        bvh::HierarchicalResult listed;
-        culler.cull(views[view], {false, true}, listed, ids);
-        expect_visible_list(got, obb_tree, ids, "obb list " + what);
-        culler.upload(sphere_tree, std::span<const Sphere>(v.spheres));
-        culler.cull(views[view], got);
-        culler.cull(views[view], {false, true}, listed, ids);
-        expect_visible_list(got, sphere_tree, ids, "sphere list " + what);
-        expect_same_traversal(bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(v.spheres), views[view]), got, "sphere " + what);
-        reference::classify_all(std::span<const Sphere>(v.spheres), views[view], flat);
-        EXPECT_EQ(got.classes, flat) << "sphere " << what;
-        if (HasFatalFailure()) return;
+      for (unsigned threads : {1u, 2u, 3u}) {
+        fast::CpuBvhCuller culler(threads, isa);
+        bvh::HierarchicalResult got;
+        for (std::size_t view = 0; view < views.size(); ++view) {
+          const std::string what = "n=" + std::to_string(n) + " isa=" + std::string(to_string(isa)) + " threads=" + std::to_string(threads) +
+                                   " view " + std::to_string(view);
+          culler.upload(obb_tree, std::span<const Obb>(v.obbs));
+          EXPECT_EQ(culler.kind(), BvKind::Obb);
+          culler.cull(views[view], got);
+          expect_same_traversal(bvh::cull_hierarchical(obb_tree, std::span<const Obb>(v.obbs), views[view]), got, "obb " + what);
+          std::vector<Classification> flat(n);
+          reference::classify_all(std::span<const Obb>(v.obbs), views[view], flat);
+          EXPECT_EQ(got.classes, flat) << "obb " << what;
+          std::vector<std::uint32_t> ids;
+          bvh::HierarchicalResult listed;
+          culler.cull(views[view], {false, true}, listed, ids);
+          expect_visible_list(got, obb_tree, ids, "obb list " + what);
+          culler.upload(sphere_tree, std::span<const Sphere>(v.spheres));
+          culler.cull(views[view], got);
+          culler.cull(views[view], {false, true}, listed, ids);
+          expect_visible_list(got, sphere_tree, ids, "sphere list " + what);
+          expect_same_traversal(bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(v.spheres), views[view]), got, "sphere " + what);
+          reference::classify_all(std::span<const Sphere>(v.spheres), views[view], flat);
+          EXPECT_EQ(got.classes, flat) << "sphere " << what;
+          if (HasFatalFailure()) return;
+        }
       }
-    }
   }
 }
 

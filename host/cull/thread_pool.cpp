@@ -35,7 +35,6 @@ ThreadPool::~ThreadPool() {
   for (std::thread& w : workers_) w.join();
 }
 
-
 unsigned ThreadPool::thread_index() const { return tls_pool == this ? tls_index : 0u; }
 
 void ThreadPool::run_tasks(std::size_t generation) {
