@@ -140,16 +140,60 @@ inline vi lanes_of(std::uint32_t bits) {
   return (static_cast<std::int32_t>(bits) & lane_bit) != 0;
 }
 
-/// Transposes the first `words` floats of the records of up to W objects, objects[0..count),
-/// into vectors: col[c] lane l = word c of objects[l] (lanes past count repeat objects[0]).
-template <unsigned Words>
-void gather_records(const float* records, std::size_t record_floats, const std::uint32_t* objects, unsigned count, vf (&col)[Words]) {
-  alignas(64) float lanes[Words][W];
-  for (unsigned l = 0; l < W; ++l) {
-    const float* rec = records + std::size_t(objects[l < count ? l : 0]) * record_floats;
-    for (unsigned c = 0; c < Words; ++c) lanes[c][l] = rec[c];
+/// Transposes W records of `Floats` floats (4, 8 or 16), the records at records + at[l] *
+/// Floats (lanes past `count` repeat the first): col[c] lane l = word c of record l. With
+/// AVX2 or SSE by register shuffles; otherwise through memory (narrow stores read back wide
+/// stall store forwarding: a cost the shuffles avoid).
+template <unsigned Floats>
+inline void gather_columns(const float* records, const std::uint32_t* at, unsigned count, vf (&col)[Floats]) {
+  static_assert(Floats == 4 || Floats == 8 || Floats == 16);
+  const float* row[W];
+  for (unsigned l = 0; l < W; ++l) row[l] = records + std::size_t(at[l < count ? l : 0]) * Floats;
+#if CULLPIPE_SIMD_LANES == 8 && defined(__AVX2__)
+  if constexpr (Floats == 4) {
+    __m256 a[4];
+    for (unsigned i = 0; i < 4; ++i) a[i] = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(row[i])), _mm_loadu_ps(row[i + 4]), 1);
+    const __m256 t0 = _mm256_unpacklo_ps(a[0], a[1]), t1 = _mm256_unpackhi_ps(a[0], a[1]);
+    const __m256 t2 = _mm256_unpacklo_ps(a[2], a[3]), t3 = _mm256_unpackhi_ps(a[2], a[3]);
+    col[0] = reinterpret_cast<vf>(_mm256_shuffle_ps(t0, t2, 0x44));
+    col[1] = reinterpret_cast<vf>(_mm256_shuffle_ps(t0, t2, 0xEE));
+    col[2] = reinterpret_cast<vf>(_mm256_shuffle_ps(t1, t3, 0x44));
+    col[3] = reinterpret_cast<vf>(_mm256_shuffle_ps(t1, t3, 0xEE));
+  } else {
+    for (unsigned base = 0; base < Floats; base += 8) {
+      __m256 a[8];
+      for (unsigned i = 0; i < 8; ++i) a[i] = _mm256_loadu_ps(row[i] + base);
+      __m256 u[8];
+      for (unsigned h = 0; h < 8; h += 4) {  // records h..h+3: columns c (low half) and c + 4 (high half)
+        const __m256 t0 = _mm256_unpacklo_ps(a[h], a[h + 1]), t1 = _mm256_unpackhi_ps(a[h], a[h + 1]);
+        const __m256 t2 = _mm256_unpacklo_ps(a[h + 2], a[h + 3]), t3 = _mm256_unpackhi_ps(a[h + 2], a[h + 3]);
+        u[h] = _mm256_shuffle_ps(t0, t2, 0x44);
+        u[h + 1] = _mm256_shuffle_ps(t0, t2, 0xEE);
+        u[h + 2] = _mm256_shuffle_ps(t1, t3, 0x44);
+        u[h + 3] = _mm256_shuffle_ps(t1, t3, 0xEE);
+      }
+      for (unsigned c = 0; c < 4; ++c) {
+        col[base + c] = reinterpret_cast<vf>(_mm256_permute2f128_ps(u[c], u[c + 4], 0x20));
+        col[base + c + 4] = reinterpret_cast<vf>(_mm256_permute2f128_ps(u[c], u[c + 4], 0x31));
+      }
+    }
   }
-  for (unsigned c = 0; c < Words; ++c) col[c] = load(lanes[c]);
+#elif CULLPIPE_SIMD_LANES == 4 && defined(__SSE2__)
+  for (unsigned base = 0; base < Floats; base += 4) {
+    __m128 r0 = _mm_loadu_ps(row[0] + base), r1 = _mm_loadu_ps(row[1] + base), r2 = _mm_loadu_ps(row[2] + base),
+           r3 = _mm_loadu_ps(row[3] + base);
+    _MM_TRANSPOSE4_PS(r0, r1, r2, r3);
+    col[base] = reinterpret_cast<vf>(r0);
+    col[base + 1] = reinterpret_cast<vf>(r1);
+    col[base + 2] = reinterpret_cast<vf>(r2);
+    col[base + 3] = reinterpret_cast<vf>(r3);
+  }
+#else
+  alignas(64) float lanes[Floats][W];
+  for (unsigned l = 0; l < W; ++l)
+    for (unsigned c = 0; c < Floats; ++c) lanes[c][l] = row[l][c];
+  for (unsigned c = 0; c < Floats; ++c) col[c] = load(lanes[c]);
+#endif
 }
 
 /// a * b + c, fused where the instruction set has it. Only for bounds, never for a distance
@@ -233,8 +277,8 @@ ChunkCounts cull_aabb(const AabbArrays& a, std::size_t begin, std::size_t end, c
     }
   };
   auto resolve = [&](const std::uint32_t* objects, unsigned count, std::uint32_t& outside_bits, std::uint32_t& crossing_bits) {
-    vf box[6];  // min x y z, max x y z
-    gather_records(a.records, kAabbRecordFloats, objects, count, box);
+    vf box[kAabbRecordFloats];  // min x y z, max x y z, two spare
+    gather_columns(a.records, objects, count, box);
     const vf zero = {};
     vi outside = {}, crossing = {};
     for (std::uint32_t k = 0; k < planes.count; ++k) {
@@ -268,8 +312,8 @@ ChunkCounts cull_obb(const ObbArrays& a, std::size_t begin, std::size_t end, con
     }
   };
   auto resolve = [&](const std::uint32_t* objects, unsigned count, std::uint32_t& outside_bits, std::uint32_t& crossing_bits) {
-    vf col[15];  // centre, axes u0 u1 u2, half extents
-    gather_records(a.records, kObbRecordFloats, objects, count, col);
+    vf col[kObbRecordFloats];  // centre, axes u0 u1 u2, half extents, a spare
+    gather_columns(a.records, objects, count, col);
     vi outside = {}, crossing = {};
     for (std::uint32_t k = 0; k < planes.count; ++k) {
       const float nx = planes.nx[k], ny = planes.ny[k], nz = planes.nz[k];
@@ -340,62 +384,6 @@ inline std::uint32_t bits_of(float word) {
 }
 
 inline vf larger(vf a, vf b) { return a < b ? b : a; }  // std::max's choice, per lane
-
-/// Transposes W records of `Floats` floats (4, 8 or 16), the records at records + at[l] *
-/// Floats (lanes past `count` repeat the first): col[c] lane l = word c of record l. With
-/// AVX2 or SSE by register shuffles; otherwise through memory (narrow stores read back wide
-/// stall store forwarding: a cost the shuffles avoid).
-template <unsigned Floats>
-inline void gather_columns(const float* records, const std::uint32_t* at, unsigned count, vf (&col)[Floats]) {
-  static_assert(Floats == 4 || Floats == 8 || Floats == 16);
-  const float* row[W];
-  for (unsigned l = 0; l < W; ++l) row[l] = records + std::size_t(at[l < count ? l : 0]) * Floats;
-#if CULLPIPE_SIMD_LANES == 8 && defined(__AVX2__)
-  if constexpr (Floats == 4) {
-    __m256 a[4];
-    for (unsigned i = 0; i < 4; ++i) a[i] = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(row[i])), _mm_loadu_ps(row[i + 4]), 1);
-    const __m256 t0 = _mm256_unpacklo_ps(a[0], a[1]), t1 = _mm256_unpackhi_ps(a[0], a[1]);
-    const __m256 t2 = _mm256_unpacklo_ps(a[2], a[3]), t3 = _mm256_unpackhi_ps(a[2], a[3]);
-    col[0] = reinterpret_cast<vf>(_mm256_shuffle_ps(t0, t2, 0x44));
-    col[1] = reinterpret_cast<vf>(_mm256_shuffle_ps(t0, t2, 0xEE));
-    col[2] = reinterpret_cast<vf>(_mm256_shuffle_ps(t1, t3, 0x44));
-    col[3] = reinterpret_cast<vf>(_mm256_shuffle_ps(t1, t3, 0xEE));
-  } else {
-    for (unsigned base = 0; base < Floats; base += 8) {
-      __m256 a[8];
-      for (unsigned i = 0; i < 8; ++i) a[i] = _mm256_loadu_ps(row[i] + base);
-      __m256 u[8];
-      for (unsigned h = 0; h < 8; h += 4) {  // records h..h+3: columns c (low half) and c + 4 (high half)
-        const __m256 t0 = _mm256_unpacklo_ps(a[h], a[h + 1]), t1 = _mm256_unpackhi_ps(a[h], a[h + 1]);
-        const __m256 t2 = _mm256_unpacklo_ps(a[h + 2], a[h + 3]), t3 = _mm256_unpackhi_ps(a[h + 2], a[h + 3]);
-        u[h] = _mm256_shuffle_ps(t0, t2, 0x44);
-        u[h + 1] = _mm256_shuffle_ps(t0, t2, 0xEE);
-        u[h + 2] = _mm256_shuffle_ps(t1, t3, 0x44);
-        u[h + 3] = _mm256_shuffle_ps(t1, t3, 0xEE);
-      }
-      for (unsigned c = 0; c < 4; ++c) {
-        col[base + c] = reinterpret_cast<vf>(_mm256_permute2f128_ps(u[c], u[c + 4], 0x20));
-        col[base + c + 4] = reinterpret_cast<vf>(_mm256_permute2f128_ps(u[c], u[c + 4], 0x31));
-      }
-    }
-  }
-#elif CULLPIPE_SIMD_LANES == 4 && defined(__SSE2__)
-  for (unsigned base = 0; base < Floats; base += 4) {
-    __m128 r0 = _mm_loadu_ps(row[0] + base), r1 = _mm_loadu_ps(row[1] + base), r2 = _mm_loadu_ps(row[2] + base),
-           r3 = _mm_loadu_ps(row[3] + base);
-    _MM_TRANSPOSE4_PS(r0, r1, r2, r3);
-    col[base] = reinterpret_cast<vf>(r0);
-    col[base + 1] = reinterpret_cast<vf>(r1);
-    col[base + 2] = reinterpret_cast<vf>(r2);
-    col[base + 3] = reinterpret_cast<vf>(r3);
-  }
-#else
-  alignas(64) float lanes[Floats][W];
-  for (unsigned l = 0; l < W; ++l)
-    for (unsigned c = 0; c < Floats; ++c) lanes[c][l] = row[l][c];
-  for (unsigned c = 0; c < Floats; ++c) col[c] = load(lanes[c]);
-#endif
-}
 
 /// For the box tests: each plane's p-vertex columns (4 + axis where the normal component is
 /// >= 0, -0 too, as pn_vertices; else the axis), chosen once per walk. The n-vertex column is
