@@ -36,6 +36,8 @@ layout(std430, set = 0, binding = BINDING_CLASSES) writeonly buffer Classes { ui
 layout(std430, set = 0, binding = BINDING_VISIBLE) writeonly buffer Visible { uint visible_ids[]; };
 layout(std430, set = 0, binding = BINDING_COUNTERS) buffer Counters { ViewCounters counters[]; };
 layout(set = 0, binding = BINDING_VIEWS) uniform usamplerBuffer views;  // GpuFrustum, FRUSTUM_TEXELS texels each
+// AABBs: per object xyz = centre, w = bound (host/cull/plane_bounds.hpp), as integer texels.
+layout(set = 0, binding = BINDING_CENTRES) uniform usamplerBuffer centres;
 layout(std430, set = 0, binding = BINDING_DRAW_TEMPLATES) readonly buffer DrawTemplates { DrawCommand templates[]; };
 layout(std430, set = 0, binding = BINDING_DRAWS) writeonly buffer Draws { DrawCommand draws[]; };
 layout(std430, set = 0, binding = BINDING_GROUP_COUNTS) writeonly buffer GroupCounts { uint group_counts[]; };
@@ -48,6 +50,7 @@ layout(push_constant, std430) uniform Push { FlatCullParams params; };
 
 uint view;             // this invocation's view (gl_WorkGroupID.y)
 uint view_plane_count;
+float view_settle_margin;  // GpuFrustum::settle_margin
 vec4 view_planes[MAX_FRUSTUM_PLANES];
 
 #include "shared/classify.glsl"
@@ -66,8 +69,30 @@ uint classify_object(uint i) {
 
 void load_view() {
   int first = int(FRUSTUM_TEXELS * view);
-  view_plane_count = min(texelFetch(views, first + int(MAX_FRUSTUM_PLANES)).x, MAX_FRUSTUM_PLANES);
+  uvec4 tail = texelFetch(views, first + int(MAX_FRUSTUM_PLANES));
+  view_plane_count = min(tail.x, MAX_FRUSTUM_PLANES);
+  view_settle_margin = uintBitsToFloat(tail.y);
   [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = uintBitsToFloat(texelFetch(views, first + int(k)));
+}
+
+// An AABB's class from its centre and bound alone where they settle it, as the fast CPU
+// kernels do (cull_aabb in host/cull/simd_kernels.inl; the proof is at aabb_plane_bound in
+// host/cull/cpu_culler.cpp): with reach = bound + the view's margin, a centre distance
+// s < -reach on a plane is the reference's OUTSIDE and s >= reach on every plane its INSIDE,
+// for s computed in any order, fused or not, in any rounding mode. Else CLASS_OPEN (a NaN bound
+// or margin settles nothing): the box gets the reference's own test.
+const uint CLASS_OPEN = 3u;
+uint settle_aabb(uint i) {
+  vec4 centre_bound = uintBitsToFloat(texelFetch(centres, int(i)));
+  float reach = centre_bound.w + view_settle_margin;
+  bool beyond = false, within = true;
+  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) {
+    bool tested = plane_tested(k, ALL_PLANES);
+    float s = plane_distance(view_planes[k], centre_bound.xyz);
+    beyond = beyond || (tested && s < -reach);
+    within = within && (!tested || s >= reach);
+  }
+  return beyond ? CLASS_OUTSIDE : within ? CLASS_INSIDE : CLASS_OPEN;
 }
 
 // Object order: each workgroup counts its visible objects; compact_scan / compact_scatter write
@@ -158,20 +183,41 @@ void main_arrival() {
   if (view_ok) load_view();
   uint group_first = params.first_object + gl_WorkGroupID.x * gl_WorkGroupSize.x * OBJECTS_PER_INVOCATION;
   uint block = group_first + gl_LocalInvocationIndex;
+  // Bit j: object j of this invocation is OUTSIDE / INSIDE (neither: INTERSECTING), or (AABBs)
+  // still open after its centre bound.
+  uint outside_bits = 0u, inside_bits = 0u, open = 0u;
+  [[unroll]] for (uint j = 0; j < OBJECTS_PER_INVOCATION; ++j) {
+    uint i = block + j * gl_WorkGroupSize.x;
+    uint c = CLASS_OUTSIDE;
+    if (view_ok && i < object_count) c = BV_KIND == BV_KIND_AABB ? settle_aabb(i) : classify_object(i);
+    outside_bits |= c == CLASS_OUTSIDE ? 1u << j : 0u;
+    inside_bits |= c == CLASS_INSIDE ? 1u << j : 0u;
+    open |= c == CLASS_OPEN ? 1u << j : 0u;
+  }
+  // The open boxes (about 1% of a random scene: those near a plane), one per invocation per
+  // round. On lavapipe a loop runs while any lane has work, where both sides of an `if` always
+  // run: 8 one-texel bound tests and one or two full tests cost less than 8 full tests.
+  if (BV_KIND == BV_KIND_AABB) {
+    while (open != 0u) {
+      uint j = findLSB(open);
+      open &= open - 1u;
+      uint i = block + j * gl_WorkGroupSize.x;
+      uint unused;
+      uint c = classify_aabb(bound(AABB_VEC4S * i).xyz, bound(AABB_VEC4S * i + 1).xyz, ALL_PLANES, unused);
+      outside_bits |= c == CLASS_OUTSIDE ? 1u << j : 0u;
+      inside_bits |= c == CLASS_INSIDE ? 1u << j : 0u;
+    }
+  }
   uvec4 ballots[OBJECTS_PER_INVOCATION];
   uint prefix[OBJECTS_PER_INVOCATION + 1];
-  uint inside = 0;
+  uint inside = bitCount(inside_bits);
   prefix[0] = 0;
   [[unroll]] for (uint j = 0; j < OBJECTS_PER_INVOCATION; ++j) {
     uint i = block + j * gl_WorkGroupSize.x;
-    bool visible = false;
-    if (view_ok && i < object_count) {
-      uint c = classify_object(i);
-      if (write_classes) classes[view * object_count + i] = c;
-      visible = c != CLASS_OUTSIDE;
-      if (c == CLASS_INSIDE) ++inside;
-    }
-    ballots[j] = subgroupBallot(visible);
+    bool in_range = view_ok && i < object_count;
+    uint c = (outside_bits & 1u << j) != 0u ? CLASS_OUTSIDE : (inside_bits & 1u << j) != 0u ? CLASS_INSIDE : CLASS_INTERSECTING;
+    if (in_range && write_classes) classes[view * object_count + i] = c;
+    ballots[j] = subgroupBallot(in_range && c != CLASS_OUTSIDE);
     prefix[j + 1] = prefix[j] + subgroupBallotBitCount(ballots[j]);
   }
   uint vis_total = prefix[OBJECTS_PER_INVOCATION];

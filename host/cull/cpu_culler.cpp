@@ -13,6 +13,7 @@
 #endif
 
 #include "cull/kernel_select.hpp"
+#include "cull/plane_bounds.hpp"
 #include "cull/simd_kernels.hpp"
 #include "cull/thread_pool.hpp"
 
@@ -153,6 +154,28 @@ float aabb_plane_bound(const Aabb& b, glm::vec3& centre) {
   if (!(size <= 0x1p120)) return std::numeric_limits<float>::quiet_NaN();
   return round_up(std::sqrt(diagonal) * (1.0 + 0x1p-16) + 0x1p-18 * size + 0x1p-100);
 }
+
+}  // namespace
+
+namespace detail {
+
+void aabb_centre_bounds(std::span<const Aabb> boxes, std::span<glm::vec4> out) {
+  const NearestNoFlush mode;
+  glm::vec3 centre;
+  for (std::size_t i = 0; i < boxes.size(); ++i) {
+    const float bound = aabb_plane_bound(boxes[i], centre);
+    out[i] = glm::vec4(centre, bound);
+  }
+}
+
+float settle_margin(const Frustum& frustum) {
+  const PlaneSet s = plane_set(frustum);
+  return s.unit_normals ? s.max_margin : std::numeric_limits<float>::quiet_NaN();
+}
+
+}  // namespace detail
+
+namespace {
 
 struct AlignedFree {
   void operator()(float* p) const { ::operator delete[](p, std::align_val_t(64)); }

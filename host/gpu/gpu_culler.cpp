@@ -6,6 +6,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "cull/plane_bounds.hpp"
 #include "gpu/layout.hpp"
 #include "gpu/pass_support.hpp"
 #include "vk/check.hpp"
@@ -22,8 +23,8 @@ constexpr std::uint32_t kBindingCount = CULL_BINDING_COUNT;  // one descriptor s
 // The volumes are read through a uniform texel buffer: on lavapipe a texel fetch loads a whole
 // 16-byte texel per lane, where a storage-buffer load is a bounds-checked branch per lane and
 // per component (AABBs: 8.0 -> 5.5 ns/object); on GPUs both are ordinary typed loads.
-// The views too (see GpuFrustum).
-constexpr std::uint32_t kTexelBindings = 1u << BINDING_BOUNDS | 1u << BINDING_VIEWS;
+// The views and the AABBs' centre bounds too (see GpuFrustum, BINDING_CENTRES).
+constexpr std::uint32_t kTexelBindings = 1u << BINDING_BOUNDS | 1u << BINDING_VIEWS | 1u << BINDING_CENTRES;
 constexpr VkBufferUsageFlags kBoundsUsage = VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT;
 
 std::uint32_t kind_index(BvKind k) { return static_cast<std::uint32_t>(k); }
@@ -81,6 +82,16 @@ GpuCuller::~GpuCuller() = default;
 void GpuCuller::upload(std::span<const Aabb> volumes) {
   std::vector<GpuAabb> packed(volumes.size());
   for (std::size_t i = 0; i < volumes.size(); ++i) packed[i] = pack(volumes[i]);
+  // The arrival-order pass first tests each box's centre against its bound (one texel), the
+  // CPU kernels' proof and numbers (host/cull/plane_bounds.hpp); only the boxes it leaves
+  // open are read in full.
+  std::vector<glm::vec4> centres(volumes.size());
+  fast::detail::aabb_centre_bounds(volumes, centres);
+  const VkDeviceSize centre_bytes = VkDeviceSize(volumes.size()) * sizeof(glm::vec4);
+  detail::check_allocation_size(ctx_, centre_bytes, std::to_string(volumes.size()) + " aabb centre bounds");
+  object_count_ = 0;  // no pass on the old volumes with a half-written centre buffer
+  detail::ensure_buffer(ctx_, centres_, centre_bytes, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
+  if (centre_bytes) std::memcpy(centres_.data(), centres.data(), centre_bytes);
   upload_words(BvKind::Aabb, packed.data(), packed.size(), sizeof(GpuAabb));
 }
 
@@ -169,7 +180,8 @@ void GpuCuller::update_descriptors() {
       resources_->set_count() >= segment_count_)
     return;
   static_assert(BINDING_BOUNDS == 0 && BINDING_CLASSES == 1 && BINDING_VISIBLE == 2 && BINDING_COUNTERS == 3 &&
-                BINDING_VIEWS == 4 && BINDING_DRAW_TEMPLATES == 5 && BINDING_DRAWS == 6 && BINDING_GROUP_COUNTS == 7);
+                BINDING_VIEWS == 4 && BINDING_DRAW_TEMPLATES == 5 && BINDING_DRAWS == 6 && BINDING_GROUP_COUNTS == 7 &&
+                BINDING_CENTRES == 8);
   resources_->ensure_sets(segment_count_);
   const std::size_t views = last_view_count_;
   for (std::size_t seg = 0; seg < segment_count_; ++seg) {
@@ -182,13 +194,14 @@ void GpuCuller::update_descriptors() {
     auto texels = [&](const vk::Buffer& b) {
       return Range{&b, 0, std::min<VkDeviceSize>(b.size(), detail::texel_range(ctx_)) / detail::kTexelBytes * detail::kTexelBytes};
     };
-    Range ranges[kBindingCount] = {texels(bounds_), whole(classes_),   whole(visible_), whole(counters_),
-                                   texels(views_),  whole(templates_), whole(draws_),   whole(group_counts_)};
+    Range ranges[kBindingCount] = {texels(bounds_), whole(classes_),   whole(visible_), whole(counters_),      texels(views_),
+                                   whole(templates_), whole(draws_), whole(group_counts_), texels(centres_)};
     if (segment_count_ > 1) {  // one segment binds whole buffers
       const VkDeviceSize first = VkDeviceSize(seg) * segment_objects_;
       const VkDeviceSize n = std::min<VkDeviceSize>(segment_objects_, object_count_ - first);
       ranges[BINDING_BOUNDS] = {&bounds_, first * bytes_per_object_, n * bytes_per_object_};
       ranges[BINDING_CLASSES] = {&classes_, first * views * sizeof(std::uint32_t), n * views * sizeof(std::uint32_t)};
+      if (kind_ == BvKind::Aabb) ranges[BINDING_CENTRES] = {&centres_, first * sizeof(glm::vec4), n * sizeof(glm::vec4)};
       if (template_count_ == object_count_) ranges[BINDING_DRAW_TEMPLATES] = {&templates_, first * sizeof(DrawCommand), n * sizeof(DrawCommand)};
     }
     resources_->write(seg, ranges);
@@ -207,6 +220,7 @@ void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
     throw std::length_error(std::to_string(views.size()) + " views exceed the device's dispatch limit of " +
                             std::to_string(ctx_.properties().limits.maxComputeWorkGroupCount[1]));
   detail::ensure_buffer(ctx_, bounds_, 0, kBoundsUsage, "bounds buffer", descriptors_dirty_);
+  detail::ensure_buffer(ctx_, centres_, 0, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
   // Nothing of the pass's state changes until every check and allocation has passed.
   const SegmentPlan plan = plan_segments(views.size(), options.ordered);
   ensure_outputs(views.size(), capacity, options.draws);
@@ -215,7 +229,10 @@ void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   last_view_count_ = views.size();
   update_descriptors();
   auto gpu_views = views_.as<GpuFrustum>();
-  for (std::size_t v = 0; v < views.size(); ++v) gpu_views[v] = pack(views[v]);
+  for (std::size_t v = 0; v < views.size(); ++v) {
+    gpu_views[v] = pack(views[v]);
+    gpu_views[v].settle_margin = fast::detail::settle_margin(views[v]);
+  }
   last_capacity_ = capacity;
   last_options_ = options;
   // Build every pipeline the pass needs now, not while recording.

@@ -178,6 +178,7 @@ class GpuCuller {
   // 2 = compact_scatter (kind and ordered unused for 1 and 2).
   std::unique_ptr<vk::ComputePipeline> pipelines_[3][3][2][2];
   vk::Buffer bounds_, classes_, visible_, counters_, views_, templates_, draws_, group_counts_;
+  vk::Buffer centres_;  // AABBs: centre and bound per object (BINDING_CENTRES)
   std::size_t template_count_ = 0;
   std::size_t last_capacity_ = 0;
   std::size_t last_view_count_ = 0;

@@ -32,6 +32,7 @@ static_assert(offsetof(GpuSphere, center_radius) == 0);
 static_assert(sizeof(GpuFrustum) == 112 && sizeof(GpuFrustum) == FRUSTUM_TEXELS * 16 && offsetof(GpuFrustum, plane_count) == MAX_FRUSTUM_PLANES * 16);
 static_assert(offsetof(GpuFrustum, planes) == 0);
 static_assert(offsetof(GpuFrustum, plane_count) == 96);
+static_assert(offsetof(GpuFrustum, settle_margin) == 100);
 static_assert(offsetof(GpuFrustum, reserved2) == 108);
 
 static_assert(sizeof(FlatCullParams) == 24);

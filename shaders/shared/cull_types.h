@@ -68,7 +68,7 @@ struct GpuSphere {
 struct GpuFrustum {
   vec4 planes[MAX_FRUSTUM_PLANES];  // xyz = unit inward normal, w = d; inside when dot(n,p)+d >= 0
   uint plane_count;                 // planes actually used (5 when the far plane is at infinity)
-  uint reserved0;
+  float settle_margin;              // AABB flat pass: the margin added to each centre bound (NaN: none settles)
   uint reserved1;
   uint reserved2;
 };
@@ -99,7 +99,8 @@ CP_CONST BINDING_VIEWS = 4u;           // GpuFrustum per view
 CP_CONST BINDING_DRAW_TEMPLATES = 5u;  // DrawCommand per object (object_id ignored)
 CP_CONST BINDING_DRAWS = 6u;           // DrawCommand out: [view * visible_capacity + k]
 CP_CONST BINDING_GROUP_COUNTS = 7u;    // ordered mode: visible count, then offset, per workgroup and view
-CP_CONST CULL_BINDING_COUNT = 8u;
+CP_CONST BINDING_CENTRES = 8u;         // AABBs: vec4 per object, xyz = centre, w = bound (host/cull/plane_bounds.hpp)
+CP_CONST CULL_BINDING_COUNT = 9u;
 
 // One indirect draw of a visible object: the first five fields are exactly
 // VkDrawIndexedIndirectCommand (so the array can be passed to vkCmdDrawIndexedIndirectCount
