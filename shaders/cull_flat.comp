@@ -75,15 +75,18 @@ void load_view() {
   [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = uintBitsToFloat(texelFetch(views, first + int(k)));
 }
 
-// An AABB's class from its centre and bound alone where they settle it, as the fast CPU
-// kernels do (cull_aabb in host/cull/simd_kernels.inl; the proof is at aabb_plane_bound in
-// host/cull/cpu_culler.cpp): with reach = bound + the view's margin, a centre distance
-// s < -reach on a plane is the reference's OUTSIDE and s >= reach on every plane its INSIDE,
-// for s computed in any order, fused or not, in any rounding mode. Else CLASS_OPEN (a NaN bound
-// or margin settles nothing): the box gets the reference's own test.
+// An AABB's or OBB's class from its centre and a bound alone where they settle it, as the fast
+// CPU kernels do (cull_aabb and cull_obb in host/cull/simd_kernels.inl; the proofs are at
+// aabb_plane_bound and obb_plane_bound in host/cull/cpu_culler.cpp). With reach = bound + the
+// view's margin, a centre distance s < -reach on a plane is the reference's OUTSIDE and
+// s >= reach on every plane its INSIDE: for AABBs with s computed in any order, fused or not,
+// in any rounding mode; for OBBs s is the reference's own and the margin only makes the reach
+// larger. Else CLASS_OPEN (a NaN bound or margin settles nothing): the reference's own test.
+// Spheres are tested in full at once (one texel either way).
 const uint CLASS_OPEN = 3u;
-uint settle_aabb(uint i) {
-  vec4 centre_bound = uintBitsToFloat(texelFetch(centres, int(i)));
+uint settle_object(uint i) {
+  if (BV_KIND == BV_KIND_SPHERE) return classify_object(i);
+  vec4 centre_bound = BV_KIND == BV_KIND_AABB ? uintBitsToFloat(texelFetch(centres, int(i))) : bound(OBB_VEC4S * i);
   float reach = centre_bound.w + view_settle_margin;
   bool beyond = false, within = true;
   [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) {
@@ -183,13 +186,13 @@ void main_arrival() {
   if (view_ok) load_view();
   uint group_first = params.first_object + gl_WorkGroupID.x * gl_WorkGroupSize.x * OBJECTS_PER_INVOCATION;
   uint block = group_first + gl_LocalInvocationIndex;
-  // Bit j: object j of this invocation is OUTSIDE / INSIDE (neither: INTERSECTING), or (AABBs)
+  // Bit j: object j of this invocation is OUTSIDE / INSIDE (neither: INTERSECTING), or (boxes)
   // still open after its centre bound.
   uint outside_bits = 0u, inside_bits = 0u, open = 0u;
   [[unroll]] for (uint j = 0; j < OBJECTS_PER_INVOCATION; ++j) {
     uint i = block + j * gl_WorkGroupSize.x;
     uint c = CLASS_OUTSIDE;
-    if (view_ok && i < object_count) c = BV_KIND == BV_KIND_AABB ? settle_aabb(i) : classify_object(i);
+    if (view_ok && i < object_count) c = settle_object(i);
     outside_bits |= c == CLASS_OUTSIDE ? 1u << j : 0u;
     inside_bits |= c == CLASS_INSIDE ? 1u << j : 0u;
     open |= c == CLASS_OPEN ? 1u << j : 0u;
@@ -197,13 +200,11 @@ void main_arrival() {
   // The open boxes (about 1% of a random scene: those near a plane), one per invocation per
   // round. On lavapipe a loop runs while any lane has work, where both sides of an `if` always
   // run: 8 one-texel bound tests and one or two full tests cost less than 8 full tests.
-  if (BV_KIND == BV_KIND_AABB) {
+  if (BV_KIND != BV_KIND_SPHERE) {
     while (open != 0u) {
       uint j = findLSB(open);
       open &= open - 1u;
-      uint i = block + j * gl_WorkGroupSize.x;
-      uint unused;
-      uint c = classify_aabb(bound(AABB_VEC4S * i).xyz, bound(AABB_VEC4S * i + 1).xyz, ALL_PLANES, unused);
+      uint c = classify_object(block + j * gl_WorkGroupSize.x);
       outside_bits |= c == CLASS_OUTSIDE ? 1u << j : 0u;
       inside_bits |= c == CLASS_INSIDE ? 1u << j : 0u;
     }

@@ -52,6 +52,7 @@ namespace cullpipe {
 namespace {
 
 using test::aabb_edge_set;
+using test::obb_edge_set;
 using test::EdgeSet;
 using fast::CpuCuller;
 using fast::CpuCullerConfig;
@@ -177,108 +178,6 @@ TEST(CpuCuller, NanInfinityAndDenormalValuesGiveTheReferenceAnswer) {
   check_everywhere(boxes, "aabb special");
   check_everywhere(obbs, "obb special");
   check_everywhere(spheres, "sphere special");
-}
-
-// The OBB kernel settles most objects with a bound b >= |r| on the projected radius and tests
-// the rest in full. OBBs whose centre distance is within float steps of +-r, with an axis along
-// the normal (where the float r can exceed |u| h), axes that are not unit or orthogonal,
-// negative and zero extents; axes so long that n.u overflows (r is NaN: no bound is safe);
-// across more than two runs of the kernel (4096 objects each).
-EdgeSet<Obb> obb_edge_set() {
-  test::Rng rng(11);
-  // Slanted planes, one view each; through the origin for the first six: a centre t n has
-  // coordinates no larger than t, so its distance can be set to within a float step of r.
-  std::vector<Frustum> views;
-  for (float d : {0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 900.0f, -3000.0f, 1e6f}) {
-    const glm::vec4 plane(glm::normalize(rng.vec3(-1, 1) + glm::vec3(0.1f)), d);
-    views.push_back(Frustum::from_planes({&plane, 1}));
-  }
-  std::vector<Obb> obbs;
-  for (const Frustum& view : views) {
-    const glm::vec3 n = view.planes[0].normal;
-    const glm::vec3 on_plane = -view.planes[0].d * n;
-    for (int shape = 0; shape < 4; ++shape)
-      for (int side = -1; side <= 1; side += 2)
-        for (int step = -64; step <= 64; ++step) {
-          Obb o;
-          if (shape == 0) {  // one axis along the normal, the others empty
-            o.basis = glm::mat3(n, glm::vec3(0), glm::vec3(0));
-            o.half_extents = {rng.uniform(0.5f, 2.0f), 0, 0};
-          } else if (shape == 1) {  // a rotated box
-            o.basis = rng.rotation();
-            o.half_extents = rng.vec3(0.0f, 2.0f);
-          } else if (shape == 2) {  // skewed, scaled axes and a negative extent
-            o.basis = glm::mat3(rng.vec3(-3, 3), rng.vec3(-3, 3), 0.001f * rng.vec3(-1, 1));
-            o.half_extents = {rng.uniform(0.0f, 2.0f), -rng.uniform(0.0f, 2.0f), 1e3f};
-          } else {  // a scaled axis along the normal
-            o.basis = glm::mat3(7.0f * n, 0.5f * rng.vec3(-1, 1), glm::vec3(0));
-            o.half_extents = {rng.uniform(0.1f, 1.0f), rng.uniform(0.0f, 0.01f), 3};
-          }
-          // r as the reference computes it for this plane; the centre at distance side * r,
-          // moved by `step` steps of 2^-26 of r (below a float step of the distance).
-          float r = 0;
-          for (int i = 0; i < 3; ++i) {
-            const glm::vec3 u = o.basis[i];
-            const float a = (n.x * u.x + n.y * u.y) + n.z * u.z;
-            r = i == 0 ? std::fabs(a) * o.half_extents[i] : r + std::fabs(a) * o.half_extents[i];
-          }
-          o.center = on_plane + (float(side) * r * (1.0f + float(step) * 0x1p-26f)) * n;
-          obbs.push_back(o);
-        }
-    // Behind this plane by 1 and by 10^-3, with an axis along which n.u overflows (r = inf x 0 =
-    // NaN: the reference finds nothing behind this plane).
-    for (float behind : {1.0f, 1e-3f}) {
-      Obb o;
-      o.basis = glm::mat3(3e38f * glm::sign(n), glm::vec3(0, 1, 0), glm::vec3(0, 0, 1));
-      o.half_extents = {0, 1e-4f, 1e-4f};
-      o.center = on_plane - behind * n;
-      obbs.push_back(o);
-    }
-  }
-  // Where rounding makes the float r exceed the exact |u| h (which the bound's slack covers), a
-  // centre at a distance s strictly between them, on each side: s < r is INTERSECTING, while a
-  // bound of just |u| h would call it INSIDE (or OUTSIDE at -s).
-  std::size_t between = 0;
-  for (int trial = 0; trial < 4000 && between < 200; ++trial) {
-    const Frustum& view = views[static_cast<std::size_t>(trial) % 6];  // d = 0
-    const glm::vec3 n = view.planes[0].normal;
-    Obb o;
-    o.basis = glm::mat3(rng.uniform(0.5f, 8.0f) * n, glm::vec3(0), glm::vec3(0));
-    o.half_extents = {rng.uniform(0.5f, 2.0f), 0, 0};
-    const glm::vec3 u = o.basis[0];
-    const float r = std::fabs((n.x * u.x + n.y * u.y) + n.z * u.z) * o.half_extents.x;
-    const double exact = std::sqrt(double(u.x) * u.x + double(u.y) * u.y + double(u.z) * u.z) * o.half_extents.x;
-    if (!(r > exact)) continue;
-    for (float t = std::nextafter(r, 0.0f), stop = r * (1 - 0x1p-20f); t > stop; t = std::nextafter(t, 0.0f)) {
-      const glm::vec3 c = t * n;
-      const float s = (n.x * c.x + n.y * c.y) + n.z * c.z;  // the plane's d is 0
-      if (s > exact && s < r) {
-        o.center = c;
-        obbs.push_back(o);
-        o.center = -c;
-        obbs.push_back(o);
-        ++between;
-        break;
-      }
-    }
-  }
-  EXPECT_GT(between, 50u);
-  // Subnormal extents on huge axes and the reverse: under DAZ they would read as 0.
-  for (const Frustum& view : views) {
-    const glm::vec3 n = view.planes[0].normal;
-    Obb o;
-    o.basis = glm::mat3(0x1p124f * n, glm::vec3(0), glm::vec3(0));
-    o.half_extents = {0x1p-127f, 0, 0};  // r = 0.125
-    o.center = -view.planes[0].d * n + 0.01f * n;
-    obbs.push_back(o);
-    o.basis = glm::mat3(0x1p-127f * n, glm::vec3(0), glm::vec3(0));
-    o.half_extents = {0x1p100f, 0, 0};  // r = 2^-27
-    o.center = -view.planes[0].d * n + 0x1p-30f * n;
-    obbs.push_back(o);
-  }
-  const std::size_t sharp = obbs.size();
-  while (obbs.size() < 9000) obbs.push_back(obbs[rng.next() % sharp]);  // more than two runs
-  return {obbs, views};
 }
 
 /// Checks an edge set everywhere, after checking that its answers against `views[mixed]` are

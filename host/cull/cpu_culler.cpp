@@ -168,6 +168,11 @@ void aabb_centre_bounds(std::span<const Aabb> boxes, std::span<glm::vec4> out) {
   }
 }
 
+void obb_plane_bounds(std::span<const Obb> boxes, std::span<float> out) {
+  const NearestNoFlush mode;
+  for (std::size_t i = 0; i < boxes.size(); ++i) out[i] = obb_plane_bound(boxes[i]);
+}
+
 float settle_margin(const Frustum& frustum) {
   const PlaneSet s = plane_set(frustum);
   return s.unit_normals ? s.max_margin : std::numeric_limits<float>::quiet_NaN();

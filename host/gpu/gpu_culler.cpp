@@ -97,7 +97,12 @@ void GpuCuller::upload(std::span<const Aabb> volumes) {
 
 void GpuCuller::upload(std::span<const Obb> volumes) {
   std::vector<GpuObb> packed(volumes.size());
-  for (std::size_t i = 0; i < volumes.size(); ++i) packed[i] = pack(volumes[i]);
+  std::vector<float> bounds(volumes.size());
+  fast::detail::obb_plane_bounds(volumes, bounds);  // settles most boxes on the centre texel alone
+  for (std::size_t i = 0; i < volumes.size(); ++i) {
+    packed[i] = pack(volumes[i]);
+    packed[i].center.w = bounds[i];
+  }
   upload_words(BvKind::Obb, packed.data(), packed.size(), sizeof(GpuObb));
 }
 

@@ -49,7 +49,7 @@ struct GpuAabb {
 
 // Oriented box, basis matrix + radius form: centre, three unit axes, half extent per axis.
 struct GpuObb {
-  vec4 center;  // xyz = centre
+  vec4 center;  // xyz = centre; w = flat pass: a bound on the projected radius (host/cull/plane_bounds.hpp)
   vec4 axis_x;  // xyz = unit axis, w = half extent along it
   vec4 axis_y;
   vec4 axis_z;
@@ -68,7 +68,7 @@ struct GpuSphere {
 struct GpuFrustum {
   vec4 planes[MAX_FRUSTUM_PLANES];  // xyz = unit inward normal, w = d; inside when dot(n,p)+d >= 0
   uint plane_count;                 // planes actually used (5 when the far plane is at infinity)
-  float settle_margin;              // AABB flat pass: the margin added to each centre bound (NaN: none settles)
+  float settle_margin;              // flat pass: the margin added to each box's centre bound (NaN: none settles)
   uint reserved1;
   uint reserved2;
 };
