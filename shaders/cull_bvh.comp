@@ -12,8 +12,8 @@
 //      OUTSIDE skips a subtree, INSIDE records its object range (adjacent ranges merged), and
 //      the objects of an INTERSECTING leaf are tested there, on the planes the leaf straddles,
 //      the visible ones recorded with their class;
-//   3. the workgroup reserves the list slots of all its visible objects with one atomic per
-//      counter (the counters' cache line is shared by every core);
+//   3. the subgroup reserves the list slots of all its visible objects with one atomic per
+//      counter;
 //   4. the subgroup writes every lane's records together, lane after lane, one object per
 //      lane: no atomics, and no lane idles through another's long accepted range.
 // Records go to the invocation's own slice of a scratch buffer (its cut subtree's object
@@ -52,8 +52,8 @@ layout(std430, set = 0, binding = BINDING_DRAWS) writeonly buffer Draws { DrawCo
 layout(set = 0, binding = BVH_BINDING_NODES) uniform usamplerBuffer nodes;
 layout(set = 0, binding = BVH_BINDING_OBJECTS) uniform usamplerBuffer object_order;  // four ids per texel
 layout(std430, set = 0, binding = BVH_BINDING_CUTS) readonly buffer Cuts { uint cuts[]; };
-// Written by each invocation in its walk, read by the other lanes of its subgroup after the
-// workgroup barrier (with memoryBarrierBuffer: barrier() alone orders shared memory only).
+// Written by each invocation in its walk, read by the other lanes of its subgroup after
+// subgroupMemoryBarrierBuffer() and subgroupBarrier().
 layout(std430, set = 0, binding = BVH_BINDING_RECORDS) coherent buffer Records { uvec2 records[]; };
 
 layout(push_constant, std430) uniform Push { BvhCullParams params; };
@@ -158,8 +158,6 @@ uvec4 with_level_mask(uvec4 masks, uint level, uint mask) {
 }
 
 
-shared uint group_visible, group_inside, group_base, group_node_tests, group_object_tests;
-
 void main() {
   // Workgroups are view-major and never straddle views (groups_per_view per view); larger
   // dispatches fold into y, and the groups past the last view return.
@@ -246,41 +244,24 @@ void main() {
     accepted += open_count;
   }
 
-  // 3. The list slots and the counts: one global atomic per workgroup and counter (as the
-  // flat pass: the counters' cache line bounces between cores).
+  // 3. The list slots and the counts: one global atomic per subgroup and counter, no
+  // workgroup barrier (as the flat pass: on lavapipe each barrier suspends and resumes every
+  // subgroup's coroutine).
   uint visible = accepted + tested_visible, inside = accepted + tested_inside;
-  if (gl_LocalInvocationIndex == 0u) {
-    group_visible = 0u;
-    group_inside = 0u;
-    group_base = 0u;
-    group_node_tests = 0u;
-    group_object_tests = 0u;
-  }
-  memoryBarrierBuffer();  // the records, for step 4
-  barrier();
+  subgroupMemoryBarrierBuffer();  // the records, for step 4 (read by this subgroup only)
+  subgroupBarrier();
   uint subgroup_visible = subgroupAdd(visible), subgroup_inside = subgroupAdd(inside);
   uint node_tests = subgroupAdd(tests.x), object_tests = subgroupAdd(tests.y);
-  uint offset = 0u;
+  uint subgroup_base = 0u;
   if (subgroupElect()) {
     if (subgroup_visible != 0u) {
-      offset = atomicAdd(group_visible, subgroup_visible);
-      atomicAdd(group_inside, subgroup_inside);
+      subgroup_base = atomicAdd(counters[view].visible_count, subgroup_visible);
+      atomicAdd(counters[view].inside_count, subgroup_inside);
     }
-    atomicAdd(group_node_tests, node_tests);
-    if (object_tests != 0u) atomicAdd(group_object_tests, object_tests);
+    if (node_tests != 0u) atomicAdd(counters[view].node_tests, node_tests);
+    if (object_tests != 0u) atomicAdd(counters[view].object_tests, object_tests);
   }
-  offset = subgroupBroadcastFirst(offset) + subgroupExclusiveAdd(visible);
-  barrier();
-  if (gl_LocalInvocationIndex == 0u) {
-    if (group_visible != 0u) {
-      group_base = atomicAdd(counters[view].visible_count, group_visible);
-      atomicAdd(counters[view].inside_count, group_inside);
-    }
-    if (group_node_tests != 0u) atomicAdd(counters[view].node_tests, group_node_tests);
-    if (group_object_tests != 0u) atomicAdd(counters[view].object_tests, group_object_tests);
-  }
-  barrier();
-  uint slot = group_base + offset;
+  uint slot = subgroupBroadcastFirst(subgroup_base) + subgroupExclusiveAdd(visible);
 
   // 4. Every lane's records, lane after lane, by the whole subgroup: its accepted ranges (every
   // object INSIDE), then its tested visible objects.
