@@ -141,7 +141,8 @@ void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capac
   const VkDeviceSize outputs = VkDeviceSize(object_count_) * view_count * sizeof(std::uint32_t);
   const VkDeviceSize visible = VkDeviceSize(visible_capacity) * view_count * sizeof(std::uint32_t);
   const VkDeviceSize draw_bytes = draws ? VkDeviceSize(visible_capacity) * view_count * sizeof(DrawCommand) : 0;
-  const VkDeviceSize groups = VkDeviceSize(vk::group_count(object_count_, group_size_)) * view_count * sizeof(std::uint32_t);
+  // Ordered passes: a visible and an INSIDE count per workgroup and view.
+  const VkDeviceSize groups = 2 * VkDeviceSize(vk::group_count(object_count_, group_size_)) * view_count * sizeof(std::uint32_t);
   // Classes are bound per segment (plan_segments keeps each within range); all of them must
   // still fit one allocation.
   detail::check_allocation_size(ctx_, outputs, std::to_string(view_count) + " views x " + std::to_string(object_count_) + " objects of output");
@@ -157,7 +158,7 @@ void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capac
   detail::ensure_buffer(ctx_, views_, view_count * sizeof(GpuFrustum), kBoundsUsage, "view buffer", dirty);
   detail::ensure_buffer(ctx_, draws_, draw_bytes, storage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "draw buffer", dirty);
   detail::ensure_buffer(ctx_, templates_, 0, storage, "draw template buffer", dirty);
-  detail::ensure_buffer(ctx_, group_counts_, groups, storage, "group count buffer", dirty);
+  detail::ensure_buffer(ctx_, group_counts_, groups, storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, "group count buffer", dirty);
 }
 
 GpuCuller::SegmentPlan GpuCuller::plan_segments(std::size_t view_count, bool ordered) const {
@@ -257,6 +258,8 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
 
   detail::record_entry_barrier(ctx_, cmd);
   vkCmdFillBuffer(cmd, counters_.handle(), 0, view_count * sizeof(ViewCounters), 0);
+  if (options.ordered && object_count_ > 0)  // the per-workgroup counts the first pass adds to
+    vkCmdFillBuffer(cmd, group_counts_.handle(), 0, 2 * VkDeviceSize(vk::group_count(object_count_, group_size_)) * view_count * sizeof(std::uint32_t), 0);
   detail::record_transfer_to_compute(cmd);
   if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, timestamps, 0);
 
