@@ -79,12 +79,16 @@ void load_view() {
 // view's margin, a centre distance s < -reach on a plane is the reference's OUTSIDE and
 // s >= reach on every plane its INSIDE: for AABBs with s computed in any order, fused or not,
 // in any rounding mode; for OBBs s is the reference's own and the margin only makes the reach
-// larger. Else CLASS_OPEN (a NaN bound or margin settles nothing): the reference's own test.
+// larger. Else CLASS_OPEN: the reference's own test. A bound or margin that is NaN or infinite
+// (the host's "no bound is safe") settles nothing; that is decided on the bits, since without
+// SignedZeroInfNanPreserve a comparison with a NaN need not be false on every device.
 // Spheres are tested in full at once (one texel either way).
 const uint CLASS_OPEN = 3u;
+bool finite_bits(float x) { return (floatBitsToUint(x) & 0x7f800000u) != 0x7f800000u; }
 uint settle_object(uint i) {
   if (BV_KIND == BV_KIND_SPHERE) return classify_object(i);
   vec4 centre_bound = BV_KIND == BV_KIND_AABB ? uintBitsToFloat(texelFetch(centres, int(i))) : bound(OBB_VEC4S * i);
+  if (!finite_bits(centre_bound.w) || !finite_bits(view_settle_margin)) return CLASS_OPEN;
   float reach = centre_bound.w + view_settle_margin;
   bool beyond = false, within = true;
   [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) {

@@ -7,6 +7,8 @@
 #include <limits>
 #include <vector>
 
+#include <gtest/gtest.h>
+
 #include "geom/pn_vertex.hpp"
 #include "test_util.hpp"
 
@@ -17,6 +19,21 @@ struct EdgeSet {
   std::vector<Volume> volumes;
   std::vector<Frustum> views;  // one plane each
 };
+
+// Appends views on which no bound may settle anything: the same planes with normals of length
+// 2, built by hand, and planes at |d| = 2^121 (past the margin's range).
+inline void add_unbounded_views(std::vector<Frustum>& views) {
+  for (std::size_t v = 0, count = views.size(); v < count; ++v) {
+    Frustum scaled = views[v];
+    scaled.planes[0].normal *= 2.0f;
+    scaled.planes[0].d *= 2.0f;
+    views.push_back(scaled);
+  }
+  for (float d : {0x1p121f, -0x1p121f}) {
+    const glm::vec4 plane(views[0].planes[0].normal, d);
+    views.push_back(Frustum::from_planes({&plane, 1}));
+  }
+}
 
 // The OBB kernel settles most objects with a bound b >= |r| on the projected radius and tests
 // the rest in full. OBBs whose centre distance is within float steps of +-r, with an axis along
@@ -117,6 +134,7 @@ inline EdgeSet<Obb> obb_edge_set() {
   }
   const std::size_t sharp = obbs.size();
   while (obbs.size() < 9000) obbs.push_back(obbs[rng.next() % sharp]);  // more than two runs
+  add_unbounded_views(views);
   return {obbs, views};
 }
 
@@ -167,13 +185,7 @@ inline EdgeSet<Aabb> aabb_edge_set() {
   }
   const std::size_t sharp = boxes.size();
   while (boxes.size() < 9000) boxes.push_back(boxes[rng.next() % sharp]);  // more than two runs
-  // The same planes with normals of length 2, built by hand: no bound may settle anything.
-  for (std::size_t v = 0, count = views.size(); v < count; ++v) {
-    Frustum scaled = views[v];
-    scaled.planes[0].normal *= 2.0f;
-    scaled.planes[0].d *= 2.0f;
-    views.push_back(scaled);
-  }
+  add_unbounded_views(views);
   return {boxes, views};
 }
 

@@ -630,6 +630,9 @@ TEST_F(Gpu, OrderedCompactionAndDrawCommands) {
   std::vector<Aabb> some(many.begin(), many.begin() + 12345);
   expect_draws(chunked, some, test_frusta(), 7);
   expect_draws(chunked, some, test_frusta(), 8, 77);
+  // A group size that is not a multiple of 32 (the scatter pass's rank bitmask words).
+  gpu::GpuCuller odd_groups(*GpuEnvironment::context, gpu::GpuCullerConfig{100});
+  expect_draws(odd_groups, some, test_frusta(), 9);
 }
 
 // The engine path: a context borrowing the caller's device, the pass recorded into the

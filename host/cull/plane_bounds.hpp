@@ -23,7 +23,7 @@ void obb_plane_bounds(std::span<const Obb> boxes, std::span<float> out);
 
 /// The margin m a view adds to every bound: a centre distance s < -(bound + m) on a plane
 /// settles OUTSIDE, s >= bound + m on every plane INSIDE. NaN (settles nothing) unless every
-/// plane normal has length <= 1 + 2^-20.
+/// plane normal has length <= 1 + 2^-20 and every |d| <= 2^120.
 float settle_margin(const Frustum& frustum);
 
 }  // namespace cullpipe::fast::detail

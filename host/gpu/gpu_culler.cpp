@@ -88,7 +88,10 @@ void GpuCuller::upload(std::span<const Aabb> volumes) {
   std::vector<glm::vec4> centres(volumes.size());
   fast::detail::aabb_centre_bounds(volumes, centres);
   const VkDeviceSize centre_bytes = VkDeviceSize(volumes.size()) * sizeof(glm::vec4);
-  detail::check_allocation_size(ctx_, centre_bytes, std::to_string(volumes.size()) + " aabb centre bounds");
+  const std::string what = std::to_string(volumes.size()) + " aabb";
+  // Both sizes are checked before anything changes: a scene that cannot fit keeps the old one.
+  detail::check_allocation_size(ctx_, VkDeviceSize(volumes.size()) * sizeof(GpuAabb), what + " volumes");
+  detail::check_allocation_size(ctx_, centre_bytes, what + " centre bounds");
   object_count_ = 0;  // no pass on the old volumes with a half-written centre buffer
   detail::ensure_buffer(ctx_, centres_, centre_bytes, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
   if (centre_bytes) std::memcpy(centres_.data(), centres.data(), centre_bytes);
@@ -137,18 +140,18 @@ void GpuCuller::upload_draws(std::span<const DrawCommand> templates) {
   template_count_ = templates.size();
 }
 
-void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capacity, bool draws) {
+void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capacity, bool draws, bool ordered) {
   const VkDeviceSize outputs = VkDeviceSize(object_count_) * view_count * sizeof(std::uint32_t);
   const VkDeviceSize visible = VkDeviceSize(visible_capacity) * view_count * sizeof(std::uint32_t);
   const VkDeviceSize draw_bytes = draws ? VkDeviceSize(visible_capacity) * view_count * sizeof(DrawCommand) : 0;
-  // Ordered passes: a visible and an INSIDE count per workgroup and view.
-  const VkDeviceSize groups = 2 * VkDeviceSize(vk::group_count(object_count_, group_size_)) * view_count * sizeof(std::uint32_t);
+  const VkDeviceSize groups = ordered ? group_count_bytes(view_count) : 0;
   // Classes are bound per segment (plan_segments keeps each within range); all of them must
   // still fit one allocation.
   detail::check_allocation_size(ctx_, outputs, std::to_string(view_count) + " views x " + std::to_string(object_count_) + " objects of output");
   detail::check_storage_range(ctx_, visible, std::to_string(view_count) + " views x " + std::to_string(visible_capacity) + " visible ids");
   detail::check_storage_range(ctx_, draw_bytes, std::to_string(view_count) + " views x " + std::to_string(visible_capacity) + " draw commands");
   detail::check_texel_range(ctx_, VkDeviceSize(view_count) * sizeof(GpuFrustum), std::to_string(view_count) + " views");
+  detail::check_storage_range(ctx_, groups, std::to_string(view_count) + " views x " + std::to_string(object_count_) + " objects of workgroup counts");
   constexpr VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
   bool& dirty = descriptors_dirty_;
   detail::ensure_buffer(ctx_, classes_, outputs, storage, "classification buffer", dirty);
@@ -159,6 +162,11 @@ void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capac
   detail::ensure_buffer(ctx_, draws_, draw_bytes, storage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "draw buffer", dirty);
   detail::ensure_buffer(ctx_, templates_, 0, storage, "draw template buffer", dirty);
   detail::ensure_buffer(ctx_, group_counts_, groups, storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, "group count buffer", dirty);
+}
+
+VkDeviceSize GpuCuller::group_count_bytes(std::size_t view_count) const {
+  // Ordered passes: a visible and an INSIDE count per workgroup and view.
+  return 2 * VkDeviceSize(vk::group_count(object_count_, group_size_)) * view_count * sizeof(std::uint32_t);
 }
 
 GpuCuller::SegmentPlan GpuCuller::plan_segments(std::size_t view_count, bool ordered) const {
@@ -229,7 +237,7 @@ void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   detail::ensure_buffer(ctx_, centres_, 0, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
   // Nothing of the pass's state changes until every check and allocation has passed.
   const SegmentPlan plan = plan_segments(views.size(), options.ordered);
-  ensure_outputs(views.size(), capacity, options.draws);
+  ensure_outputs(views.size(), capacity, options.draws, options.ordered);
   segment_objects_ = plan.objects;
   segment_count_ = plan.count;
   last_view_count_ = views.size();
@@ -259,7 +267,7 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
   detail::record_entry_barrier(ctx_, cmd);
   vkCmdFillBuffer(cmd, counters_.handle(), 0, view_count * sizeof(ViewCounters), 0);
   if (options.ordered && object_count_ > 0)  // the per-workgroup counts the first pass adds to
-    vkCmdFillBuffer(cmd, group_counts_.handle(), 0, 2 * VkDeviceSize(vk::group_count(object_count_, group_size_)) * view_count * sizeof(std::uint32_t), 0);
+    vkCmdFillBuffer(cmd, group_counts_.handle(), 0, group_count_bytes(view_count), 0);
   detail::record_transfer_to_compute(cmd);
   if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, timestamps, 0);
 

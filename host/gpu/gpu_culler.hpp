@@ -76,7 +76,7 @@ struct GpuCullerConfig {
   /// (maxComputeWorkGroupCount[0]). Tests set it low to exercise the chunked path.
   std::uint32_t max_groups_per_dispatch = 0;
   /// Objects each invocation classifies in the arrival-order pass (1..32): planes loaded once
-  /// for all of them, and one visible-list atomic per workgroup for all of the workgroup's.
+  /// for all of them, and one visible-list atomic per subgroup for all of the subgroup's.
   /// The ordered pass uses 1.
   std::uint32_t objects_per_invocation = FLAT_OBJECTS_PER_INVOCATION;
   /// Most objects per segment; 0 means as many as the device's limits allow (one texel buffer
@@ -150,7 +150,8 @@ class GpuCuller {
 
  private:
   void upload_words(BvKind kind, const void* data, std::size_t count, std::size_t bytes_per_object);
-  void ensure_outputs(std::size_t view_count, std::size_t visible_capacity, bool draws);
+  void ensure_outputs(std::size_t view_count, std::size_t visible_capacity, bool draws, bool ordered);
+  VkDeviceSize group_count_bytes(std::size_t view_count) const;  // the ordered passes' workgroup counts
   struct SegmentPlan {
     std::size_t objects = 0;  // per segment
     std::size_t count = 1;

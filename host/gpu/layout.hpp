@@ -1,6 +1,8 @@
 #pragma once
 // Conversions between the host volume types and the GPU structs of shaders/shared/cull_types.h.
 // Every conversion copies floats unchanged, so CPU and GPU see bit-identical inputs.
+#include <limits>
+
 #include "shared/cull_types.h"  // shaders/shared/, on the include path of cullpipe_gpu
 #include "geom/aabb.hpp"
 #include "geom/frustum.hpp"
@@ -19,6 +21,7 @@ inline GpuFrustum pack(const Frustum& f) {
   GpuFrustum g{};
   for (std::size_t i = 0; i < f.plane_count; ++i) g.planes[i] = f.planes[i].as_vec4();
   g.plane_count = static_cast<uint>(f.plane_count);
+  g.settle_margin = std::numeric_limits<float>::quiet_NaN();  // settles nothing until the flat culler sets it
   return g;
 }
 

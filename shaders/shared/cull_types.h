@@ -68,7 +68,7 @@ struct GpuSphere {
 struct GpuFrustum {
   vec4 planes[MAX_FRUSTUM_PLANES];  // xyz = unit inward normal, w = d; inside when dot(n,p)+d >= 0
   uint plane_count;                 // planes actually used (5 when the far plane is at infinity)
-  float settle_margin;              // flat pass: the margin added to each box's centre bound (NaN: none settles)
+  float settle_margin;              // flat pass: the margin added to each box's centre bound (NaN or inf: none settles)
   uint reserved1;
   uint reserved2;
 };
@@ -87,10 +87,11 @@ struct FlatCullParams {
   uint write_classes;     // arrival-order pass: 0 skips the per-object classes (not asked for)
 };
 
-// Largest workgroup the compaction shaders support (their shared scan array).
+// Largest workgroup the compaction shaders support (their shared arrays).
 CP_CONST MAX_CULL_GROUP_SIZE = 1024u;
 
-// Storage-buffer bindings of set 0, shared by every culling shader (one descriptor set).
+// Bindings of set 0, shared by every culling shader (one descriptor set): storage buffers,
+// except the bounds, views and centres, which are uniform texel buffers.
 CP_CONST BINDING_BOUNDS = 0u;          // vec4 words of the volumes
 CP_CONST BINDING_CLASSES = 1u;         // uint per object and view: [view * object_count + i]
 CP_CONST BINDING_VISIBLE = 2u;         // visible ids: [view * visible_capacity + k]
@@ -98,7 +99,7 @@ CP_CONST BINDING_COUNTERS = 3u;        // ViewCounters per view
 CP_CONST BINDING_VIEWS = 4u;           // GpuFrustum per view
 CP_CONST BINDING_DRAW_TEMPLATES = 5u;  // DrawCommand per object (object_id ignored)
 CP_CONST BINDING_DRAWS = 6u;           // DrawCommand out: [view * visible_capacity + k]
-CP_CONST BINDING_GROUP_COUNTS = 7u;    // ordered mode: visible count, then offset, per workgroup and view
+CP_CONST BINDING_GROUP_COUNTS = 7u;    // ordered mode: [view][group] visible counts (then offsets), then [view][group] INSIDE counts
 CP_CONST BINDING_CENTRES = 8u;         // AABBs: vec4 per object, xyz = centre, w = bound (host/cull/plane_bounds.hpp)
 CP_CONST CULL_BINDING_COUNT = 9u;
 
