@@ -10,6 +10,7 @@
 #include "shared/cull_types.h"
 
 layout(local_size_x_id = 1) in;  // the culling group size (the counts are per culling workgroup)
+layout(constant_id = 4) const uint OBJECTS_PER_INVOCATION = 1;  // the culling pass's
 
 layout(std430, set = 0, binding = BINDING_COUNTERS) buffer Counters { ViewCounters counters[]; };
 // [view][group] visible counts, then [view][group] INSIDE counts (cull_flat.comp, ORDERED = 1).
@@ -23,7 +24,8 @@ void main() {
   uint view = gl_WorkGroupID.y;
   uint lanes = gl_WorkGroupSize.x;
   uint t = gl_LocalInvocationIndex;
-  uint groups = (params.object_count + lanes - 1) / lanes;
+  uint run = lanes * OBJECTS_PER_INVOCATION;  // objects per culling workgroup
+  uint groups = (params.object_count + run - 1) / run;
   uint per = (groups + lanes - 1) / lanes;
   uint begin = min(t * per, groups), end = min(begin + per, groups);
   uint base = view * groups, inside_base = (params.view_count + view) * groups;

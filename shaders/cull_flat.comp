@@ -6,8 +6,9 @@
 //   WRITE_DRAWS, draw commands) to the view's lists in arrival order, one global atomic per
 //   subgroup (on lavapipe 8 objects per invocation measured 2.6x faster than 1: the planes
 //   are loaded once and the counter's cache line bounces 8x less);
-// - ORDERED == 1: one object per invocation; writes only each workgroup's visible and INSIDE
-//   counts; compact_scan.comp and compact_scatter.comp then write the lists in object order.
+// - ORDERED == 1: the same objects per invocation; writes the classes and each workgroup's
+//   visible and INSIDE counts; compact_scan.comp and compact_scatter.comp then write the lists
+//   in object order.
 //
 // The plane tests, and their bit-exact contract with the CPU reference, are in
 // shared/classify.glsl.
@@ -24,10 +25,11 @@ layout(local_size_x_id = 1) in;                 // = FLAT_CULL_GROUP_SIZE, set b
 layout(constant_id = 0) const uint BV_KIND = BV_KIND_AABB;
 layout(constant_id = 2) const uint ORDERED = 0;      // 1: object-order compaction by later passes
 layout(constant_id = 3) const uint WRITE_DRAWS = 0;  // 1: also write draw commands (arrival order)
-// Objects per invocation in the arrival-order pass (ORDERED == 0): the planes are loaded once
+// Objects per invocation in both passes: the planes are loaded once
 // for all of them and the visible list takes one atomic per subgroup for all of its objects.
 // Object j of an invocation is at block + j * group size, so each step of the loop reads one
-// contiguous run of objects per workgroup. The ordered pass keeps one object per invocation.
+// contiguous run of objects per workgroup, and a workgroup covers one contiguous run of
+// group size x OBJECTS_PER_INVOCATION objects (the ordered passes' unit).
 layout(constant_id = 4) const uint OBJECTS_PER_INVOCATION = 1;
 
 // The volumes' vec4 words, fetched as integer texels (exact bits) from a uniform texel buffer.
@@ -100,25 +102,68 @@ uint settle_object(uint i) {
   return beyond ? CLASS_OUTSIDE : within ? CLASS_INSIDE : CLASS_OPEN;
 }
 
-// Object order: each workgroup's visible and INSIDE objects are counted, one global atomic
-// per subgroup on the workgroup's own two counts (zeroed before the pass; a workgroup runs on
-// one core, so no cache line bounces, and no workgroup barrier); compact_scan sums them into
-// the view's counters and offsets, and compact_scatter writes the lists.
-void main_ordered() {
-  uint i = params.first_object + gl_GlobalInvocationID.x;
-  bool view_ok = view < params.view_count;
-  bool in_range = i < params.object_count && view_ok;
-  uint c = CLASS_OUTSIDE;
-  if (in_range) {
-    load_view();
-    c = classify_object(i);
-    classes[view * params.object_count + i] = c;
+// Classifies this invocation's objects block + j * group size (j < OBJECTS_PER_INVOCATION):
+// bit j of outside_bits / inside_bits is set for OUTSIDE / INSIDE (neither: INTERSECTING);
+// objects past object_count (or of no view) are OUTSIDE.
+void classify_objects(uint block, bool view_ok, uint object_count, out uint outside_bits, out uint inside_bits) {
+  uint open = 0u;
+  outside_bits = 0u;
+  inside_bits = 0u;
+  // Bit j of open: object j is still open after its centre bound (boxes).
+  [[unroll]] for (uint j = 0; j < OBJECTS_PER_INVOCATION; ++j) {
+    uint i = block + j * gl_WorkGroupSize.x;
+    uint c = CLASS_OUTSIDE;
+    if (view_ok && i < object_count) c = settle_object(i);
+    outside_bits |= c == CLASS_OUTSIDE ? 1u << j : 0u;
+    inside_bits |= c == CLASS_INSIDE ? 1u << j : 0u;
+    open |= c == CLASS_OPEN ? 1u << j : 0u;
   }
-  uint vis_total = subgroupBallotBitCount(subgroupBallot(c != CLASS_OUTSIDE));  // inactive = OUTSIDE
-  uint inside_total = subgroupBallotBitCount(subgroupBallot(c == CLASS_INSIDE));
+  // The open boxes (about 1% of a random scene: those near a plane), one per invocation per
+  // round. On lavapipe a loop runs while any lane has work, where both sides of an `if` always
+  // run: 8 one-texel bound tests and one or two full tests cost less than 8 full tests.
+  if (BV_KIND != BV_KIND_SPHERE) {
+    while (open != 0u) {
+      uint j = findLSB(open);
+      open &= open - 1u;
+      uint c = classify_object(block + j * gl_WorkGroupSize.x);
+      outside_bits |= c == CLASS_OUTSIDE ? 1u << j : 0u;
+      inside_bits |= c == CLASS_INSIDE ? 1u << j : 0u;
+    }
+  }
+}
+
+uint class_of(uint j, uint outside_bits, uint inside_bits) {
+  return (outside_bits & 1u << j) != 0u ? CLASS_OUTSIDE : (inside_bits & 1u << j) != 0u ? CLASS_INSIDE : CLASS_INTERSECTING;
+}
+
+// Object order: OBJECTS_PER_INVOCATION objects per invocation, each workgroup's contiguous run
+// of objects counted (visible and INSIDE) with one global atomic per subgroup on the
+// workgroup's own two counts (zeroed before the pass; a workgroup runs on one core, so no cache
+// line bounces, and no workgroup barrier); compact_scan sums them into the view's counters and
+// offsets, and compact_scatter writes the lists.
+void main_ordered() {
+  uint object_count = params.object_count;
+  bool view_ok = view < params.view_count;
+  if (view_ok) load_view();
+  uint run = gl_WorkGroupSize.x * OBJECTS_PER_INVOCATION;  // objects per workgroup
+  uint group_first = params.first_object + gl_WorkGroupID.x * run;
+  uint block = group_first + gl_LocalInvocationIndex;
+  uint outside_bits, inside_bits;
+  classify_objects(block, view_ok, object_count, outside_bits, inside_bits);
+  uint visible = 0u;
+  [[unroll]] for (uint j = 0; j < OBJECTS_PER_INVOCATION; ++j) {
+    uint i = block + j * gl_WorkGroupSize.x;
+    if (view_ok && i < object_count) {
+      uint c = class_of(j, outside_bits, inside_bits);
+      classes[view * object_count + i] = c;
+      visible += c != CLASS_OUTSIDE ? 1u : 0u;
+    }
+  }
+  uint vis_total = subgroupAdd(visible);
+  uint inside_total = subgroupAdd(bitCount(inside_bits));
   if (subgroupElect() && view_ok) {
-    uint groups = (params.object_count + gl_WorkGroupSize.x - 1) / gl_WorkGroupSize.x;
-    uint g = params.first_object / gl_WorkGroupSize.x + gl_WorkGroupID.x;
+    uint groups = (object_count + run - 1) / run;
+    uint g = params.first_object / run + gl_WorkGroupID.x;
     if (vis_total > 0) atomicAdd(group_counts[view * groups + g], vis_total);
     if (inside_total > 0) atomicAdd(group_counts[(params.view_count + view) * groups + g], inside_total);
   }
@@ -175,29 +220,8 @@ void main_arrival() {
   if (view_ok) load_view();
   uint group_first = params.first_object + gl_WorkGroupID.x * gl_WorkGroupSize.x * OBJECTS_PER_INVOCATION;
   uint block = group_first + gl_LocalInvocationIndex;
-  // Bit j: object j of this invocation is OUTSIDE / INSIDE (neither: INTERSECTING), or (boxes)
-  // still open after its centre bound.
-  uint outside_bits = 0u, inside_bits = 0u, open = 0u;
-  [[unroll]] for (uint j = 0; j < OBJECTS_PER_INVOCATION; ++j) {
-    uint i = block + j * gl_WorkGroupSize.x;
-    uint c = CLASS_OUTSIDE;
-    if (view_ok && i < object_count) c = settle_object(i);
-    outside_bits |= c == CLASS_OUTSIDE ? 1u << j : 0u;
-    inside_bits |= c == CLASS_INSIDE ? 1u << j : 0u;
-    open |= c == CLASS_OPEN ? 1u << j : 0u;
-  }
-  // The open boxes (about 1% of a random scene: those near a plane), one per invocation per
-  // round. On lavapipe a loop runs while any lane has work, where both sides of an `if` always
-  // run: 8 one-texel bound tests and one or two full tests cost less than 8 full tests.
-  if (BV_KIND != BV_KIND_SPHERE) {
-    while (open != 0u) {
-      uint j = findLSB(open);
-      open &= open - 1u;
-      uint c = classify_object(block + j * gl_WorkGroupSize.x);
-      outside_bits |= c == CLASS_OUTSIDE ? 1u << j : 0u;
-      inside_bits |= c == CLASS_INSIDE ? 1u << j : 0u;
-    }
-  }
+  uint outside_bits, inside_bits;
+  classify_objects(block, view_ok, object_count, outside_bits, inside_bits);
   uvec4 ballots[OBJECTS_PER_INVOCATION];
   uint prefix[OBJECTS_PER_INVOCATION + 1];
   uint inside = bitCount(inside_bits);
@@ -205,7 +229,7 @@ void main_arrival() {
   [[unroll]] for (uint j = 0; j < OBJECTS_PER_INVOCATION; ++j) {
     uint i = block + j * gl_WorkGroupSize.x;
     bool in_range = view_ok && i < object_count;
-    uint c = (outside_bits & 1u << j) != 0u ? CLASS_OUTSIDE : (inside_bits & 1u << j) != 0u ? CLASS_INSIDE : CLASS_INTERSECTING;
+    uint c = class_of(j, outside_bits, inside_bits);
     if (in_range && write_classes) classes[view * object_count + i] = c;
     ballots[j] = subgroupBallot(in_range && c != CLASS_OUTSIDE);
     prefix[j + 1] = prefix[j] + subgroupBallotBitCount(ballots[j]);

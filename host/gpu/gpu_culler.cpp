@@ -69,9 +69,8 @@ const vk::ComputePipeline& GpuCuller::pipeline(int shader, std::uint32_t kind, b
     name = std::string("ordered compaction scatter") + (draws ? " (draws)" : "");
   }
   // Specialization constants: 0 kind, 1 group size, 2 ordered, 3 draws, 4 objects per invocation
-  // (arrival-order cull pass only).
-  const std::uint32_t spec[5] = {kind, group_size_, ordered ? 1u : 0u, draws ? 1u : 0u,
-                                 shader == 0 && !ordered ? objects_per_invocation_ : 1u};
+  // (every pass: the ordered passes' unit is a workgroup's run of objects).
+  const std::uint32_t spec[5] = {kind, group_size_, ordered ? 1u : 0u, draws ? 1u : 0u, objects_per_invocation_};
   slot = std::make_unique<vk::ComputePipeline>(
       ctx_, vk::ComputePipelineDesc{spirv, kBindingCount, sizeof(FlatCullParams), spec, name.c_str(), kTexelBindings});
   return *slot;
@@ -166,7 +165,8 @@ void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capac
 
 VkDeviceSize GpuCuller::group_count_bytes(std::size_t view_count) const {
   // Ordered passes: a visible and an INSIDE count per workgroup and view.
-  return 2 * VkDeviceSize(vk::group_count(object_count_, group_size_)) * view_count * sizeof(std::uint32_t);
+  return 2 * VkDeviceSize(vk::group_count(object_count_, group_size_ * objects_per_invocation_)) * view_count *
+         sizeof(std::uint32_t);
 }
 
 GpuCuller::SegmentPlan GpuCuller::plan_segments(std::size_t view_count, bool ordered) const {
@@ -306,7 +306,7 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
     object_pass(pipeline(0, kind, false, options.draws), objects_per_invocation_);
   } else if (object_count_ > 0) {
     // Count per workgroup, scan the counts per view, scatter in object order.
-    object_pass(pipeline(0, kind, true, false), 1);
+    object_pass(pipeline(0, kind, true, false), objects_per_invocation_);
     compute_to_compute();
     const vk::ComputePipeline& scan = pipeline(1, 0, false, false);
     vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, scan.pipeline());
@@ -314,7 +314,7 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
     vkCmdPushConstants(cmd, scan.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(base_params), &base_params);
     vkCmdDispatch(cmd, 1, std::uint32_t(view_count), 1);
     compute_to_compute();
-    object_pass(pipeline(2, 0, false, options.draws), 1);
+    object_pass(pipeline(2, 0, false, options.draws), objects_per_invocation_);
   }
   if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps, 1);
   detail::record_exit_barrier(ctx_, cmd);

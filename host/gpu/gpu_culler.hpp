@@ -77,7 +77,7 @@ struct GpuCullerConfig {
   std::uint32_t max_groups_per_dispatch = 0;
   /// Objects each invocation classifies in the arrival-order pass (1..32): planes loaded once
   /// for all of them, and one visible-list atomic per subgroup for all of the subgroup's.
-  /// The ordered pass uses 1.
+  /// The ordered passes use the same number.
   std::uint32_t objects_per_invocation = FLAT_OBJECTS_PER_INVOCATION;
   /// Most objects per segment; 0 means as many as the device's limits allow (one texel buffer
   /// view of volumes, one storage buffer of classes). Larger scenes are culled in segments of

@@ -87,8 +87,10 @@ struct FlatCullParams {
   uint write_classes;     // arrival-order pass: 0 skips the per-object classes (not asked for)
 };
 
-// Largest workgroup the compaction shaders support (their shared arrays).
+// Largest workgroup and objects per invocation the compaction shaders support (their shared
+// arrays).
 CP_CONST MAX_CULL_GROUP_SIZE = 1024u;
+CP_CONST MAX_OBJECTS_PER_INVOCATION = 32u;
 
 // Bindings of set 0, shared by every culling shader (one descriptor set): storage buffers,
 // except the bounds, views and centres, which are uniform texel buffers.
