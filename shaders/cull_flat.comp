@@ -90,7 +90,7 @@ bool finite_bits(float x) { return (floatBitsToUint(x) & 0x7f800000u) != 0x7f800
 uint settle_object(uint i) {
   if (BV_KIND == BV_KIND_SPHERE) return classify_object(i);
   vec4 centre_bound = BV_KIND == BV_KIND_AABB ? uintBitsToFloat(texelFetch(centres, int(i))) : bound(OBB_VEC4S * i);
-  if (!finite_bits(centre_bound.w) || !finite_bits(view_settle_margin)) return CLASS_OPEN;
+  bool usable = finite_bits(centre_bound.w) && finite_bits(view_settle_margin);
   float reach = centre_bound.w + view_settle_margin;
   bool beyond = false, within = true;
   [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) {
@@ -99,7 +99,7 @@ uint settle_object(uint i) {
     beyond = beyond || (tested && s < -reach);
     within = within && (!tested || s >= reach);
   }
-  return beyond ? CLASS_OUTSIDE : within ? CLASS_INSIDE : CLASS_OPEN;
+  return !usable ? CLASS_OPEN : beyond ? CLASS_OUTSIDE : within ? CLASS_INSIDE : CLASS_OPEN;
 }
 
 // Classifies this invocation's objects block + j * group size (j < OBJECTS_PER_INVOCATION):
