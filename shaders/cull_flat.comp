@@ -83,7 +83,9 @@ void load_view() {
 // in any rounding mode; for OBBs s is the reference's own and the margin only makes the reach
 // larger. Else CLASS_OPEN: the reference's own test. A bound or margin that is NaN or infinite
 // (the host's "no bound is safe") settles nothing; that is decided on the bits, since without
-// SignedZeroInfNanPreserve a comparison with a NaN need not be false on every device.
+// SignedZeroInfNanPreserve a comparison with a NaN need not be false on every device, so
+// finite inputs do not depend on it. (A NaN centre distance, from NaN or infinite inputs,
+// is compared as the reference's full test compares it.)
 // Spheres are tested in full at once (one texel either way).
 const uint CLASS_OPEN = 3u;
 bool finite_bits(float x) { return (floatBitsToUint(x) & 0x7f800000u) != 0x7f800000u; }

@@ -630,9 +630,18 @@ TEST_F(Gpu, OrderedCompactionAndDrawCommands) {
   std::vector<Aabb> some(many.begin(), many.begin() + 12345);
   expect_draws(chunked, some, test_frusta(), 7);
   expect_draws(chunked, some, test_frusta(), 8, 77);
-  // A group size that is not a multiple of 32 (the scatter pass's rank bitmask words).
-  gpu::GpuCuller odd_groups(*GpuEnvironment::context, gpu::GpuCullerConfig{100});
-  expect_draws(odd_groups, some, test_frusta(), 9);
+  // Workgroup runs that are not a multiple of 32 objects (a partly filled last word of the
+  // scatter pass's rank bitmask), words that span objects of two steps, one object per
+  // invocation, and the largest run (every word of the shared arrays) where the device allows.
+  const std::uint32_t max_group = std::min(GpuEnvironment::context->properties().limits.maxComputeWorkGroupSize[0],
+                                           GpuEnvironment::context->properties().limits.maxComputeWorkGroupInvocations);
+  for (const gpu::GpuCullerConfig config : {gpu::GpuCullerConfig{100}, gpu::GpuCullerConfig{100, 3, 3}, gpu::GpuCullerConfig{64, 3, 1}}) {
+    SCOPED_TRACE("group size " + std::to_string(config.group_size) + ", " + std::to_string(config.objects_per_invocation) + " per invocation");
+    gpu::GpuCuller shaped(*GpuEnvironment::context, config);
+    expect_draws(shaped, some, test_frusta(), 9);
+  }
+  gpu::GpuCuller largest(*GpuEnvironment::context, gpu::GpuCullerConfig{std::min(max_group, gpu::MAX_CULL_GROUP_SIZE), 0, 32});
+  expect_draws(largest, some, test_frusta(), 10, 5000);
 }
 
 // The engine path: a context borrowing the caller's device, the pass recorded into the
