@@ -25,8 +25,8 @@ layout(local_size_x_id = 1) in;                 // = FLAT_CULL_GROUP_SIZE, set b
 layout(constant_id = 0) const uint BV_KIND = BV_KIND_AABB;
 layout(constant_id = 2) const uint ORDERED = 0;      // 1: object-order compaction by later passes
 layout(constant_id = 3) const uint WRITE_DRAWS = 0;  // 1: also write draw commands (arrival order)
-// Objects per invocation in both passes: the planes are loaded once
-// for all of them and the visible list takes one atomic per subgroup for all of its objects.
+// Objects per invocation in both passes: the planes are loaded once for all of them and the
+// visible list takes one atomic per subgroup for all of its objects.
 // Object j of an invocation is at block + j * group size, so each step of the loop reads one
 // contiguous run of objects per workgroup, and a workgroup covers one contiguous run of
 // group size x OBJECTS_PER_INVOCATION objects (the ordered passes' unit).
@@ -44,7 +44,6 @@ layout(std430, set = 0, binding = BINDING_DRAW_TEMPLATES) readonly buffer DrawTe
 layout(std430, set = 0, binding = BINDING_DRAWS) writeonly buffer Draws { DrawCommand draws[]; };
 // Ordered: per workgroup, [view][group] visible counts, then [view][group] INSIDE counts.
 layout(std430, set = 0, binding = BINDING_GROUP_COUNTS) buffer GroupCounts { uint group_counts[]; };
-
 
 layout(push_constant, std430) uniform Push { FlatCullParams params; };
 
