@@ -81,9 +81,9 @@ GpuCuller::~GpuCuller() = default;
 void GpuCuller::upload(std::span<const Aabb> volumes) {
   std::vector<GpuAabb> packed(volumes.size());
   for (std::size_t i = 0; i < volumes.size(); ++i) packed[i] = pack(volumes[i]);
-  // The arrival-order pass first tests each box's centre against its bound (one texel), the
-  // CPU kernels' proof and numbers (host/cull/plane_bounds.hpp); only the boxes it leaves
-  // open are read in full.
+  // The culling passes first test each box's centre against its bound (one texel), the CPU
+  // kernels' proof and numbers (host/cull/plane_bounds.hpp); only the boxes it leaves open
+  // are read in full.
   std::vector<glm::vec4> centres(volumes.size());
   fast::detail::aabb_centre_bounds(volumes, centres);
   const VkDeviceSize centre_bytes = VkDeviceSize(volumes.size()) * sizeof(glm::vec4);
