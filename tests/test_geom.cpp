@@ -1,6 +1,8 @@
 #include <gtest/gtest.h>
 
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <glm/ext/matrix_clip_space.hpp>
 #include <glm/ext/matrix_transform.hpp>
 #include <limits>
@@ -8,6 +10,7 @@
 #include "geom/aabb.hpp"
 #include "geom/frustum.hpp"
 #include "geom/obb.hpp"
+#include "geom/rounding.hpp"
 #include "geom/sphere.hpp"
 #include "geom/validate.hpp"
 #include "test_util.hpp"
@@ -113,6 +116,35 @@ TEST(Validate, NamesWhatIsWrong) {
   o.half_extents = {1, 1, 1};
   o.basis[2] = glm::vec3(1, 0, 0);
   EXPECT_EQ(invalid_reason(o), "axes[0] and axes[2] are not orthogonal");
+}
+
+// float_below / float_above replace std::nextafter toward -inf / +inf bit for bit (signed
+// zeros, subnormals, the largest floats, infinities, NaN), and round_down / round_up built on
+// them bracket doubles tightly.
+TEST(Rounding, FloatStepsAreNextafterBitForBit) {
+  const float inf = std::numeric_limits<float>::infinity();
+  std::vector<float> values = {0.0f, -0.0f, std::numeric_limits<float>::denorm_min(), -std::numeric_limits<float>::denorm_min(),
+                               std::numeric_limits<float>::min(), -std::numeric_limits<float>::min(),
+                               std::numeric_limits<float>::max(), -std::numeric_limits<float>::max(), 1.0f, -1.0f, inf, -inf,
+                               std::numeric_limits<float>::quiet_NaN()};
+  test::Rng rng{7};
+  for (int i = 0; i < 100000; ++i) values.push_back(std::bit_cast<float>(std::uint32_t(rng.next())));
+  for (float f : values) {
+    const float down = std::nextafter(f, -inf), up = std::nextafter(f, inf);
+    if (std::isnan(f)) {
+      EXPECT_TRUE(std::isnan(float_below(f)) && std::isnan(float_above(f)));
+      continue;
+    }
+    EXPECT_EQ(std::bit_cast<std::uint32_t>(float_below(f)), std::bit_cast<std::uint32_t>(down)) << f;
+    EXPECT_EQ(std::bit_cast<std::uint32_t>(float_above(f)), std::bit_cast<std::uint32_t>(up)) << f;
+  }
+  for (int i = 0; i < 100000; ++i) {
+    const double v = (double(rng.next() >> 11) * 0x1p-53 - 0.5) * std::ldexp(1.0, int(rng.next() % 300) - 150);  // 53 random bits
+    const float lo = round_down(v), hi = round_up(v);
+    EXPECT_LE(double(lo), v);
+    EXPECT_GE(double(hi), v);
+    EXPECT_TRUE(lo == hi ? double(lo) == v : float_above(lo) == hi) << v;
+  }
 }
 
 // ---- frusta ---------------------------------------------------------------------------------

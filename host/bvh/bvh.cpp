@@ -19,6 +19,7 @@
 #include "bvh/box_ops.hpp"
 #include "geom/bv_kind.hpp"
 #include "geom/pn_vertex.hpp"
+#include "geom/prefetch.hpp"
 #include "geom/rounding.hpp"
 #include "geom/validate.hpp"
 #include "geom/volume_tests.hpp"
@@ -89,8 +90,8 @@ namespace {
 
 // One float step below round_down(v) / above round_up(v): the double arithmetic before the
 // rounding may itself have rounded, by far less than a float step.
-float below(double v) { return std::nextafter(round_down(v), -std::numeric_limits<float>::infinity()); }
-float above(double v) { return std::nextafter(round_up(v), std::numeric_limits<float>::infinity()); }
+float below(double v) { return float_below(round_down(v)); }
+float above(double v) { return float_above(round_up(v)); }
 
 }  // namespace
 
@@ -439,6 +440,16 @@ Metrics metrics(const Tree& tree) {
   return m;
 }
 
+namespace {
+
+// "node i: " + what, formatted only when there is a message (the checks run per upload).
+struct NodePrefix {
+  std::size_t i;
+  std::string operator+(const std::string& what) const { return "node " + std::to_string(i) + ": " + what; }
+};
+
+}  // namespace
+
 std::string check_tree(const Tree& tree, std::span<const Aabb> boxes) {
   if (boxes.empty()) return tree.nodes.empty() && tree.objects.empty() ? "" : "a tree over no objects must be empty";
   if (tree.nodes.empty()) return "no nodes";
@@ -448,7 +459,7 @@ std::string check_tree(const Tree& tree, std::span<const Aabb> boxes) {
   while (!stack.empty()) {
     const std::uint32_t i = stack.back();
     stack.pop_back();
-    const std::string at = "node " + std::to_string(i) + ": ";
+    const NodePrefix at{i};
     if (i >= tree.nodes.size()) return at + "does not exist";
     if (visited[i]++) return at + "reached twice";
     const Node& node = tree.nodes[i];
@@ -538,17 +549,20 @@ std::string check_flat_tree_impl(const FlatTree& tree, std::span<const Volume> v
   }
   for (std::size_t i = 0; i < nodes; ++i) {
     const FlatNode& node = tree.nodes[i];
-    const std::string at = "node " + std::to_string(i) + ": ";
+    const NodePrefix at{i};
     if (depth[i] == 0) return at + "not reachable from the root in depth-first order";
     if (node.skip <= i || node.skip > nodes) return at + "skip index " + std::to_string(node.skip) + " out of range";
     if (std::size_t(node.first) + node.count > n) return at + "object range past the object list";
     if (const std::string why = invalid_reason(node.box); !why.empty()) return at + "invalid box: " + why;
     if (node.leaf) {
       if (node.skip != i + 1) return at + "leaf whose skip is not the next node";
-      for (std::uint32_t k = node.first; k < node.first + node.count; ++k)
+      for (std::uint32_t k = node.first; k < node.first + node.count; ++k) {
+        // (leaves cover the object order in node order, so this runs over it ahead of them)
+        if (k + kGatherAhead < n) prefetch_object(&volumes[tree.objects[k + kGatherAhead]]);
         if (!encloses(node.box, enclosing_box(volumes[tree.objects[k]])))
           return at + "box does not enclose " + kind + " " + std::to_string(tree.objects[k]) +
                  (std::is_same_v<Volume, Aabb> ? "" : " (build the tree over bvh::enclosing_boxes)");
+      }
     } else {
       if (i + 1 >= node.skip) return at + "inner node without children";
       const std::uint32_t second = tree.nodes[i + 1].skip;

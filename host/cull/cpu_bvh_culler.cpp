@@ -9,6 +9,7 @@
 
 #include "cull/kernel_select.hpp"
 #include "cull/thread_pool.hpp"
+#include "geom/prefetch.hpp"
 
 namespace cullpipe::fast {
 
@@ -100,7 +101,10 @@ void CpuBvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume
   }
   constexpr std::size_t floats = walk_floats<Volume>();
   std::vector<float> walk_volumes(tree.objects.size() * floats);
-  for (std::size_t k = 0; k < tree.objects.size(); ++k) walk_record(volumes[tree.objects[k]], walk_volumes.data() + k * floats);
+  for (std::size_t k = 0; k < tree.objects.size(); ++k) {
+    if (k + kGatherAhead < tree.objects.size()) prefetch_object(&volumes[tree.objects[k + kGatherAhead]]);
+    walk_record(volumes[tree.objects[k]], walk_volumes.data() + k * floats);
+  }
   bvh::FlatTree copy = tree;
 
   tree_ = std::move(copy);

@@ -109,7 +109,7 @@ std::string invalid_reason(const Obb& b) {
   if (auto e = non_finite("center", b.center); !e.empty()) return e;
   if (auto e = non_finite("half_extents", b.half_extents); !e.empty()) return e;
   for (int k = 0; k < 3; ++k) {
-    const std::string name = std::string("axes[") + std::to_string(k) + "]";
+    const std::string name = std::string("axes[") + char('0' + k) + "]";  // (short: no allocation)
     if (auto e = non_finite(name.c_str(), b.basis[k]); !e.empty()) return e;
     if (b.half_extents[k] < 0.0f) return std::string("half_extents.") + axis_name(k) + " is negative";
     if (std::abs(glm::length(b.basis[k]) - 1.0f) > 1e-3f) return name + " is not unit length";

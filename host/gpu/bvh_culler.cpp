@@ -7,6 +7,7 @@
 #include <string>
 
 #include "bvh/box_ops.hpp"
+#include "geom/prefetch.hpp"
 #include "geom/validate.hpp"
 #include "gpu/pass_support.hpp"
 #include "vk/check.hpp"
@@ -109,7 +110,10 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
   detail::ensure_buffer(ctx_, objects_, order_bytes, kTexel, "BVH object order buffer", dirty);
   detail::ensure_buffer(ctx_, cuts_, cut_bytes, kStorage, "BVH cut buffer", dirty);
   auto gpu_boxes = bounds_.as<Packed>();
-  for (std::size_t i = 0; i < n; ++i) gpu_boxes[i] = pack(boxes[tree.objects[i]]);  // tree order
+  for (std::size_t i = 0; i < n; ++i) {  // tree order
+    if (i + kGatherAhead < n) prefetch_object(&boxes[tree.objects[i + kGatherAhead]]);
+    gpu_boxes[i] = pack(boxes[tree.objects[i]]);
+  }
   if (nodes) std::memcpy(nodes_.data(), packed.data(), node_bytes);
   if (n) std::memcpy(objects_.data(), tree.objects.data(), n * sizeof(std::uint32_t));
   if (!cuts.empty()) std::memcpy(cuts_.data(), cuts.data(), cuts.size() * sizeof(std::uint32_t));
