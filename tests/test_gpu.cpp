@@ -87,6 +87,32 @@ TEST_F(Gpu, OneMillionObjects) {
   expect_agreement(culler(), spheres, test_frusta());
 }
 
+// Uploads are written in chunks of 16384 objects on a pool of upload threads: on the calling
+// thread alone and on more threads than cores, a count that ends mid-chunk, every kind, and
+// a smaller scene after a larger one on the same culler (its buffers reused).
+TEST_F(Gpu, UploadsOnOneOrManyThreadsAgree) {
+  test::Rng rng{102};
+  std::vector<Aabb> boxes(70001);
+  std::vector<Obb> obbs(boxes.size());
+  std::vector<Sphere> spheres(boxes.size());
+  for (std::size_t i = 0; i < boxes.size(); ++i) {
+    boxes[i] = test::random_aabb(rng, 40.0f, 3.0f);
+    obbs[i] = test::random_obb(rng, 40.0f, 3.0f);
+    spheres[i] = test::random_sphere(rng, 40.0f, 3.0f);
+  }
+  for (unsigned threads : {1u, 3u}) {
+    SCOPED_TRACE("upload threads " + std::to_string(threads));
+    gpu::GpuCullerConfig config;
+    config.upload_threads = threads;
+    gpu::GpuCuller culler(*GpuEnvironment::context, config);
+    expect_agreement(culler, boxes, test_frusta());
+    expect_agreement(culler, obbs, test_frusta());
+    expect_agreement(culler, spheres, test_frusta());
+    expect_agreement(culler, std::vector<Aabb>(boxes.begin(), boxes.begin() + 16385), test_frusta());
+    expect_agreement(culler, std::vector<Obb>(obbs.begin(), obbs.begin() + 999), test_frusta());
+  }
+}
+
 TEST_F(Gpu, GeneratedScenesManyViews) {
   for (SceneKind kind : {SceneKind::Uniform, SceneKind::Clustered, SceneKind::City}) {
     const Scene scene = generate_scene(kind, 20000, 5);

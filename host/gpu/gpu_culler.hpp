@@ -17,6 +17,10 @@
 #include "vk/compute_pipeline.hpp"
 #include "vk/context.hpp"
 
+namespace cullpipe::fast {
+class ThreadPool;
+}
+
 namespace cullpipe::gpu {
 
 namespace detail {
@@ -84,6 +88,11 @@ struct GpuCullerConfig {
   /// this many objects (a multiple of 256), each bound as its own range. Tests set it low to
   /// exercise that path.
   std::size_t max_segment_objects = 0;
+  /// Threads that write an upload (packing the volumes and computing the boxes' bounds):
+  /// 0 means every core (std::thread::hardware_concurrency()), 1 the calling thread only.
+  /// The threads start with the first upload of more than 16384 objects and sleep between
+  /// uploads.
+  unsigned upload_threads = 0;
 };
 
 /// Flat frustum culling on a Vulkan device: uploads one set of volumes, then classifies them
@@ -149,7 +158,8 @@ class GpuCuller {
   const vk::Context& context() const { return ctx_; }
 
  private:
-  void upload_words(BvKind kind, const void* data, std::size_t count, std::size_t bytes_per_object);
+  template <class Fill>
+  void upload_volumes(BvKind kind, std::size_t count, std::size_t bytes_per_object, VkDeviceSize centre_bytes, Fill&& fill);
   void ensure_outputs(std::size_t view_count, std::size_t visible_capacity, bool draws, bool ordered);
   VkDeviceSize group_count_bytes(std::size_t view_count) const;  // the ordered passes' workgroup counts
   struct SegmentPlan {
@@ -167,6 +177,8 @@ class GpuCuller {
   std::uint32_t max_groups_ = 0;
   std::uint32_t objects_per_invocation_ = 1;
   std::size_t max_segment_objects_ = 0;
+  unsigned upload_threads_ = 0;
+  std::unique_ptr<fast::ThreadPool> upload_pool_;  // started by the first upload of several chunks
   std::size_t bytes_per_object_ = sizeof(GpuAabb);
   // Segments of the current pass: objects per segment and their count (1 when all fit).
   std::size_t segment_objects_ = 0;
