@@ -9,6 +9,9 @@
 //   cpu-fast-bvh  the same tests on every core with SIMD kernels (fast::CpuBvhCuller), the visible list
 //   gpu-flat   GpuCuller, visible list compacted on the device (time between timestamps)
 //   gpu-bvh    BvhCuller, visible list
+// Each method that keeps its own copy of the scene (cpu-fast, cpu-fast-bvh, gpu-flat, gpu-bvh)
+// also has its upload timed: what an engine pays per frame when objects move (median of
+// repeated uploads into the buffers the first one allocated).
 // The hierarchies (binned SAH, leaves of 4) are built over the volumes' enclosing boxes.
 // Scenes: the first N objects of one uniform random scene, in shuffled order or sorted along the
 // Morton curve; the camera's field of view is chosen so that about 1%, 10%, 50% are visible.
@@ -26,6 +29,7 @@
 #include <cstring>
 #include <fstream>
 #include <functional>
+#include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -69,6 +73,7 @@ struct Cell {
   int repeats = 0;
   double ns = 0;       ///< median time of one pass (GPU: between timestamps)
   double wall_ns = 0;  ///< GPU: median wall time of a pass (record, submit, wait, read back)
+  double upload_ns = 0;  ///< median time of the method's upload of the scene (0: none, it reads the caller's arrays)
   std::size_t bytes_per_object = 0;
   std::optional<bool> agree;  ///< nullopt when there is nothing to check (cpu-read)
   std::string note;           ///< why a method did not run
@@ -109,6 +114,21 @@ std::size_t gpu_bytes_per_object<Obb>(bool) { return sizeof(gpu::GpuObb); }
 template <>
 std::size_t gpu_bytes_per_object<Sphere>(bool) { return sizeof(gpu::GpuSphere); }
 
+/// Median time of repeated calls of `upload` after an untimed first one (which allocates): the
+/// steady state of an engine that uploads every frame.
+template <class F>
+double time_upload(F&& upload, std::size_t n) {
+  upload();
+  const int repeats = n >= 4'000'000 ? 3 : 5;
+  std::vector<double> times;
+  for (int r = 0; r < repeats; ++r) {
+    const auto t0 = Clock::now();
+    upload();
+    times.push_back(since(t0));
+  }
+  return median(times);
+}
+
 /// Measures one (volume kind, N, order) for every fraction; appends the cells.
 template <class Volume>
 void run_scene(const Config& config, const std::string& bv, const std::string& order, const std::vector<Volume>& volumes,
@@ -117,26 +137,27 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
   const std::size_t n = volumes.size();
   const std::span<const Volume> vspan(volumes);
   const bool is_aabb = std::is_same_v<Volume, Aabb>;
-  fast_culler.upload(vspan);
+  std::map<std::string, double> upload_ns;  // by method
+  upload_ns["cpu-fast"] = time_upload([&] { fast_culler.upload(vspan); }, n);
 
   // The BVH (binned SAH, leaves of 4) over the volumes' enclosing boxes, built once per scene;
   // not part of the timed passes.
   const bool bvh_methods = wants(config, "cpu-bvh") || wants(config, "cpu-fast-bvh") || wants(config, "gpu-bvh");
   bvh::FlatTree tree;
   if (bvh_methods) tree = bvh::flatten(bvh::build("binned-sah", is_aabb ? boxes : bvh::enclosing_boxes(vspan)));
-  if (bvh_methods && wants(config, "cpu-fast-bvh")) fast_bvh.upload(tree, vspan);
+  if (bvh_methods && wants(config, "cpu-fast-bvh")) upload_ns["cpu-fast-bvh"] = time_upload([&] { fast_bvh.upload(tree, vspan); }, n);
 
   std::string gpu_flat_note, gpu_bvh_note;
   if (gpu.flat && wants(config, "gpu-flat")) {
     try {
-      gpu.flat->upload(vspan);
+      upload_ns["gpu-flat"] = time_upload([&] { gpu.flat->upload(vspan); }, n);
     } catch (const std::length_error& e) {
       gpu_flat_note = std::string("too large: ") + e.what();
     }
   }
   if (gpu.bvh && bvh_methods && wants(config, "gpu-bvh")) {
     try {
-      gpu.bvh->upload(tree, vspan);
+      upload_ns["gpu-bvh"] = time_upload([&] { gpu.bvh->upload(tree, vspan); }, n);
     } catch (const std::length_error& e) {
       gpu_bvh_note = std::string("too large: ") + e.what();
     }
@@ -175,7 +196,8 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
                    std::function<void(std::vector<double>&, std::vector<double>&)> pass) {
       Timed t;
       t.method = method;
-      t.cell = {method, bv, order, n, fraction, achieved, reps, 0, 0, bytes, agree, std::move(note)};
+      t.cell = {method, bv, order, n, fraction, achieved, reps, 0, 0, 0, bytes, agree, std::move(note)};
+      if (const auto u = upload_ns.find(method); u != upload_ns.end() && t.cell.note.empty()) t.cell.upload_ns = u->second;
       if (t.cell.note.empty()) t.pass = std::move(pass);
       timed.push_back(std::move(t));
     };
@@ -304,10 +326,10 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
         continue;
       }
       const double gbps = c.ns > 0 ? double(c.bytes_per_object) * dn / c.ns : 0.0;
-      std::printf("%-12s %-7s %-9s %9zu %6.1f%% %5d %10.3f %10.1f %8.2f %8.2f %10s %6s\n", c.method.c_str(), bv.c_str(), order.c_str(), n,
+      std::printf("%-12s %-7s %-9s %9zu %6.1f%% %5d %10.3f %10.1f %8.2f %8.2f %10s %10s %6s\n", c.method.c_str(), bv.c_str(), order.c_str(), n,
                   100 * achieved, c.repeats, c.ns / dn, c.ns > 0 ? dn / c.ns * 1e3 : 0.0, gbps,
                   ref_ns > 0 && c.ns > 0 ? ref_ns / c.ns : 0.0, c.wall_ns > 0 ? std::to_string(c.wall_ns / dn).substr(0, 8).c_str() : "-",
-                  !c.agree ? "-" : *c.agree ? "yes" : "NO");
+                  c.upload_ns > 0 ? std::to_string(c.upload_ns / dn).substr(0, 8).c_str() : "-", !c.agree ? "-" : *c.agree ? "yes" : "NO");
     }
     std::fflush(stdout);
   }
@@ -456,8 +478,8 @@ int main(int argc, char** argv) {
   if (gpu.ctx) std::printf("gpu: %s, %s\n", gpu.ctx->info().name.c_str(), gpu.ctx->info().driver.c_str());
   else if (!gpu.error.empty()) std::printf("gpu: none (%s)\n", gpu.error.c_str());
   std::printf("memory read bandwidth (256 MiB, %u threads): %.1f GB/s\n\n", fast_culler.threads(), read_gbps);
-  std::printf("%-12s %-7s %-9s %9s %7s %5s %10s %10s %8s %8s %10s %6s\n", "method", "bv", "order", "N", "visible", "reps", "ns/obj",
-              "Mobj/s", "GB/s", "x ref", "wall ns/o", "agree");
+  std::printf("%-12s %-7s %-9s %9s %7s %5s %10s %10s %8s %8s %10s %10s %6s\n", "method", "bv", "order", "N", "visible", "reps", "ns/obj",
+              "Mobj/s", "GB/s", "x ref", "wall ns/o", "upload ns/o", "agree");
 
   std::vector<Cell> cells;
   bool all_agree = true;
@@ -506,14 +528,14 @@ int main(int argc, char** argv) {
                           {"objects_per_s", c.ns > 0 ? dn / c.ns * 1e9 : 0.0}, {"bytes_per_object", c.bytes_per_object},
                           {"gb_per_s", gbps}, {"bandwidth_fraction", gbps / read_gbps}, {"read_bandwidth_gbps", read_gbps},
                           {"speedup_vs_reference", ref_ns > 0 && c.ns > 0 ? ref_ns / c.ns : 0.0},
-                          {"gpu_wall_ns_per_object", c.wall_ns / dn}, {"agree", c.agree ? nlohmann::json(*c.agree) : nlohmann::json()},
+                          {"gpu_wall_ns_per_object", c.wall_ns / dn}, {"upload_ns_per_object", c.upload_ns / dn}, {"agree", c.agree ? nlohmann::json(*c.agree) : nlohmann::json()},
                           {"note", c.note}};
   };
   if (!config.csv.empty()) {
     std::ofstream csv(config.csv);
     const char* const columns[] = {"method", "bv", "n", "order", "target_fraction", "visible_fraction", "repeats", "ns_per_object",
                                    "objects_per_s", "bytes_per_object", "gb_per_s", "bandwidth_fraction", "read_bandwidth_gbps",
-                                   "speedup_vs_reference", "gpu_wall_ns_per_object", "agree", "note"};
+                                   "speedup_vs_reference", "gpu_wall_ns_per_object", "upload_ns_per_object", "agree", "note"};
     for (std::size_t k = 0; k < std::size(columns); ++k) csv << (k ? "," : "") << columns[k];
     csv << "\n";
     for (const Cell& c : cells) {
