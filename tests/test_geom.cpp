@@ -3,6 +3,9 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#if defined(__SSE__)
+#include <xmmintrin.h>
+#endif
 #include <glm/ext/matrix_clip_space.hpp>
 #include <glm/ext/matrix_transform.hpp>
 #include <limits>
@@ -138,6 +141,24 @@ TEST(Rounding, FloatStepsAreNextafterBitForBit) {
     EXPECT_EQ(std::bit_cast<std::uint32_t>(float_below(f)), std::bit_cast<std::uint32_t>(down)) << f;
     EXPECT_EQ(std::bit_cast<std::uint32_t>(float_above(f)), std::bit_cast<std::uint32_t>(up)) << f;
   }
+#if defined(__SSE__)
+  {  // the same steps with subnormals read as zero and results flushed (DAZ + FTZ)
+    struct Mode {
+      unsigned saved = _mm_getcsr();
+      Mode() { _mm_setcsr(saved | 0x8040u); }
+      ~Mode() { _mm_setcsr(saved); }
+    } mode;
+    for (float f : values) {
+      if (std::isnan(f)) continue;
+      std::uint32_t u = std::bit_cast<std::uint32_t>(f);
+      const std::uint32_t below = std::bit_cast<std::uint32_t>(float_below(f)), above = std::bit_cast<std::uint32_t>(float_above(f));
+      // Expected from the bits alone: the next pattern away from or toward zero.
+      const bool negative = u >> 31, zero = (u & 0x7fffffffu) == 0;
+      EXPECT_EQ(below, zero ? 0x80000001u : u == 0xff800000u ? u : negative ? u + 1 : u - 1) << std::hex << u;
+      EXPECT_EQ(above, zero ? 0x00000001u : u == 0x7f800000u ? u : negative ? u - 1 : u + 1) << std::hex << u;
+    }
+  }
+#endif
   for (int i = 0; i < 100000; ++i) {
     const double v = (double(rng.next() >> 11) * 0x1p-53 - 0.5) * std::ldexp(1.0, int(rng.next() % 300) - 150);  // 53 random bits
     const float lo = round_down(v), hi = round_up(v);

@@ -18,15 +18,20 @@ thread_local unsigned tls_index = 0;
 ThreadPool::ThreadPool(unsigned threads) {
   if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
   workers_.reserve(threads - 1);
-  for (unsigned t = 1; t < threads; ++t)
-    workers_.emplace_back([this, t] {
-      tls_pool = this;
-      tls_index = t;
-      worker_loop();
-    });
+  try {
+    for (unsigned t = 1; t < threads; ++t)
+      workers_.emplace_back([this, t] {
+        tls_pool = this;
+        tls_index = t;
+        worker_loop();
+      });
+  } catch (...) {  // a thread could not start: stop and join the ones that did, then report it
+    stop_workers();
+    throw;
+  }
 }
 
-ThreadPool::~ThreadPool() {
+void ThreadPool::stop_workers() {
   {
     std::lock_guard lock(mutex_);
     stop_ = true;
@@ -34,6 +39,8 @@ ThreadPool::~ThreadPool() {
   wake_.notify_all();
   for (std::thread& w : workers_) w.join();
 }
+
+ThreadPool::~ThreadPool() { stop_workers(); }
 
 unsigned ThreadPool::thread_index() const { return tls_pool == this ? tls_index : 0u; }
 

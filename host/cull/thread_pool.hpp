@@ -53,6 +53,7 @@ class ThreadPool {
 
  private:
   void worker_loop();
+  void stop_workers();  // wakes, stops and joins the workers
   void run_tasks(std::size_t generation);
 
   std::vector<std::thread> workers_;

@@ -5,6 +5,7 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <system_error>
 
 #include "cull/plane_bounds.hpp"
 #include "cull/thread_pool.hpp"
@@ -100,8 +101,13 @@ void GpuCuller::upload_volumes(BvKind kind, std::size_t count, std::size_t bytes
   detail::ensure_buffer(ctx_, bounds_, bytes, kBoundsUsage, "bounds buffer", descriptors_dirty_);
   const std::size_t tasks = (count + kUploadChunk - 1) / kUploadChunk;
   auto task = [&](std::size_t t) { fill(t * kUploadChunk, std::min(count, (t + 1) * kUploadChunk)); };
-  if (tasks > 1 && upload_threads_ != 1) {
-    if (!upload_pool_) upload_pool_ = std::make_unique<fast::ThreadPool>(upload_threads_);
+  if (tasks > 1 && upload_threads_ != 1 && !upload_pool_) {
+    try {
+      upload_pool_ = std::make_unique<fast::ThreadPool>(upload_threads_);
+    } catch (const std::system_error&) {  // no threads to be had: this upload runs on the caller
+    }
+  }
+  if (tasks > 1 && upload_pool_) {
     upload_pool_->parallel_for(tasks, task);
   } else {
     for (std::size_t t = 0; t < tasks; ++t) task(t);
@@ -125,11 +131,16 @@ void GpuCuller::upload(std::span<const Aabb> volumes) {
 void GpuCuller::upload(std::span<const Obb> volumes) {
   upload_volumes(BvKind::Obb, volumes.size(), sizeof(GpuObb), 0, [&](std::size_t first, std::size_t end) {
     GpuObb* out = bounds_.as<GpuObb>().data();
-    float bounds[kUploadChunk];
-    fast::detail::obb_plane_bounds(volumes.subspan(first, end - first), std::span<float>(bounds, end - first));
-    for (std::size_t i = first; i < end; ++i) {
-      out[i] = pack(volumes[i]);
-      out[i].center.w = bounds[i - first];  // settles most boxes on the centre texel alone
+    constexpr std::size_t kBatch = 256;  // bounds on the stack (upload threads may be small-stack job threads)
+    float bounds[kBatch];
+    for (std::size_t b = first; b < end; b += kBatch) {
+      const std::size_t count = std::min(kBatch, end - b);
+      fast::detail::obb_plane_bounds(volumes.subspan(b, count), std::span<float>(bounds, count));
+      for (std::size_t i = b; i < b + count; ++i) {
+        GpuObb o = pack(volumes[i]);
+        o.center.w = bounds[i - b];  // settles most boxes on the centre texel alone
+        out[i] = o;                  // one whole store to mapped (perhaps write-combined) memory
+      }
     }
   });
 }

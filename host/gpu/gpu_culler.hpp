@@ -91,7 +91,7 @@ struct GpuCullerConfig {
   /// Threads that write an upload (packing the volumes and computing the boxes' bounds):
   /// 0 means every core (std::thread::hardware_concurrency()), 1 the calling thread only.
   /// The threads start with the first upload of more than 16384 objects and sleep between
-  /// uploads.
+  /// uploads (each GpuCuller has its own; where none can start, uploads run on the caller).
   unsigned upload_threads = 0;
 };
 
