@@ -108,7 +108,7 @@ struct Gpu {
 template <class Volume>
 std::size_t gpu_bytes_per_object(bool flat);
 template <>
-std::size_t gpu_bytes_per_object<Aabb>(bool flat) { return sizeof(gpu::GpuAabb) + (flat ? 16 : 0); }
+std::size_t gpu_bytes_per_object<Aabb>(bool flat) { return sizeof(gpu::GpuAabb) + (flat ? sizeof(glm::vec4) : 0); }
 template <>
 std::size_t gpu_bytes_per_object<Obb>(bool) { return sizeof(gpu::GpuObb); }
 template <>

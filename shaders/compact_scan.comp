@@ -11,6 +11,7 @@
 
 layout(local_size_x_id = 1) in;  // the culling group size (the counts are per culling workgroup)
 layout(constant_id = 4) const uint OBJECTS_PER_INVOCATION = 1;  // the culling pass's
+#include "shared/ordered_runs.glsl"
 
 layout(std430, set = 0, binding = BINDING_COUNTERS) buffer Counters { ViewCounters counters[]; };
 // [view][group] visible counts, then [view][group] INSIDE counts (cull_flat.comp, ORDERED = 1).
@@ -24,8 +25,7 @@ void main() {
   uint view = gl_WorkGroupID.y;
   uint lanes = gl_WorkGroupSize.x;
   uint t = gl_LocalInvocationIndex;
-  uint run = lanes * OBJECTS_PER_INVOCATION;  // objects per culling workgroup
-  uint groups = (params.object_count + run - 1) / run;
+  uint groups = run_count(params.object_count);  // the culling workgroups' runs
   uint per = (groups + lanes - 1) / lanes;
   uint begin = min(t * per, groups), end = min(begin + per, groups);
   uint base = view * groups, inside_base = (params.view_count + view) * groups;

@@ -13,6 +13,7 @@
 layout(local_size_x_id = 1) in;
 layout(constant_id = 3) const uint WRITE_DRAWS = 0;
 layout(constant_id = 4) const uint OBJECTS_PER_INVOCATION = 1;  // the culling pass's
+#include "shared/ordered_runs.glsl"
 
 layout(std430, set = 0, binding = BINDING_CLASSES) readonly buffer Classes { uint classes[]; };
 layout(std430, set = 0, binding = BINDING_VISIBLE) writeonly buffer Visible { uint visible_ids[]; };
@@ -30,8 +31,8 @@ void main() {
   uint view = gl_WorkGroupID.y;  // = gl_GlobalInvocationID.y (local size 1 in y), visibly uniform
   uint t = gl_LocalInvocationIndex;
   uint group_size = gl_WorkGroupSize.x;
-  uint run = group_size * OBJECTS_PER_INVOCATION;  // objects per workgroup, as the culling pass's
-  uint group_first = params.first_object + gl_WorkGroupID.x * run;
+  uint run = run_objects();  // as the culling pass's
+  uint group_first = this_run_first_object(params.first_object);
   bool view_ok = view < params.view_count;
 
   // The rank of each visible object among the workgroup's: the set bits before it. Three
@@ -56,9 +57,7 @@ void main() {
   }
   barrier();
 
-  uint groups = (params.object_count + run - 1) / run;
-  uint g = params.first_object / run + gl_WorkGroupID.x;
-  uint offset = view_ok ? group_offsets[view * groups + g] : 0u;
+  uint offset = view_ok ? group_offsets[view * run_count(params.object_count) + this_run(params.first_object)] : 0u;
   [[unroll]] for (uint j = 0; j < OBJECTS_PER_INVOCATION; ++j) {
     uint p = j * group_size + t, i = group_first + p;
     uint slot = offset + word_base[p / 32u] + bitCount(flags[p / 32u] & ((1u << (p % 32u)) - 1u));

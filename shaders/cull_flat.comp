@@ -53,6 +53,7 @@ float view_settle_margin;  // GpuFrustum::settle_margin
 vec4 view_planes[MAX_FRUSTUM_PLANES];
 
 #include "shared/classify.glsl"
+#include "shared/ordered_runs.glsl"
 
 vec4 bound(uint word) { return uintBitsToFloat(texelFetch(bounds, int(word))); }
 
@@ -146,9 +147,7 @@ void main_ordered() {
   uint object_count = params.object_count;
   bool view_ok = view < params.view_count;
   if (view_ok) load_view();
-  uint run = gl_WorkGroupSize.x * OBJECTS_PER_INVOCATION;  // objects per workgroup
-  uint group_first = params.first_object + gl_WorkGroupID.x * run;
-  uint block = group_first + gl_LocalInvocationIndex;
+  uint block = this_run_first_object(params.first_object) + gl_LocalInvocationIndex;
   uint outside_bits, inside_bits;
   classify_objects(block, view_ok, object_count, outside_bits, inside_bits);
   uint visible = 0u;
@@ -163,8 +162,7 @@ void main_ordered() {
   uint vis_total = subgroupAdd(visible);
   uint inside_total = subgroupAdd(bitCount(inside_bits));
   if (subgroupElect() && view_ok) {
-    uint groups = (object_count + run - 1) / run;
-    uint g = params.first_object / run + gl_WorkGroupID.x;
+    uint groups = run_count(object_count), g = this_run(params.first_object);
     if (vis_total > 0) atomicAdd(group_counts[view * groups + g], vis_total);
     if (inside_total > 0) atomicAdd(group_counts[(params.view_count + view) * groups + g], inside_total);
   }
@@ -219,7 +217,7 @@ void main_arrival() {
   uint id_base = params.id_base;
   bool view_ok = view < params.view_count;
   if (view_ok) load_view();
-  uint group_first = params.first_object + gl_WorkGroupID.x * gl_WorkGroupSize.x * OBJECTS_PER_INVOCATION;
+  uint group_first = this_run_first_object(params.first_object);  // (the same runs as the ordered passes')
   uint block = group_first + gl_LocalInvocationIndex;
   uint outside_bits, inside_bits;
   classify_objects(block, view_ok, object_count, outside_bits, inside_bits);
