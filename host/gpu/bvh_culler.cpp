@@ -73,12 +73,6 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
   // The layout flatten() gives, which the traversal relies on (skip links, nested ranges).
   std::vector<std::uint32_t> depth;
   if (const std::string why = bvh::check_flat_tree(tree, boxes, &depth); !why.empty()) bad(why);
-  std::vector<GpuBvhNode> packed(nodes);
-  for (std::size_t i = 0; i < nodes; ++i) {
-    const bvh::FlatNode& node = tree.nodes[i];
-    const std::uint32_t second = node.leaf ? bvh::kNone : tree.nodes[i + 1].skip;
-    packed[i] = {node.box.min, node.first, node.box.max, node.count, node.skip, second, node.leaf ? 1u : 0u, depth[i]};
-  }
   // The cut: the highest subtrees of at most subtree_objects_ objects and BVH_CUT_MAX_HEIGHT
   // levels below their root, and the leaves above them (see cull_bvh.comp).
   std::vector<std::uint32_t> height(nodes, 0), cuts;
@@ -109,12 +103,19 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
   detail::ensure_buffer(ctx_, nodes_, node_bytes, kTexel, "BVH node buffer", dirty);
   detail::ensure_buffer(ctx_, objects_, order_bytes, kTexel, "BVH object order buffer", dirty);
   detail::ensure_buffer(ctx_, cuts_, cut_bytes, kStorage, "BVH cut buffer", dirty);
+  // Written straight into the mapped buffers (no staging copies whose pages fault in on every
+  // upload of a refitted tree).
+  GpuBvhNode* gpu_nodes = nodes_.as<GpuBvhNode>().data();
+  for (std::size_t i = 0; i < nodes; ++i) {
+    const bvh::FlatNode& node = tree.nodes[i];
+    const std::uint32_t second = node.leaf ? bvh::kNone : tree.nodes[i + 1].skip;
+    gpu_nodes[i] = {node.box.min, node.first, node.box.max, node.count, node.skip, second, node.leaf ? 1u : 0u, depth[i]};
+  }
   auto gpu_boxes = bounds_.as<Packed>();
   for (std::size_t i = 0; i < n; ++i) {  // tree order
     if (i + kGatherAhead < n) prefetch_object(&boxes[tree.objects[i + kGatherAhead]]);
     gpu_boxes[i] = pack(boxes[tree.objects[i]]);
   }
-  if (nodes) std::memcpy(nodes_.data(), packed.data(), node_bytes);
   if (n) std::memcpy(objects_.data(), tree.objects.data(), n * sizeof(std::uint32_t));
   if (!cuts.empty()) std::memcpy(cuts_.data(), cuts.data(), cuts.size() * sizeof(std::uint32_t));
   object_count_ = n;
