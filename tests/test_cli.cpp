@@ -80,6 +80,8 @@ TEST(Cli, RunEveryVolumeKindWithValidation) {
     EXPECT_EQ(j["per_view"].size(), 3u);
     EXPECT_GT(j["gpu_wall_ns"].get<double>(), 0.0);
     EXPECT_TRUE(j.contains("gpu_ns"));  // 0 on a queue without timestamps
+    EXPECT_GT(j["gpu_upload_ns"].get<double>(), 0.0);
+    EXPECT_FALSE(j.contains("cpu_upload_ns")) << "the reference has no upload";
   }
 }
 
@@ -194,6 +196,7 @@ TEST(Cli, EveryKindFlatAndHierarchicalOnEitherCpuPath) {
   const Result r = cullpipe("run --generate uniform:5000 --bv sphere --cull bvh --cpu fast --backend cpu", kNoVulkan);
   EXPECT_EQ(r.code, 0) << r.err;
   EXPECT_NE(r.out.find("cpu fast hierarchical"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("; upload "), std::string::npos) << r.out;  // the fast culler's copy of the scene
   EXPECT_NE(r.out.find("(fast cpu == reference)"), std::string::npos) << r.out;
 }
 

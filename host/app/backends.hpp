@@ -36,6 +36,9 @@ struct BackendResults {
   std::size_t fast_mismatches = 0;  ///< differences between the fast path and the reference
   double gpu_ns = 0.0;       ///< all views, GPU timestamps
   double gpu_wall_ns = 0.0;  ///< all views, including submission and readback
+  /// The uploads of the paths that keep their own copy of the scene (0: none ran): the fast
+  /// CPU culler's and the GPU culler's, the first into fresh buffers (allocation included).
+  double cpu_upload_ns = 0.0, gpu_upload_ns = 0.0;
   std::size_t mismatches = 0;
   std::vector<std::string> mismatch_reports;  ///< the first few, described in full
   /// Per view: node boxes and objects tested (the CPU's counts when it ran, else the GPU's);
@@ -173,7 +176,9 @@ BackendResults cull_bvh_on_backends(const bvh::FlatTree& tree, std::span<const V
     };
     if (cpu == CpuPath::Fast) {
       fast::CpuBvhCuller culler;
+      const auto upload_start = std::chrono::steady_clock::now();
       culler.upload(tree, boxes);
+      r.cpu_upload_ns = elapsed_ns(upload_start);
       std::vector<fast::CpuBvhViewResult> results;
       const fast::CpuBvhCullOptions classes_only{true, false};
       if (warm_up && !frusta.empty()) culler.cull(frusta.first(1), classes_only, results);
@@ -205,7 +210,9 @@ BackendResults cull_bvh_on_backends(const bvh::FlatTree& tree, std::span<const V
   }
   if (backend != Backend::Cpu) {
     gpu::BvhCuller& culler = session.bvh();
+    const auto upload_start = std::chrono::steady_clock::now();
     culler.upload(tree, boxes);
+    r.gpu_upload_ns = elapsed_ns(upload_start);
     if (warm_up) culler.cull(frusta, {false, false, 0});  // the first dispatch of each pipeline compiles it (lavapipe)
     gpu::CullResult g = culler.cull(frusta);
     session.check_validation();
@@ -236,7 +243,9 @@ BackendResults cull_on_backends(std::span<const Volume> volumes, std::span<const
   BackendResults r;
   if (backend != Backend::Gpu && cpu == CpuPath::Fast) {
     fast::CpuCuller culler;
-    culler.upload(volumes);  // structure of arrays, not timed (done once per scene)
+    const auto upload_start = std::chrono::steady_clock::now();
+    culler.upload(volumes);  // structure of arrays
+    r.cpu_upload_ns = elapsed_ns(upload_start);
     fast::CpuCullOptions options;
     options.visible_ids = false;
     std::vector<fast::CpuViewResult> results;
@@ -270,7 +279,9 @@ BackendResults cull_on_backends(std::span<const Volume> volumes, std::span<const
   }
   if (backend != Backend::Cpu) {
     gpu::GpuCuller& culler = session.get();
+    const auto upload_start = std::chrono::steady_clock::now();
     culler.upload(volumes);
+    r.gpu_upload_ns = elapsed_ns(upload_start);
     if (warm_up) culler.cull(frusta, {false, false, 0});  // the first dispatch compiles the pipeline (lavapipe)
     gpu::CullResult g = culler.cull(frusta);
     session.check_validation();

@@ -154,10 +154,10 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
     const double object_views = double(std::max<std::size_t>(n * frusta.size(), 1));
     if (have_cpu)
       out << "  cpu " << r.cpu_path << ": " << format_ms(r.cpu_ns) << " ms (" << format_ms(r.cpu_ns / object_views * 1e6)
-          << " ns per object-view)\n";
+          << " ns per object-view)" << (r.cpu_upload_ns > 0 ? "; upload " + format_ms(r.cpu_upload_ns) + " ms" : "") << "\n";
     if (have_gpu)
       out << "  gpu:           " << format_ms(r.gpu_ns) << " ms on the GPU (timestamps), " << format_ms(r.gpu_wall_ns)
-          << " ms wall with submit and readback\n";
+          << " ms wall with submit and readback; upload " << format_ms(r.gpu_upload_ns) << " ms\n";
     const std::string all_identical = "all " + std::to_string(n * frusta.size()) + " object-view classifications identical";
     if (have_cpu && have_gpu && r.mismatches == 0 && r.fast_mismatches == 0)
       out << "  agreement:     " << all_identical << " (" << (r.fast_checked ? "gpu == fast cpu == reference" : "gpu == cpu") << ")\n";
@@ -192,10 +192,12 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
       if (have_cpu) {
         j["cpu_ns"] = r.cpu_ns;
         j["cpu_path"] = r.cpu_path;
+        if (r.cpu_upload_ns > 0) j["cpu_upload_ns"] = r.cpu_upload_ns;
       }
       if (have_gpu) {
         j["gpu_ns"] = r.gpu_ns;
         j["gpu_wall_ns"] = r.gpu_wall_ns;
+        j["gpu_upload_ns"] = r.gpu_upload_ns;
       }
       j["mismatches"] = r.mismatches;
       if (r.fast_checked) j["fast_mismatches"] = r.fast_mismatches;
