@@ -168,6 +168,35 @@ TEST(Rounding, FloatStepsAreNextafterBitForBit) {
   }
 }
 
+// is_valid is invalid_reason(v).empty(), on volumes broken one value at a time.
+TEST(Validate, IsValidAgreesWithInvalidReason) {
+  const float specials[] = {std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity(),
+                            -std::numeric_limits<float>::infinity(), -1.0f, 0.0f, 2.0f, 0.999f, 1.0005f, -0.0f};
+  test::Rng rng{5};
+  int invalid = 0;
+  for (int i = 0; i < 2000; ++i) {
+    Aabb a = test::random_aabb(rng, 10.0f, 2.0f);
+    Obb o = test::random_obb(rng, 10.0f, 2.0f);
+    Sphere s = test::random_sphere(rng, 10.0f, 2.0f);
+    const float v = specials[rng.next() % std::size(specials)];
+    const int at = int(rng.next() % 16);
+    if (i % 4) {  // one value replaced (a quarter stay as generated)
+      if (at < 3) a.min[at] = v;
+      else if (at < 6) a.max[at - 3] = v;
+      if (at < 3) o.center[at] = v;
+      else if (at < 6) o.half_extents[at - 3] = v;
+      else if (at < 15) o.basis[(at - 6) / 3][(at - 6) % 3] = v;
+      if (at < 3) s.center[at] = v;
+      else if (at == 3) s.radius = v;
+    }
+    EXPECT_EQ(is_valid(a), invalid_reason(a).empty()) << i;
+    EXPECT_EQ(is_valid(o), invalid_reason(o).empty()) << i;
+    EXPECT_EQ(is_valid(s), invalid_reason(s).empty()) << i;
+    invalid += !is_valid(a) + !is_valid(o) + !is_valid(s);
+  }
+  EXPECT_GT(invalid, 1000);  // both answers were seen
+}
+
 // ---- frusta ---------------------------------------------------------------------------------
 
 bool inside(const Frustum& f, const glm::vec3& p) {

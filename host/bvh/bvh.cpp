@@ -539,7 +539,7 @@ std::string check_flat_tree_impl(const FlatTree& tree, std::span<const Volume> v
     if (seen[o]++) return "object id " + std::to_string(o) + " appears twice";
   }
   for (std::size_t i = 0; i < n; ++i)
-    if (const std::string why = invalid_reason(volumes[i]); !why.empty()) return kind + " " + std::to_string(i) + ": " + why;
+    if (!is_valid(volumes[i])) return kind + " " + std::to_string(i) + ": " + invalid_reason(volumes[i]);
   // Depth of every node: children follow their parent in depth-first order.
   std::vector<std::uint32_t> depth(nodes, 0);
   if (nodes) {
@@ -553,7 +553,7 @@ std::string check_flat_tree_impl(const FlatTree& tree, std::span<const Volume> v
     if (depth[i] == 0) return at + "not reachable from the root in depth-first order";
     if (node.skip <= i || node.skip > nodes) return at + "skip index " + std::to_string(node.skip) + " out of range";
     if (std::size_t(node.first) + node.count > n) return at + "object range past the object list";
-    if (const std::string why = invalid_reason(node.box); !why.empty()) return at + "invalid box: " + why;
+    if (!is_valid(node.box)) return at + "invalid box: " + invalid_reason(node.box);
     if (node.leaf) {
       if (node.skip != i + 1) return at + "leaf whose skip is not the next node";
       for (std::uint32_t k = node.first; k < node.first + node.count; ++k) {

@@ -14,4 +14,10 @@ std::string invalid_reason(const Aabb& b);
 std::string invalid_reason(const Obb& b);
 std::string invalid_reason(const Sphere& s);
 
+/// invalid_reason(v).empty(), without building strings: for checks of every volume of a scene
+/// on each upload.
+bool is_valid(const Aabb& b);
+bool is_valid(const Obb& b);
+bool is_valid(const Sphere& s);
+
 }  // namespace cullpipe

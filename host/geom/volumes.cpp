@@ -97,6 +97,27 @@ std::string non_finite(const char* what, const glm::vec3& v) {
 
 }  // namespace
 
+namespace {
+bool finite3(const glm::vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+}  // namespace
+
+// is_valid: the conditions of invalid_reason below, in the same terms (a test holds them equal).
+bool is_valid(const Aabb& b) {
+  return finite3(b.min) && finite3(b.max) && b.min.x <= b.max.x && b.min.y <= b.max.y && b.min.z <= b.max.z;
+}
+
+bool is_valid(const Obb& b) {
+  if (!finite3(b.center) || !finite3(b.half_extents)) return false;
+  for (int k = 0; k < 3; ++k) {
+    if (!finite3(b.basis[k]) || b.half_extents[k] < 0.0f || std::abs(glm::length(b.basis[k]) - 1.0f) > 1e-3f) return false;
+    for (int j = 0; j < k; ++j)
+      if (std::abs(glm::dot(b.basis[k], b.basis[j])) > 1e-3f) return false;
+  }
+  return true;
+}
+
+bool is_valid(const Sphere& s) { return finite3(s.center) && std::isfinite(s.radius) && s.radius >= 0.0f; }
+
 std::string invalid_reason(const Aabb& b) {
   if (auto e = non_finite("min", b.min); !e.empty()) return e;
   if (auto e = non_finite("max", b.max); !e.empty()) return e;
