@@ -26,6 +26,7 @@
 #include <cmath>
 #include <cstdio>
 #include <glm/common.hpp>
+#include <glm/vec4.hpp>
 #include <cstring>
 #include <fstream>
 #include <functional>

@@ -197,6 +197,12 @@ TEST(Cli, EveryKindFlatAndHierarchicalOnEitherCpuPath) {
   EXPECT_EQ(r.code, 0) << r.err;
   EXPECT_NE(r.out.find("cpu fast hierarchical"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("; upload "), std::string::npos) << r.out;  // the fast culler's copy of the scene
+  const fs::path upload_json = temp_dir() / "fast_upload.json";
+  const Result flat = cullpipe("run --generate uniform:5000 --cpu fast --backend cpu --json '" + upload_json.string() + "'", kNoVulkan);
+  ASSERT_EQ(flat.code, 0) << flat.err;
+  const auto uploads = nlohmann::json::parse(slurp(upload_json));
+  EXPECT_GT(uploads["cpu_upload_ns"].get<double>(), 0.0);
+  EXPECT_FALSE(uploads.contains("gpu_upload_ns"));
   EXPECT_NE(r.out.find("(fast cpu == reference)"), std::string::npos) << r.out;
 }
 

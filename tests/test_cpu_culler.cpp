@@ -579,18 +579,20 @@ TEST(CpuBvhCuller, RefusesATreeOfOtherBoxes) {
   EXPECT_EQ(culler.cull(Frustum::from_planes(all)).visible, boxes.size());
 }
 
-// Uploads rewrite the culler's arrays in place: trees of other sizes, leaf sizes and volume
-// kinds, one after another on one culler, each culls as a fresh culler would.
-TEST(CpuBvhCuller, UploadsOneAfterAnotherReuseTheArraysExactly) {
+// Trees of other sizes, leaf sizes and volume kinds uploaded one after another on one culler:
+// each culls as a fresh culler would (nothing of an earlier upload leaks into a later one).
+TEST(CpuBvhCuller, UploadsOneAfterAnotherCullAsAFreshCuller) {
   test::Rng rng{23};
   const std::vector<Frustum> views = test_views(false);
   fast::CpuBvhCuller culler(2);
-  for (std::size_t n : {3000u, 100u, 20000u, 1u, 5000u}) {
+  for (std::size_t n : {3000u, 101u, 20000u, 1u, 5001u}) {
     const test::RandomVolumes v = test::random_volumes(rng, n, 30.0f, 2.0f);
     bvh::BuildOptions options;
     options.max_leaf_size = n % 2 ? 1 : 8;
     const bvh::FlatTree box_tree = bvh::flatten(bvh::build("binned-sah", v.aabbs, options));
     const bvh::FlatTree obb_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(v.obbs)), options));
+    const bvh::FlatTree sphere_tree =
+        bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Sphere>(v.spheres)), options));
     bvh::HierarchicalResult got;
     for (const Frustum& view : views) {
       culler.upload(box_tree, std::span<const Aabb>(v.aabbs));
@@ -599,6 +601,10 @@ TEST(CpuBvhCuller, UploadsOneAfterAnotherReuseTheArraysExactly) {
       culler.upload(obb_tree, std::span<const Obb>(v.obbs));
       culler.cull(view, got);
       expect_same_traversal(bvh::cull_hierarchical(obb_tree, std::span<const Obb>(v.obbs), view), got, "obbs n=" + std::to_string(n));
+      culler.upload(sphere_tree, std::span<const Sphere>(v.spheres));
+      culler.cull(view, got);
+      expect_same_traversal(bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(v.spheres), view), got,
+                            "spheres n=" + std::to_string(n));
       if (HasFatalFailure()) return;
     }
   }

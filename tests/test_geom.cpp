@@ -195,6 +195,21 @@ TEST(Validate, IsValidAgreesWithInvalidReason) {
     invalid += !is_valid(a) + !is_valid(o) + !is_valid(s);
   }
   EXPECT_GT(invalid, 1000);  // both answers were seen
+  EXPECT_LT(invalid, 5500);
+  // Each condition alone: unit but not orthogonal axes, a negative half extent, -0 radius and
+  // half extents (valid), an inverted box, a point box (valid).
+  Obb o;
+  o.basis[1] = glm::normalize(glm::vec3(0.01f, 1.0f, 0.0f));  // 0.01 off orthogonal, unit length
+  EXPECT_EQ(is_valid(o), invalid_reason(o).empty());
+  EXPECT_FALSE(is_valid(o));
+  o = Obb{};
+  o.half_extents = {1.0f, -0.0f, 1.0f};
+  EXPECT_TRUE(is_valid(o) && invalid_reason(o).empty());
+  o.half_extents.z = -1e-30f;
+  EXPECT_FALSE(is_valid(o) || invalid_reason(o).empty());
+  EXPECT_TRUE(is_valid(Sphere{{0, 0, 0}, -0.0f}) && invalid_reason(Sphere{{0, 0, 0}, -0.0f}).empty());
+  EXPECT_FALSE(is_valid(Aabb{{0, 0, 1}, {1, 1, 0.5f}}) || invalid_reason(Aabb{{0, 0, 1}, {1, 1, 0.5f}}).empty());
+  EXPECT_TRUE(is_valid(Aabb{{1, 1, 1}, {1, 1, 1}}));
 }
 
 // ---- frusta ---------------------------------------------------------------------------------
