@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "bvh/bvh.hpp"
+#include "cull/aligned_vector.hpp"
 #include "cull/cpu_culler.hpp"
 #include "geom/aabb.hpp"
 #include "geom/bv_kind.hpp"
@@ -108,9 +109,9 @@ class CpuBvhCuller {
   BvKind kind_ = BvKind::Aabb;
   // The tree as the walk kernels read it (detail::WalkTree): nodes, their object counts, and
   // the volumes in tree order (a leaf's are adjacent), as records of kind_.
-  std::vector<float> walk_nodes_;
+  detail::CacheLineVector<float> walk_nodes_;  // 32-byte records, each within one cache line
   std::vector<std::uint32_t> counts_;
-  std::vector<float> walk_volumes_;
+  detail::CacheLineVector<float> walk_volumes_;
   // Per-pass working storage, kept so passes reuse it.
   std::vector<Task> tasks_;
   std::vector<Tally> tallies_;
