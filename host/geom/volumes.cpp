@@ -88,65 +88,74 @@ namespace {
 
 const char* axis_name(int i) { return i == 0 ? "x" : i == 1 ? "y" : "z"; }
 
-std::string non_finite(const char* what, const glm::vec3& v) {
+// The checks of is_valid and invalid_reason, written once. At the first that fails, `fail` is
+// called with a callable that formats what is wrong (only invalid_reason calls it: a valid
+// volume, or one merely tested by is_valid, builds no string); the check returns false.
+template <class Fail>
+bool check_finite(const char* what, const glm::vec3& v, Fail& fail) {
   for (int i = 0; i < 3; ++i)
     if (!std::isfinite(v[i]))
-      return std::string(what) + "." + axis_name(i) + (std::isnan(v[i]) ? " is NaN" : " is infinite");
-  return {};
+      return fail([&] { return std::string(what) + "." + axis_name(i) + (std::isnan(v[i]) ? " is NaN" : " is infinite"); });
+  return true;
 }
 
-}  // namespace
-
-namespace {
-bool finite3(const glm::vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
-}  // namespace
-
-// is_valid: the conditions of invalid_reason below, in the same terms (a test holds them equal).
-bool is_valid(const Aabb& b) {
-  return finite3(b.min) && finite3(b.max) && b.min.x <= b.max.x && b.min.y <= b.max.y && b.min.z <= b.max.z;
+template <class Fail>
+bool check(const Aabb& b, Fail& fail) {
+  if (!check_finite("min", b.min, fail) || !check_finite("max", b.max, fail)) return false;
+  for (int i = 0; i < 3; ++i)
+    if (b.min[i] > b.max[i]) return fail([&] { return std::string("min.") + axis_name(i) + " > max." + axis_name(i); });
+  return true;
 }
 
-bool is_valid(const Obb& b) {
-  if (!finite3(b.center) || !finite3(b.half_extents)) return false;
+template <class Fail>
+bool check(const Obb& b, Fail& fail) {
+  if (!check_finite("center", b.center, fail) || !check_finite("half_extents", b.half_extents, fail)) return false;
+  const char* const names[3] = {"axes[0]", "axes[1]", "axes[2]"};
   for (int k = 0; k < 3; ++k) {
-    if (!finite3(b.basis[k]) || b.half_extents[k] < 0.0f || std::abs(glm::length(b.basis[k]) - 1.0f) > 1e-3f) return false;
+    if (!check_finite(names[k], b.basis[k], fail)) return false;
+    if (b.half_extents[k] < 0.0f) return fail([&] { return std::string("half_extents.") + axis_name(k) + " is negative"; });
+    if (std::abs(glm::length(b.basis[k]) - 1.0f) > 1e-3f) return fail([&] { return std::string(names[k]) + " is not unit length"; });
     for (int j = 0; j < k; ++j)
-      if (std::abs(glm::dot(b.basis[k], b.basis[j])) > 1e-3f) return false;
+      if (std::abs(glm::dot(b.basis[k], b.basis[j])) > 1e-3f)
+        return fail([&] { return std::string(names[j]) + " and " + names[k] + " are not orthogonal"; });
   }
   return true;
 }
 
-bool is_valid(const Sphere& s) { return finite3(s.center) && std::isfinite(s.radius) && s.radius >= 0.0f; }
-
-std::string invalid_reason(const Aabb& b) {
-  if (auto e = non_finite("min", b.min); !e.empty()) return e;
-  if (auto e = non_finite("max", b.max); !e.empty()) return e;
-  for (int i = 0; i < 3; ++i)
-    if (b.min[i] > b.max[i]) return std::string("min.") + axis_name(i) + " > max." + axis_name(i);
-  return {};
+template <class Fail>
+bool check(const Sphere& s, Fail& fail) {
+  if (!check_finite("center", s.center, fail)) return false;
+  if (std::isnan(s.radius)) return fail([] { return std::string("radius is NaN"); });
+  if (!std::isfinite(s.radius)) return fail([] { return std::string("radius is infinite"); });
+  if (s.radius < 0.0f) return fail([] { return std::string("radius is negative"); });
+  return true;
 }
 
-std::string invalid_reason(const Obb& b) {
-  if (auto e = non_finite("center", b.center); !e.empty()) return e;
-  if (auto e = non_finite("half_extents", b.half_extents); !e.empty()) return e;
-  for (int k = 0; k < 3; ++k) {
-    const std::string name = std::string("axes[") + char('0' + k) + "]";  // (short: no allocation)
-    if (auto e = non_finite(name.c_str(), b.basis[k]); !e.empty()) return e;
-    if (b.half_extents[k] < 0.0f) return std::string("half_extents.") + axis_name(k) + " is negative";
-    if (std::abs(glm::length(b.basis[k]) - 1.0f) > 1e-3f) return name + " is not unit length";
-    for (int j = 0; j < k; ++j)
-      if (std::abs(glm::dot(b.basis[k], b.basis[j])) > 1e-3f)
-        return "axes[" + std::to_string(j) + "] and " + name + " are not orthogonal";
-  }
-  return {};
+template <class Volume>
+bool valid(const Volume& v) {
+  auto fail = [](auto&&) { return false; };
+  return check(v, fail);
 }
 
-std::string invalid_reason(const Sphere& s) {
-  if (auto e = non_finite("center", s.center); !e.empty()) return e;
-  if (std::isnan(s.radius)) return "radius is NaN";
-  if (!std::isfinite(s.radius)) return "radius is infinite";
-  if (s.radius < 0.0f) return "radius is negative";
-  return {};
+template <class Volume>
+std::string reason(const Volume& v) {
+  std::string why;
+  auto fail = [&](auto&& message) {
+    why = message();
+    return false;
+  };
+  check(v, fail);
+  return why;
 }
+
+}  // namespace
+
+bool is_valid(const Aabb& b) { return valid(b); }
+bool is_valid(const Obb& b) { return valid(b); }
+bool is_valid(const Sphere& s) { return valid(s); }
+
+std::string invalid_reason(const Aabb& b) { return reason(b); }
+std::string invalid_reason(const Obb& b) { return reason(b); }
+std::string invalid_reason(const Sphere& s) { return reason(s); }
 
 }  // namespace cullpipe

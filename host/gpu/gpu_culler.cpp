@@ -84,20 +84,21 @@ GpuCuller::~GpuCuller() = default;
 
 // Every upload writes straight into the mapped buffers, in chunks on the upload pool: no
 // staging copy, and no fresh allocation whose pages fault in on every upload (which made a
-// million-box upload 3x slower than a pass). `fill(first, end)` writes objects [first, end).
+// million-box upload 3x slower than a pass). `fill(first, end)` writes objects [first, end);
+// with `centres` (AABBs) the centre-bound buffer is sized for them too.
 template <class Fill>
-void GpuCuller::upload_volumes(BvKind kind, std::size_t count, std::size_t bytes_per_object, VkDeviceSize centre_bytes, Fill&& fill) {
+void GpuCuller::upload_volumes(BvKind kind, std::size_t count, std::size_t bytes_per_object, bool centres, Fill&& fill) {
   const std::string what = std::to_string(count) + " " + std::string(to_string(kind)) + " volumes";
   if (count > std::numeric_limits<std::uint32_t>::max())
     throw std::length_error(what + ": object ids are 32-bit (at most 4294967295 objects)");
-  const VkDeviceSize bytes = VkDeviceSize(count) * bytes_per_object;
+  const VkDeviceSize bytes = VkDeviceSize(count) * bytes_per_object, centre_bytes = VkDeviceSize(count) * sizeof(glm::vec4);
   // Both sizes are checked before anything changes: a scene that cannot fit keeps the old one.
   detail::check_allocation_size(ctx_, bytes, what);
-  if (centre_bytes) detail::check_allocation_size(ctx_, centre_bytes, what + " (centre bounds)");
+  if (centres) detail::check_allocation_size(ctx_, centre_bytes, what + " (centre bounds)");
   object_count_ = 0;  // stays 0 if an allocation below fails: no pass on half-written buffers
   bytes_per_object_ = bytes_per_object;
   descriptors_dirty_ = true;  // segment ranges depend on the object size and count
-  if (centre_bytes) detail::ensure_buffer(ctx_, centres_, centre_bytes, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
+  if (centres) detail::ensure_buffer(ctx_, centres_, centre_bytes, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
   detail::ensure_buffer(ctx_, bounds_, bytes, kBoundsUsage, "bounds buffer", descriptors_dirty_);
   const std::size_t tasks = (count + kUploadChunk - 1) / kUploadChunk;
   auto task = [&](std::size_t t) { fill(t * kUploadChunk, std::min(count, (t + 1) * kUploadChunk)); };
@@ -120,8 +121,7 @@ void GpuCuller::upload(std::span<const Aabb> volumes) {
   // The culling passes first test each box's centre against its bound (one texel), the CPU
   // kernels' proof and numbers (host/cull/plane_bounds.hpp); only the boxes it leaves open
   // are read in full.
-  const VkDeviceSize centre_bytes = std::max<VkDeviceSize>(VkDeviceSize(volumes.size()) * sizeof(glm::vec4), 1);
-  upload_volumes(BvKind::Aabb, volumes.size(), sizeof(GpuAabb), centre_bytes, [&](std::size_t first, std::size_t end) {
+  upload_volumes(BvKind::Aabb, volumes.size(), sizeof(GpuAabb), true, [&](std::size_t first, std::size_t end) {
     GpuAabb* out = bounds_.as<GpuAabb>().data();
     for (std::size_t i = first; i < end; ++i) out[i] = pack(volumes[i]);
     fast::detail::aabb_centre_bounds(volumes.subspan(first, end - first), centres_.as<glm::vec4>().subspan(first, end - first));
@@ -129,7 +129,7 @@ void GpuCuller::upload(std::span<const Aabb> volumes) {
 }
 
 void GpuCuller::upload(std::span<const Obb> volumes) {
-  upload_volumes(BvKind::Obb, volumes.size(), sizeof(GpuObb), 0, [&](std::size_t first, std::size_t end) {
+  upload_volumes(BvKind::Obb, volumes.size(), sizeof(GpuObb), false, [&](std::size_t first, std::size_t end) {
     GpuObb* out = bounds_.as<GpuObb>().data();
     constexpr std::size_t kBatch = 256;  // bounds on the stack (upload threads may be small-stack job threads)
     float bounds[kBatch];
@@ -146,7 +146,7 @@ void GpuCuller::upload(std::span<const Obb> volumes) {
 }
 
 void GpuCuller::upload(std::span<const Sphere> volumes) {
-  upload_volumes(BvKind::Sphere, volumes.size(), sizeof(GpuSphere), 0, [&](std::size_t first, std::size_t end) {
+  upload_volumes(BvKind::Sphere, volumes.size(), sizeof(GpuSphere), false, [&](std::size_t first, std::size_t end) {
     GpuSphere* out = bounds_.as<GpuSphere>().data();
     for (std::size_t i = first; i < end; ++i) out[i] = pack(volumes[i]);
   });

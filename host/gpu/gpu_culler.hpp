@@ -159,7 +159,7 @@ class GpuCuller {
 
  private:
   template <class Fill>
-  void upload_volumes(BvKind kind, std::size_t count, std::size_t bytes_per_object, VkDeviceSize centre_bytes, Fill&& fill);
+  void upload_volumes(BvKind kind, std::size_t count, std::size_t bytes_per_object, bool centres, Fill&& fill);
   void ensure_outputs(std::size_t view_count, std::size_t visible_capacity, bool draws, bool ordered);
   VkDeviceSize group_count_bytes(std::size_t view_count) const;  // the ordered passes' workgroup counts
   struct SegmentPlan {
