@@ -91,6 +91,28 @@ inline EdgeSet<Obb> obb_edge_set() {
       obbs.push_back(o);
     }
   }
+  // Centres 10^5 away along the planes through the origin, within float steps of distance
+  // +-r: a step of the distance is far larger than r, so only the bound's share for the centre
+  // (2^-18 |c|_1) covers the fused centre distance rounding differently from the reference's.
+  for (std::size_t v = 0; v < 6; ++v) {
+    const glm::vec3 n = views[v].planes[0].normal;
+    for (int i = 0; i < 300; ++i) {
+      Obb o;
+      o.basis = rng.rotation();
+      o.half_extents = rng.vec3(0.0f, 1e-2f);
+      const glm::vec3 along = rng.vec3(-1e5f, 1e5f);
+      float r = 0;
+      for (int k = 0; k < 3; ++k) {
+        const glm::vec3 u = o.basis[k];
+        r += std::fabs((n.x * u.x + n.y * u.y) + n.z * u.z) * o.half_extents[k];
+      }
+      o.center = (along - glm::dot(along, n) * n) + (i % 2 ? r : -r) * n;
+      const int step = i % 9 - 4;
+      for (int k = 0; k < 3; ++k)
+        for (int t = 0; t < std::abs(step); ++t) o.center[k] = std::nextafter(o.center[k], (step > 0) == (n[k] > 0) ? 1e30f : -1e30f);
+      obbs.push_back(o);
+    }
+  }
   // Where rounding makes the float r exceed the exact |u| h (which the bound's slack covers), a
   // centre at a distance s strictly between them, on each side: s < r is INTERSECTING, while a
   // bound of just |u| h would call it INSIDE (or OUTSIDE at -s).
@@ -187,6 +209,51 @@ inline EdgeSet<Aabb> aabb_edge_set() {
   while (boxes.size() < 9000) boxes.push_back(boxes[rng.next() % sharp]);  // more than two runs
   add_unbounded_views(views);
   return {boxes, views};
+}
+
+// The sphere kernel settles most spheres by their centre distance, computed fused, against a
+// bound of |radius| plus margins for the rounding of that distance and the reference's; the rest
+// get the reference's test. Centres within float steps of distance +-r from slanted planes, some
+// far along the plane (so a step of the distance is larger than the radius: only the margins
+// tell the two distances apart); zero, negative, subnormal and huge radii; huge and non-finite
+// centres.
+inline EdgeSet<Sphere> sphere_edge_set() {
+  Rng rng(31);
+  std::vector<Frustum> views;
+  for (float d : {0.0f, 900.0f, -3000.0f, 1e6f}) {
+    const glm::vec4 plane(glm::normalize(rng.vec3(-1, 1) + glm::vec3(0.1f)), d);
+    views.push_back(Frustum::from_planes({&plane, 1}));
+  }
+  std::vector<Sphere> spheres;
+  for (const Frustum& view : views) {
+    const Plane& plane = view.planes[0];
+    const glm::vec3 n = plane.normal;
+    for (int i = 0; i < 700; ++i) {
+      // A point on the plane, near the origin or 10^5 away along the plane.
+      const float reach = i % 4 == 0 ? 1e5f : 50.0f;
+      const glm::vec3 along = rng.vec3(-reach, reach);
+      const glm::vec3 on_plane = -plane.d * n + (along - glm::dot(along, n) * n);
+      float r = i % 7 == 0 ? 0.0f : i % 3 == 0 ? rng.uniform(1e-4f, 1e-2f) : rng.uniform(0.1f, 3.0f);
+      if (i % 11 == 5) r = -r;
+      const int side = i % 2 ? 1 : -1, step = i % 17 - 8;
+      Sphere sp{on_plane + (float(side) * std::fabs(r)) * n, r};
+      // Then move the centre along the normal until the reference's distance is within a few
+      // float steps of +-r.
+      for (int k = 0; k < 3; ++k)
+        for (int s = 0; s < std::abs(step); ++s) sp.center[k] = std::nextafter(sp.center[k], (step > 0) == (n[k] > 0) ? 1e30f : -1e30f);
+      spheres.push_back(sp);
+    }
+  }
+  const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
+  for (float v : {inf, -inf, nan, 3e38f, -3e38f, 1e36f, 1e-40f, -1e-40f}) {
+    spheres.push_back({{v, 0, 0}, 1.0f});
+    spheres.push_back({{0, 0, 0}, v});
+    spheres.push_back({{v, v, v}, v});
+  }
+  const std::size_t sharp = spheres.size();
+  while (spheres.size() < 9000) spheres.push_back(spheres[rng.next() % sharp]);  // more than two runs
+  add_unbounded_views(views);
+  return {spheres, views};
 }
 
 }  // namespace cullpipe::test

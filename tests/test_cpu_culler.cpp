@@ -53,6 +53,7 @@ namespace {
 
 using test::aabb_edge_set;
 using test::obb_edge_set;
+using test::sphere_edge_set;
 using test::EdgeSet;
 using fast::CpuCuller;
 using fast::CpuCullerConfig;
@@ -195,6 +196,8 @@ TEST(CpuCuller, ObbsAtTheEdgeOfTheirPlaneBound) { check_edge_set(obb_edge_set(),
 
 TEST(CpuCuller, AabbsAtTheEdgeOfTheirPlaneBound) { check_edge_set(aabb_edge_set(), 1, "aabb at the bound"); }
 
+TEST(CpuCuller, SpheresAtTheEdgeOfTheirPlaneBound) { check_edge_set(sphere_edge_set(), 1, "sphere at the bound"); }
+
 #if defined(__SSE__)
 TEST(CpuCuller, AgreesUnderFlushToZeroSetAfterThePoolStarted) {
   // An engine may turn FTZ/DAZ on at any time, on its own thread. Planes through the origin
@@ -269,6 +272,7 @@ void expect_mode_independent(const EdgeSet<Volume>& set, const std::string& what
 TEST(CpuCuller, BoundsHoldInEveryFloatModeAtUploadAndCull) {
   expect_mode_independent(obb_edge_set(), "obb");
   expect_mode_independent(aabb_edge_set(), "aabb");
+  expect_mode_independent(sphere_edge_set(), "sphere");
 }
 #endif
 

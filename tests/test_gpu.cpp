@@ -269,6 +269,7 @@ void expect_edge_set_agreement(gpu::GpuCuller& culler, const test::EdgeSet<Volum
 TEST_F(Gpu, BoxesAtTheEdgeOfTheirCentreBound) {
   expect_edge_set_agreement(culler(), test::aabb_edge_set(), 1);
   expect_edge_set_agreement(culler(), test::obb_edge_set(), 0);
+  expect_edge_set_agreement(culler(), test::sphere_edge_set(), 1);  // (the GPU tests spheres in full)
 }
 
 TEST_F(Gpu, DegenerateBehindCameraHugeAndTiny) {

@@ -96,33 +96,60 @@ PlaneSet plane_set(const Frustum& f) {
 
 namespace {
 
-/// ObbArrays::bound of `b`: a float b >= |r| for the reference's projected radius
-/// r = (|a0| h0 + |a1| h1) + |a2| h2, a_i = (n.x u_i.x + n.y u_i.y) + n.z u_i.z, computed in float
-/// for every normal n with |n| <= 1 + 2^-20, or NaN where no bound is safe. Why it holds, with
-/// e = 2^-23 (a float rounding in any rounding mode) and each rounding also off by at most
-/// 2^-149 in the subnormal range (flushing to zero at cull time only shrinks a term):
+/// ObbArrays::bound of `b`: a float bound >= |r| + 2^-18 |c|_1 for the reference's projected
+/// radius r = (|a0| h0 + |a1| h1) + |a2| h2, a_i = (n.x u_i.x + n.y u_i.y) + n.z u_i.z, computed
+/// in float for every normal n with |n| <= 1 + 2^-20, and the centre c; or NaN where no bound
+/// is safe. With a margin m >= 2^-18 |d| (PlaneSet::max_margin) it settles the reference's test
+/// from a centre distance s = n.c + d computed in float in any order, fused or not: s < -(bound
+/// + m) means s_ref < -|r| (OUTSIDE), s >= bound + m on every plane s_ref >= |r| (INSIDE), s_ref
+/// the reference's own centre distance. Why, with e = 2^-23 (a float rounding in any rounding
+/// mode) and each rounding also off by at most 2^-149 in the subnormal range (flushing to zero
+/// at cull time only shrinks a term):
 /// - |a_i| <= (|n.x u.x| + |n.y u.y| + |n.z u.z|)(1 + e)^3 + 6 x 2^-149
 ///         <= |n| |u_i| (1 + e)^3 + 6 x 2^-149 (Cauchy-Schwarz);
 /// - the products with h_i and the two sums add (1 + e)^3 and 5 x 2^-149, so
-///   |r| <= [sum_i (|u_i| + 2^-140) |h_i|] (1 + 2^-16) + 2^-140, as (1 + 2^-20)(1 + e)^6 < 1 + 2^-16.
-///   That is computed here in double, with 2^-100 for the last term (the bound stays a normal
-///   float: DAZ would read a subnormal one as 0), and rounded up to a float;
-/// - NaN inputs give NaN. An axis component of magnitude 2^125 or more gives NaN: past it
-///   a_i may overflow, and r may be inf - inf = NaN while the bound is finite. Below it a_i
-///   is finite, so r is NaN only from 0 x inf (an infinite h_i, which makes the bound inf) or
-///   inf - inf of two overflowed products (their exact size makes the bound round up to inf).
-///   An infinite bound settles only a centre distance of +inf on every plane, where the
-///   reference also finds nothing behind any plane.
+///   |r| <= [sum_i (|u_i| + 2^-140) |h_i|] (1 + 2^-16) (1 - e) + 2^-140, as
+///   (1 + 2^-20)(1 + e)^6 / (1 - e) < 1 + 2^-16;
+/// - s and s_ref are each within 6e (|n| |c|_1 + |d|) of n.c + d (three products and three
+///   sums), so within 12e (1 + 2^-20)(|c|_1 + |d|) < 2^-18 (1 - e)(|c|_1 + |d|) of each other;
+///   the float sum bound + m is at least (1 - e)(bound + m);
+/// - that is computed here in double, with 2^-100 for the absolute terms (subnormal roundings,
+///   inputs flushed by DAZ at cull time; the bound stays a normal float: DAZ would read a
+///   subnormal one as 0), and rounded up to a float;
+/// - NaN inputs give NaN, and so does |c|_1 past 2^120 (s could overflow). An axis component
+///   of magnitude 2^125 or more gives NaN: past it a_i may overflow, and r may be inf - inf =
+///   NaN while the bound is finite. Below it a_i is finite, so r is NaN only from 0 x inf (an
+///   infinite h_i, which makes the bound inf) or inf - inf of two overflowed products (their
+///   exact size makes the bound round up to inf). An infinite bound settles nothing (s is
+///   finite when the bound and the margin are).
 float obb_plane_bound(const Obb& b) {
-  double sum = 0.0;
+  double sum = 0.0, size = 0.0;
   for (int i = 0; i < 3; ++i) {
     const glm::vec3 u = b.basis[i];
     const double x = u.x, y = u.y, z = u.z;
     if (!(std::fabs(x) < 0x1p125 && std::fabs(y) < 0x1p125 && std::fabs(z) < 0x1p125))  // NaN too
       return std::numeric_limits<float>::quiet_NaN();
     sum += (std::sqrt(x * x + y * y + z * z) + 0x1p-140) * std::fabs(double(b.half_extents[i]));
+    size += std::fabs(double(b.center[i]));
   }
-  return round_up(sum * (1.0 + 0x1p-16) + 0x1p-100);
+  if (!(size <= 0x1p120)) return std::numeric_limits<float>::quiet_NaN();  // NaN and inf too
+  return round_up(sum * (1.0 + 0x1p-16) + 0x1p-18 * size + 0x1p-100);
+}
+
+/// SphereArrays::bound of `s`: with a margin m >= 2^-18 |d| (PlaneSet::max_margin) it settles
+/// the reference's test (s_ref < -r: OUTSIDE, else s_ref < r: INTERSECTING, else INSIDE) for
+/// every plane of normal |n| <= 1 + 2^-20 from a centre distance s computed in float in any
+/// order, fused or not: s < -(bound + m) means s_ref < -|r| <= -r, and s >= bound + m on every
+/// plane s_ref >= |r| >= r. Why, with e = 2^-23 as above: s and s_ref are within
+/// 12e (1 + 2^-20)(|c|_1 + |d|) of each other (see obb_plane_bound), less than the
+/// 2^-18 (1 - e)(|c|_1 + |d|) the bound and margin add; |r| (1 + 2^-20)(1 - e) >= |r| covers
+/// the float sum bound + m rounding down; 2^-100 covers subnormal roundings and inputs (or a
+/// radius) flushed to zero at cull time. Non-finite values or |c|_1 past 2^120 give NaN.
+float sphere_plane_bound(const Sphere& s) {
+  const double size = std::fabs(double(s.center.x)) + std::fabs(double(s.center.y)) + std::fabs(double(s.center.z));
+  const double radius = std::fabs(double(s.radius));
+  if (!(size <= 0x1p120) || !std::isfinite(radius)) return std::numeric_limits<float>::quiet_NaN();
+  return round_up(radius * (1.0 + 0x1p-20) + 0x1p-18 * size + 0x1p-100);
 }
 
 /// AabbArrays::bound of `b`, and its centre (min + max) / 2 rounded to a float. With a margin
@@ -328,9 +355,10 @@ void CpuCuller::upload(std::span<const Obb> volumes) {
 }
 
 void CpuCuller::upload(std::span<const Sphere> volumes) {
-  upload_columns<4, 0>(volumes, [](const Sphere& s, float* const* c, std::size_t i) {
+  upload_columns<5, 0>(volumes, [](const Sphere& s, float* const* c, std::size_t i) {
     c[0][i] = s.center.x, c[1][i] = s.center.y, c[2][i] = s.center.z;
-    c[3][i] = s.radius;
+    c[3][i] = sphere_plane_bound(s);
+    c[4][i] = s.radius;
   });
 }
 
@@ -368,13 +396,14 @@ std::uint32_t CpuCuller::touch(std::span<const float> data) {
   return touch_spans(impl_->pool, impl_->table, {&data, 1}, impl_->chunk * 8);
 }
 
-std::uint32_t CpuCuller::touch_bounds() {
+std::uint32_t CpuCuller::touch_bounds(bool streamed_only) {
   // Only the objects' floats (rounded up to a vector), not the spare padding.
   if (!count_) return 0;
   const std::size_t used = (count_ + kPad - 1) / kPad * kPad;
   std::vector<std::span<const float>> spans;
-  for (const float* column : impl_->arrays) spans.emplace_back(column, used);
-  if (impl_->records) spans.emplace_back(impl_->records, used * impl_->record_size);
+  constexpr std::size_t kStreamed = 4;  // the columns every pass reads: centre x y z, bound
+  for (std::size_t c = 0; c < impl_->arrays.size() && (!streamed_only || c < kStreamed); ++c) spans.emplace_back(impl_->arrays[c], used);
+  if (impl_->records && !streamed_only) spans.emplace_back(impl_->records, used * impl_->record_size);
   return touch_spans(impl_->pool, impl_->table, spans, impl_->chunk);
 }
 
@@ -428,7 +457,7 @@ void CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& optio
         counts = m.table.obb(detail::ObbArrays{a[0], a[1], a[2], a[3], m.records}, begin, end, planes[v], out);
         break;
       case BvKind::Sphere:
-        counts = m.table.sphere(detail::SphereArrays{a[0], a[1], a[2], a[3]}, begin, end, planes[v], out);
+        counts = m.table.sphere(detail::SphereArrays{a[0], a[1], a[2], a[3], a[4]}, begin, end, planes[v], out);
         break;
     }
   });

@@ -78,14 +78,16 @@ class CpuCuller {
   void cull(std::span<const Frustum> views, const CpuCullOptions& options, std::vector<CpuViewResult>& results);
 
   /// Reads every uploaded bound once with the same kernels' loads and threads but no tests,
-  /// and returns the OR of the bits read: the memory floor of a pass, for benchmarks.
-  std::uint32_t touch_bounds();
+  /// and returns the OR of the bits read, for benchmarks. With `streamed_only`, only what a
+  /// pass reads for every object (the centres and bounds, 16 bytes per object): the memory
+  /// floor of a pass; else every byte the upload stored.
+  std::uint32_t touch_bounds(bool streamed_only = false);
   /// Reads `data` the same way (e.g. a buffer larger than the caches, to measure read
   /// bandwidth). `data` is read in whole vectors: its size should be a multiple of 16.
   std::uint32_t touch(std::span<const float> data);
-  /// Bytes per object of the uploaded bounds: 16 sphere; 48 AABB and 80 OBB: 16 of centre and
-  /// plane bound in arrays, read for every object, and a 32- or 64-byte record read for the
-  /// few objects the bound leaves open.
+  /// Bytes per object of the uploaded bounds: 48 AABB, 80 OBB and 20 sphere: 16 of centre and
+  /// plane bound in arrays, read for every object, and a 32- or 64-byte record (spheres: the
+  /// radius) read for the few objects the bound leaves open.
   std::size_t bytes_per_object() const;
 
   BvKind kind() const { return kind_; }

@@ -13,9 +13,9 @@ namespace cullpipe::fast::detail {
 struct PlaneSet {
   std::uint32_t count = 0;
   float nx[6]{}, ny[6]{}, nz[6]{}, d[6]{};
-  /// Every normal's length is at most 1 + 2^-20, so the AABB and OBB bounds hold for these planes.
+  /// Every normal's length is at most 1 + 2^-20, so the AABB, OBB and sphere bounds hold for these planes.
   bool unit_normals = false;
-  /// The share of the AABB settling margin that depends on the plane, 2^-18 |d| rounded up,
+  /// The share of the settling margin that depends on the plane, 2^-18 |d| rounded up,
   /// at its largest over the planes (NaN past |d| = 2^120: nothing is settled).
   float max_margin = 0.0f;
 };
@@ -39,13 +39,20 @@ struct AabbArrays {
 constexpr std::size_t kObbRecordFloats = 16;
 struct ObbArrays {
   const float *c_x, *c_y, *c_z;
-  /// Per object, obb_plane_bound(): at least |r| for the reference's projected radius r
-  /// against any plane of a unit-normal PlaneSet (or NaN: no bound).
+  /// Per object, obb_plane_bound(): with PlaneSet::max_margin, at least |r| for the reference's
+  /// projected radius r against any plane of a unit-normal PlaneSet, plus every rounding of the
+  /// reference's and the kernel's centre distances (or NaN: no bound).
   const float* bound;
   const float* records;  ///< object i at records + i * kObbRecordFloats, 64-byte aligned
 };
+/// Spheres: the centres and bounds, read for every sphere, and the radii, read only for the
+/// spheres that the bound does not settle (and for all of them without unit normals).
 struct SphereArrays {
-  const float *c_x, *c_y, *c_z, *radius;
+  const float *c_x, *c_y, *c_z;
+  /// Per sphere, sphere_plane_bound(): with PlaneSet::max_margin, covers |radius| and every
+  /// rounding of the reference's and the kernel's centre distances (or NaN: no bound).
+  const float* bound;
+  const float* radius;
 };
 
 /// Where one chunk's results go. `classes` (may be null) receives the class of objects
