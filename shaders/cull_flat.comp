@@ -76,16 +76,17 @@ void load_view() {
 }
 
 // An AABB's or OBB's class from its centre and a bound alone where they settle it, as the fast
-// CPU kernels do (cull_aabb and cull_obb in host/cull/simd_kernels.inl; the proofs are at
+// CPU kernels do (cull_settled in host/cull/simd_kernels.inl; the proofs are at
 // aabb_plane_bound and obb_plane_bound in host/cull/cpu_culler.cpp). With reach = bound + the
 // view's margin, a centre distance s < -reach on a plane is the reference's OUTSIDE and
-// s >= reach on every plane its INSIDE: for AABBs with s computed in any order, fused or not,
-// in any rounding mode; for OBBs s is the reference's own and the margin only makes the reach
-// larger. Else CLASS_OPEN: the reference's own test. A bound or margin that is NaN or infinite
-// (the host's "no bound is safe") settles nothing; that is decided on the bits, since without
+// s >= reach on every plane its INSIDE, for s computed in any order, fused or not, in any
+// rounding mode: both are decided by the smallest s over the planes (pack() repeats the first
+// plane past the last, which leaves the smallest as it is; no planes: everything INSIDE).
+// Else CLASS_OPEN: the reference's own test. A bound or margin that is NaN or infinite (the
+// host's "no bound is safe") settles nothing; that is decided on the bits, since without
 // SignedZeroInfNanPreserve a comparison with a NaN need not be false on every device, so
-// finite inputs do not depend on it. (A NaN centre distance, from NaN or infinite inputs,
-// is compared as the reference's full test compares it.)
+// finite inputs do not depend on it. A finite bound and margin mean a finite centre and planes
+// (|c|_1, |d| <= 2^120, unit normals), so every s is finite and min() is defined.
 // Spheres are tested in full at once (one texel either way).
 const uint CLASS_OPEN = 3u;
 bool finite_bits(float x) { return (floatBitsToUint(x) & 0x7f800000u) != 0x7f800000u; }
@@ -94,13 +95,10 @@ uint settle_object(uint i) {
   vec4 centre_bound = BV_KIND == BV_KIND_AABB ? uintBitsToFloat(texelFetch(centres, int(i))) : bound(OBB_VEC4S * i);
   bool usable = finite_bits(centre_bound.w) && finite_bits(view_settle_margin);
   float reach = centre_bound.w + view_settle_margin;
-  bool beyond = false, within = true;
-  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) {
-    bool tested = plane_tested(k, ALL_PLANES);
-    float s = plane_distance(view_planes[k], centre_bound.xyz);
-    beyond = beyond || (tested && s < -reach);
-    within = within && (!tested || s >= reach);
-  }
+  float m = plane_distance(view_planes[0], centre_bound.xyz);
+  [[unroll]] for (uint k = 1; k < MAX_FRUSTUM_PLANES; ++k) m = min(m, plane_distance(view_planes[k], centre_bound.xyz));
+  bool planes = view_plane_count != 0u;
+  bool beyond = planes && m < -reach, within = !planes || m >= reach;
   return !usable ? CLASS_OPEN : beyond ? CLASS_OUTSIDE : within ? CLASS_INSIDE : CLASS_OPEN;
 }
 

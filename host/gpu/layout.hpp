@@ -17,9 +17,12 @@ inline GpuObb pack(const Obb& b) {
           vec4(b.basis[2], b.half_extents.z)};
 }
 inline GpuSphere pack(const Sphere& s) { return {vec4(s.center, s.radius)}; }
+/// The planes past plane_count repeat the first: the tests read plane_count planes only, and the
+/// flat pass's smallest centre distance over all of them is that of the planes in use.
 inline GpuFrustum pack(const Frustum& f) {
   GpuFrustum g{};
-  for (std::size_t i = 0; i < f.plane_count; ++i) g.planes[i] = f.planes[i].as_vec4();
+  for (std::size_t i = 0; i < MAX_FRUSTUM_PLANES; ++i)
+    if (f.plane_count > 0) g.planes[i] = f.planes[i < f.plane_count ? i : 0].as_vec4();
   g.plane_count = static_cast<uint>(f.plane_count);
   g.settle_margin = std::numeric_limits<float>::quiet_NaN();  // settles nothing until the flat culler sets it
   return g;
