@@ -1,28 +1,29 @@
 #version 460
 // Hierarchical frustum culling of a depth-first BVH in one dispatch. The host cuts the tree
 // into subtrees of at most BvhCuller::subtree_objects() objects and BVH_CUT_MAX_HEIGHT levels
-// below their root (the highest nodes that fit, and leaves), and one invocation takes one
-// such cut subtree of one view:
-//   1. it descends from the root to its cut node, testing each node on the path on the planes
-//      its parent straddles (plane masking, Assarsson & Moller 2000); an OUTSIDE node ends the
-//      work, an INSIDE one accepts the cut subtree's whole object range. Invocations whose cut
-//      nodes share an ancestor all test it (same answer); only the one whose cut node is its
-//      first-child descendant counts the test, so every node test is counted once;
-//   2. it walks its cut subtree depth first (skip indices, a 6-bit plane mask per level):
-//      OUTSIDE skips a subtree, INSIDE records its object range (adjacent ranges merged), and
-//      the objects of an INTERSECTING leaf are tested there, on the planes the leaf straddles,
-//      the visible ones recorded with their class;
-//   3. the subgroup reserves the list slots of all its visible objects with one atomic per
-//      counter;
-//   4. the subgroup writes every lane's records together, lane after lane, one object per
-//      lane: no atomics, and no lane idles through another's long accepted range.
-// Records go to the invocation's own slice of a scratch buffer (its cut subtree's object
-// range: one record per accepted range or visible tested object, so they fit), so the walk
-// needs no atomics and no work queues. (On lavapipe every branch runs under a mask and only
-// loops skip work: the walk loop holds the tests and record stores alone, and nothing in it
-// waits on other lanes. The design before this one, an indirect dispatch per five tree
-// levels over node queues with appends at every walk step, took 9 dispatches and 2.7-4x as
-// long at 10-50% visible.)
+// below their root (the highest nodes that fit, and leaves); a workgroup is one subgroup and
+// takes consecutive cut subtrees of one view, one per invocation:
+//   1. each invocation descends from the root to its cut node, testing each node on the path
+//      on the planes its parent straddles (plane masking, Assarsson & Moller 2000); an OUTSIDE
+//      node ends its work, an INSIDE one accepts the cut subtree's whole object range.
+//      Invocations whose cut nodes share an ancestor all test it (same answer); only the one
+//      whose cut node is its first-child descendant counts the test, so every node test is
+//      counted once;
+//   2. the subgroup walks its cut subtrees together: their nodes go on one stack in shared
+//      memory, and each round every invocation takes one (the subgroup's lanes stay busy
+//      however unevenly the work is spread over its subtrees; walking one subtree per
+//      invocation kept 3-4 of 8 lanes idle on average at 10% visible). OUTSIDE drops a node,
+//      INSIDE records its object range, an INTERSECTING inner node pushes its two children
+//      with the planes it straddles, an INTERSECTING leaf lists its objects;
+//   3. the listed objects are tested a subgroup-wide round at a time, on the planes their leaf
+//      straddles, and the visible ones recorded with their class;
+//   4. the subgroup reserves the list slots of all its visible objects with one atomic per
+//      counter and writes them: the accepted ranges, then the tested objects, one object per
+//      lane.
+// Records go to the workgroup's own slice of a scratch buffer (its cut subtrees' object
+// ranges, which are adjacent: one record per accepted range or listed object, so they fit), so
+// the walk needs no global atomics and no work queues. (On lavapipe every branch runs under a
+// mask and only loops skip work, so a lane's work in a round is the whole round's.)
 // The result equals host/bvh cull_hierarchical bit for bit: same p/n-vertex test, distances as
 // ((n.x*p.x + n.y*p.y) + n.z*p.z) + d marked `precise`, same masks, and the same counts of
 // node and object tests.
@@ -142,21 +143,8 @@ void emit_visible(uint view, uint object, uint slot, uint c) {
   }
 }
 
-// The plane mask of tree level `level` below the cut node: 6 bits (MAX_FRUSTUM_PLANES) per
-// level, five levels per word, BVH_CUT_MAX_HEIGHT + 1 <= 20 levels.
-uint level_mask(uvec4 masks, uint level) {
-  uint word = level < 5u ? masks.x : level < 10u ? masks.y : level < 15u ? masks.z : masks.w;
-  return (word >> (6u * (level % 5u))) & 63u;
-}
-uvec4 with_level_mask(uvec4 masks, uint level, uint mask) {
-  uint shift = 6u * (level % 5u), keep = ~(63u << shift), put = mask << shift;
-  if (level < 5u) masks.x = (masks.x & keep) | put;
-  else if (level < 10u) masks.y = (masks.y & keep) | put;
-  else if (level < 15u) masks.z = (masks.z & keep) | put;
-  else masks.w = (masks.w & keep) | put;
-  return masks;
-}
-
+// The walk's stack: (node, planes to test) pairs, BVH_STACK_PER_INVOCATION per invocation.
+shared uvec2 walk_stack[gl_WorkGroupSize.x * BVH_STACK_PER_INVOCATION];
 
 void main() {
   // Workgroups are view-major and never straddle views (groups_per_view per view); larger
@@ -174,7 +162,7 @@ void main() {
   uint cut = has_cut ? cuts[i] : 0u;
   uvec4 cut_lo = texelFetch(nodes, int(3u * cut)), cut_hi = texelFetch(nodes, int(3u * cut + 1u));
   uvec4 cut_links = texelFetch(nodes, int(3u * cut + 2u));  // skip, second child, leaf, depth
-  uint cut_first = cut_lo.w, cut_count = has_cut ? cut_hi.w : 0u, cut_end = cut_links.x, cut_depth = cut_links.w;
+  uint cut_first = cut_lo.w, cut_count = has_cut ? cut_hi.w : 0u, cut_depth = cut_links.w;
   uint mask = (1u << view_plane_count) - 1u;
   uvec2 tests = uvec2(0u);  // node tests, object tests (counted as host/bvh counts them)
 
@@ -197,60 +185,92 @@ void main() {
     }
   }
 
-  // 2. The cut subtree, depth first, recording into this invocation's slice of the scratch
-  // (cut_count records; one per accepted range or visible tested object, so they fit):
-  // accepted ranges from its front, the visible objects of INTERSECTING leaves, tested here,
-  // from its back.
-  uint base = view * object_count + cut_first, back = base + cut_count - 1u;
-  uint accept_records = 0u, tested_visible = 0u, accepted = 0u, tested_inside = 0u;
-  uint open_first = cut_first, open_count = accept_all ? cut_count : 0u;  // the accepted range being grown
-  uvec4 masks = uvec4(mask, 0u, 0u, 0u);
-  node = cut;
-  while (walk) {
-    GpuBvhNode n = load_node(node);
-    uint level = n.depth - cut_depth, straddled;
-    uint c = classify_node(n.box_min, n.box_max, level_mask(masks, level), straddled);
-    tests.x += 1u;
-    bool leaf_test = c == CLASS_INTERSECTING && n.leaf != 0u;
-    uint to_test = leaf_test ? n.count : 0u;
-    tests.y += to_test;
-    for (uint k = 0u; k < to_test; ++k) {
-      uint object_class = classify_object(n.first + k, straddled);
-      if (object_class != CLASS_OUTSIDE) {
-        records[back - tested_visible] = uvec2(n.first + k, object_class);
-        tested_visible += 1u;
-        tested_inside += object_class == CLASS_INSIDE ? 1u : 0u;
-      }
+  // 2. The cut subtrees, by the whole subgroup. The workgroup's slice of the scratch: its cut
+  // subtrees' objects, adjacent in tree order; accepted ranges from its front, listed objects
+  // (then the visible ones among them) from its back.
+  uint lanes = subgroupAdd(1u), rank = subgroupExclusiveAdd(1u);
+  uint slice_first = subgroupMin(has_cut ? cut_first : 0xffffffffu), slice_end = subgroupMax(has_cut ? cut_first + cut_count : 0u);
+  uint base = view * object_count + slice_first, back = view * object_count + slice_end - 1u;
+  uint ranges = 0u, listed = 0u;  // records at the front and back, subgroup-wide
+  uint accepted = 0u;             // objects in this invocation's accepted ranges
+  // A cut INSIDE by an ancestor is accepted whole.
+  uint take_all = accept_all && cut_count != 0u ? 1u : 0u;
+  uint take_all_at = subgroupExclusiveAdd(take_all);
+  if (take_all != 0u) records[base + take_all_at] = uvec2(cut_first, cut_count);
+  ranges += subgroupAdd(take_all);
+  accepted += take_all != 0u ? cut_count : 0u;
+  // The walk. The stack holds at most BVH_STACK_PER_INVOCATION entries per lane: it stays
+  // sorted by depth below the cut (each round takes its top entries, in order, and pushes their
+  // children in that order, one level deeper than any entry left), and a round that takes an
+  // entry of depth d - 1 has taken every entry of depth >= d, so the entries of depth d all come
+  // from that one round: at most 2 x lanes of them, for depths 1..BVH_CUT_MAX_HEIGHT, and the
+  // cut nodes (depth 0) at most one per lane.
+  uint push0 = walk ? 1u : 0u;
+  uint push0_at = subgroupExclusiveAdd(push0);
+  if (walk) walk_stack[push0_at] = uvec2(cut, mask);
+  uint top = subgroupAdd(push0);
+  subgroupMemoryBarrierShared();
+  subgroupBarrier();
+  while (top != 0u) {
+    uint take = min(top, lanes);
+    bool live = rank < take;
+    uvec2 entry = walk_stack[top - take + min(rank, take - 1u)];
+    top -= take;
+    subgroupMemoryBarrierShared();  // every lane has read its entry before any lane pushes
+    subgroupBarrier();
+    GpuBvhNode n = load_node(entry.x);
+    uint straddled;
+    uint c = classify_node(n.box_min, n.box_max, entry.y, straddled);
+    c = live ? c : CLASS_OUTSIDE;
+    tests.x += live ? 1u : 0u;
+    bool intersecting = c == CLASS_INTERSECTING;
+    uint push = intersecting && n.leaf == 0u ? 2u : 0u;
+    uint at = top + subgroupExclusiveAdd(push);
+    if (push != 0u) {
+      walk_stack[at] = uvec2(entry.x + 1u, straddled);
+      walk_stack[at + 1u] = uvec2(n.second_child, straddled);
     }
-    // An INSIDE node continues the accepted range being grown, or closes it and starts one.
-    bool extend = c == CLASS_INSIDE && open_count != 0u && open_first + open_count == n.first;
-    if (c == CLASS_INSIDE && !extend && open_count != 0u) {
-      records[base + accept_records] = uvec2(open_first, open_count);
-      accept_records += 1u;
-      accepted += open_count;
-    }
-    if (c == CLASS_INSIDE) {
-      open_first = extend ? open_first : n.first;
-      open_count = extend ? open_count + n.count : n.count;
-    }
-    bool descend = c == CLASS_INTERSECTING && n.leaf == 0u;
-    if (descend) masks = with_level_mask(masks, level + 1u, straddled);
-    node = descend ? node + 1u : n.skip;
-    walk = node != cut_end;
-  }
-  if (open_count != 0u) {
-    records[base + accept_records] = uvec2(open_first, open_count);
-    accept_records += 1u;
-    accepted += open_count;
+    top += subgroupAdd(push);
+    uint range = c == CLASS_INSIDE && n.count != 0u ? 1u : 0u;
+    uint range_at = ranges + subgroupExclusiveAdd(range);
+    if (range != 0u) records[base + range_at] = uvec2(n.first, n.count);
+    ranges += subgroupAdd(range);
+    accepted += range != 0u ? n.count : 0u;
+    uint list = intersecting && n.leaf != 0u ? n.count : 0u;
+    uint list_at = listed + subgroupExclusiveAdd(list);
+    for (uint k = 0u; k < list; ++k) records[back - (list_at + k)] = uvec2(n.first + k, straddled);
+    listed += subgroupAdd(list);
+    tests.y += list;
+    subgroupMemoryBarrierShared();  // the pushes, for the next round
+    subgroupBarrier();
   }
 
-  // 3. The list slots and the counts: one global atomic per subgroup and counter, no
+  // 3. The listed objects, a lane each per round. The visible ones are written back over the
+  // list from its start (at or before the entries read so far, which are read before any write).
+  subgroupMemoryBarrierBuffer();
+  subgroupBarrier();
+  uint tested_visible = 0u, tested_inside = 0u;
+  for (uint first = 0u; first < listed; first += lanes) {
+    bool live = first + rank < listed;
+    uvec2 item = records[back - min(first + rank, listed - 1u)];
+    uint object_class = classify_object(item.x, item.y);
+    object_class = live ? object_class : CLASS_OUTSIDE;
+    subgroupMemoryBarrierBuffer();
+    subgroupBarrier();
+    uint visible = object_class != CLASS_OUTSIDE ? 1u : 0u;
+    uint visible_at = tested_visible + subgroupExclusiveAdd(visible);
+    if (visible != 0u) records[back - visible_at] = uvec2(item.x, object_class);
+    tested_visible += subgroupAdd(visible);
+    tested_inside += object_class == CLASS_INSIDE ? 1u : 0u;  // this lane's
+    subgroupMemoryBarrierBuffer();
+    subgroupBarrier();
+  }
+
+  // 4. The list slots and the counts: one global atomic per subgroup and counter, no
   // workgroup barrier (as the flat pass: on lavapipe each barrier suspends and resumes every
   // subgroup's coroutine).
-  uint visible = accepted + tested_visible, inside = accepted + tested_inside;
-  subgroupMemoryBarrierBuffer();  // the records, for step 4 (read by this subgroup only)
-  subgroupBarrier();
-  uint subgroup_visible = subgroupAdd(visible), subgroup_inside = subgroupAdd(inside);
+  uint subgroup_accepted = subgroupAdd(accepted);
+  uint subgroup_visible = subgroup_accepted + tested_visible, subgroup_inside = subgroup_accepted + subgroupAdd(tested_inside);
   uint node_tests = subgroupAdd(tests.x), object_tests = subgroupAdd(tests.y);
   uint subgroup_base = 0u;
   if (subgroupElect()) {
@@ -261,26 +281,15 @@ void main() {
     if (node_tests != 0u) atomicAdd(counters[view].node_tests, node_tests);
     if (object_tests != 0u) atomicAdd(counters[view].object_tests, object_tests);
   }
-  uint slot = subgroupBroadcastFirst(subgroup_base) + subgroupExclusiveAdd(visible);
-
-  // 4. Every lane's records, lane after lane, by the whole subgroup: its accepted ranges (every
-  // object INSIDE), then its tested visible objects.
-  uvec4 todo = subgroupBallot(visible != 0u);
-  for (uint left = subgroupBallotBitCount(todo); left > 0u; --left) {
-    uint lane = subgroupBallotFindLSB(todo);
-    todo[lane / 32u] &= ~(1u << (lane % 32u));
-    uint lane_base = subgroupShuffle(base, lane), lane_records = subgroupShuffle(accept_records, lane);
-    uint lane_slot = subgroupShuffle(slot, lane);
-    for (uint r = 0u; r < lane_records; ++r) {
-      uvec2 range = records[lane_base + r];
-      for (uint k = gl_SubgroupInvocationID; k < range.y; k += gl_SubgroupSize)
-        emit_visible(view, object_at(range.x + k), lane_slot + k, CLASS_INSIDE);
-      lane_slot += range.y;
-    }
-    uint lane_back = subgroupShuffle(back, lane), lane_tested = subgroupShuffle(tested_visible, lane);
-    for (uint k = gl_SubgroupInvocationID; k < lane_tested; k += gl_SubgroupSize) {
-      uvec2 tested = records[lane_back - k];
-      emit_visible(view, object_at(tested.x), lane_slot + k, tested.y);
-    }
+  uint slot = subgroupBroadcastFirst(subgroup_base);
+  // The accepted ranges (every object INSIDE), then the tested visible objects.
+  for (uint r = 0u; r < ranges; ++r) {
+    uvec2 range = records[base + r];
+    for (uint k = rank; k < range.y; k += lanes) emit_visible(view, object_at(range.x + k), slot + k, CLASS_INSIDE);
+    slot += range.y;
+  }
+  for (uint k = rank; k < tested_visible; k += lanes) {
+    uvec2 tested = records[back - k];
+    emit_visible(view, object_at(tested.x), slot + k, tested.y);
   }
 }

@@ -30,9 +30,19 @@ BvhCuller::BvhCuller(const vk::Context& ctx)
     : ctx_(ctx),
       subtree_objects_(ctx.properties().deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU ? kCpuSubtreeObjects : kGpuSubtreeObjects) {
   const VkPhysicalDeviceLimits& limits = ctx_.properties().limits;
-  if (limits.maxComputeWorkGroupSize[0] < BVH_CULL_GROUP_SIZE || limits.maxComputeWorkGroupInvocations < BVH_CULL_GROUP_SIZE)
-    throw vk::Error("hierarchical culling needs workgroups of " + std::to_string(BVH_CULL_GROUP_SIZE) + " invocations; " +
+  // A workgroup is one subgroup (cull_bvh.comp walks the subtrees of a subgroup together, on
+  // a stack in shared memory): the device's subgroup size, at most BVH_CULL_GROUP_SIZE.
+  VkPhysicalDeviceSubgroupProperties subgroup{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_SUBGROUP_PROPERTIES};
+  VkPhysicalDeviceProperties2 properties{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2, &subgroup, {}};
+  vkGetPhysicalDeviceProperties2(ctx_.physical_device(), &properties);
+  group_size_ = std::clamp<std::uint32_t>(subgroup.subgroupSize, 1, BVH_CULL_GROUP_SIZE);
+  if (limits.maxComputeWorkGroupSize[0] < group_size_ || limits.maxComputeWorkGroupInvocations < group_size_)
+    throw vk::Error("hierarchical culling needs workgroups of " + std::to_string(group_size_) + " invocations; " +
                     ctx_.info().name + " allows " + std::to_string(limits.maxComputeWorkGroupInvocations));
+  const std::uint32_t stack_bytes = group_size_ * BVH_STACK_PER_INVOCATION * 8;
+  if (limits.maxComputeSharedMemorySize < stack_bytes)
+    throw vk::Error("hierarchical culling needs " + std::to_string(stack_bytes) + " bytes of shared memory per workgroup; " +
+                    ctx_.info().name + " has " + std::to_string(limits.maxComputeSharedMemorySize));
   if (limits.maxPerStageDescriptorStorageBuffers < kStorageBindings)
     throw vk::Error("hierarchical culling needs " + std::to_string(kStorageBindings) + " storage buffers per stage; " +
                     ctx_.info().name + " allows " + std::to_string(limits.maxPerStageDescriptorStorageBuffers));

@@ -18,8 +18,10 @@ namespace cullpipe::gpu {
 
 /// Hierarchical frustum culling of a flattened BVH on a Vulkan device (shaders/cull_bvh.comp),
 /// in one dispatch: the tree is cut into subtrees of at most subtree_objects() objects, one
-/// invocation per subtree and view, which tests the nodes from the root down to its subtree
-/// and then walks it; every node test is counted once per view. OUTSIDE drops a subtree, INSIDE
+/// invocation per subtree and view, which tests the nodes from the root down to its subtree;
+/// a workgroup is one subgroup (the device's subgroup size, at most BVH_CULL_GROUP_SIZE), and
+/// it walks its subtrees together, every lane taking a node of any of them each round; every
+/// node test is counted once per view. OUTSIDE drops a subtree, INSIDE
 /// accepts its object range with no further tests, INTERSECTING descends; objects of
 /// INTERSECTING leaves are tested on the planes the leaf straddles. Any number of views per
 /// pass, each with its own outputs. Classes and test counts equal bvh::cull_hierarchical bit
@@ -46,7 +48,7 @@ class BvhCuller {
   void upload(const bvh::FlatTree& tree, std::span<const Sphere> spheres);
   /// The cut's size: the traversal's invocations take subtrees of at most this many objects
   /// (and BVH_CUT_MAX_HEIGHT levels below their root), or single leaves. Fewer, larger subtrees mean fewer
-  /// redundant tests of the nodes above them and longer walks per invocation. Default:
+  /// redundant tests of the nodes above them and fewer workgroups to share the walks. Default:
   /// kCpuSubtreeObjects on a CPU device (lavapipe: measured best in bench_bvh), else
   /// kGpuSubtreeObjects (more invocations for a wide GPU; not measured on one). Takes effect
   /// at the next upload; throws std::invalid_argument for 0.
@@ -92,7 +94,7 @@ class BvhCuller {
   void update_descriptors();
 
   const vk::Context& ctx_;
-  std::uint32_t group_size_ = BVH_CULL_GROUP_SIZE;
+  std::uint32_t group_size_ = BVH_CULL_GROUP_SIZE;  // the device's subgroup size, at most this
   std::uint32_t subtree_objects_;
   std::uint32_t max_groups_x_ = 0;
   std::unique_ptr<vk::ComputePipeline> pipelines_[3][2];  // [kind][draws]

@@ -59,7 +59,7 @@ static_assert(offsetof(GpuBvhNode, second_child) == 36);
 static_assert(offsetof(GpuBvhNode, leaf) == 40);
 static_assert(sizeof(BvhCullParams) == 24);
 static_assert(offsetof(BvhCullParams, cut_count) == 12 && offsetof(BvhCullParams, write_classes) == 20);
-static_assert(MAX_FRUSTUM_PLANES == 6 && BVH_CUT_MAX_HEIGHT + 1 <= 20, "a subtree walk keeps 20 levels of 6-bit plane masks");
+static_assert(BVH_STACK_PER_INVOCATION >= 1 + 2 * BVH_CUT_MAX_HEIGHT, "the walk stack holds a cut node and two nodes per level below it, per lane");
 
 // DrawCommand starts with exactly VkDrawIndexedIndirectCommand.
 static_assert(sizeof(DrawCommand) == 24);

@@ -133,8 +133,13 @@ struct ViewCounters {
 // is the index of the node after its subtree, and every subtree's objects are the range
 // [first, first + count) of the object-order buffer.
 
-// Invocations per workgroup of the hierarchical pass.
+// Invocations per workgroup of the hierarchical pass, at most: a workgroup is one subgroup
+// (the device's subgroup size, up to this).
 CP_CONST BVH_CULL_GROUP_SIZE = 64u;
+// Entries per invocation of the hierarchical pass's walk stack (shared memory, 8 bytes each):
+// at most one cut node per lane and two nodes per lane for each of BVH_CUT_MAX_HEIGHT levels
+// below (see cull_bvh.comp).
+CP_CONST BVH_STACK_PER_INVOCATION = 40u;
 
 // The host cuts the tree into the highest subtrees of at most so many objects (a BvhCuller
 // setting) and at most BVH_CUT_MAX_HEIGHT levels below their root (20 levels in all), or
