@@ -270,6 +270,73 @@ TEST_F(GpuBvh, EveryCutSizeAgrees) {
   EXPECT_THROW(culler().set_subtree_objects(0), std::invalid_argument);
 }
 
+// Every node straddles a plane (each box crosses z = 0), so the subgroups walk every node of
+// their subtrees: the walk stack grows with the subtrees' depth (complete subtrees of 2^14
+// leaves in one cut, then many cuts of 1024 and of 3 objects), and every node and object is
+// tested once, as the CPU traversal tests it.
+TEST_F(GpuBvh, EveryNodeStraddlingAPlaneWalksTheWholeTree) {
+  std::vector<Aabb> boxes;
+  for (int x = 0; x < 128; ++x)
+    for (int y = 0; y < 128; ++y) boxes.push_back({glm::vec3(float(x), float(y), -1.0f), glm::vec3(float(x) + 0.5f, float(y) + 0.5f, 1.0f)});
+  const glm::vec4 plane(0, 0, 1, 0);
+  const std::vector<Frustum> frusta = {Frustum::from_planes({&plane, 1})};
+  struct Restore {
+    gpu::BvhCuller& c;
+    std::uint32_t objects;
+    ~Restore() { c.set_subtree_objects(objects); }
+  } restore{culler(), culler().subtree_objects()};
+  for (std::uint32_t cut : {1u << 30, 1024u, 3u}) {
+    SCOPED_TRACE("subtrees of <= " + std::to_string(cut) + " objects");
+    culler().set_subtree_objects(cut);
+    const bvh::FlatTree flat = flat_tree(boxes, 1);
+    const gpu::CullResult r = expect_agreement(culler(), flat, boxes, frusta);
+    ASSERT_EQ(r.views.size(), 1u);
+    EXPECT_EQ(r.views[0].node_tests, flat.nodes.size());  // every node, once
+    EXPECT_EQ(r.views[0].object_tests, boxes.size());
+    EXPECT_EQ(r.views[0].counts.intersecting, boxes.size());
+  }
+}
+
+// The walk stack of cull_bvh.comp, replayed on the host with every node INTERSECTING (the
+// most it can hold): each round takes the top min(size, lanes) entries in order and pushes the
+// two children of each inner one in that order. Returns the largest size it reaches.
+std::size_t largest_walk_stack(const bvh::FlatTree& t, std::span<const std::uint32_t> cut_nodes, std::size_t lanes) {
+  std::vector<std::uint32_t> stack(cut_nodes.begin(), cut_nodes.end());
+  std::size_t largest = stack.size();
+  while (!stack.empty()) {
+    const std::size_t take = std::min(stack.size(), lanes);
+    const std::vector<std::uint32_t> taken(stack.end() - std::ptrdiff_t(take), stack.end());
+    stack.resize(stack.size() - take);
+    for (std::uint32_t node : taken)
+      if (!t.nodes[node].leaf) {
+        stack.push_back(node + 1);
+        stack.push_back(t.nodes[node + 1].skip);
+      }
+    largest = std::max(largest, stack.size());
+  }
+  return largest;
+}
+
+// The bound the shader's shared memory is sized by (BVH_STACK_PER_INVOCATION entries per
+// lane) holds for subtrees of the greatest cut height: one complete subtree of 2^19 leaves, and
+// one per lane of 2^12 leaves, at subgroup sizes from 1 to 64.
+TEST(GpuBvhWalk, StackStaysWithinItsSharedMemory) {
+  for (std::uint32_t height : {12u, gpu::BVH_CUT_MAX_HEIGHT}) {
+    std::vector<Aabb> boxes;
+    for (std::uint32_t i = 0; i < (1u << height); ++i) boxes.push_back({glm::vec3(float(i), 0, 0), glm::vec3(float(i) + 0.5f, 1, 1)});
+    const bvh::FlatTree flat = bvh::flatten(bvh::build_binned_sah(boxes, {1, 16}));
+    ASSERT_EQ(bvh::metrics(bvh::build_binned_sah(boxes, {1, 16})).depth, height + 1);  // complete: height levels below the root
+    for (std::size_t lanes : {1u, 2u, 8u, 32u, 64u}) {
+      // Subtrees of the same shape under every lane (replays of the one tree: their nodes are
+      // told apart by an offset, which the replay does not need).
+      const std::vector<std::uint32_t> cuts(height == 12 ? lanes : 1, 0u);
+      const std::size_t largest = largest_walk_stack(flat, cuts, lanes);
+      EXPECT_LE(largest, lanes * gpu::BVH_STACK_PER_INVOCATION) << "height " << height << ", " << lanes << " lanes";
+      EXPECT_GT(largest, lanes * height / 2) << "the replay walks the tree";
+    }
+  }
+}
+
 // The camera inside objects (a room around the eye, boxes the eye sits in), next to objects
 // of 1e-30 and 1e30 extent: defined answers, never culled when they contain the eye.
 TEST_F(GpuBvh, CameraInsideObjectsAndExtremeSizes) {
