@@ -4,6 +4,7 @@
 // each set comes with views of one plane each, and the answers must still be the reference's.
 #include <cmath>
 #include <cstdlib>
+#include <initializer_list>
 #include <limits>
 #include <vector>
 
@@ -35,6 +36,16 @@ inline void add_unbounded_views(std::vector<Frustum>& views) {
   }
 }
 
+// One view of one slanted plane (a random normal) per offset d.
+inline std::vector<Frustum> slanted_views(Rng& rng, std::initializer_list<float> offsets) {
+  std::vector<Frustum> views;
+  for (float d : offsets) {
+    const glm::vec4 plane(glm::normalize(rng.vec3(-1, 1) + glm::vec3(0.1f)), d);
+    views.push_back(Frustum::from_planes({&plane, 1}));
+  }
+  return views;
+}
+
 // The OBB kernel settles most objects with a bound b >= |r| on the projected radius and tests
 // the rest in full. OBBs whose centre distance is within float steps of +-r, with an axis along
 // the normal (where the float r can exceed |u| h), axes that are not unit or orthogonal,
@@ -44,11 +55,7 @@ inline EdgeSet<Obb> obb_edge_set() {
   Rng rng(11);
   // Slanted planes, one view each; through the origin for the first six: a centre t n has
   // coordinates no larger than t, so its distance can be set to within a float step of r.
-  std::vector<Frustum> views;
-  for (float d : {0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 900.0f, -3000.0f, 1e6f}) {
-    const glm::vec4 plane(glm::normalize(rng.vec3(-1, 1) + glm::vec3(0.1f)), d);
-    views.push_back(Frustum::from_planes({&plane, 1}));
-  }
+  std::vector<Frustum> views = slanted_views(rng, {0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 900.0f, -3000.0f, 1e6f});
   std::vector<Obb> obbs;
   for (const Frustum& view : views) {
     const glm::vec3 n = view.planes[0].normal;
@@ -167,11 +174,7 @@ inline EdgeSet<Obb> obb_edge_set() {
 // planes far from the origin; inverted, flat and point boxes; huge and non-finite coordinates.
 inline EdgeSet<Aabb> aabb_edge_set() {
   Rng rng(23);
-  std::vector<Frustum> views;
-  for (float d : {0.0f, 900.0f, -3000.0f, 1e6f}) {
-    const glm::vec4 plane(glm::normalize(rng.vec3(-1, 1) + glm::vec3(0.1f)), d);
-    views.push_back(Frustum::from_planes({&plane, 1}));
-  }
+  std::vector<Frustum> views = slanted_views(rng, {0.0f, 900.0f, -3000.0f, 1e6f});
   std::vector<Aabb> boxes;
   for (const Frustum& view : views) {
     const Plane& plane = view.planes[0];
@@ -219,11 +222,7 @@ inline EdgeSet<Aabb> aabb_edge_set() {
 // centres.
 inline EdgeSet<Sphere> sphere_edge_set() {
   Rng rng(31);
-  std::vector<Frustum> views;
-  for (float d : {0.0f, 900.0f, -3000.0f, 1e6f}) {
-    const glm::vec4 plane(glm::normalize(rng.vec3(-1, 1) + glm::vec3(0.1f)), d);
-    views.push_back(Frustum::from_planes({&plane, 1}));
-  }
+  std::vector<Frustum> views = slanted_views(rng, {0.0f, 900.0f, -3000.0f, 1e6f});
   std::vector<Sphere> spheres;
   for (const Frustum& view : views) {
     const Plane& plane = view.planes[0];
