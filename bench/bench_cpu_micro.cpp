@@ -72,7 +72,7 @@ void fast_read_floor(benchmark::State& state) {
   // What every pass reads of every object: centre and bound, 16 bytes.
   for (auto _ : state) benchmark::DoNotOptimize(culler.touch_bounds(true));
   state.SetItemsProcessed(state.iterations() * state.range(0));
-  state.SetBytesProcessed(state.iterations() * state.range(0) * std::int64_t(4 * sizeof(float)));
+  state.SetBytesProcessed(state.iterations() * state.range(0) * std::int64_t(fast::CpuCuller::kStreamedBytesPerObject));
 }
 
 void fast_args(benchmark::internal::Benchmark* b) {

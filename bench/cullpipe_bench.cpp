@@ -226,7 +226,7 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
       });
     }
     if (wants(config, "cpu-read")) {
-      add("cpu-read", 4 * sizeof(float), std::nullopt, "", [&](std::vector<double>& t, std::vector<double>&) {
+      add("cpu-read", fast::CpuCuller::kStreamedBytesPerObject, std::nullopt, "", [&](std::vector<double>& t, std::vector<double>&) {
         const auto t0 = Clock::now();
         volatile std::uint32_t sink = fast_culler.touch_bounds(true);
         (void)sink;

@@ -401,7 +401,7 @@ std::uint32_t CpuCuller::touch_bounds(bool streamed_only) {
   if (!count_) return 0;
   const std::size_t used = (count_ + kPad - 1) / kPad * kPad;
   std::vector<std::span<const float>> spans;
-  constexpr std::size_t kStreamed = 4;  // the columns every pass reads: centre x y z, bound
+  constexpr std::size_t kStreamed = kStreamedBytesPerObject / sizeof(float);  // the first columns: centre x y z, bound
   for (std::size_t c = 0; c < impl_->arrays.size() && (!streamed_only || c < kStreamed); ++c) spans.emplace_back(impl_->arrays[c], used);
   if (impl_->records && !streamed_only) spans.emplace_back(impl_->records, used * impl_->record_size);
   return touch_spans(impl_->pool, impl_->table, spans, impl_->chunk);

@@ -82,6 +82,8 @@ class CpuCuller {
   /// pass reads for every object (the centres and bounds, 16 bytes per object): the memory
   /// floor of a pass; else every byte the upload stored.
   std::uint32_t touch_bounds(bool streamed_only = false);
+  /// What a pass reads of every object (touch_bounds(true)): centre x y z and bound.
+  static constexpr std::size_t kStreamedBytesPerObject = 4 * sizeof(float);
   /// Reads `data` the same way (e.g. a buffer larger than the caches, to measure read
   /// bandwidth). `data` is read in whole vectors: its size should be a multiple of 16.
   std::uint32_t touch(std::span<const float> data);

@@ -240,7 +240,7 @@ inline vf mul_add(float a, vf b, vf c) {
 // obb_plane_bound and sphere_plane_bound in cpu_culler.cpp). Both conditions are decided by the
 // smallest s over the planes, so a vector of objects costs three fused multiply-adds and a min
 // per plane, and two comparisons. The few objects the bound leaves open (those near a plane:
-// about 1% of random scenes) are gathered per run of kRunBlocks vectors, their records
+// under 1% of random scenes) are gathered per run of kRunBlocks vectors, their records
 // prefetched as they are found (`prefetch(object)`), tested in full by `resolve(objects,
 // count, outside_bits, crossing_bits)` (the reference's own operations), and the run's results emitted in object
 // order. Without unit normals (PlaneSet::unit_normals) no bound holds and every object is
@@ -267,7 +267,6 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
   const bool settles = planes.unit_normals, no_planes = planes.count == 0;
   const vf margin = splat(planes.max_margin);
   const float *const c_x = a.c_x, *const c_y = a.c_y, *const c_z = a.c_z, *const bound = a.bound;  // (not reloaded per vector)
-  const bool record_output = out.classes || out.ids;
   ChunkCounts counts;
   for (std::size_t run = begin; run < end; run += kRunBlocks * W) {
     const std::size_t run_end = smaller(end, run + kRunBlocks * W);
@@ -303,11 +302,6 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
         const std::uint32_t object = static_cast<std::uint32_t>(i + static_cast<unsigned>(__builtin_ctz(rest)));
         prefetch(object);
         open[open_count++] = object;
-      }
-      if (!record_output && opened == 0) {  // counts only and all settled: counted at once
-        counts.visible += static_cast<std::uint32_t>(__builtin_popcount(~beyond & lanes));
-        counts.inside += static_cast<std::uint32_t>(__builtin_popcount(within & lanes));
-        outside_bits[b] = kAllLanes;  // the emit pass below counts nothing of it
       }
     }
     for (unsigned o = 0; o < open_count; o += W) {
