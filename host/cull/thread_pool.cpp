@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <stdexcept>
 
 #if defined(__SSE__)
 #include <xmmintrin.h>
@@ -44,23 +45,24 @@ ThreadPool::~ThreadPool() { stop_workers(); }
 
 unsigned ThreadPool::thread_index() const { return tls_pool == this ? tls_index : 0u; }
 
-void ThreadPool::run_tasks(std::size_t generation) {
-  std::unique_lock lock(mutex_);
+void ThreadPool::run_tasks(std::size_t generation, const TaskRef& task, std::size_t tasks) {
   // Only the tasks of `generation`: a worker that woke late, after the caller had finished
   // that generation and started the next, must not run the next one's tasks in the float
-  // mode it loaded for this one.
-  while (generation_ == generation && next_task_ < task_count_) {
-    const std::size_t t = next_task_++;
-    const TaskRef task = *task_;
-    lock.unlock();
+  // mode it loaded for this one. Claims are lock free: with a mutex per claim, two threads
+  // claiming at once put one to sleep in the kernel (a futex wait and wake, tens of
+  // microseconds on a virtual machine, a large part of a hierarchical pass).
+  const std::uint64_t mine = (std::uint64_t(generation) & kTaskMask) << 32;
+  std::uint64_t word = claim_.load(std::memory_order_acquire);
+  for (;;) {
+    if ((word & ~kTaskMask) != mine || (word & kTaskMask) >= tasks) return;
+    if (!claim_.compare_exchange_weak(word, word + 1, std::memory_order_acq_rel, std::memory_order_acquire)) continue;
     try {
-      task(t);
+      task(static_cast<std::size_t>(word & kTaskMask));
     } catch (...) {
-      lock.lock();
+      std::lock_guard lock(mutex_);
       if (!error_) error_ = std::current_exception();
-      continue;
     }
-    lock.lock();
+    word = claim_.load(std::memory_order_acquire);
   }
 }
 
@@ -95,12 +97,15 @@ void ThreadPool::worker_loop() {
     if (stop_) return;
     seen = generation_;
     ++busy_;
+    // (no task_ once the caller has finished this generation: nothing left to run)
+    const TaskRef task = task_ ? *task_ : TaskRef::none();
+    const std::size_t tasks = task_ ? task_count_ : 0;
 #if defined(__SSE__)
     const unsigned own_mode = _mm_getcsr();
     _mm_setcsr(fp_mode_);
 #endif
     lock.unlock();
-    run_tasks(seen);
+    run_tasks(seen, task, tasks);
 #if defined(__SSE__)
     _mm_setcsr(own_mode);
 #endif
@@ -111,6 +116,7 @@ void ThreadPool::worker_loop() {
 
 void ThreadPool::parallel_for(std::size_t tasks, TaskRef task) {
   if (tasks == 0) return;
+  if (tasks > kTaskMask) throw std::length_error("ThreadPool::parallel_for: more than 2^32 - 1 tasks");
   if (workers_.empty() || tasks == 1) {
     for (std::size_t t = 0; t < tasks; ++t) task(t);
     return;
@@ -123,12 +129,12 @@ void ThreadPool::parallel_for(std::size_t tasks, TaskRef task) {
 #if defined(__SSE__)
     fp_mode_ = _mm_getcsr();
 #endif
-    next_task_ = 0;
     error_ = nullptr;
-    generation = ++generation_;
+    generation = ++generation_ & kTaskMask;  // (the claims carry the low 32 bits)
+    claim_.store(std::uint64_t(generation) << 32, std::memory_order_release);
   }
   wake_.notify_all();
-  run_tasks(generation);
+  run_tasks(generation, task, tasks);
   spin_until([&] { return busy_.load(std::memory_order_relaxed) == 0; });
   std::unique_lock lock(mutex_);
   // Every task has been taken; wait for workers still running one (or about to look).

@@ -16,8 +16,11 @@ class TaskRef {
   template <class F>
   TaskRef(F& f) : object_(&f), call_([](void* o, std::size_t t) { (*static_cast<F*>(o))(t); }) {}  // NOLINT: implicit by design
   void operator()(std::size_t t) const { call_(object_, t); }
+  /// A task that does nothing.
+  static TaskRef none() { return TaskRef(); }
 
  private:
+  TaskRef() : object_(nullptr), call_([](void*, std::size_t) {}) {}
   void* object_;
   void (*call_)(void*, std::size_t);
 };
@@ -54,14 +57,17 @@ class ThreadPool {
  private:
   void worker_loop();
   void stop_workers();  // wakes, stops and joins the workers
-  void run_tasks(std::size_t generation);
+  void run_tasks(std::size_t generation, const TaskRef& task, std::size_t tasks);
 
   std::vector<std::thread> workers_;
   std::mutex mutex_;
   std::condition_variable wake_, done_;
   const TaskRef* task_ = nullptr;
   std::size_t task_count_ = 0;
-  std::size_t next_task_ = 0;      // guarded by mutex_ (tasks are coarse: one lock per task is cheap)
+  // The generation's low 32 bits over the next task to claim, taken by compare-and-swap: a
+  // thread claims a task of its own generation only, and never waits on a lock to claim one.
+  static constexpr std::uint64_t kTaskMask = 0xffffffffu;
+  std::atomic<std::uint64_t> claim_ = 0;
   // Written under mutex_; atomic so that threads may spin on them before they sleep.
   std::atomic<std::size_t> generation_ = 0;  // bumped per parallel_for
   std::atomic<unsigned> busy_ = 0;           // workers inside the current generation
