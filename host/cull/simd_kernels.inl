@@ -174,7 +174,57 @@ inline void gather_columns(const float* records, const std::uint32_t* at, unsign
   static_assert(Floats == 4 || Floats == 8 || Floats == 16);
   const float* row[W];
   for (unsigned l = 0; l < W; ++l) row[l] = records + std::size_t(at[l < count ? l : 0]) * Floats;
-#if CULLPIPE_SIMD_LANES == 8 && defined(__AVX2__)
+#if CULLPIPE_SIMD_LANES == 16 && defined(__AVX512F__)
+  // Four records per register, one per 128-bit lane, transposed within the lanes as SSE does;
+  // with 8-float records, two per register (256-bit halves), transposed as AVX2 does, and the
+  // 128-bit blocks put in record order at the end. (Vector-extension shuffles: GCC 12's
+  // AVX-512 shuffle intrinsics trip -Wmaybe-uninitialized in its own header.)
+  typedef float v4f __attribute__((vector_size(16)));
+  typedef float v8f __attribute__((vector_size(32)));
+  auto unpack_lo = [](vf x, vf y) { return __builtin_shufflevector(x, y, 0, 16, 1, 17, 4, 20, 5, 21, 8, 24, 9, 25, 12, 28, 13, 29); };
+  auto unpack_hi = [](vf x, vf y) { return __builtin_shufflevector(x, y, 2, 18, 3, 19, 6, 22, 7, 23, 10, 26, 11, 27, 14, 30, 15, 31); };
+  auto pick_low_pairs = [](vf x, vf y) { return __builtin_shufflevector(x, y, 0, 1, 16, 17, 4, 5, 20, 21, 8, 9, 24, 25, 12, 13, 28, 29); };
+  auto pick_high_pairs = [](vf x, vf y) { return __builtin_shufflevector(x, y, 2, 3, 18, 19, 6, 7, 22, 23, 10, 11, 26, 27, 14, 15, 30, 31); };
+  if constexpr (Floats == 4) {
+    vf a[4];
+    for (unsigned i = 0; i < 4; ++i) {  // lane k of a[i]: record 4k + i
+      v4f r[4];
+      for (unsigned k = 0; k < 4; ++k) __builtin_memcpy(&r[k], row[i + 4 * k], sizeof r[k]);
+      const v8f lo = __builtin_shufflevector(r[0], r[1], 0, 1, 2, 3, 4, 5, 6, 7), hi = __builtin_shufflevector(r[2], r[3], 0, 1, 2, 3, 4, 5, 6, 7);
+      a[i] = __builtin_shufflevector(lo, hi, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    }
+    const vf t0 = unpack_lo(a[0], a[1]), t1 = unpack_hi(a[0], a[1]), t2 = unpack_lo(a[2], a[3]), t3 = unpack_hi(a[2], a[3]);
+    col[0] = pick_low_pairs(t0, t2);
+    col[1] = pick_high_pairs(t0, t2);
+    col[2] = pick_low_pairs(t1, t3);
+    col[3] = pick_high_pairs(t1, t3);
+  } else {
+    for (unsigned base = 0; base < Floats; base += 8) {
+      vf a[8];
+      for (unsigned i = 0; i < 8; ++i) {  // records i (low half) and i + 8 (high half)
+        v8f lo, hi;
+        __builtin_memcpy(&lo, row[i] + base, sizeof lo);
+        __builtin_memcpy(&hi, row[i + 8] + base, sizeof hi);
+        a[i] = __builtin_shufflevector(lo, hi, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+      }
+      vf u[8];
+      for (unsigned h = 0; h < 8; h += 4) {  // per 128-bit lane: records h..h+3 (or + 8), columns c or c + 4
+        const vf t0 = unpack_lo(a[h], a[h + 1]), t1 = unpack_hi(a[h], a[h + 1]);
+        const vf t2 = unpack_lo(a[h + 2], a[h + 3]), t3 = unpack_hi(a[h + 2], a[h + 3]);
+        u[h] = pick_low_pairs(t0, t2);
+        u[h + 1] = pick_high_pairs(t0, t2);
+        u[h + 2] = pick_low_pairs(t1, t3);
+        u[h + 3] = pick_high_pairs(t1, t3);
+      }
+      // u[c] blocks: records 0-3 column c, 0-3 column c + 4, 8-11 column c, 8-11 column c + 4;
+      // u[c + 4] the same for records 4-7 and 12-15.
+      for (unsigned c = 0; c < 4; ++c) {
+        col[base + c] = __builtin_shufflevector(u[c], u[c + 4], 0, 1, 2, 3, 16, 17, 18, 19, 8, 9, 10, 11, 24, 25, 26, 27);
+        col[base + c + 4] = __builtin_shufflevector(u[c], u[c + 4], 4, 5, 6, 7, 20, 21, 22, 23, 12, 13, 14, 15, 28, 29, 30, 31);
+      }
+    }
+  }
+#elif CULLPIPE_SIMD_LANES == 8 && defined(__AVX2__)
   if constexpr (Floats == 4) {
     __m256 a[4];
     for (unsigned i = 0; i < 4; ++i) a[i] = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(row[i])), _mm_loadu_ps(row[i + 4]), 1);
