@@ -85,36 +85,42 @@ void CpuBvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume
   // changes, so a failure leaves the old upload. The arrays are then rewritten in place: an
   // engine that refits and uploads every frame reuses their memory instead of faulting in
   // ~90 bytes per object of fresh pages per upload (10^6 boxes: 109 -> 61 ns/object). The
-  // node and volume records start on a cache line (CacheLineVector): with malloc's 16-byte
-  // alignment, half the 32-byte records could straddle two lines, and the passes ran
-  // 0.29 -> 0.32 ns/object depending on where an allocation happened to land.
+  // node pairs and volume records start on a cache line (CacheLineVector): with malloc's
+  // 16-byte alignment, records could straddle two lines, and the passes ran 0.29 -> 0.32
+  // ns/object depending on where an allocation happened to land.
   const std::size_t nodes = tree.nodes.size(), n = tree.objects.size();
-  if (nodes >= detail::kWalkLeaf)  // a link at or past the leaf bit would read as a leaf
+  if (nodes >= detail::kWalkLeaf)  // (a pair index at or past the leaf bit would read as a leaf)
     throw std::length_error("CpuBvhCuller::upload: " + std::to_string(nodes) + " nodes (at most 2^31 - 1)");
-  for (const bvh::FlatNode& node : tree.nodes)
-    if (node.leaf && node.count >= detail::kWalkLeaf)
-      throw std::length_error("CpuBvhCuller::upload: a leaf of " + std::to_string(node.count) + " objects (at most 2^31 - 1)");
   constexpr std::size_t floats = walk_floats<Volume>();
+  // Slots: the root alone in pair 0, then a pair per inner node for its two children, in
+  // depth-first order (a subtree's pairs are adjacent). A binary tree of `nodes` nodes has
+  // (nodes - 1) / 2 inner nodes: nodes + 1 slots.
+  const std::size_t slots = nodes + 1;
   tree_.nodes.reserve(nodes);  // (each has the strong guarantee; growing capacity changes nothing seen)
   tree_.objects.reserve(n);
-  walk_nodes_.reserve(nodes * detail::kWalkNodeFloats);
-  counts_.reserve(nodes);
+  walk_nodes_.reserve(slots * detail::kWalkNodeFloats);
+  slot_of_.reserve(nodes);
   walk_volumes_.reserve(n * floats);
 
   // Nothing below throws: every resize is within the reserved capacity.
   tree_.nodes.assign(tree.nodes.begin(), tree.nodes.end());
   tree_.objects.assign(tree.objects.begin(), tree.objects.end());
-  walk_nodes_.resize(nodes * detail::kWalkNodeFloats);
-  counts_.resize(nodes);
-  for (std::size_t i = 0; i < nodes; ++i) {
+  walk_nodes_.assign(slots * detail::kWalkNodeFloats, 0.0f);
+  slot_of_.resize(nodes);
+  if (nodes != 0) slot_of_[0] = 0;
+  std::uint32_t next_pair = 1;
+  for (std::size_t i = 0; i < nodes; ++i) {  // depth first: a node's slot is set before it is reached
     const bvh::FlatNode& node = tree.nodes[i];
-    // Checked: an inner node has two children, the next node and the one at that one's skip.
-    const std::uint32_t link = node.leaf ? detail::kWalkLeaf | node.count : tree.nodes[i + 1].skip;
-    float* out = walk_nodes_.data() + i * detail::kWalkNodeFloats;
-    const float r[detail::kWalkNodeFloats] = {node.box.min.x, node.box.min.y, node.box.min.z, float_bits(node.first),
+    std::uint32_t link = detail::kWalkLeaf;
+    if (!node.leaf) {  // checked: two children, the next node and the one at that one's skip
+      link = next_pair++;
+      slot_of_[i + 1] = 2 * link;
+      slot_of_[tree.nodes[i + 1].skip] = 2 * link + 1;
+    }
+    float* out = walk_nodes_.data() + std::size_t(slot_of_[i]) * detail::kWalkNodeFloats;
+    const float r[detail::kWalkNodeFloats] = {node.box.min.x, node.box.min.y, node.box.min.z, float_bits(node.count),
                                               node.box.max.x, node.box.max.y, node.box.max.z, float_bits(link)};
     std::copy(std::begin(r), std::end(r), out);
-    counts_[i] = node.count;
   }
   walk_volumes_.resize(n * floats);
   for (std::size_t k = 0; k < n; ++k) {
@@ -233,7 +239,7 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
   if (ids && marks_.size() < mark_words) marks_.resize(mark_words);
   planes_.clear();
   for (const Frustum& f : views) planes_.push_back(detail::plane_set(f));
-  const detail::WalkTree walk_tree{walk_nodes_.data(), counts_.data(), walk_volumes_.data(), objects.data(),
+  const detail::WalkTree walk_tree{walk_nodes_.data(), walk_volumes_.data(), objects.data(),
                                    bvh::kBvhMarginScale,  bvh::kBvhMarginFloor, bvh::kBvhMarginLimit};
   const detail::WalkKernel walk = kind_ == BvKind::Obb      ? kernels_->walk_obb
                                   : kind_ == BvKind::Sphere ? kernels_->walk_sphere
@@ -252,7 +258,7 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
     std::vector<std::uint32_t>& work = work_[pool_->thread_index()];  // kept between passes
     const bvh::FlatNode& root = nodes[task.node_or_first];
     const std::size_t subtree_nodes = root.skip - task.node_or_first;
-    const std::size_t work_words = 2 * (subtree_nodes + 16 + root.count) + 16;  // detail::WalkOutput
+    const std::size_t work_words = detail::walk_work_words(subtree_nodes, root.count);
     if (work.size() < work_words) work.resize(work_words);
     detail::WalkOutput out;
     out.classes = classes ? reinterpret_cast<std::uint8_t*>(view_classes.data()) : nullptr;
@@ -262,7 +268,8 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
     }
     out.work = work.data();
     out.work_capacity = subtree_nodes;
-    const detail::WalkCounts c = walk(walk_tree, task.node_or_first, task.mask_or_count, planes_[task.view], out);
+    const detail::WalkRoot walk_root{slot_of_[task.node_or_first], root.first, root.count, task.mask_or_count};
+    const detail::WalkCounts c = walk(walk_tree, walk_root, planes_[task.view], out);
     tally.node_tests = c.node_tests;
     tally.object_tests = c.object_tests;
     tally.visible = c.visible;

@@ -107,10 +107,11 @@ class CpuBvhCuller {
   std::unique_ptr<detail::KernelTable> kernels_;
   bvh::FlatTree tree_;
   BvKind kind_ = BvKind::Aabb;
-  // The tree as the walk kernels read it (detail::WalkTree): nodes, their object counts, and
-  // the volumes in tree order (a leaf's are adjacent), as records of kind_.
-  detail::CacheLineVector<float> walk_nodes_;  // 32-byte records, each within one cache line
-  std::vector<std::uint32_t> counts_;
+  // The tree as the walk kernels read it (detail::WalkTree): nodes in sibling pairs (64-byte
+  // records on cache lines), each flat node's slot there, and the volumes in tree order (a
+  // leaf's are adjacent), as records of kind_.
+  detail::CacheLineVector<float> walk_nodes_;
+  std::vector<std::uint32_t> slot_of_;
   detail::CacheLineVector<float> walk_volumes_;
   // Per-pass working storage, kept so passes reuse it.
   std::vector<Task> tasks_;

@@ -78,17 +78,18 @@ using SphereKernel = ChunkCounts (*)(const SphereArrays&, std::size_t begin, std
 using TouchKernel = std::uint32_t (*)(const float* data, std::size_t begin, std::size_t end);
 
 /// A hierarchy as the walk kernels read it (fast::CpuBvhCuller builds it on upload from a
-/// bvh::FlatTree; node and object order are the flat tree's).
-constexpr std::size_t kWalkNodeFloats = 8;     ///< min x y z, first object (bits), max x y z, link (bits)
-/// A node's link: for a leaf kWalkLeaf | its object count, else its second child (the first is
-/// the next node).
+/// bvh::FlatTree; object order is the flat tree's). Nodes are stored in sibling pairs: the two
+/// children of a node are the two halves (slots 2p and 2p + 1) of one 64-byte pair record p, so
+/// that testing them reads one cache line; pair 0 holds the root alone (slot 0).
+constexpr std::size_t kWalkNodeFloats = 8;     ///< per slot: min x y z, object count (bits), max x y z, link (bits)
+/// A slot's link: kWalkLeaf for a leaf, else the pair holding its children (first child in
+/// the low slot).
 constexpr std::uint32_t kWalkLeaf = 0x80000000u;
 constexpr std::size_t kWalkAabbFloats = 8;     ///< min x y z, 0, max x y z, 0
 constexpr std::size_t kWalkObbFloats = 16;     ///< centre, u0, u1, u2, half extents, 0
 constexpr std::size_t kWalkSphereFloats = 4;   ///< centre, radius
 struct WalkTree {
-  const float* nodes;           ///< kWalkNodeFloats per node
-  const std::uint32_t* counts;  ///< per node its object count
+  const float* nodes;           ///< kWalkNodeFloats per slot, 2 slots per pair
   const float* volumes;         ///< per object in tree order, kWalk*Floats for the kind
   const std::uint32_t* ids;     ///< per object in tree order, its id
   /// The node test of hierarchies over OBBs and spheres (bvh::classify_masked_margin): the
@@ -96,11 +97,17 @@ struct WalkTree {
   float margin_scale, margin_floor, margin_limit;
 };
 
+/// The subtree a walk tests: its root's slot, the root's object range [first, first + count),
+/// and the planes its parent straddles.
+struct WalkRoot {
+  std::uint32_t slot, first, count, mask;
+};
+
 /// Where one walk's results go. `classes` (may be null): per object id. `marks` (may be
 /// null): a bitmap of (the subtree's object count + 63) / 64 words, zero, that gets bit p set
-/// for each visible object at position first + p of the subtree's range (first: the root's
-/// first object). `work`: 2 (work_capacity + 16 + the subtree's object count) + 16 words,
-/// work_capacity at least the number of nodes in the subtree.
+/// for each visible object at position first + p of the subtree's range. `work`:
+/// walk_work_words(work_capacity, the subtree's object count) words, work_capacity at least
+/// the number of nodes in the subtree.
 struct WalkOutput {
   std::uint8_t* classes = nullptr;
   std::uint64_t* marks = nullptr;
@@ -108,15 +115,19 @@ struct WalkOutput {
   std::size_t work_capacity = 0;
 };
 
+/// The words of WalkOutput::work a walk of `nodes` nodes over `objects` objects needs: its
+/// list of pairs to test (pair, planes, first object), each with room for a vector store of up
+/// to 16 lanes past its end, and its list of objects to test (position, planes).
+constexpr std::size_t walk_work_words(std::size_t nodes, std::size_t objects) { return 3 * (nodes + 16) + 2 * objects + 16; }
+
 /// What one walk did: bvh::cull_hierarchical's counts for its subtree.
 struct WalkCounts {
   std::uint64_t node_tests = 0, object_tests = 0;
   std::uint32_t visible = 0, inside = 0;
 };
 
-/// Tests the subtree at `node`, whose parent straddles the planes in `mask`, as
-/// bvh::cull_hierarchical does: the same tests, results and counts (not in the same order).
-using WalkKernel = WalkCounts (*)(const WalkTree&, std::uint32_t node, std::uint32_t mask, const PlaneSet&, WalkOutput);
+/// Tests the subtree at `root`, as bvh::cull_hierarchical does: the same tests, results and counts (not in the same order).
+using WalkKernel = WalkCounts (*)(const WalkTree&, WalkRoot, const PlaneSet&, WalkOutput);
 
 struct KernelTable {
   AabbKernel aabb;

@@ -577,14 +577,13 @@ inline void test_spheres(const vf* col, vi mask, std::uint32_t any, const PlaneS
 enum class WalkKind { Aabb, Obb, Sphere };
 
 template <WalkKind Kind>
-WalkCounts walk(const WalkTree& t, std::uint32_t root, std::uint32_t root_mask, const PlaneSet& planes, WalkOutput out) {
+WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOutput out) {
   constexpr unsigned object_floats = Kind == WalkKind::Obb ? kWalkObbFloats : Kind == WalkKind::Sphere ? kWalkSphereFloats : kWalkAabbFloats;
+  static_assert(W % 2 == 0, "a step takes whole sibling pairs");
   const WalkTree* margin = Kind == WalkKind::Aabb ? nullptr : &t;
   const BoxPlanes columns(planes);
   WalkCounts counts;
-  const std::uint32_t range_first = bits_of(t.nodes[std::size_t(root) * kWalkNodeFloats + 3]);
-  const std::uint32_t root_link = bits_of(t.nodes[std::size_t(root) * kWalkNodeFloats + 7]);
-  const std::uint32_t range_count = root_link & kWalkLeaf ? root_link & ~kWalkLeaf : t.counts[root];
+  const std::uint32_t range_first = root.first, range_count = root.count;
   // Visible objects, one bit per position in the subtree's range.
   std::uint64_t* const marks = out.marks;
   auto mark_range = [&](std::uint32_t first, std::uint32_t count) {
@@ -599,55 +598,71 @@ WalkCounts walk(const WalkTree& t, std::uint32_t root, std::uint32_t root_mask, 
     marks[b / 64] |= high;
   };
 
+  // The work list: sibling pairs to test (pair, planes their parent straddles, first object of
+  // the pair's range), taken W / 2 pairs (W slots, a lane each) per step. Breadth first: a
+  // pair is tested a level after it was listed and its record prefetched (each pair is listed
+  // once: work_capacity suffices). The subtree's root is listed as a pair with one slot
+  // skipped (kSkipLow / kSkipHigh in its planes word).
+  constexpr std::uint32_t kSkipLow = 1u << 30, kSkipHigh = 1u << 31, kPlaneBits = kSkipLow - 1u;
+  const std::size_t span = out.work_capacity + W;  // a list and the room a vector store may write past it
+  std::uint32_t* const work_pair = out.work;
+  std::uint32_t* const work_mask = work_pair + span;
+  std::uint32_t* const work_first = work_mask + span;
   // The objects of straddling leaves, listed (position, planes) as their leaves are found and
   // tested W at a time at the end; their records are prefetched when listed.
-  const std::size_t span = out.work_capacity + W;  // a list and the room a vector store may write past it
-  std::uint32_t* const object_at = out.work + 2 * span;
+  std::uint32_t* const object_at = work_first + span;
   std::uint32_t* const object_mask = object_at + range_count;
   std::size_t objects = 0;
 
-  // Breadth first: a node's children are tested a level later, after their records were
-  // prefetched when they were listed (each node is listed once: work_capacity suffices).
-  std::uint32_t* const work_node = out.work;
-  std::uint32_t* const work_mask = out.work + span;
+  const bool root_high = root.slot & 1u;  // the root's sibling (low slot) comes first in the pair's range
+  work_pair[0] = root.slot / 2;
+  work_mask[0] = root.mask | (root_high ? kSkipLow : kSkipHigh);
+  work_first[0] = root_high ? root.first - bits_of(t.nodes[std::size_t(root.slot - 1) * kWalkNodeFloats + 3]) : root.first;
   std::size_t head = 0, tail = 1;
-  work_node[0] = root;
-  work_mask[0] = root_mask;
   while (head != tail) {
-    const unsigned take = static_cast<unsigned>(smaller(tail - head, W));
-    alignas(64) std::uint32_t node[W];
-    for (unsigned l = 0; l < W; ++l) node[l] = work_node[head + (l < take ? l : 0)];
-    std::uint32_t any = 0;  // the planes some lane tests (deep nodes straddle few)
-    for (unsigned l = 0; l < take; ++l) any |= work_mask[head + l];
-    const vi mask = load_ints(work_mask + head);  // lanes past take: read but not used (work has the room)
-    head += take;
-    vf col[8];  // min x y z, first, max x y z, link
-    gather_columns<kWalkNodeFloats>(t.nodes, node, take, col);
+    const unsigned pairs = static_cast<unsigned>(smaller(tail - head, W / 2));
+    alignas(64) std::uint32_t slot[W], lane_mask[W], first_of[W];
+    std::uint32_t any = 0, valid = 0;  // the planes some lane tests (deep nodes straddle few); the lanes in use
+    for (unsigned k = 0; k < W / 2; ++k) {
+      const std::size_t item = head + (k < pairs ? k : 0);  // lanes past the pairs repeat the first
+      const std::uint32_t m = work_mask[item];
+      slot[2 * k] = 2 * work_pair[item];
+      slot[2 * k + 1] = 2 * work_pair[item] + 1;
+      lane_mask[2 * k] = lane_mask[2 * k + 1] = m & kPlaneBits;
+      first_of[2 * k] = work_first[item];
+      if (k < pairs) {
+        any |= m & kPlaneBits;
+        valid |= (m & kSkipLow ? 0u : 1u << (2 * k)) | (m & kSkipHigh ? 0u : 2u << (2 * k));
+      }
+    }
+    head += pairs;
+    vf col[8];  // min x y z, count, max x y z, link
+    gather_columns<kWalkNodeFloats>(t.nodes, slot, W, col);
+    alignas(64) std::uint32_t count_of[W], link_of[W];
+    __builtin_memcpy(count_of, &col[3], sizeof count_of);
+    __builtin_memcpy(link_of, &col[7], sizeof link_of);
+    for (unsigned k = 0; k < W / 2; ++k) first_of[2 * k + 1] = first_of[2 * k] + count_of[2 * k];  // the low slot's range comes first
     vi outside, straddled;
-    test_boxes(col, mask, any, planes, columns, margin, outside, straddled);
-    counts.node_tests += take;
+    test_boxes(col, load_ints(lane_mask), any, planes, columns, margin, outside, straddled);
+    counts.node_tests += static_cast<unsigned>(__builtin_popcount(valid));
     const vi link = reinterpret_cast<vi>(col[7]);
-    const std::uint32_t valid = take >= W ? kAllLanes : (1u << take) - 1u;
     const std::uint32_t live = ~lane_bits(outside != 0) & valid, leaves = lane_bits(link < 0);  // kWalkLeaf: the sign bit
     const std::uint32_t inner = live & ~leaves & ~lane_bits(straddled == 0);
-    // Straddling inner nodes: both children listed, with the planes still to test.
+    // Straddling inner nodes: their children's pair listed, with the planes still to test.
     if (inner) {
-      const unsigned listed = static_cast<unsigned>(__builtin_popcount(inner));
-      compress_store(work_node + tail, load_ints(node) + 1, inner);
+      compress_store(work_pair + tail, link, inner);
       compress_store(work_mask + tail, straddled, inner);
-      compress_store(work_node + tail + listed, link, inner);
-      compress_store(work_mask + tail + listed, straddled, inner);
-      for (std::size_t k = tail; k < tail + 2 * listed; ++k) __builtin_prefetch(t.nodes + std::size_t(work_node[k]) * kWalkNodeFloats);
-      tail += 2 * listed;
+      compress_store(work_first + tail, load_ints(first_of), inner);
+      for (std::uint32_t rest = inner; rest != 0; rest &= rest - 1)
+        __builtin_prefetch(t.nodes + std::size_t(link_of[__builtin_ctz(rest)]) * (2 * kWalkNodeFloats));
+      tail += static_cast<unsigned>(__builtin_popcount(inner));
     }
     alignas(64) std::int32_t straddled_lanes[W];
     __builtin_memcpy(straddled_lanes, &straddled, sizeof straddled);
     for (std::uint32_t rest = live & ~inner; rest != 0; rest &= rest - 1) {
       const unsigned l = static_cast<unsigned>(__builtin_ctz(rest));
       const std::uint32_t planes_left = static_cast<std::uint32_t>(straddled_lanes[l]);
-      const std::uint32_t first = bits_of(col[3][l]), lane_link = bits_of(col[7][l]);
-      const bool leaf = lane_link & kWalkLeaf;
-      const std::uint32_t count = leaf ? lane_link & ~kWalkLeaf : t.counts[node[l]];
+      const std::uint32_t first = first_of[l], count = count_of[l];
       if (planes_left == 0) {  // INSIDE: the whole range, no further tests
         if (out.classes)
           for (std::uint32_t k = first; k < first + count; ++k) out.classes[t.ids[k]] = kInside;
@@ -697,14 +712,10 @@ WalkCounts walk(const WalkTree& t, std::uint32_t root, std::uint32_t root_mask, 
   return counts;
 }
 
-WalkCounts walk_aabb(const WalkTree& t, std::uint32_t node, std::uint32_t mask, const PlaneSet& planes, WalkOutput out) {
-  return walk<WalkKind::Aabb>(t, node, mask, planes, out);
-}
-WalkCounts walk_obb(const WalkTree& t, std::uint32_t node, std::uint32_t mask, const PlaneSet& planes, WalkOutput out) {
-  return walk<WalkKind::Obb>(t, node, mask, planes, out);
-}
-WalkCounts walk_sphere(const WalkTree& t, std::uint32_t node, std::uint32_t mask, const PlaneSet& planes, WalkOutput out) {
-  return walk<WalkKind::Sphere>(t, node, mask, planes, out);
+WalkCounts walk_aabb(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOutput out) { return walk<WalkKind::Aabb>(t, root, planes, out); }
+WalkCounts walk_obb(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOutput out) { return walk<WalkKind::Obb>(t, root, planes, out); }
+WalkCounts walk_sphere(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOutput out) {
+  return walk<WalkKind::Sphere>(t, root, planes, out);
 }
 
 }  // namespace
