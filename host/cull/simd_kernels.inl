@@ -477,9 +477,10 @@ std::uint32_t touch(const float* data, std::size_t begin, std::size_t end) {
 }
 
 // ---- Hierarchy walks (fast::CpuBvhCuller) ----
-// bvh::cull_hierarchical's tests of one subtree, W at a time: a work list of (node, planes to
-// test) pairs is taken W pairs per step, their records transposed into vectors (one node per
-// lane) and tested against the planes one by one; the leaves' objects go to a second list,
+// bvh::cull_hierarchical's tests of one subtree, W at a time: a work list of sibling pairs
+// (the two children of a straddling node, with the planes it straddles) is taken W / 2 pairs
+// per step, their records transposed into vectors (one node per lane) and tested against the
+// planes one by one; the leaves' objects go to a second list,
 // tested W at a time the same way. Every lane does the scalar test's float operations in its
 // order (bvh::classify_masked for boxes, classify_masked_margin for the nodes of OBB and
 // sphere trees, classify_planes for OBBs and spheres) and the planes outside its mask count
