@@ -140,6 +140,48 @@ TEST(CpuCuller, RandomAabbsObbsAndSpheresOfEverySizeAroundTheVectorWidths) {
   }
 }
 
+TEST(CpuCuller, VisibleListsMixDenseAndSparseRuns) {
+  // Blocks of 2,500 objects (not aligned with the kernels' runs of 4,096 or the chunks) that are
+  // all visible, none, 10% and 60% visible, behind or in front of one plane: a chunk's runs mix
+  // those whose ids are listed as found and the dense ones listed from their bits afterwards.
+  test::Rng rng(11);
+  const std::size_t n = 23000;
+  test::RandomVolumes v = test::random_volumes(rng, n, 30.0f, 4.0f);
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::size_t block = i / 2500 % 4;
+    const float share = block == 0 ? 1.0f : block == 1 ? 0.0f : block == 2 ? 0.1f : 0.6f;
+    const float dx = rng.uniform(0.0f, 1.0f) < share ? 50.0f : -50.0f;
+    v.aabbs[i].min.x += dx;
+    v.aabbs[i].max.x += dx;
+    v.obbs[i].center.x += dx;
+    v.spheres[i].center.x += dx;
+  }
+  Frustum unit, scaled;  // x >= 0; the scaled one takes the spheres' test without the bound
+  unit.plane_count = scaled.plane_count = 1;
+  unit.planes[0] = {{1, 0, 0}, 0};
+  scaled.planes[0] = {{2, 0, 0}, 0};
+  const std::vector<Frustum> views = {unit, scaled};
+  for (Isa isa : runnable_isas())
+    for (unsigned threads : {1u, 2u})
+      for (std::size_t chunk : {4096u, 10000u, 16384u}) {
+        CpuCullerConfig config;
+        config.isa = isa;
+        config.threads = threads;
+        config.chunk_objects = chunk;
+        CpuCuller culler(config);
+        const std::string what = "isa=" + std::string(to_string(isa)) + " threads=" + std::to_string(threads) + " chunk=" + std::to_string(chunk);
+        auto check = [&](auto volumes, const char* kind) {
+          culler.upload(volumes);
+          const std::vector<CpuViewResult> results = culler.cull(views);
+          for (std::size_t k = 0; k < views.size(); ++k)
+            expect_equal_to_reference(volumes, views[k], results[k], what + " " + kind + " view " + std::to_string(k));
+        };
+        check(std::span<const Aabb>(v.aabbs), "aabb");
+        check(std::span<const Obb>(v.obbs), "obb");
+        check(std::span<const Sphere>(v.spheres), "sphere");
+      }
+}
+
 TEST(CpuCuller, ObjectsTouchingPlanesExactly) {
   // Boxes whose faces lie on the planes of the axis-aligned view (distance exactly 0) and
   // degenerate boxes (points, flat slabs).

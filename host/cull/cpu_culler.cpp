@@ -254,9 +254,10 @@ struct CpuCuller::Impl {
   std::vector<const float*> arrays;  // component array starts
   float* records = nullptr;          // per-object records after the arrays (OBB), or null
   std::size_t record_size = 0;       // floats per record
-  // Per view: visible ids, written per chunk into slots of chunk + kPad, then gathered.
-  std::vector<std::unique_ptr<std::uint32_t[]>> scratch;
-  std::size_t scratch_size = 0;
+  // Per view: visible ids, written per chunk into slots of chunk + kPad, then gathered; and
+  // per chunk the visible lanes of its dense runs' vectors and a word per run (ChunkOutput).
+  std::vector<std::unique_ptr<std::uint32_t[]>> scratch, bits, runs;
+  std::size_t scratch_size = 0, bits_size = 0, runs_size = 0;
   std::vector<detail::ChunkCounts> chunk_counts;  // [view * chunks + chunk]
   std::vector<std::size_t> offsets;               // [view * chunks + chunk]: first id's index in the view's list
   std::vector<detail::PlaneSet> planes;           // per view of the current pass
@@ -423,16 +424,25 @@ void CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& optio
   for (const Frustum& f : views) planes.push_back(detail::plane_set(f));
   // Each chunk writes its visible ids at its own slot of the view's scratch (chunk size plus
   // the kernels' slack), then they are gathered in chunk order.
+  // Dense runs (more than a quarter visible) leave their ids out of the scratch: they are
+  // listed from the runs' bits straight into the result, each id written once instead of
+  // twice (4*10^6 boxes, half of them visible, medians of 5 interleaved runs: 0.407 -> 0.364
+  // ns/object against 0.22 to read; unchanged at 1% and 10%, whose runs are sparse).
   const std::size_t slot = m.chunk + kPad;
+  const std::size_t bits_slot = m.chunk / m.table.lanes, runs_slot = (m.chunk + detail::kRunObjects - 1) / detail::kRunObjects;
   if (options.visible_ids) {
-    const std::size_t need = chunks * slot;
-    if (m.scratch_size < need) {  // too small: reallocate every view's
-      m.scratch.clear();
-      m.scratch_size = need;
-    }
-    if (m.scratch.size() < views.size()) m.scratch.resize(views.size());
-    for (std::size_t v = 0; v < views.size(); ++v)
-      if (!m.scratch[v]) m.scratch[v].reset(new std::uint32_t[m.scratch_size]);
+    auto room = [&](std::vector<std::unique_ptr<std::uint32_t[]>>& buffers, std::size_t& size, std::size_t need) {
+      if (size < need) {  // too small: reallocate every view's
+        buffers.clear();
+        size = need;
+      }
+      if (buffers.size() < views.size()) buffers.resize(views.size());
+      for (std::size_t v = 0; v < views.size(); ++v)
+        if (!buffers[v]) buffers[v].reset(new std::uint32_t[size]);
+    };
+    room(m.scratch, m.scratch_size, chunks * slot);
+    room(m.bits, m.bits_size, chunks * bits_slot);
+    room(m.runs, m.runs_size, chunks * runs_slot);
   }
   for (CpuViewResult& r : results) {
     if (options.classes) r.classes.resize(n);
@@ -447,7 +457,11 @@ void CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& optio
     if (begin >= end) return;
     detail::ChunkOutput out;
     if (options.classes) out.classes = reinterpret_cast<std::uint8_t*>(results[v].classes.data()) + begin;
-    if (options.visible_ids) out.ids = m.scratch[v].get() + chunk * slot;
+    if (options.visible_ids) {
+      out.ids = m.scratch[v].get() + chunk * slot;
+      out.bits = m.bits[v].get() + chunk * bits_slot;
+      out.runs = m.runs[v].get() + chunk * runs_slot;
+    }
     detail::ChunkCounts& counts = m.chunk_counts[task];
     switch (kind_) {
       case BvKind::Aabb:
@@ -478,8 +492,22 @@ void CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& optio
   if (!options.visible_ids) return;
   m.pool.parallel_for(views.size() * chunks, [&](std::size_t task) {
     const std::size_t v = task / chunks, chunk = task % chunks;
+    const std::size_t begin = chunk * m.chunk, end = std::min(n, begin + m.chunk);
+    if (begin >= end) return;
     const std::uint32_t* ids = m.scratch[v].get() + chunk * slot;
-    std::copy(ids, ids + m.chunk_counts[task].visible, results[v].visible_ids.data() + m.offsets[task]);
+    const std::uint32_t* bits = m.bits[v].get() + chunk * bits_slot;
+    const std::uint32_t* runs = m.runs[v].get() + chunk * runs_slot;
+    std::uint32_t* out = results[v].visible_ids.data() + m.offsets[task];
+    const std::uint32_t* const out_end = out + m.chunk_counts[task].visible;
+    for (std::size_t run = begin, r = 0; run < end; run += detail::kRunObjects, ++r) {
+      if (runs[r] & detail::kDenseRun) {
+        const std::size_t vectors = (std::min(end, run + detail::kRunObjects) - run + m.table.lanes - 1) / m.table.lanes;
+        out = m.table.expand(bits + (run - begin) / m.table.lanes, vectors, static_cast<std::uint32_t>(run), out, out_end);
+      } else {
+        out = std::copy(ids, ids + runs[r], out);
+        ids += runs[r];
+      }
+    }
   });
 }
 

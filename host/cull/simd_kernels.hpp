@@ -55,12 +55,27 @@ struct SphereArrays {
   const float* radius;
 };
 
+/// A chunk is culled in runs of kRunObjects objects from its first (the last may be shorter).
+constexpr std::size_t kRunObjects = 4096;
+/// ChunkOutput::runs: the run wrote no ids, only its vectors' visible lanes (the low bits are
+/// its visible count).
+constexpr std::uint32_t kDenseRun = 0x80000000u;
+/// A run is dense when more than 1 / kDenseShare of its objects are visible.
+constexpr std::size_t kDenseShare = 4;
+
 /// Where one chunk's results go. `classes` (may be null) receives the class of objects
 /// begin..end-1 at classes[0..]; `ids` (may be null) receives the ids of visible objects in
 /// object order, at most end - begin of them, and may write up to 16 values beyond them.
+/// With `runs` (and `ids`): a dense run writes no ids; it sets runs[r] = kDenseRun | its
+/// visible count and, for each of its vectors, bits[v] = the vector's visible lanes (v = the
+/// vector's first object - begin, over the kernel's lanes); any other run sets runs[r] = the
+/// number of ids it wrote. Listing the ids of dense runs from their bits, straight into the
+/// result (ExpandKernel), writes them once instead of twice (to `ids`, then copied).
 struct ChunkOutput {
   std::uint8_t* classes = nullptr;
   std::uint32_t* ids = nullptr;
+  std::uint32_t* bits = nullptr;
+  std::uint32_t* runs = nullptr;
 };
 
 /// Visible (INSIDE + INTERSECTING) and INSIDE objects of one chunk.
@@ -129,12 +144,18 @@ struct WalkCounts {
 /// Tests the subtree at `root`, as bvh::cull_hierarchical does: the same tests, results and counts (not in the same order).
 using WalkKernel = WalkCounts (*)(const WalkTree&, WalkRoot, const PlaneSet&, WalkOutput);
 
+/// Writes first + W v + l for every set bit l of bits[v], v = 0..vectors-1 (W: the kernels'
+/// lanes), in that order from `out`, and returns the new end; never writes at or past out_end.
+using ExpandKernel = std::uint32_t* (*)(const std::uint32_t* bits, std::size_t vectors, std::uint32_t first, std::uint32_t* out,
+                                        const std::uint32_t* out_end);
+
 struct KernelTable {
   AabbKernel aabb;
   ObbKernel obb;
   SphereKernel sphere;
   TouchKernel touch;
   WalkKernel walk_aabb, walk_obb, walk_sphere;
+  ExpandKernel expand;
   unsigned lanes;
 };
 

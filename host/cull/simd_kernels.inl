@@ -303,7 +303,8 @@ struct CentreArrays {
 template <class Prefetch, class Resolve>
 ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t end, const PlaneSet& planes, Prefetch prefetch,
                          Resolve resolve, ChunkOutput out) {
-  constexpr std::size_t kRunBlocks = 256;
+  constexpr std::size_t kRunBlocks = kRunObjects / W;
+  static_assert(kRunObjects % W == 0);
   std::uint32_t outside_bits[kRunBlocks], crossing_bits[kRunBlocks];
   std::uint32_t open[kRunBlocks * W];  // objects left open in this run
   // The planes padded to six with copies of the first (a repeated plane leaves the smallest
@@ -321,6 +322,7 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
   for (std::size_t run = begin; run < end; run += kRunBlocks * W) {
     const std::size_t run_end = smaller(end, run + kRunBlocks * W);
     unsigned open_count = 0;
+    std::uint32_t run_outside = 0;  // objects of the run found OUTSIDE
     for (std::size_t i = run, b = 0; i < run_end; i += W, ++b) {
       const unsigned valid = static_cast<unsigned>(smaller(W, run_end - i));
       const std::uint32_t lanes = valid >= W ? kAllLanes : (1u << valid) - 1u;
@@ -345,8 +347,9 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
         beyond = less_bits(m, -reach);
         within = at_least_bits(m, reach);
       }
-      outside_bits[b] = beyond;
+      outside_bits[b] = beyond & lanes;
       crossing_bits[b] = 0;
+      run_outside += static_cast<std::uint32_t>(__builtin_popcount(beyond & lanes));
       const std::uint32_t opened = ~(beyond | within) & lanes;
       for (std::uint32_t rest = opened; rest != 0; rest &= rest - 1) {
         const std::uint32_t object = static_cast<std::uint32_t>(i + static_cast<unsigned>(__builtin_ctz(rest)));
@@ -361,14 +364,44 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
       for (unsigned l = 0; l < count; ++l) {
         const std::size_t at = open[o + l] - run;
         const std::uint32_t bit = 1u << (at % W);
-        if (outside >> l & 1u) outside_bits[at / W] |= bit;
+        if (outside >> l & 1u) outside_bits[at / W] |= bit, ++run_outside;
         if (crossing >> l & 1u) crossing_bits[at / W] |= bit;
       }
     }
+    if (!out.runs) {
+      for (std::size_t i = run, b = 0; i < run_end; i += W, ++b)
+        emit(i, begin, static_cast<unsigned>(smaller(W, end - i)), outside_bits[b], crossing_bits[b], out, counts);
+      continue;
+    }
+    const std::size_t blocks = (run_end - run + W - 1) / W;
+    const std::uint32_t last_lanes = run_end - run == blocks * W ? kAllLanes : (1u << ((run_end - run) % W)) - 1u;
+    const std::uint32_t run_visible = static_cast<std::uint32_t>(run_end - run) - run_outside;
+    std::uint32_t& run_word = out.runs[(run - begin) / kRunObjects];
+    const bool dense = run_visible * kDenseShare > run_end - run;
+    ChunkOutput emitted = out;
+    if (dense) {  // listed from the bits
+      emitted.ids = nullptr;
+      std::uint32_t* const bits = out.bits + (run - begin) / W;
+      for (std::size_t b = 0; b < blocks; ++b) bits[b] = ~outside_bits[b] & (b + 1 < blocks ? kAllLanes : last_lanes);
+    }
+    const std::uint32_t* const ids_before = emitted.ids;
     for (std::size_t i = run, b = 0; i < run_end; i += W, ++b)
-      emit(i, begin, static_cast<unsigned>(smaller(W, end - i)), outside_bits[b], crossing_bits[b], out, counts);
+      emit(i, begin, static_cast<unsigned>(smaller(W, end - i)), outside_bits[b], crossing_bits[b], emitted, counts);
+    run_word = dense ? kDenseRun | run_visible : static_cast<std::uint32_t>(emitted.ids - ids_before);
+    out.ids = emitted.ids ? emitted.ids : out.ids;
   }
   return counts;
+}
+
+std::uint32_t* expand_ids(const std::uint32_t* bits, std::size_t vectors, std::uint32_t first, std::uint32_t* out, const std::uint32_t* out_end) {
+  for (std::size_t v = 0; v < vectors; ++v, first += W) {
+    if (out_end - out >= static_cast<std::ptrdiff_t>(W)) {  // room for the vector store
+      out = append_ids(out, first, bits[v]);
+      continue;
+    }
+    for (std::uint32_t rest = bits[v]; rest != 0; rest &= rest - 1) *out++ = first + static_cast<std::uint32_t>(__builtin_ctz(rest));
+  }
+  return out;
 }
 
 // AABBs: the open boxes get the reference's p/n-vertex test.
@@ -433,10 +466,14 @@ inline void test_spheres_all(vf cx, vf cy, vf cz, vf radius, const PlaneSet& pla
 ChunkCounts cull_sphere(const SphereArrays& a, std::size_t begin, std::size_t end, const PlaneSet& planes, ChunkOutput out) {
   if (!planes.unit_normals) {
     ChunkCounts counts;
-    for (std::size_t i = begin; i < end; i += W) {
-      vi outside, crossing;
-      test_spheres_all(load(a.c_x + i), load(a.c_y + i), load(a.c_z + i), load(a.radius + i), planes, outside, crossing);
-      emit(i, begin, static_cast<unsigned>(smaller(W, end - i)), lane_bits(outside), lane_bits(crossing), out, counts);
+    for (std::size_t run = begin, r = 0; run < end; run += kRunObjects, ++r) {
+      const std::uint32_t* const ids_before = out.ids;
+      for (std::size_t i = run; i < smaller(end, run + kRunObjects); i += W) {
+        vi outside, crossing;
+        test_spheres_all(load(a.c_x + i), load(a.c_y + i), load(a.c_z + i), load(a.radius + i), planes, outside, crossing);
+        emit(i, begin, static_cast<unsigned>(smaller(W, end - i)), lane_bits(outside), lane_bits(crossing), out, counts);
+      }
+      if (out.runs) out.runs[r] = static_cast<std::uint32_t>(out.ids - ids_before);  // (every run's ids listed)
     }
     return counts;
   }
