@@ -110,10 +110,11 @@ void expect_equal_to_reference(std::span<const Volume> volumes, const Frustum& f
 }
 
 template <class Volume>
-void check_everywhere(const std::vector<Volume>& volumes, const std::string& what, std::vector<Frustum> views = test_views()) {
+void check_everywhere(const std::vector<Volume>& volumes, const std::string& what, std::vector<Frustum> views = test_views(),
+                      std::vector<unsigned> thread_counts = {1u, 2u, 3u}, std::vector<std::size_t> chunks = {16u, 48u, 16384u}) {
   for (Isa isa : runnable_isas())
-    for (unsigned threads : {1u, 2u, 3u})
-      for (std::size_t chunk : {16u, 48u, 16384u}) {
+    for (unsigned threads : thread_counts)
+      for (std::size_t chunk : chunks) {
         CpuCullerConfig config;
         config.isa = isa;
         config.threads = threads;
@@ -161,25 +162,9 @@ TEST(CpuCuller, VisibleListsMixDenseAndSparseRuns) {
   unit.planes[0] = {{1, 0, 0}, 0};
   scaled.planes[0] = {{2, 0, 0}, 0};
   const std::vector<Frustum> views = {unit, scaled};
-  for (Isa isa : runnable_isas())
-    for (unsigned threads : {1u, 2u})
-      for (std::size_t chunk : {4096u, 10000u, 16384u}) {
-        CpuCullerConfig config;
-        config.isa = isa;
-        config.threads = threads;
-        config.chunk_objects = chunk;
-        CpuCuller culler(config);
-        const std::string what = "isa=" + std::string(to_string(isa)) + " threads=" + std::to_string(threads) + " chunk=" + std::to_string(chunk);
-        auto check = [&](auto volumes, const char* kind) {
-          culler.upload(volumes);
-          const std::vector<CpuViewResult> results = culler.cull(views);
-          for (std::size_t k = 0; k < views.size(); ++k)
-            expect_equal_to_reference(volumes, views[k], results[k], what + " " + kind + " view " + std::to_string(k));
-        };
-        check(std::span<const Aabb>(v.aabbs), "aabb");
-        check(std::span<const Obb>(v.obbs), "obb");
-        check(std::span<const Sphere>(v.spheres), "sphere");
-      }
+  check_everywhere(v.aabbs, "aabb runs", views, {1u, 2u}, {4096u, 10000u, 16384u});
+  check_everywhere(v.obbs, "obb runs", views, {1u, 2u}, {4096u, 10000u, 16384u});
+  check_everywhere(v.spheres, "sphere runs", views, {1u, 2u}, {4096u, 10000u, 16384u});
 }
 
 TEST(CpuCuller, ObjectsTouchingPlanesExactly) {
