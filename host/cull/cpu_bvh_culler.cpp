@@ -95,7 +95,7 @@ void CpuBvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume
   // Slots: the root alone in pair 0, then a pair per inner node for its two children, in
   // depth-first order (a subtree's pairs are adjacent). A binary tree of `nodes` nodes has
   // (nodes - 1) / 2 inner nodes: nodes + 1 slots.
-  const std::size_t slots = nodes + 1;
+  const std::size_t slots = std::max<std::size_t>(nodes + 1, 2);  // (pair 0 whole even without nodes)
   tree_.nodes.reserve(nodes);  // (each has the strong guarantee; growing capacity changes nothing seen)
   tree_.objects.reserve(n);
   walk_nodes_.reserve(slots * detail::kWalkNodeFloats);
@@ -105,7 +105,8 @@ void CpuBvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume
   // Nothing below throws: every resize is within the reserved capacity.
   tree_.nodes.assign(tree.nodes.begin(), tree.nodes.end());
   tree_.objects.assign(tree.objects.begin(), tree.objects.end());
-  walk_nodes_.assign(slots * detail::kWalkNodeFloats, 0.0f);
+  walk_nodes_.resize(slots * detail::kWalkNodeFloats);  // every slot is written below but pair 0's second
+  std::fill_n(walk_nodes_.data() + detail::kWalkNodeFloats, detail::kWalkNodeFloats, 0.0f);
   slot_of_.resize(nodes);
   if (nodes != 0) slot_of_[0] = 0;
   std::uint32_t next_pair = 1;
