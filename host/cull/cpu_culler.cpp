@@ -451,9 +451,10 @@ void CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& optio
   m.chunk_counts.assign(views.size() * chunks, {});
 
   const std::vector<const float*>& a = m.arrays;
+  auto chunk_end = [&](std::size_t begin) { return std::min(n, begin + m.chunk); };
   m.pool.parallel_for(views.size() * chunks, [&](std::size_t task) {
     const std::size_t v = task / chunks, chunk = task % chunks;
-    const std::size_t begin = chunk * m.chunk, end = std::min(n, begin + m.chunk);
+    const std::size_t begin = chunk * m.chunk, end = chunk_end(begin);
     if (begin >= end) return;
     detail::ChunkOutput out;
     if (options.classes) out.classes = reinterpret_cast<std::uint8_t*>(results[v].classes.data()) + begin;
@@ -492,7 +493,7 @@ void CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& optio
   if (!options.visible_ids) return;
   m.pool.parallel_for(views.size() * chunks, [&](std::size_t task) {
     const std::size_t v = task / chunks, chunk = task % chunks;
-    const std::size_t begin = chunk * m.chunk, end = std::min(n, begin + m.chunk);
+    const std::size_t begin = chunk * m.chunk, end = chunk_end(begin);
     if (begin >= end) return;
     const std::uint32_t* ids = m.scratch[v].get() + chunk * slot;
     const std::uint32_t* bits = m.bits[v].get() + chunk * bits_slot;

@@ -368,27 +368,23 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
         if (crossing >> l & 1u) crossing_bits[at / W] |= bit;
       }
     }
-    if (!out.runs) {
-      for (std::size_t i = run, b = 0; i < run_end; i += W, ++b)
-        emit(i, begin, static_cast<unsigned>(smaller(W, end - i)), outside_bits[b], crossing_bits[b], out, counts);
-      continue;
-    }
-    const std::size_t blocks = (run_end - run + W - 1) / W;
-    const std::uint32_t last_lanes = run_end - run == blocks * W ? kAllLanes : (1u << ((run_end - run) % W)) - 1u;
+    // With runs asked for, a dense run lists no ids: its vectors' visible lanes go to `bits`.
     const std::uint32_t run_visible = static_cast<std::uint32_t>(run_end - run) - run_outside;
-    std::uint32_t& run_word = out.runs[(run - begin) / kRunObjects];
-    const bool dense = run_visible * kDenseShare > run_end - run;
+    const bool dense = out.runs && run_visible * kDenseShare > run_end - run;
     ChunkOutput emitted = out;
-    if (dense) {  // listed from the bits
+    if (dense) {
       emitted.ids = nullptr;
       std::uint32_t* const bits = out.bits + (run - begin) / W;
-      for (std::size_t b = 0; b < blocks; ++b) bits[b] = ~outside_bits[b] & (b + 1 < blocks ? kAllLanes : last_lanes);
+      for (std::size_t i = run, b = 0; i < run_end; i += W, ++b) {
+        const unsigned valid = static_cast<unsigned>(smaller(W, run_end - i));
+        bits[b] = ~outside_bits[b] & (valid >= W ? kAllLanes : (1u << valid) - 1u);
+      }
     }
     const std::uint32_t* const ids_before = emitted.ids;
     for (std::size_t i = run, b = 0; i < run_end; i += W, ++b)
       emit(i, begin, static_cast<unsigned>(smaller(W, end - i)), outside_bits[b], crossing_bits[b], emitted, counts);
-    run_word = dense ? kDenseRun | run_visible : static_cast<std::uint32_t>(emitted.ids - ids_before);
-    out.ids = emitted.ids ? emitted.ids : out.ids;
+    if (out.runs) out.runs[(run - begin) / kRunObjects] = dense ? kDenseRun | run_visible : static_cast<std::uint32_t>(emitted.ids - ids_before);
+    if (emitted.ids) out.ids = emitted.ids;
   }
   return counts;
 }
