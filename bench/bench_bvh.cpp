@@ -8,7 +8,8 @@
 // visible list) and on the GPU (flat pass vs hierarchical pass, timestamps), with the camera's
 // field of view chosen so that about 1%, 10%, 50%, ... of the objects are visible. Every
 // hierarchical answer is checked: CPU traversal == flat reference, GPU and fast CPU == CPU
-// traversal (classes or list, and test counts).
+// traversal (classes or list, and test counts; the fast CPU hierarchy's counts against the
+// scalar traversal with its range_objects, whose node and object tests get their own columns).
 //
 // usage: bench_bvh [--part build|cull|all] [--sizes 1000,...] [--builders a,b|all]
 //                  [--cull-size N] [--leaf-size L] [--fractions 0.01,0.1,0.5] [--repeats R] [--device NAME]
@@ -114,8 +115,9 @@ nlohmann::json bench_cull(std::size_t n, std::uint32_t leaf_size, const std::vec
               leaf_size, flat.nodes.size(), build_ns / 1e6);
   std::printf("gpu: %s, %s; fast CPU: %s kernels, %u threads\n\n", ctx.info().name.c_str(), ctx.info().driver.c_str(),
               std::string(fast::to_string(fast_flat.isa())).c_str(), fast_flat.threads());
-  std::printf("%8s %8s %12s %12s %7s %12s %12s %7s %12s %12s %7s %11s %11s %6s\n", "target", "visible", "cpu flat ms", "cpu bvh ms",
-              "cpu x", "fast flat ms", "fast bvh ms", "fast x", "gpu flat ms", "gpu bvh ms", "gpu x", "node tests", "obj tests", "agree");
+  std::printf("%8s %8s %12s %12s %7s %12s %12s %7s %12s %12s %7s %11s %11s %11s %11s %6s\n", "target", "visible", "cpu flat ms",
+              "cpu bvh ms", "cpu x", "fast flat ms", "fast bvh ms", "fast x", "gpu flat ms", "gpu bvh ms", "gpu x", "node tests", "obj tests",
+              "fast nodes", "fast objs", "agree");
   nlohmann::json cells = nlohmann::json::array();
   const int reps = repeats_override > 0 ? repeats_override : 7;
   for (double fraction : fractions) {
@@ -147,24 +149,27 @@ nlohmann::json bench_cull(std::size_t n, std::uint32_t leaf_size, const std::vec
       gpu_bvh.push_back(bvh_culler.cull(views, counters_only).timings.gpu_ns);
     }
     const gpu::CullResult g = bvh_culler.cull(views);
+    // The fast hierarchy's traversal (object ranges of small nodes): the scalar one's counts with its range_objects.
+    const bvh::HierarchicalResult hf = bvh::cull_hierarchical(flat, boxes, f, {fast::CpuBvhCullOptions::kDefaultRangeObjects});
     std::vector<std::uint32_t> tree_order;  // the fast hierarchy's list: the visible ids in the tree's object order
     for (std::uint32_t o : flat.objects)
       if (is_visible(h.classes[o])) tree_order.push_back(o);
     const bool agree = h.classes == ref && g.views[0].classes == h.classes && g.views[0].node_tests == h.node_tests &&
                        g.views[0].object_tests == h.object_tests && g.views[0].counts == counts &&
-                       fast_results[0].counts == counts && fast_h.node_tests == h.node_tests && fast_h.object_tests == h.object_tests &&
-                       fast_ids == tree_order;
+                       fast_results[0].counts == counts && hf.classes == h.classes && fast_h.node_tests == hf.node_tests &&
+                       fast_h.object_tests == hf.object_tests && fast_ids == tree_order;
     all_agree &= agree;
     const double cf = median(cpu_flat), cb = median(cpu_bvh), gf = median(gpu_flat), gb = median(gpu_bvh);
     const double ff = median(fast_flat_ns), fb = median(fast_bvh_ns);
-    std::printf("%7.1f%% %7.1f%% %12.3f %12.3f %7.2f %12.3f %12.3f %7.2f %12.3f %12.3f %7.2f %11zu %11zu %6s\n", 100 * fraction,
-                100 * achieved, cf / 1e6, cb / 1e6, cf / cb, ff / 1e6, fb / 1e6, ff / fb, gf / 1e6, gb / 1e6, gf / std::max(gb, 1.0),
-                h.node_tests, h.object_tests, agree ? "yes" : "NO");
+    std::printf("%7.1f%% %7.1f%% %12.3f %12.3f %7.2f %12.3f %12.3f %7.2f %12.3f %12.3f %7.2f %11zu %11zu %11zu %11zu %6s\n",
+                100 * fraction, 100 * achieved, cf / 1e6, cb / 1e6, cf / cb, ff / 1e6, fb / 1e6, ff / fb, gf / 1e6, gb / 1e6,
+                gf / std::max(gb, 1.0), h.node_tests, h.object_tests, hf.node_tests, hf.object_tests, agree ? "yes" : "NO");
     std::fflush(stdout);
     cells.push_back({{"target_fraction", fraction}, {"visible_fraction", achieved}, {"cpu_flat_ns", cf}, {"cpu_bvh_ns", cb},
                      {"fast_flat_ns", ff}, {"fast_bvh_ns", fb},
                      {"gpu_flat_ns", gf}, {"gpu_bvh_ns", gb}, {"node_tests", h.node_tests}, {"object_tests", h.object_tests},
-                     {"agree", agree}});
+                     {"fast_node_tests", hf.node_tests}, {"fast_object_tests", hf.object_tests},
+                     {"fast_range_objects", fast::CpuBvhCullOptions::kDefaultRangeObjects}, {"agree", agree}});
   }
   return cells;
 }

@@ -91,6 +91,37 @@ TEST(Bvh, GeneratedScenesAlongCameraPaths) {
   }
 }
 
+// Object ranges (TraversalOptions::range_objects): a straddling node of at most that many
+// objects tests its objects instead of descending. The classes do not change (an object inside
+// a node's box gets the node's INSIDE or OUTSIDE from its own test too); node tests only fall
+// and object tests only rise as the ranges grow; a range as large as the tree tests the root
+// and, if it straddles, every object.
+TEST(Bvh, ObjectRangesChangeTheTestsButNoClass) {
+  for (SceneKind kind : {SceneKind::Uniform, SceneKind::City}) {
+    SCOPED_TRACE(std::string(to_string(kind)));
+    const Scene scene = generate_scene(kind, 20000, 5);
+    const std::vector<Aabb> boxes = world_aabbs(scene);
+    const bvh::FlatTree flat = bvh::flatten(bvh::build_binned_sah(boxes, {2, 16}));
+    for (const Camera& c : camera_path(scene.camera, scene.bounds(), 3)) {
+      const Frustum f = Frustum::from_view_proj(c.view_proj());
+      const bvh::HierarchicalResult leaves = bvh::cull_hierarchical(flat, boxes, f);
+      EXPECT_EQ(leaves, bvh::cull_hierarchical(flat, boxes, f, {1}));  // (leaves of 1-2: a node of 1 is a leaf)
+      bvh::HierarchicalResult last = leaves;
+      for (std::uint32_t range : {2u, 3u, 8u, 32u, 1000u, 20000u}) {
+        const bvh::HierarchicalResult r = bvh::cull_hierarchical(flat, boxes, f, {range});
+        ASSERT_EQ(r.classes, leaves.classes) << "ranges of " << range;
+        EXPECT_EQ(r.visible, leaves.visible);
+        EXPECT_EQ(r.inside, leaves.inside);
+        EXPECT_LE(r.node_tests, last.node_tests) << "ranges of " << range;
+        EXPECT_GE(r.object_tests, last.object_tests) << "ranges of " << range;
+        last = r;
+      }
+      EXPECT_EQ(last.node_tests, 1u);  // the root straddles these views: every object is tested
+      EXPECT_EQ(last.object_tests, boxes.size());
+    }
+  }
+}
+
 TEST(Bvh, DegenerateSetsStayBalanced) {
   // All boxes identical (equal centroids): the builder halves ranges, so depth is ~log2(n).
   const std::vector<Aabb> same(1000, Aabb{glm::vec3(-1), glm::vec3(1)});

@@ -158,6 +158,25 @@ TEST(Cli, RunWithTheBvhAgreesAndDumpsTestCounts) {
   const auto flat = nlohmann::json::parse(c.out);
   for (std::size_t v = 0; v < 3; ++v)
     for (std::size_t i = 0; i < 4000; i += 7) ASSERT_EQ(flat["views"][v]["cpu"][i], d["volumes"][i]["classes"][v]) << i;
+  EXPECT_EQ(d["tests"][0]["range_objects"], 0);  // the reference descends to the leaves by default
+  // Ranges of up to 64 objects on either CPU path: fewer node tests, more object tests, the
+  // same classes; the GPU (to the leaves) still agrees, its counts proved against the scalar
+  // traversal's with no ranges.
+  for (const char* cpu : {"reference", "fast"}) {
+    const Result g = cullpipe("run --generate city:4000 --views 3 --validate --cull bvh --builder median --leaf-size 2 --cpu " +
+                              std::string(cpu) + " --range-objects 64 --json '" + json.string() + "'");
+    ASSERT_EQ(g.code, 0) << g.out << g.err;
+    EXPECT_NE(g.out.find("ranges of <= 64 objects"), std::string::npos) << g.out;
+    const auto gj = nlohmann::json::parse(slurp(json));
+    EXPECT_EQ(gj["agree"], true) << cpu;
+    EXPECT_EQ(gj["range_objects"], 64) << cpu;
+    for (std::size_t v = 0; v < 3; ++v) {
+      EXPECT_LT(gj["per_view"][v]["node_tests"], j["per_view"][v]["node_tests"]) << cpu << " view " << v;
+      EXPECT_GT(gj["per_view"][v]["object_tests"], j["per_view"][v]["object_tests"]) << cpu << " view " << v;
+      EXPECT_EQ(gj["per_view"][v]["visible"], j["per_view"][v]["visible"]) << cpu << " view " << v;
+      EXPECT_EQ(gj["per_view"][v]["inside"], j["per_view"][v]["inside"]) << cpu << " view " << v;
+    }
+  }
   // Flat culling records one object test per object and no node tests.
   const Result f = cullpipe("run --generate city:500 --dump '" + dump.string() + "'");
   ASSERT_EQ(f.code, 0) << f.err;

@@ -366,6 +366,9 @@ TEST(CpuCuller, ReportsItsKernelsAndRejectsOnesTheCpuLacks) {
   EXPECT_EQ(CpuCuller(config).threads(), 3u);
 }
 
+// The traversal a CpuBvhCuller pass with default options makes.
+const bvh::TraversalOptions kFastTraversal{fast::CpuBvhCullOptions::kDefaultRangeObjects};
+
 void expect_same_traversal(const bvh::HierarchicalResult& expected, const bvh::HierarchicalResult& got, const std::string& what) {
   ASSERT_EQ(got.classes.size(), expected.classes.size()) << what;
   const std::size_t i = first_mismatch(expected.classes, got.classes);
@@ -411,26 +414,34 @@ TEST(CpuBvhCuller, EqualsTheScalarTraversalExactly) {
           for (std::size_t v = 0; v < views.size(); ++v) {
             const std::string what = std::string(builder) + " n=" + std::to_string(n) + " isa=" + std::string(to_string(isa)) +
                                      " threads=" + std::to_string(threads) + " view " + std::to_string(v);
-            const bvh::HierarchicalResult expected = bvh::cull_hierarchical(tree, boxes, views[v]);
-            culler.cull(views[v], reused);
-            expect_same_traversal(expected, reused, what);
+            culler.cull(views[v], reused);  // the default options
+            expect_same_traversal(bvh::cull_hierarchical(tree, boxes, views[v], kFastTraversal), reused, what);
             if (HasFatalFailure()) return;
-            // The visible list, with and without the classes.
-            std::vector<std::uint32_t> ids{7, 7, 7};
-            for (bool classes : {true, false}) {
-              bvh::HierarchicalResult listed;
-              culler.cull(views[v], {classes, true}, listed, ids);
-              expect_visible_list(expected, tree, ids, what + (classes ? " (list and classes)" : " (list only)"));
-              EXPECT_EQ(listed.classes.size(), classes ? n : 0u) << what;
-              if (classes) {
-                EXPECT_EQ(listed.classes, expected.classes) << what;
-              }
-              EXPECT_EQ(listed.node_tests, expected.node_tests) << what;
-              EXPECT_EQ(listed.object_tests, expected.object_tests) << what;
-              EXPECT_EQ(listed.visible, expected.visible) << what;
-              EXPECT_EQ(listed.inside, expected.inside) << what;
-            }
           }
+          // Object ranges from leaves only, from nodes of up to 5 objects, and from nodes larger
+          // than a subtree task (the whole tree at the smaller n); the visible list with and
+          // without the classes.
+          for (std::uint32_t range : {0u, 5u, 20000u})
+            for (std::size_t v = 0; v < views.size(); ++v) {
+              const std::string what = std::string(builder) + " n=" + std::to_string(n) + " isa=" + std::string(to_string(isa)) +
+                                       " threads=" + std::to_string(threads) + " ranges " + std::to_string(range) + " view " + std::to_string(v);
+              const bvh::HierarchicalResult expected = bvh::cull_hierarchical(tree, boxes, views[v], {range});
+              std::vector<std::uint32_t> ids{7, 7, 7};
+              for (bool classes : {true, false}) {
+                bvh::HierarchicalResult listed;
+                fast::CpuBvhCullOptions cull_options{classes, true};
+                cull_options.range_objects = range;
+                culler.cull(views[v], cull_options, listed, ids);
+                if (classes) expect_same_traversal(expected, listed, what);
+                expect_visible_list(expected, tree, ids, what + (classes ? " (list and classes)" : " (list only)"));
+                EXPECT_EQ(listed.classes.size(), classes ? n : 0u) << what;
+                EXPECT_EQ(listed.node_tests, expected.node_tests) << what;
+                EXPECT_EQ(listed.object_tests, expected.object_tests) << what;
+                EXPECT_EQ(listed.visible, expected.visible) << what;
+                EXPECT_EQ(listed.inside, expected.inside) << what;
+                if (HasFatalFailure()) return;
+              }
+            }
         }
     }
   }
@@ -464,16 +475,20 @@ TEST(CpuBvhCuller, TouchingBoxesAndLargeLeavesEqualTheScalarTraversal) {
     for (Isa isa : runnable_isas()) {
       fast::CpuBvhCuller culler(2, isa);
       culler.upload(tree, boxes);
-      for (std::size_t v = 0; v < views.size(); ++v) {
-        const std::string what = "leaf " + std::to_string(leaf) + " isa=" + std::string(to_string(isa)) + " view " + std::to_string(v);
-        const bvh::HierarchicalResult expected = bvh::cull_hierarchical(tree, boxes, views[v]);
-        std::vector<std::uint32_t> ids;
-        bvh::HierarchicalResult got;
-        culler.cull(views[v], {true, true}, got, ids);
-        expect_same_traversal(expected, got, what);
-        expect_visible_list(expected, tree, ids, what);
-        if (HasFatalFailure()) return;
-      }
+      for (std::uint32_t range : {0u, 3u, fast::CpuBvhCullOptions::kDefaultRangeObjects, 1000u})
+        for (std::size_t v = 0; v < views.size(); ++v) {
+          const std::string what = "leaf " + std::to_string(leaf) + " isa=" + std::string(to_string(isa)) + " ranges " +
+                                   std::to_string(range) + " view " + std::to_string(v);
+          const bvh::HierarchicalResult expected = bvh::cull_hierarchical(tree, boxes, views[v], {range});
+          std::vector<std::uint32_t> ids;
+          bvh::HierarchicalResult got;
+          fast::CpuBvhCullOptions cull_options{true, true};
+          cull_options.range_objects = range;
+          culler.cull(views[v], cull_options, got, ids);
+          expect_same_traversal(expected, got, what);
+          expect_visible_list(expected, tree, ids, what);
+          if (HasFatalFailure()) return;
+        }
     }
   }
 }
@@ -508,22 +523,25 @@ TEST(CpuBvhCuller, MarginEdgesAndHugeCoordinatesEqualTheScalarTraversal) {
   const bvh::FlatTree obb_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(obbs))));
   for (Isa isa : runnable_isas()) {
     fast::CpuBvhCuller culler(2, isa);
-    for (std::size_t v = 0; v < views.size(); ++v) {
-      const std::string what = "isa=" + std::string(to_string(isa)) + " view " + std::to_string(v);
-      std::vector<std::uint32_t> ids;
-      bvh::HierarchicalResult got;
-      culler.upload(sphere_tree, std::span<const Sphere>(spheres));
-      const bvh::HierarchicalResult s = bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(spheres), views[v]);
-      culler.cull(views[v], {true, true}, got, ids);
-      expect_same_traversal(s, got, "spheres " + what);
-      expect_visible_list(s, sphere_tree, ids, "spheres " + what);
-      culler.upload(obb_tree, std::span<const Obb>(obbs));
-      const bvh::HierarchicalResult o = bvh::cull_hierarchical(obb_tree, std::span<const Obb>(obbs), views[v]);
-      culler.cull(views[v], {true, true}, got, ids);
-      expect_same_traversal(o, got, "obbs " + what);
-      expect_visible_list(o, obb_tree, ids, "obbs " + what);
-      if (HasFatalFailure()) return;
-    }
+    for (std::uint32_t range : {0u, fast::CpuBvhCullOptions::kDefaultRangeObjects})
+      for (std::size_t v = 0; v < views.size(); ++v) {
+        const std::string what = "isa=" + std::string(to_string(isa)) + " ranges " + std::to_string(range) + " view " + std::to_string(v);
+        std::vector<std::uint32_t> ids;
+        bvh::HierarchicalResult got;
+        fast::CpuBvhCullOptions options{true, true};
+        options.range_objects = range;
+        culler.upload(sphere_tree, std::span<const Sphere>(spheres));
+        const bvh::HierarchicalResult s = bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(spheres), views[v], {range});
+        culler.cull(views[v], options, got, ids);
+        expect_same_traversal(s, got, "spheres " + what);
+        expect_visible_list(s, sphere_tree, ids, "spheres " + what);
+        culler.upload(obb_tree, std::span<const Obb>(obbs));
+        const bvh::HierarchicalResult o = bvh::cull_hierarchical(obb_tree, std::span<const Obb>(obbs), views[v], {range});
+        culler.cull(views[v], options, got, ids);
+        expect_same_traversal(o, got, "obbs " + what);
+        expect_visible_list(o, obb_tree, ids, "obbs " + what);
+        if (HasFatalFailure()) return;
+      }
   }
 }
 
@@ -557,9 +575,10 @@ TEST(CpuBvhCuller, SeveralViewsInOnePassEqualOnePassEach) {
         for (std::size_t view = 0; view < views.size(); ++view) {
           const std::string what = "kind " + std::to_string(kind) + " threads=" + std::to_string(threads) + " view " + std::to_string(view) +
                                    (options.classes ? " classes" : "") + (options.visible_ids ? " list" : "");
-          const bvh::HierarchicalResult expected = kind == 0   ? bvh::cull_hierarchical(tree, std::span<const Aabb>(v.aabbs), views[view])
-                                                   : kind == 1 ? bvh::cull_hierarchical(tree, std::span<const Obb>(v.obbs), views[view])
-                                                               : bvh::cull_hierarchical(tree, std::span<const Sphere>(v.spheres), views[view]);
+          const bvh::HierarchicalResult expected =
+              kind == 0   ? bvh::cull_hierarchical(tree, std::span<const Aabb>(v.aabbs), views[view], kFastTraversal)
+              : kind == 1 ? bvh::cull_hierarchical(tree, std::span<const Obb>(v.obbs), views[view], kFastTraversal)
+                          : bvh::cull_hierarchical(tree, std::span<const Sphere>(v.spheres), views[view], kFastTraversal);
           const bvh::HierarchicalResult& got = results[view].result;
           if (options.classes) {
             expect_same_traversal(expected, got, what);
@@ -628,13 +647,13 @@ TEST(CpuBvhCuller, UploadsOneAfterAnotherCullAsAFreshCuller) {
     for (const Frustum& view : views) {
       culler.upload(box_tree, std::span<const Aabb>(v.aabbs));
       culler.cull(view, got);
-      expect_same_traversal(bvh::cull_hierarchical(box_tree, std::span<const Aabb>(v.aabbs), view), got, "boxes n=" + std::to_string(n));
+      expect_same_traversal(bvh::cull_hierarchical(box_tree, std::span<const Aabb>(v.aabbs), view, kFastTraversal), got, "boxes n=" + std::to_string(n));
       culler.upload(obb_tree, std::span<const Obb>(v.obbs));
       culler.cull(view, got);
-      expect_same_traversal(bvh::cull_hierarchical(obb_tree, std::span<const Obb>(v.obbs), view), got, "obbs n=" + std::to_string(n));
+      expect_same_traversal(bvh::cull_hierarchical(obb_tree, std::span<const Obb>(v.obbs), view, kFastTraversal), got, "obbs n=" + std::to_string(n));
       culler.upload(sphere_tree, std::span<const Sphere>(v.spheres));
       culler.cull(view, got);
-      expect_same_traversal(bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(v.spheres), view), got,
+      expect_same_traversal(bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(v.spheres), view, kFastTraversal), got,
                             "spheres n=" + std::to_string(n));
       if (HasFatalFailure()) return;
     }
@@ -658,7 +677,7 @@ TEST(CpuBvhCuller, ObbsAndSpheresEqualTheScalarTraversalAndFlatCulling) {
           culler.upload(obb_tree, std::span<const Obb>(v.obbs));
           EXPECT_EQ(culler.kind(), BvKind::Obb);
           culler.cull(views[view], got);
-          expect_same_traversal(bvh::cull_hierarchical(obb_tree, std::span<const Obb>(v.obbs), views[view]), got, "obb " + what);
+          expect_same_traversal(bvh::cull_hierarchical(obb_tree, std::span<const Obb>(v.obbs), views[view], kFastTraversal), got, "obb " + what);
           std::vector<Classification> flat(n);
           reference::classify_all(std::span<const Obb>(v.obbs), views[view], flat);
           EXPECT_EQ(got.classes, flat) << "obb " << what;
@@ -670,7 +689,7 @@ TEST(CpuBvhCuller, ObbsAndSpheresEqualTheScalarTraversalAndFlatCulling) {
           culler.cull(views[view], got);
           culler.cull(views[view], {false, true}, listed, ids);
           expect_visible_list(got, sphere_tree, ids, "sphere list " + what);
-          expect_same_traversal(bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(v.spheres), views[view]), got, "sphere " + what);
+          expect_same_traversal(bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(v.spheres), views[view], kFastTraversal), got, "sphere " + what);
           reference::classify_all(std::span<const Sphere>(v.spheres), views[view], flat);
           EXPECT_EQ(got.classes, flat) << "sphere " << what;
           if (HasFatalFailure()) return;

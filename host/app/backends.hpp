@@ -159,14 +159,23 @@ void compare_backends(BackendResults& r, std::span<const Volume> volumes, std::s
   }
 }
 
+/// The CPU traversal's range_objects: `asked`, else the fast path's default for CpuPath::Fast
+/// and 0 (the classic traversal, the GPU's) for the reference.
+inline std::uint32_t cpu_range_objects(CpuPath cpu, std::optional<std::uint32_t> asked) {
+  return asked.value_or(cpu == CpuPath::Fast ? fast::CpuBvhCullOptions::kDefaultRangeObjects : 0);
+}
+
 /// Hierarchical culling of `boxes` (AABBs, OBBs or spheres) through `tree`: on the CPU the
-/// scalar traversal (bvh::cull_hierarchical) or, with CpuPath::Fast, fast::CpuBvhCuller; on the
-/// GPU BvhCuller; compared object by object.
+/// scalar traversal (bvh::cull_hierarchical) or, with CpuPath::Fast, fast::CpuBvhCuller, with
+/// cpu_range_objects(cpu, range_objects); on the GPU BvhCuller (range_objects 0); compared
+/// object by object (the classes do not depend on range_objects; the test counts do, and each
+/// side's are proved against the scalar traversal with its own).
 template <class Volume>
 BackendResults cull_bvh_on_backends(const bvh::FlatTree& tree, std::span<const Volume> boxes, std::span<const Frustum> frusta,
                                     Backend backend, GpuSession& session, bool warm_up, CpuPath cpu = CpuPath::Reference,
-                                    std::size_t max_reports = 10) {
+                                    std::optional<std::uint32_t> range_objects = std::nullopt, std::size_t max_reports = 10) {
   BackendResults r;
+  const bvh::TraversalOptions traversal{cpu_range_objects(cpu, range_objects)};
   if (backend != Backend::Gpu) {
     auto take = [&](bvh::HierarchicalResult& h) {
       r.cpu_counts.push_back({h.visible, h.inside, h.visible - h.inside});
@@ -180,16 +189,18 @@ BackendResults cull_bvh_on_backends(const bvh::FlatTree& tree, std::span<const V
       culler.upload(tree, boxes);
       r.cpu_upload_ns = elapsed_ns(upload_start);
       std::vector<fast::CpuBvhViewResult> results;
-      const fast::CpuBvhCullOptions classes_only{true, false};
+      fast::CpuBvhCullOptions classes_only{true, false};
+      classes_only.range_objects = traversal.range_objects;
       if (warm_up && !frusta.empty()) culler.cull(frusta.first(1), classes_only, results);
       const auto start = std::chrono::steady_clock::now();
       culler.cull(frusta, classes_only, results);  // every view in one pass
       r.cpu_ns = elapsed_ns(start);
       for (fast::CpuBvhViewResult& v : results) take(v.result);
-      r.cpu_path = "fast hierarchical (" + std::to_string(culler.threads()) + " threads)";
+      r.cpu_path = "fast hierarchical (" + std::to_string(culler.threads()) + " threads, ranges of <= " +
+                   std::to_string(traversal.range_objects) + " objects)";
       // The fast traversal is proved against the scalar one (untimed): classes and test counts.
       for (std::size_t v = 0; v < frusta.size(); ++v) {
-        const bvh::HierarchicalResult h = bvh::cull_hierarchical(tree, boxes, frusta[v]);
+        const bvh::HierarchicalResult h = bvh::cull_hierarchical(tree, boxes, frusta[v], traversal);
         std::size_t differ = h.node_tests != r.node_tests[v] || h.object_tests != r.object_tests[v] ? 1 : 0;
         for (std::size_t i = 0; i < h.classes.size(); ++i) differ += h.classes[i] != r.cpu[v][i];
         if (differ && r.mismatch_reports.size() < max_reports)
@@ -201,11 +212,11 @@ BackendResults cull_bvh_on_backends(const bvh::FlatTree& tree, std::span<const V
     } else {
       const auto start = std::chrono::steady_clock::now();
       for (const Frustum& f : frusta) {
-        bvh::HierarchicalResult h = bvh::cull_hierarchical(tree, boxes, f);
+        bvh::HierarchicalResult h = bvh::cull_hierarchical(tree, boxes, f, traversal);
         take(h);
       }
       r.cpu_ns = elapsed_ns(start);
-      r.cpu_path = "hierarchical reference";
+      r.cpu_path = "hierarchical reference (ranges of <= " + std::to_string(traversal.range_objects) + " objects)";
     }
   }
   if (backend != Backend::Cpu) {
@@ -222,12 +233,24 @@ BackendResults cull_bvh_on_backends(const bvh::FlatTree& tree, std::span<const V
       if (!have_cpu_tests) {
         r.node_tests.push_back(view.node_tests);
         r.object_tests.push_back(view.object_tests);
-      } else if (view.node_tests != r.node_tests[v] || view.object_tests != r.object_tests[v]) {
-        ++r.mismatches;  // the same traversal must make the same tests
+        continue;
+      }
+      // The same traversal must make the same tests: the CPU's, or the scalar one's with the
+      // GPU's range_objects (0) when the CPU's differs (untimed).
+      std::size_t node_tests = r.node_tests[v], object_tests = r.object_tests[v];
+      const char* against = "the CPU";
+      if (traversal.range_objects != 0) {
+        const bvh::HierarchicalResult h = bvh::cull_hierarchical(tree, boxes, frusta[v]);
+        node_tests = h.node_tests;
+        object_tests = h.object_tests;
+        against = "the scalar traversal to the leaves";
+      }
+      if (view.node_tests != node_tests || view.object_tests != object_tests) {
+        ++r.mismatches;
         if (r.mismatch_reports.size() < max_reports)
           r.mismatch_reports.push_back("view " + std::to_string(v) + ": the GPU made " + std::to_string(view.node_tests) +
-                                       " node and " + std::to_string(view.object_tests) + " object tests, the CPU " +
-                                       std::to_string(r.node_tests[v]) + " and " + std::to_string(r.object_tests[v]));
+                                       " node and " + std::to_string(view.object_tests) + " object tests, " + against + " " +
+                                       std::to_string(node_tests) + " and " + std::to_string(object_tests));
       }
     }
     take_gpu_result(r, g);

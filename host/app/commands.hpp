@@ -1,6 +1,7 @@
 #pragma once
 #include <cstdint>
 #include <iosfwd>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -46,6 +47,9 @@ struct RunOptions : SceneOptions {
   std::uint32_t leaf_size = 4;          ///< --cull bvh: most objects per leaf
   Backend backend = Backend::Both;
   std::string cpu = "reference";  ///< CPU side: reference (scalar oracle) | fast (SIMD, every core, bit-exact)
+  /// --cull bvh on the CPU: bvh::TraversalOptions::range_objects (unset: the fast path's
+  /// default with --cpu fast, 0 with --cpu reference; the GPU traversal always uses 0).
+  std::optional<std::uint32_t> range_objects;
   std::size_t views = 1;    ///< views along the camera path around the scene
   std::string json_path;    ///< summary as JSON
   std::string dump_path;    ///< planes, volumes and classes (classify schema)

@@ -4,6 +4,7 @@
 #include <map>
 
 #include "app/commands.hpp"
+#include "cull/cpu_bvh_culler.hpp"
 
 using namespace cullpipe::app;
 
@@ -48,6 +49,10 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--leaf-size", run.leaf_size, "--cull bvh: most objects per leaf")->capture_default_str()->check(CLI::Range(1u, 1024u));
   run_cmd->add_option("--backend", run.backend, "gpu | cpu | both (both compares them)")->transform(CLI::CheckedTransformer(kBackends))->default_str("both");
   run_cmd->add_option("--cpu", run.cpu, "CPU side: reference (scalar oracle) | fast (SIMD on every core, bit-exact with the reference)")->capture_default_str()->check(CLI::IsMember({"reference", "fast"}));
+  run_cmd->add_option("--range-objects", run.range_objects,
+                      "--cull bvh on the CPU: a straddling node of at most N objects tests its objects instead of descending (default: " +
+                          std::to_string(cullpipe::fast::CpuBvhCullOptions::kDefaultRangeObjects) +
+                          " with --cpu fast, 0 with --cpu reference; the GPU always descends to the leaves)");
   run_cmd->add_option("--views", run.views, "Number of views on a camera path around the scene")->capture_default_str()->check(CLI::PositiveNumber);
   run_cmd->add_option("--json", run.json_path, "Write a summary as JSON");
   run_cmd->add_option("--dump", run.dump_path, "Write planes, volumes and classes (the classify schema)");

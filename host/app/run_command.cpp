@@ -50,7 +50,7 @@ BackendResults cull_kind_bvh(const std::vector<Volume>& volumes, std::span<const
   const std::span<const Volume> span(volumes);
   built = build_bvh(o.builder, bvh::enclosing_boxes(span), o.leaf_size);
   if (!o.dump_path.empty()) dump_volumes.assign(volumes.begin(), volumes.end());
-  return cull_bvh_on_backends(built.flat, span, frusta, o.backend, session, /*warm_up=*/true, cpu_path(o));
+  return cull_bvh_on_backends(built.flat, span, frusta, o.backend, session, /*warm_up=*/true, cpu_path(o), o.range_objects);
 }
 
 // Culls one kind of volume; with a dump path, also keeps the volumes for the dump.
@@ -177,6 +177,7 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
       if (hierarchical) {
         j["builder"] = o.builder;
         j["leaf_size"] = o.leaf_size;
+        j["range_objects"] = have_cpu ? cpu_range_objects(cpu_path(o), o.range_objects) : 0;
         j["build_ns"] = built.build_ns;
         j["bvh"] = {{"nodes", built.metrics.nodes},
                     {"leaves", built.metrics.leaves},
@@ -214,7 +215,9 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
     }
     if (!o.dump_path.empty()) {
       CullCase c{frusta, frusta.size() > 1, std::move(dump_volumes), {}, {}};
-      for (std::size_t v = 0; v < frusta.size(); ++v) c.tests.push_back({o.cull, r.node_tests[v], r.object_tests[v]});
+      // The counts are the CPU traversal's when the CPU ran, else the GPU's (which descends to the leaves).
+      const std::uint32_t range_objects = have_cpu ? cpu_range_objects(cpu_path(o), o.range_objects) : 0;
+      for (std::size_t v = 0; v < frusta.size(); ++v) c.tests.push_back({o.cull, r.node_tests[v], r.object_tests[v], range_objects});
       if (from_gltf) {
         // Where each object came from, and all its world-space volumes.
         const std::vector<Aabb> aabbs = world_aabbs(scene, loaded.aabb_update);

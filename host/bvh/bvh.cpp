@@ -594,7 +594,8 @@ std::string check_flat_tree(const FlatTree& tree, std::span<const Sphere> volume
 namespace {
 
 template <class Volume>
-HierarchicalResult cull_hierarchical_impl(const FlatTree& tree, std::span<const Volume> volumes, const Frustum& frustum) {
+HierarchicalResult cull_hierarchical_impl(const FlatTree& tree, std::span<const Volume> volumes, const Frustum& frustum,
+                                          const TraversalOptions& options) {
   if constexpr (!std::is_same_v<Volume, Aabb>) require_unit_normals(frustum, "bvh::cull_hierarchical");
   HierarchicalResult r;
   r.classes.assign(volumes.size(), Classification::Outside);
@@ -613,7 +614,7 @@ HierarchicalResult cull_hierarchical_impl(const FlatTree& tree, std::span<const 
       for (std::uint32_t k = node.first; k < node.first + node.count; ++k) r.classes[tree.objects[k]] = Classification::Inside;
       continue;
     }
-    if (node.leaf) {
+    if (node.leaf || node.count <= options.range_objects) {
       for (std::uint32_t k = node.first; k < node.first + node.count; ++k) {
         r.classes[tree.objects[k]] = classify_object(volumes[tree.objects[k]], frustum, straddled);
         ++r.object_tests;
@@ -633,14 +634,17 @@ HierarchicalResult cull_hierarchical_impl(const FlatTree& tree, std::span<const 
 
 }  // namespace
 
-HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Aabb> boxes, const Frustum& frustum) {
-  return cull_hierarchical_impl(tree, boxes, frustum);
+HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Aabb> boxes, const Frustum& frustum,
+                                     const TraversalOptions& options) {
+  return cull_hierarchical_impl(tree, boxes, frustum, options);
 }
-HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Obb> volumes, const Frustum& frustum) {
-  return cull_hierarchical_impl(tree, volumes, frustum);
+HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Obb> volumes, const Frustum& frustum,
+                                     const TraversalOptions& options) {
+  return cull_hierarchical_impl(tree, volumes, frustum, options);
 }
-HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Sphere> volumes, const Frustum& frustum) {
-  return cull_hierarchical_impl(tree, volumes, frustum);
+HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Sphere> volumes, const Frustum& frustum,
+                                     const TraversalOptions& options) {
+  return cull_hierarchical_impl(tree, volumes, frustum, options);
 }
 
 }  // namespace cullpipe::bvh

@@ -167,12 +167,26 @@ struct HierarchicalResult {
   std::size_t node_tests = 0;
   std::size_t object_tests = 0;
   std::size_t visible = 0, inside = 0;
+  bool operator==(const HierarchicalResult&) const = default;
 };
-HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Aabb> boxes, const Frustum& frustum);
+/// How cull_hierarchical walks a tree.
+struct TraversalOptions {
+  /// A straddling node with at most this many objects tests its objects (each against the
+  /// planes the node straddles) instead of descending: fewer node tests, more object tests,
+  /// and each object range is contiguous (fast::CpuBvhCuller tests ranges as streams).
+  /// 0: only leaves test their objects (the classic traversal; the GPU culler's).
+  std::uint32_t range_objects = 0;
+  bool operator==(const TraversalOptions&) const = default;
+};
+
+HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Aabb> boxes, const Frustum& frustum,
+                                     const TraversalOptions& options = {});
 /// The same over OBBs or spheres: the tree's node boxes must enclose enclosing_box() of each of
 /// its volumes (build the tree over enclosing_boxes()). Every object's class equals flat
 /// culling's (see kBvhMarginScale).
-HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Obb> volumes, const Frustum& frustum);
-HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Sphere> volumes, const Frustum& frustum);
+HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Obb> volumes, const Frustum& frustum,
+                                     const TraversalOptions& options = {});
+HierarchicalResult cull_hierarchical(const FlatTree& tree, std::span<const Sphere> volumes, const Frustum& frustum,
+                                     const TraversalOptions& options = {});
 
 }  // namespace cullpipe::bvh

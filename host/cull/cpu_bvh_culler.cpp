@@ -1,6 +1,7 @@
 #include "cull/cpu_bvh_culler.hpp"
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <deque>
 #include <iterator>
@@ -47,30 +48,15 @@ unsigned CpuBvhCuller::threads() const { return pool_->size(); }
 
 namespace {
 
-/// A volume as the walk kernels read it (detail::kWalk*Floats).
-void walk_record(const Aabb& b, float* out) {
-  const float r[detail::kWalkAabbFloats] = {b.min.x, b.min.y, b.min.z, 0.0f, b.max.x, b.max.y, b.max.z, 0.0f};
-  std::copy(std::begin(r), std::end(r), out);
+/// A volume's columns as the walk kernels read them (detail::kWalk*Columns).
+template <std::size_t Columns>
+using WalkColumns = std::array<float, Columns>;
+WalkColumns<detail::kWalkAabbColumns> walk_columns(const Aabb& b) { return {b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z}; }
+WalkColumns<detail::kWalkObbColumns> walk_columns(const Obb& b) {
+  return {b.center.x,   b.center.y,   b.center.z,   b.basis[0].x,     b.basis[0].y,     b.basis[0].z,     b.basis[1].x,    b.basis[1].y,
+          b.basis[1].z, b.basis[2].x, b.basis[2].y, b.basis[2].z, b.half_extents.x, b.half_extents.y, b.half_extents.z};
 }
-void walk_record(const Obb& b, float* out) {
-  const float r[detail::kWalkObbFloats] = {b.center.x,       b.center.y,       b.center.z,       b.basis[0].x, b.basis[0].y, b.basis[0].z,
-                                           b.basis[1].x,     b.basis[1].y,     b.basis[1].z,     b.basis[2].x, b.basis[2].y, b.basis[2].z,
-                                           b.half_extents.x, b.half_extents.y, b.half_extents.z, 0.0f};
-  std::copy(std::begin(r), std::end(r), out);
-}
-void walk_record(const Sphere& s, float* out) {
-  const float r[detail::kWalkSphereFloats] = {s.center.x, s.center.y, s.center.z, s.radius};
-  std::copy(std::begin(r), std::end(r), out);
-}
-template <class Volume>
-constexpr std::size_t walk_floats() {
-  if constexpr (std::is_same_v<Volume, Obb>)
-    return detail::kWalkObbFloats;
-  else if constexpr (std::is_same_v<Volume, Sphere>)
-    return detail::kWalkSphereFloats;
-  else
-    return detail::kWalkAabbFloats;
-}
+WalkColumns<detail::kWalkSphereColumns> walk_columns(const Sphere& s) { return {s.center.x, s.center.y, s.center.z, s.radius}; }
 
 float float_bits(std::uint32_t u) { return std::bit_cast<float>(u); }
 
@@ -91,7 +77,9 @@ void CpuBvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume
   const std::size_t nodes = tree.nodes.size(), n = tree.objects.size();
   if (nodes >= detail::kWalkLeaf)  // (a pair index at or past the leaf bit would read as a leaf)
     throw std::length_error("CpuBvhCuller::upload: " + std::to_string(nodes) + " nodes (at most 2^31 - 1)");
-  constexpr std::size_t floats = walk_floats<Volume>();
+  constexpr std::size_t columns = std::tuple_size_v<decltype(walk_columns(std::declval<const Volume&>()))>;
+  // Each column padded to whole cache lines, with room for a vector load from its last object.
+  const std::size_t stride = (n + detail::kWalkColumnPadding + 15) / 16 * 16;
   // Slots: the root alone in pair 0, then a pair per inner node for its two children, in
   // depth-first order (a subtree's pairs are adjacent). A binary tree of `nodes` nodes has
   // (nodes - 1) / 2 inner nodes: nodes + 1 slots.
@@ -100,7 +88,7 @@ void CpuBvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume
   tree_.objects.reserve(n);
   walk_nodes_.reserve(slots * detail::kWalkNodeFloats);
   slot_of_.reserve(nodes);
-  walk_volumes_.reserve(n * floats);
+  walk_columns_.reserve(columns * stride);
 
   // Nothing below throws: every resize is within the reserved capacity.
   tree_.nodes.assign(tree.nodes.begin(), tree.nodes.end());
@@ -123,11 +111,15 @@ void CpuBvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume
                                               node.box.max.x, node.box.max.y, node.box.max.z, float_bits(link)};
     std::copy(std::begin(r), std::end(r), out);
   }
-  walk_volumes_.resize(n * floats);
+  walk_columns_.resize(columns * stride);
+  walk_stride_ = stride;
+  float* const column = walk_columns_.data();
   for (std::size_t k = 0; k < n; ++k) {
     if (k + kGatherAhead < n) prefetch_object(&volumes[tree.objects[k + kGatherAhead]]);
-    walk_record(volumes[tree.objects[k]], walk_volumes_.data() + k * floats);
+    const auto record = walk_columns(volumes[tree.objects[k]]);
+    for (std::size_t c = 0; c < columns; ++c) column[c * stride + k] = record[c];
   }
+  for (std::size_t c = 0; c < columns; ++c) std::fill(column + c * stride + n, column + (c + 1) * stride, 0.0f);
   kind_ = kind_of<Volume>();
 }
 
@@ -200,7 +192,7 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
       const Task t = frontier.front();
       frontier.pop_front();
       const bvh::FlatNode& node = nodes[t.node_or_first];
-      if (node.leaf) {  // leaves go to the threads whole
+      if (node.leaf || node.count <= options.range_objects) {  // leaves (and small nodes) go to the threads whole
         tasks.push_back(t);
         continue;
       }
@@ -240,8 +232,8 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
   if (ids && marks_.size() < mark_words) marks_.resize(mark_words);
   planes_.clear();
   for (const Frustum& f : views) planes_.push_back(detail::plane_set(f));
-  const detail::WalkTree walk_tree{walk_nodes_.data(), walk_volumes_.data(), objects.data(),
-                                   bvh::kBvhMarginScale,  bvh::kBvhMarginFloor, bvh::kBvhMarginLimit};
+  const detail::WalkTree walk_tree{walk_nodes_.data(),    walk_columns_.data(),  walk_stride_,          objects.data(),
+                                   options.range_objects, bvh::kBvhMarginScale, bvh::kBvhMarginFloor, bvh::kBvhMarginLimit};
   const detail::WalkKernel walk = kind_ == BvKind::Obb      ? kernels_->walk_obb
                                   : kind_ == BvKind::Sphere ? kernels_->walk_sphere
                                                             : kernels_->walk_aabb;
@@ -259,7 +251,7 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
     std::vector<std::uint32_t>& work = work_[pool_->thread_index()];  // kept between passes
     const bvh::FlatNode& root = nodes[task.node_or_first];
     const std::size_t subtree_nodes = root.skip - task.node_or_first;
-    const std::size_t work_words = detail::walk_work_words(subtree_nodes, root.count);
+    const std::size_t work_words = detail::walk_work_words(subtree_nodes);
     if (work.size() < work_words) work.resize(work_words);
     detail::WalkOutput out;
     out.classes = classes ? reinterpret_cast<std::uint8_t*>(view_classes.data()) : nullptr;
@@ -300,14 +292,7 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
     const bvh::FlatNode& root = nodes[task.node_or_first];
     const std::uint32_t* from = objects.data() + root.first;
     const std::uint64_t* marks = marks_.data() + tallies[index].marks;
-    for (std::size_t w = 0; w < (std::size_t(root.count) + 63) / 64; ++w, from += 64) {
-      std::uint64_t word = marks[w];
-      if (word == ~std::uint64_t{0}) {  // (no bit is set past the range)
-        out = std::copy_n(from, 64, out);
-        continue;
-      }
-      for (; word != 0; word &= word - 1) *out++ = from[std::countr_zero(word)];
-    }
+    kernels_->list(marks, (std::size_t(root.count) + 63) / 64, from, out, out + tallies[index].visible);
   });
 }
 

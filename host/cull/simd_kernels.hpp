@@ -100,13 +100,20 @@ constexpr std::size_t kWalkNodeFloats = 8;     ///< per slot: min x y z, object 
 /// A slot's link: kWalkLeaf for a leaf, else the pair holding its children (first child in
 /// the low slot).
 constexpr std::uint32_t kWalkLeaf = 0x80000000u;
-constexpr std::size_t kWalkAabbFloats = 8;     ///< min x y z, 0, max x y z, 0
-constexpr std::size_t kWalkObbFloats = 16;     ///< centre, u0, u1, u2, half extents, 0
-constexpr std::size_t kWalkSphereFloats = 4;   ///< centre, radius
+constexpr std::size_t kWalkAabbColumns = 6;     ///< min x y z, max x y z
+constexpr std::size_t kWalkObbColumns = 15;     ///< centre, u0, u1, u2, half extents
+constexpr std::size_t kWalkSphereColumns = 4;   ///< centre, radius
+/// Floats past the last object in each column: a kernel loads whole vectors (of up to 16
+/// lanes) from any object's position.
+constexpr std::size_t kWalkColumnPadding = 16;
 struct WalkTree {
   const float* nodes;           ///< kWalkNodeFloats per slot, 2 slots per pair
-  const float* volumes;         ///< per object in tree order, kWalk*Floats for the kind
+  /// The volumes in tree order as columns (kWalk*Columns for the kind): column c of the object
+  /// at tree position k is columns[c * stride + k]; stride >= objects + kWalkColumnPadding.
+  const float* columns;
+  std::size_t stride;
   const std::uint32_t* ids;     ///< per object in tree order, its id
+  std::uint32_t range_objects;  ///< bvh::TraversalOptions::range_objects
   /// The node test of hierarchies over OBBs and spheres (bvh::classify_masked_margin): the
   /// bvh constants, passed in so this header stays plain data.
   float margin_scale, margin_floor, margin_limit;
@@ -121,8 +128,8 @@ struct WalkRoot {
 /// Where one walk's results go. `classes` (may be null): per object id. `marks` (may be
 /// null): a bitmap of (the subtree's object count + 63) / 64 words, zero, that gets bit p set
 /// for each visible object at position first + p of the subtree's range. `work`:
-/// walk_work_words(work_capacity, the subtree's object count) words, work_capacity at least
-/// the number of nodes in the subtree.
+/// walk_work_words(work_capacity) words, work_capacity at least the number of nodes in the
+/// subtree.
 struct WalkOutput {
   std::uint8_t* classes = nullptr;
   std::uint64_t* marks = nullptr;
@@ -130,10 +137,10 @@ struct WalkOutput {
   std::size_t work_capacity = 0;
 };
 
-/// The words of WalkOutput::work a walk of `nodes` nodes over `objects` objects needs: its
-/// list of pairs to test (pair, planes, first object), each with room for a vector store of up
-/// to 16 lanes past its end, and its list of objects to test (position, planes).
-constexpr std::size_t walk_work_words(std::size_t nodes, std::size_t objects) { return 3 * (nodes + 16) + 2 * objects + 16; }
+/// The words of WalkOutput::work a walk of `nodes` nodes needs: its list of pairs to test
+/// (pair, planes, first object) and its list of object ranges to test (first, count, planes),
+/// each with room for a vector store of up to 16 lanes past its end.
+constexpr std::size_t walk_work_words(std::size_t nodes) { return 6 * (nodes + 16); }
 
 /// What one walk did: bvh::cull_hierarchical's counts for its subtree.
 struct WalkCounts {
@@ -149,6 +156,12 @@ using WalkKernel = WalkCounts (*)(const WalkTree&, WalkRoot, const PlaneSet&, Wa
 using ExpandKernel = std::uint32_t* (*)(const std::uint32_t* bits, std::size_t vectors, std::uint32_t first, std::uint32_t* out,
                                         const std::uint32_t* out_end);
 
+/// Writes from[64 w + l] for every set bit l of marks[w], w = 0..words-1, in that order from
+/// `out`, and returns the new end; never writes at or past out_end, and reads `from` only
+/// where a bit is set.
+using ListKernel = std::uint32_t* (*)(const std::uint64_t* marks, std::size_t words, const std::uint32_t* from, std::uint32_t* out,
+                                      const std::uint32_t* out_end);
+
 struct KernelTable {
   AabbKernel aabb;
   ObbKernel obb;
@@ -156,6 +169,7 @@ struct KernelTable {
   TouchKernel touch;
   WalkKernel walk_aabb, walk_obb, walk_sphere;
   ExpandKernel expand;
+  ListKernel list;
   unsigned lanes;
 };
 

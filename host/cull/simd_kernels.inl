@@ -400,6 +400,47 @@ std::uint32_t* expand_ids(const std::uint32_t* bits, std::size_t vectors, std::u
   return out;
 }
 
+/// The lanes of p[0..W) whose bit is set in `lanes` (the others 0, and not read: p may end
+/// before them).
+inline vi load_ints_where(const std::uint32_t* p, std::uint32_t lanes) {
+#if CULLPIPE_SIMD_LANES == 16 && defined(__AVX512F__)
+  return reinterpret_cast<vi>(_mm512_maskz_loadu_epi32(static_cast<__mmask16>(lanes), p));
+#elif CULLPIPE_SIMD_LANES == 8 && defined(__AVX2__)
+  return reinterpret_cast<vi>(_mm256_maskload_epi32(reinterpret_cast<const int*>(p), reinterpret_cast<__m256i>(lanes_of(lanes))));
+#else
+  vi v = {};
+  for (unsigned l = 0; l < W; ++l)
+    if (lanes & (1u << l)) v[l] = static_cast<std::int32_t>(p[l]);
+  return v;
+#endif
+}
+
+/// Writes from[64 w + l] for every set bit l of marks[w], w = 0..words-1, in that order from
+/// `out`, and returns the new end; never writes at or past out_end.
+std::uint32_t* list_marked(const std::uint64_t* marks, std::size_t words, const std::uint32_t* from, std::uint32_t* out,
+                           const std::uint32_t* out_end) {
+  for (std::size_t w = 0; w < words; ++w, from += 64) {
+    const std::uint64_t word = marks[w];
+    if (word == 0) continue;
+    if (word == ~std::uint64_t{0}) {
+      __builtin_memcpy(out, from, 64 * sizeof *out);
+      out += 64;
+      continue;
+    }
+    for (unsigned q = 0; q < 64 / W; ++q) {
+      const std::uint32_t lanes = static_cast<std::uint32_t>(word >> (q * W)) & kAllLanes;
+      if (lanes == 0) continue;
+      if (out_end - out >= static_cast<std::ptrdiff_t>(W)) {  // room for the vector store
+        compress_store(out, load_ints_where(from + q * W, lanes), lanes);
+        out += __builtin_popcount(lanes);
+        continue;
+      }
+      for (std::uint32_t rest = lanes; rest != 0; rest &= rest - 1) *out++ = from[q * W + static_cast<unsigned>(__builtin_ctz(rest))];
+    }
+  }
+  return out;
+}
+
 // AABBs: the open boxes get the reference's p/n-vertex test.
 ChunkCounts cull_aabb(const AabbArrays& a, std::size_t begin, std::size_t end, const PlaneSet& planes, ChunkOutput out) {
   auto resolve = [&](const std::uint32_t* objects, unsigned count, std::uint32_t& outside_bits, std::uint32_t& crossing_bits) {
@@ -610,14 +651,41 @@ inline void test_spheres(const vf* col, vi mask, std::uint32_t any, const PlaneS
 
 enum class WalkKind { Aabb, Obb, Sphere };
 
+/// Lane l = p[l / 2]: W / 2 items, each in two adjacent lanes.
+inline vi load_doubled(const std::uint32_t* p) {
+  typedef std::int32_t vh __attribute__((vector_size(W * 2)));
+  vh h;
+  __builtin_memcpy(&h, p, sizeof h);
+#if CULLPIPE_SIMD_LANES == 16
+  return __builtin_shufflevector(h, h, 0, 0, 1, 1, 2, 2, 3, 3, 4, 4, 5, 5, 6, 6, 7, 7);
+#elif CULLPIPE_SIMD_LANES == 8
+  return __builtin_shufflevector(h, h, 0, 0, 1, 1, 2, 2, 3, 3);
+#else
+  return __builtin_shufflevector(h, h, 0, 0, 1, 1);
+#endif
+}
+
+/// Lanes 2k and 2k + 1 = lane 2k of v.
+inline vi even_lanes_doubled(vi v) {
+#if CULLPIPE_SIMD_LANES == 16
+  return __builtin_shufflevector(v, v, 0, 0, 2, 2, 4, 4, 6, 6, 8, 8, 10, 10, 12, 12, 14, 14);
+#elif CULLPIPE_SIMD_LANES == 8
+  return __builtin_shufflevector(v, v, 0, 0, 2, 2, 4, 4, 6, 6);
+#else
+  return __builtin_shufflevector(v, v, 0, 0, 2, 2);
+#endif
+}
+
 template <WalkKind Kind>
 WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOutput out) {
-  constexpr unsigned object_floats = Kind == WalkKind::Obb ? kWalkObbFloats : Kind == WalkKind::Sphere ? kWalkSphereFloats : kWalkAabbFloats;
+  constexpr unsigned object_columns = Kind == WalkKind::Obb      ? kWalkObbColumns
+                                      : Kind == WalkKind::Sphere ? kWalkSphereColumns
+                                                                 : kWalkAabbColumns;
   static_assert(W % 2 == 0, "a step takes whole sibling pairs");
   const WalkTree* margin = Kind == WalkKind::Aabb ? nullptr : &t;
   const BoxPlanes columns(planes);
   WalkCounts counts;
-  const std::uint32_t range_first = root.first, range_count = root.count;
+  const std::uint32_t range_first = root.first;
   // Visible objects, one bit per position in the subtree's range.
   std::uint64_t* const marks = out.marks;
   auto mark_range = [&](std::uint32_t first, std::uint32_t count) {
@@ -638,55 +706,65 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
   // once: work_capacity suffices). The subtree's root is listed as a pair with one slot
   // skipped (kSkipLow / kSkipHigh in its planes word).
   constexpr std::uint32_t kSkipLow = 1u << 30, kSkipHigh = 1u << 31, kPlaneBits = kSkipLow - 1u;
-  const std::size_t span = out.work_capacity + W;  // a list and the room a vector store may write past it
+  const std::size_t span = out.work_capacity + 16;  // a list and the room a vector store may write past it
   std::uint32_t* const work_pair = out.work;
   std::uint32_t* const work_mask = work_pair + span;
   std::uint32_t* const work_first = work_mask + span;
-  // The objects of straddling leaves, listed (position, planes) as their leaves are found and
-  // tested W at a time at the end; their records are prefetched when listed.
-  std::uint32_t* const object_at = work_first + span;
-  std::uint32_t* const object_mask = object_at + range_count;
-  std::size_t objects = 0;
+  // The object ranges to test (first, count, planes): straddling leaves, and straddling nodes
+  // of at most t.range_objects objects. Listed as they are found (their columns prefetched)
+  // and tested at the end, W objects of a range at a time, straight from the columns.
+  std::uint32_t* const range_at = work_first + span;
+  std::uint32_t* const range_count = range_at + span;
+  std::uint32_t* const range_mask = range_count + span;
+  std::size_t ranges = 0;
+  const vi small_limit = vi{} + static_cast<std::int32_t>(t.range_objects);  // (counts < 2^31)
 
   const bool root_high = root.slot & 1u;  // the root's sibling (low slot) comes first in the pair's range
   work_pair[0] = root.slot / 2;
   work_mask[0] = root.mask | (root_high ? kSkipLow : kSkipHigh);
   work_first[0] = root_high ? root.first - bits_of(t.nodes[std::size_t(root.slot - 1) * kWalkNodeFloats + 3]) : root.first;
   std::size_t head = 0, tail = 1;
+  vi lane_index;
+  for (unsigned l = 0; l < W; ++l) lane_index[l] = static_cast<std::int32_t>(l);
+  const vi odd = -(lane_index & 1);  // -1 in the high slots' lanes
+  const vi skip_bit = static_cast<std::int32_t>(kSkipLow) + (odd & static_cast<std::int32_t>(kSkipHigh - kSkipLow));
   while (head != tail) {
+    // W / 2 pairs from the list (reads past its end stay in its room), their slots a lane each.
     const unsigned pairs = static_cast<unsigned>(smaller(tail - head, W / 2));
-    alignas(64) std::uint32_t slot[W], lane_mask[W], first_of[W];
-    std::uint32_t any = 0, valid = 0;  // the planes some lane tests (deep nodes straddle few); the lanes in use
-    for (unsigned k = 0; k < W / 2; ++k) {
-      const std::size_t item = head + (k < pairs ? k : 0);  // lanes past the pairs repeat the first
-      const std::uint32_t m = work_mask[item];
-      slot[2 * k] = 2 * work_pair[item];
-      slot[2 * k + 1] = 2 * work_pair[item] + 1;
-      lane_mask[2 * k] = lane_mask[2 * k + 1] = m & kPlaneBits;
-      first_of[2 * k] = work_first[item];
-      if (k < pairs) {
-        any |= m & kPlaneBits;
-        valid |= (m & kSkipLow ? 0u : 1u << (2 * k)) | (m & kSkipHigh ? 0u : 2u << (2 * k));
-      }
-    }
+    const vi in_use = lane_index < static_cast<std::int32_t>(2 * pairs);
+    const vi listed_mask = load_doubled(work_mask + head);
+    // Lanes past the pairs repeat the first pair (their reads stay in the tree).
+    const vi pair = in_use ? load_doubled(work_pair + head) : vi{} + static_cast<std::int32_t>(work_pair[head]);
+    alignas(64) std::uint32_t slot[W], first_of[W];
+    const vi slots = pair + pair - odd;
+    __builtin_memcpy(slot, &slots, sizeof slot);
+    const vi lane_mask = listed_mask & static_cast<std::int32_t>(kPlaneBits);
+    const std::uint32_t valid = lane_bits((listed_mask & skip_bit) == 0) & lane_bits(in_use);  // the lanes in use
+    std::uint32_t any = 0;  // the planes some lane tests (deep nodes straddle few)
+    for (unsigned k = 0; k < pairs; ++k) any |= work_mask[head + k];
+    any &= kPlaneBits;
+    const vi low_first = load_doubled(work_first + head);
     head += pairs;
     vf col[8];  // min x y z, count, max x y z, link
     gather_columns<kWalkNodeFloats>(t.nodes, slot, W, col);
     alignas(64) std::uint32_t count_of[W], link_of[W];
     __builtin_memcpy(count_of, &col[3], sizeof count_of);
     __builtin_memcpy(link_of, &col[7], sizeof link_of);
-    for (unsigned k = 0; k < W / 2; ++k) first_of[2 * k + 1] = first_of[2 * k] + count_of[2 * k];  // the low slot's range comes first
+    // The low slot's range comes first: the high slot's starts past it.
+    const vi lane_first = low_first + (odd & even_lanes_doubled(reinterpret_cast<vi>(col[3])));
+    __builtin_memcpy(first_of, &lane_first, sizeof first_of);
     vi outside, straddled;
-    test_boxes(col, load_ints(lane_mask), any, planes, columns, margin, outside, straddled);
+    test_boxes(col, lane_mask, any, planes, columns, margin, outside, straddled);
     counts.node_tests += static_cast<unsigned>(__builtin_popcount(valid));
-    const vi link = reinterpret_cast<vi>(col[7]);
-    const std::uint32_t live = ~lane_bits(outside != 0) & valid, leaves = lane_bits(link < 0);  // kWalkLeaf: the sign bit
-    const std::uint32_t inner = live & ~leaves & ~lane_bits(straddled == 0);
+    const vi link = reinterpret_cast<vi>(col[7]), count = reinterpret_cast<vi>(col[3]);
+    const std::uint32_t live = ~lane_bits(outside != 0) & valid;
+    const std::uint32_t ends = lane_bits(link < 0) | lane_bits(count <= small_limit);  // kWalkLeaf: the sign bit
+    const std::uint32_t inner = live & ~ends & ~lane_bits(straddled == 0);
     // Straddling inner nodes: their children's pair listed, with the planes still to test.
     if (inner) {
       compress_store(work_pair + tail, link, inner);
       compress_store(work_mask + tail, straddled, inner);
-      compress_store(work_first + tail, load_ints(first_of), inner);
+      compress_store(work_first + tail, lane_first, inner);
       for (std::uint32_t rest = inner; rest != 0; rest &= rest - 1)
         __builtin_prefetch(t.nodes + std::size_t(link_of[__builtin_ctz(rest)]) * (2 * kWalkNodeFloats));
       tail += static_cast<unsigned>(__builtin_popcount(inner));
@@ -696,52 +774,82 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
     for (std::uint32_t rest = live & ~inner; rest != 0; rest &= rest - 1) {
       const unsigned l = static_cast<unsigned>(__builtin_ctz(rest));
       const std::uint32_t planes_left = static_cast<std::uint32_t>(straddled_lanes[l]);
-      const std::uint32_t first = first_of[l], count = count_of[l];
+      const std::uint32_t first = first_of[l], n = count_of[l];
       if (planes_left == 0) {  // INSIDE: the whole range, no further tests
         if (out.classes)
-          for (std::uint32_t k = first; k < first + count; ++k) out.classes[t.ids[k]] = kInside;
-        if (marks && count) mark_range(first, count);
-        counts.visible += count;
-        counts.inside += count;
+          for (std::uint32_t k = first; k < first + n; ++k) out.classes[t.ids[k]] = kInside;
+        if (marks && n) mark_range(first, n);
+        counts.visible += n;
+        counts.inside += n;
         continue;
       }
-      // A straddling leaf: its objects, against the planes it straddles.
-      const float* record = t.volumes + std::size_t(first) * object_floats;
-      for (std::size_t b = 0; b < count * object_floats; b += 16) __builtin_prefetch(record + b);
-      for (std::uint32_t k = first; k < first + count; ++k) {
-        object_at[objects] = k;
-        object_mask[objects++] = planes_left;
+      // A straddling leaf or small node: its objects, against the planes it straddles.
+      for (unsigned c = 0; c < object_columns; ++c) {
+        const float* column = t.columns + c * t.stride + first;
+        for (std::size_t b = 0; b < n; b += 16) __builtin_prefetch(column + b);
+        __builtin_prefetch(column + n - 1);
       }
+      range_at[ranges] = first;
+      range_count[ranges] = n;
+      range_mask[ranges++] = planes_left;
     }
   }
 
-  for (std::size_t o = 0; o < objects; o += W) {
-    const unsigned take = static_cast<unsigned>(smaller(W, objects - o));
-    vf col[object_floats];
-    gather_columns<object_floats>(t.volumes, object_at + o, take, col);
-    const vi mask = load_ints(object_mask + o);  // lanes past take: read but not used
-    std::uint32_t any = 0;
-    for (unsigned l = 0; l < take; ++l) any |= object_mask[o + l];
-    vi outside, crossing;
-    if constexpr (Kind == WalkKind::Obb)
-      test_obbs(col, mask, any, planes, outside, crossing);
-    else if constexpr (Kind == WalkKind::Sphere)
-      test_spheres(col, mask, any, planes, outside, crossing);
-    else
-      test_boxes(col, mask, any, planes, columns, nullptr, outside, crossing);
-    const vi cls = (kInside - ((crossing != 0) & 1)) & ~(outside != 0);  // 2 inside, 1 intersecting, 0 outside
-    const std::uint32_t valid = take >= W ? kAllLanes : (1u << take) - 1u;
-    counts.visible += static_cast<std::uint32_t>(__builtin_popcount(lane_bits(cls != 0) & valid));
-    counts.inside += static_cast<std::uint32_t>(__builtin_popcount(lane_bits(cls == kInside) & valid));
-    for (unsigned l = 0; l < take; ++l) {
-      if (out.classes) out.classes[t.ids[object_at[o + l]]] = static_cast<std::uint8_t>(cls[l]);
+  // Boxes: each plane's p- and n-vertex columns (BoxPlanes), so a range's vectors are loaded
+  // straight from the columns the plane needs.
+  const float* vertex_column[6][6] = {};  // [plane][p x y z, n x y z]
+  if constexpr (Kind == WalkKind::Aabb)
+    for (std::uint32_t k = 0; k < planes.count; ++k)
+      for (unsigned a = 0; a < 3; ++a) {
+        const std::uint32_t p = columns.p[k][a] & 4 ? 3 + a : a;  // max or min column
+        vertex_column[k][a] = t.columns + p * t.stride;
+        vertex_column[k][3 + a] = t.columns + (p >= 3 ? p - 3 : p + 3) * t.stride;
+      }
+  for (std::size_t r = 0; r < ranges; ++r) {
+    const std::uint32_t first = range_at[r], n = range_count[r], m = range_mask[r];
+    const vi mask = vi{} + static_cast<std::int32_t>(m);
+    counts.object_tests += n;
+    for (std::uint32_t j = 0; j < n; j += W) {
+      const std::uint32_t at = first + j;
+      std::uint32_t outside_bits = 0, crossing_bits = 0;
+      if constexpr (Kind == WalkKind::Aabb) {  // test_boxes's operations, for one mask
+        const vf zero = {};
+        for (std::uint32_t any = m; any != 0; any &= any - 1) {
+          const std::uint32_t k = static_cast<std::uint32_t>(__builtin_ctz(any));
+          const float nx = planes.nx[k], ny = planes.ny[k], nz = planes.nz[k], d = planes.d[k];
+          const float* const* v = vertex_column[k];
+          const vf dp = ((nx * load(v[0] + at) + ny * load(v[1] + at)) + nz * load(v[2] + at)) + d;
+          const vf dn = ((nx * load(v[3] + at) + ny * load(v[4] + at)) + nz * load(v[5] + at)) + d;
+          outside_bits |= less_bits(dp, zero);
+          crossing_bits |= less_bits(dn, zero);
+        }
+      } else {
+        vf col[object_columns];
+        for (unsigned c = 0; c < object_columns; ++c) col[c] = load(t.columns + c * t.stride + at);
+        vi outside, crossing;
+        if constexpr (Kind == WalkKind::Obb)
+          test_obbs(col, mask, m, planes, outside, crossing);
+        else
+          test_spheres(col, mask, m, planes, outside, crossing);
+        outside_bits = lane_bits(outside != 0);
+        crossing_bits = lane_bits(crossing != 0);
+      }
+      const unsigned take = static_cast<unsigned>(smaller(W, n - j));
+      const std::uint32_t lanes = take >= W ? kAllLanes : (1u << take) - 1u;
+      const std::uint32_t visible = ~outside_bits & lanes;
+      counts.visible += static_cast<std::uint32_t>(__builtin_popcount(visible));
+      counts.inside += static_cast<std::uint32_t>(__builtin_popcount(visible & ~crossing_bits));
+      if (out.classes) {
+        const vi cls = (kInside + lanes_of(crossing_bits)) & ~lanes_of(outside_bits);  // crossing is -1: Inside - 1 = Intersecting
+        for (unsigned l = 0; l < take; ++l) out.classes[t.ids[at + l]] = static_cast<std::uint8_t>(cls[l]);
+      }
       if (marks) {
-        const std::uint32_t at = object_at[o + l] - range_first;
-        marks[at / 64] |= std::uint64_t(cls[l] != 0) << (at % 64);
+        const std::uint32_t p = at - range_first, shift = p % 64;
+        marks[p / 64] |= std::uint64_t(visible) << shift;
+        if (shift + take > 64) marks[p / 64 + 1] |= std::uint64_t(visible) >> (64 - shift);
       }
     }
   }
-  counts.object_tests = objects;
 
   return counts;
 }

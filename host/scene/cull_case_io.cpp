@@ -157,8 +157,11 @@ std::string cull_case_to_json(const CullCase& c, const std::vector<std::vector<C
   root["volumes"] = std::move(volumes);
   if (!c.tests.empty()) {
     json tests = json::array();
-    for (std::size_t v = 0; v < c.tests.size(); ++v)
-      tests.push_back({{"view", v}, {"cull", c.tests[v].cull}, {"node_tests", c.tests[v].node_tests}, {"object_tests", c.tests[v].object_tests}});
+    for (std::size_t v = 0; v < c.tests.size(); ++v) {
+      json t = {{"view", v}, {"cull", c.tests[v].cull}, {"node_tests", c.tests[v].node_tests}, {"object_tests", c.tests[v].object_tests}};
+      if (c.tests[v].cull == "bvh") t["range_objects"] = c.tests[v].range_objects;
+      tests.push_back(std::move(t));
+    }
     root["tests"] = std::move(tests);
   }
   return root.dump(1) + "\n";

@@ -40,10 +40,12 @@ struct CullCase {
   bool multi_view = false;  ///< written as "frusta" rather than "frustum"
   std::vector<Volume> volumes;
   std::vector<Object> objects;  ///< empty, or one per volume (written only)
-  /// Work done per view (written only, as "tests": [{"view", "cull", "node_tests", "object_tests"}]).
+  /// Work done per view (written only, as "tests": [{"view", "cull", "node_tests", "object_tests"}],
+  /// with "range_objects" for "bvh").
   struct Tests {
     std::string cull;  ///< "flat" or "bvh"
     std::size_t node_tests = 0, object_tests = 0;
+    std::uint32_t range_objects = 0;  ///< "bvh": the traversal's bvh::TraversalOptions::range_objects
   };
   std::vector<Tests> tests;
 };
