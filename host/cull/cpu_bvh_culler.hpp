@@ -27,9 +27,9 @@ struct CpuBvhCullOptions {
   bool classes = true;       ///< bvh::HierarchicalResult::classes, one per object id
   bool visible_ids = false;  ///< the ids of the visible objects, in the tree's object order
   /// bvh::TraversalOptions::range_objects: straddling nodes of at most this many objects test
-  /// their objects as one stream instead of descending. The default was the fastest measured
-  /// (see bench/README.md); 0 is the classic traversal, bvh::cull_hierarchical's default and
-  /// the GPU culler's.
+  /// their objects as one range instead of descending (see the class comment for why and what
+  /// was measured); 0 is the classic traversal, bvh::cull_hierarchical's default and the GPU
+  /// culler's. The classes do not depend on it; the node and object test counts do.
   std::uint32_t range_objects = kDefaultRangeObjects;
   static constexpr std::uint32_t kDefaultRangeObjects = 32;
 };
@@ -64,7 +64,7 @@ struct CpuBvhViewResult {
 /// lists kept), an object of a range about two (contiguous loads); near the leaves a node's
 /// test saves fewer object tests than it costs. On 10^6 boxes, OBBs and spheres at 1-50%
 /// visible, ranges of 24 to 128 objects measured within a few percent of each other and
-/// 1.3-1.6x faster than none (0); 32 is the default.
+/// 1.3-1.7x faster than none (0); 32 is the default.
 ///
 /// The objects may be AABBs, OBBs or spheres (bvh::cull_hierarchical's three forms: a tree
 /// over OBBs or spheres is built over bvh::enclosing_boxes and its nodes are tested with a

@@ -27,6 +27,7 @@ constexpr unsigned W = CULLPIPE_SIMD_LANES;
 static_assert(W == 4 || W == 8 || W == 16);
 typedef float vf __attribute__((vector_size(W * 4)));
 typedef std::int32_t vi __attribute__((vector_size(W * 4)));
+typedef std::uint32_t vu __attribute__((vector_size(W * 4)));
 typedef std::uint8_t vb __attribute__((vector_size(W)));
 
 constexpr std::uint8_t kOutside = 0, kIntersecting = 1, kInside = 2;  // = Classification values
@@ -554,8 +555,10 @@ std::uint32_t touch(const float* data, std::size_t begin, std::size_t end) {
 // bvh::cull_hierarchical's tests of one subtree, W at a time: a work list of sibling pairs
 // (the two children of a straddling node, with the planes it straddles) is taken W / 2 pairs
 // per step, their records transposed into vectors (one node per lane) and tested against the
-// planes one by one; the leaves' objects go to a second list,
-// tested W at a time the same way. Every lane does the scalar test's float operations in its
+// planes one by one. The object ranges of straddling leaves (and, with range_objects, of
+// straddling nodes of at most that many objects) go to a second list, tested at the end, W
+// objects of a range at a time, loaded straight from the volumes' columns in tree order
+// against the planes their node straddles. Every lane does the scalar test's float operations in its
 // order (bvh::classify_masked for boxes, classify_masked_margin for the nodes of OBB and
 // sphere trees, classify_planes for OBBs and spheres) and the planes outside its mask count
 // for nothing. The scalar tests stop at the first plane that rejects, which does not change
@@ -717,7 +720,7 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
   std::uint32_t* const range_count = range_at + span;
   std::uint32_t* const range_mask = range_count + span;
   std::size_t ranges = 0;
-  const vi small_limit = vi{} + static_cast<std::int32_t>(t.range_objects);  // (counts < 2^31)
+  const vu small_limit = vu{} + t.range_objects;
 
   const bool root_high = root.slot & 1u;  // the root's sibling (low slot) comes first in the pair's range
   work_pair[0] = root.slot / 2;
@@ -727,7 +730,7 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
   vi lane_index;
   for (unsigned l = 0; l < W; ++l) lane_index[l] = static_cast<std::int32_t>(l);
   const vi odd = -(lane_index & 1);  // -1 in the high slots' lanes
-  const vi skip_bit = static_cast<std::int32_t>(kSkipLow) + (odd & static_cast<std::int32_t>(kSkipHigh - kSkipLow));
+  const vi skip_bit = (~odd & static_cast<std::int32_t>(kSkipLow)) | (odd & static_cast<std::int32_t>(kSkipHigh));  // the slot's skip flag
   while (head != tail) {
     // W / 2 pairs from the list (reads past its end stay in its room), their slots a lane each.
     const unsigned pairs = static_cast<unsigned>(smaller(tail - head, W / 2));
@@ -736,7 +739,7 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
     // Lanes past the pairs repeat the first pair (their reads stay in the tree).
     const vi pair = in_use ? load_doubled(work_pair + head) : vi{} + static_cast<std::int32_t>(work_pair[head]);
     alignas(64) std::uint32_t slot[W], first_of[W];
-    const vi slots = pair + pair - odd;
+    const vi slots = reinterpret_cast<vi>(reinterpret_cast<vu>(pair) * 2u - reinterpret_cast<vu>(odd));
     __builtin_memcpy(slot, &slots, sizeof slot);
     const vi lane_mask = listed_mask & static_cast<std::int32_t>(kPlaneBits);
     const std::uint32_t valid = lane_bits((listed_mask & skip_bit) == 0) & lane_bits(in_use);  // the lanes in use
@@ -751,14 +754,15 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
     __builtin_memcpy(count_of, &col[3], sizeof count_of);
     __builtin_memcpy(link_of, &col[7], sizeof link_of);
     // The low slot's range comes first: the high slot's starts past it.
-    const vi lane_first = low_first + (odd & even_lanes_doubled(reinterpret_cast<vi>(col[3])));
+    const vi lane_first =
+        reinterpret_cast<vi>(reinterpret_cast<vu>(low_first) + reinterpret_cast<vu>(odd & even_lanes_doubled(reinterpret_cast<vi>(col[3]))));
     __builtin_memcpy(first_of, &lane_first, sizeof first_of);
     vi outside, straddled;
     test_boxes(col, lane_mask, any, planes, columns, margin, outside, straddled);
     counts.node_tests += static_cast<unsigned>(__builtin_popcount(valid));
     const vi link = reinterpret_cast<vi>(col[7]), count = reinterpret_cast<vi>(col[3]);
     const std::uint32_t live = ~lane_bits(outside != 0) & valid;
-    const std::uint32_t ends = lane_bits(link < 0) | lane_bits(count <= small_limit);  // kWalkLeaf: the sign bit
+    const std::uint32_t ends = lane_bits(link < 0) | lane_bits(reinterpret_cast<vu>(count) <= small_limit);  // kWalkLeaf: the sign bit
     const std::uint32_t inner = live & ~ends & ~lane_bits(straddled == 0);
     // Straddling inner nodes: their children's pair listed, with the planes still to test.
     if (inner) {
