@@ -60,8 +60,8 @@ struct CpuBvhViewResult {
 /// every core. Objects are written by id, and a subtree's objects are its own, so no two
 /// threads write the same class.
 ///
-/// Why object ranges: a node test costs about ten cycles (records gathered into lanes, work
-/// lists kept), an object of a range about two (contiguous loads); near the leaves a node's
+/// Why object ranges: a node test costs about 13 cycles (records gathered into lanes, work
+/// lists kept, prefetches), an object of a range under 2 (contiguous loads); near the leaves a node's
 /// test saves fewer object tests than it costs. On 10^6 boxes, OBBs and spheres at 1-50%
 /// visible, ranges of 24 to 128 objects measured within a few percent of each other and
 /// 1.3-1.7x faster than none (0); 32 is the default.
