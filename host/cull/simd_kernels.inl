@@ -791,7 +791,7 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
       for (unsigned c = 0; c < object_columns; ++c) {
         const float* column = t.columns + c * t.stride + first;
         for (std::size_t b = 0; b < n; b += 16) __builtin_prefetch(column + b);
-        __builtin_prefetch(column + n - 1);
+        if (n) __builtin_prefetch(column + n - 1);  // the last line, when the range ends past a 16-float step
       }
       range_at[ranges] = first;
       range_count[ranges] = n;
