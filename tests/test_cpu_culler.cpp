@@ -599,6 +599,34 @@ TEST(CpuBvhCuller, SeveralViewsInOnePassEqualOnePassEach) {
   }
 }
 
+// An engine culls every frame: once the sizes have settled, a pass (one view or several,
+// classes, list or both, any range size) allocates nothing.
+TEST(CpuBvhCuller, ASteadyPassAllocatesNothing) {
+  test::Rng rng{41};
+  const test::RandomVolumes v = test::random_volumes(rng, 100000, 30.0f, 2.0f);
+  const bvh::FlatTree tree = bvh::flatten(bvh::build("binned-sah", v.aabbs));
+  fast::CpuBvhCuller culler(2);
+  culler.upload(tree, std::span<const Aabb>(v.aabbs));
+  const std::vector<Frustum> views = test_views(false);
+  std::vector<fast::CpuBvhViewResult> results;
+  bvh::HierarchicalResult single;
+  std::vector<std::uint32_t> ids;
+  fast::CpuBvhCullOptions both{true, true}, ranges_of_8{false, true};
+  ranges_of_8.range_objects = 8;
+  auto frame = [&] {
+    culler.cull(views, both, results);
+    culler.cull(views, ranges_of_8, results);
+    for (const Frustum& f : views) culler.cull(f, both, single, ids);
+    culler.cull(views[0], single);
+  };
+  frame();  // sizes settle
+  const long before = g_allocations.load();
+  for (int i = 0; i < 10; ++i) frame();
+  EXPECT_EQ(g_allocations.load() - before, 0) << "allocations in ten steady frames";
+  const bvh::HierarchicalResult expected = bvh::cull_hierarchical(tree, std::span<const Aabb>(v.aabbs), views[0], kFastTraversal);
+  expect_same_traversal(expected, single, "steady");
+}
+
 TEST(CpuBvhCuller, RejectsKernelsTheCpuLacks) {
   for (Isa isa : {Isa::Avx2, Isa::Avx512})
     if (!fast::isa_supported(isa)) {

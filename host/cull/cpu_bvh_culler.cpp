@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <array>
 #include <bit>
-#include <deque>
 #include <iterator>
 #include <stdexcept>
 #include <string>
@@ -134,7 +133,7 @@ bvh::HierarchicalResult CpuBvhCuller::cull(const Frustum& frustum) {
 }
 
 void CpuBvhCuller::cull(const Frustum& frustum, bvh::HierarchicalResult& r) {
-  std::vector<std::uint32_t> unused;
+  std::vector<std::uint32_t> unused;  // (never grown: no list is asked for)
   cull(frustum, {}, r, unused);
 }
 
@@ -184,13 +183,15 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
   for (std::uint32_t v = 0; v < view_count; ++v) {
     const Frustum& frustum = views[v];
     const std::size_t first_task = tasks.size();
-    std::deque<Task> frontier{{Task::Subtree, 0, (1u << frustum.active().size()) - 1u, v}};
+    // A queue in a kept vector (front at `head`), so a steady pass allocates nothing.
+    std::vector<Task>& frontier = frontier_;
+    frontier.assign(1, {Task::Subtree, 0, (1u << frustum.active().size()) - 1u, v});
+    std::size_t head = 0;
     auto accept = [&](std::uint32_t first, std::uint32_t count) {
       for (std::uint32_t k = 0; k < count; k += kRangeChunk) tasks.push_back({Task::Inside, first + k, std::min(kRangeChunk, count - k), v});
     };
-    while (!frontier.empty() && frontier.size() + tasks.size() - first_task < wanted) {
-      const Task t = frontier.front();
-      frontier.pop_front();
+    while (head != frontier.size() && frontier.size() - head + tasks.size() - first_task < wanted) {
+      const Task t = frontier[head++];
       const bvh::FlatNode& node = nodes[t.node_or_first];
       if (node.leaf || node.count <= options.range_objects) {  // leaves (and small nodes) go to the threads whole
         tasks.push_back(t);
@@ -208,7 +209,7 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
       frontier.push_back({Task::Subtree, t.node_or_first + 1, straddled, v});
       frontier.push_back({Task::Subtree, nodes[t.node_or_first + 1].skip, straddled, v});
     }
-    tasks.insert(tasks.end(), frontier.begin(), frontier.end());
+    tasks.insert(tasks.end(), frontier.begin() + std::ptrdiff_t(head), frontier.end());
   }
   // Each task covers its own contiguous part of its view's tree object order (a subtree's
   // range or part of one): in that order, a view's task lists concatenate into tree order.

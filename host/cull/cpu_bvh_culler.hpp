@@ -132,6 +132,7 @@ class CpuBvhCuller {
   std::size_t walk_stride_ = 0;
   // Per-pass working storage, kept so passes reuse it.
   std::vector<Task> tasks_;
+  std::vector<Task> frontier_;  // the top of the tree, breadth first
   std::vector<Tally> tallies_;
   std::vector<std::uint64_t> marks_;  // the subtree tasks' visible objects, a bit each
   std::vector<std::vector<std::uint32_t>> work_;  // per pool thread: a walk's work lists
