@@ -238,7 +238,16 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
   const detail::WalkKernel walk = kind_ == BvKind::Obb      ? kernels_->walk_obb
                                   : kind_ == BvKind::Sphere ? kernels_->walk_sphere
                                                             : kernels_->walk_aabb;
-  pool_->parallel_for(tasks.size(), [&](std::size_t index) {
+  // The threads take the largest subtrees first and the accepted ranges (short, even) last,
+  // so the pass does not end waiting on one thread's large subtree.
+  order_.resize(tasks.size());
+  for (std::size_t t = 0; t < tasks.size(); ++t) order_[t] = static_cast<std::uint32_t>(t);
+  auto work_of = [&](std::uint32_t t) -> std::uint64_t {
+    return tasks[t].kind == Task::Inside ? 0 : nodes[tasks[t].node_or_first].skip - tasks[t].node_or_first;
+  };
+  std::sort(order_.begin(), order_.end(), [&](std::uint32_t a, std::uint32_t b) { return work_of(a) > work_of(b); });
+  pool_->parallel_for(tasks.size(), [&](std::size_t claimed) {
+    const std::size_t index = order_[claimed];
     const Task& task = tasks[index];
     Tally& tally = tallies[index];
     std::vector<Classification>& view_classes = outs[task.view].result->classes;
