@@ -24,6 +24,7 @@
 #include "cull/compare.hpp"
 #include "cull/cpu_bvh_culler.hpp"
 #include "cull/cpu_culler.hpp"
+#include "cull/kernel_select.hpp"
 #include "cull/reference.hpp"
 #include "cull/thread_pool.hpp"
 #include "geom/pn_vertex.hpp"
@@ -523,7 +524,7 @@ TEST(CpuBvhCuller, MarginEdgesAndHugeCoordinatesEqualTheScalarTraversal) {
   const bvh::FlatTree obb_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(obbs))));
   for (Isa isa : runnable_isas()) {
     fast::CpuBvhCuller culler(2, isa);
-    for (std::uint32_t range : {0u, fast::CpuBvhCullOptions::kDefaultRangeObjects})
+    for (std::uint32_t range : {0u, fast::CpuBvhCullOptions::kDefaultRangeObjects, 100000u})  // (the last: the whole tree one range)
       for (std::size_t v = 0; v < views.size(); ++v) {
         const std::string what = "isa=" + std::string(to_string(isa)) + " ranges " + std::to_string(range) + " view " + std::to_string(v);
         std::vector<std::uint32_t> ids;
@@ -596,6 +597,85 @@ TEST(CpuBvhCuller, SeveralViewsInOnePassEqualOnePassEach) {
     }
     culler.cull(std::span<const Frustum>(), {}, results);
     EXPECT_TRUE(results.empty());
+  }
+}
+
+// A tree with an empty inner node (two empty leaves under it): check_flat_tree accepts it. With
+// range_objects 0 the traversal is the classic one and descends into the empty node (5 node
+// tests, as the GPU makes); with ranges of 1 the empty node is a range of no objects (3); with
+// 32 the root is one range (1). The fast culler makes the scalar traversal's tests each time.
+TEST(CpuBvhCuller, EmptyNodesDescendOnlyWithoutRanges) {
+  const std::vector<Aabb> boxes = {{{-1, -1, -1}, {1, 1, 1}}, {{2, 2, 2}, {3, 3, 3}}};
+  const Aabb big{{-10, -10, -10}, {10, 10, 10}};
+  auto node = [&](std::uint32_t skip, std::uint32_t first, std::uint32_t count, bool leaf) {
+    bvh::FlatNode n;
+    n.box = big;
+    n.skip = skip;
+    n.first = first;
+    n.count = count;
+    n.leaf = leaf;
+    return n;
+  };
+  bvh::FlatTree tree;
+  tree.nodes = {node(5, 0, 2, false), node(4, 0, 0, false), node(3, 0, 0, true), node(4, 0, 0, true), node(5, 0, 2, true)};
+  tree.objects = {0, 1};
+  ASSERT_EQ(bvh::check_flat_tree(tree, std::span<const Aabb>(boxes)), "");
+  const glm::vec4 plane[1] = {{1, 0, 0, 0}};  // x >= 0: every node straddles it
+  const Frustum f = Frustum::from_planes(plane);
+  for (std::uint32_t range : {0u, 1u, 32u}) {
+    const bvh::HierarchicalResult expected = bvh::cull_hierarchical(tree, std::span<const Aabb>(boxes), f, {range});
+    EXPECT_EQ(expected.node_tests, range == 0 ? 5u : range == 1 ? 3u : 1u) << "ranges " << range;  // (32: the root is a range)
+    for (Isa isa : runnable_isas()) {
+      fast::CpuBvhCuller culler(1, isa);
+      culler.upload(tree, std::span<const Aabb>(boxes));
+      fast::CpuBvhCullOptions options{true, true};
+      options.range_objects = range;
+      bvh::HierarchicalResult got;
+      std::vector<std::uint32_t> ids;
+      culler.cull(f, options, got, ids);
+      const std::string what = "ranges " + std::to_string(range) + " isa=" + std::string(to_string(isa));
+      expect_same_traversal(expected, got, what);
+      expect_visible_list(expected, tree, ids, what);
+    }
+  }
+}
+
+// The visible-list kernel of every instruction set against a scalar listing: zero, full and
+// partial words, a partial last word, and room for the vector stores or only for the ids.
+TEST(CpuBvhCuller, ListKernelListsTheMarkedIds) {
+  test::Rng rng{43};
+  for (Isa isa : runnable_isas()) {
+    const fast::detail::KernelTable table = fast::detail::kernels(isa);
+    for (std::size_t objects : {1u, 63u, 64u, 65u, 200u, 448u}) {
+      const std::size_t words = (objects + 63) / 64;
+      std::vector<std::uint32_t> from(objects);
+      for (std::size_t k = 0; k < objects; ++k) from[k] = static_cast<std::uint32_t>(1000 + 7 * k);
+      for (int pattern = 0; pattern < 6; ++pattern) {
+        std::vector<std::uint64_t> marks(words);
+        for (std::size_t w = 0; w < words; ++w) {
+          const int kind = (pattern + static_cast<int>(w)) % 4;  // zero, full, sparse, dense words in turn
+          std::uint64_t bits = 0;
+          for (unsigned b = 0; b < 64; ++b)
+            if (kind == 1 || (kind == 2 && rng.uniform(0.0f, 1.0f) < 0.1f) || (kind == 3 && rng.uniform(0.0f, 1.0f) < 0.7f)) bits |= 1ull << b;
+          marks[w] = bits;
+        }
+        if (objects % 64) marks.back() &= (1ull << (objects % 64)) - 1;  // no bit past the objects
+        std::vector<std::uint32_t> want;
+        for (std::size_t k = 0; k < objects; ++k)
+          if (marks[k / 64] >> (k % 64) & 1u) want.push_back(from[k]);
+        for (std::size_t slack : {0u, 16u}) {
+          std::vector<std::uint32_t> out(want.size() + slack + 1, 0xdeadbeefu);  // one guard past the room
+          std::uint32_t* end = table.list(marks.data(), words, from.data(), out.data(), out.data() + want.size() + slack);
+          const std::string what = std::string(to_string(isa)) + " objects " + std::to_string(objects) + " pattern " +
+                                   std::to_string(pattern) + " slack " + std::to_string(slack);
+          ASSERT_EQ(end - out.data(), static_cast<std::ptrdiff_t>(want.size())) << what;
+          EXPECT_EQ(std::vector<std::uint32_t>(out.begin(), out.begin() + std::ptrdiff_t(want.size())), want) << what;
+          if (slack == 0) {
+            EXPECT_EQ(out[want.size()], 0xdeadbeefu) << what << ": wrote past out_end";
+          }
+        }
+      }
+    }
   }
 }
 

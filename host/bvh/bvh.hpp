@@ -171,10 +171,11 @@ struct HierarchicalResult {
 };
 /// How cull_hierarchical walks a tree.
 struct TraversalOptions {
-  /// A straddling node with at most this many objects tests its objects (each against the
-  /// planes the node straddles) instead of descending: fewer node tests, more object tests,
-  /// and each object range is contiguous (fast::CpuBvhCuller tests ranges as streams).
-  /// 0: only leaves test their objects (the classic traversal; the GPU culler's).
+  /// When nonzero, a straddling node with at most this many objects tests its objects (each
+  /// against the planes the node straddles) instead of descending: fewer node tests, more
+  /// object tests, and each object range is contiguous (fast::CpuBvhCuller tests ranges as
+  /// streams). 0: only leaves test their objects, and every straddling inner node descends,
+  /// an empty one too (the classic traversal; the GPU culler's).
   std::uint32_t range_objects = 0;
   bool operator==(const TraversalOptions&) const = default;
 };

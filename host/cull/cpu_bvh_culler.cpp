@@ -70,9 +70,10 @@ void CpuBvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume
   // changes, so a failure leaves the old upload. The arrays are then rewritten in place: an
   // engine that refits and uploads every frame reuses their memory instead of faulting in
   // ~90 bytes per object of fresh pages per upload (10^6 boxes: 109 -> 61 ns/object). The
-  // node pairs and volume records start on a cache line (CacheLineVector): with malloc's
-  // 16-byte alignment, records could straddle two lines, and the passes ran 0.29 -> 0.32
-  // ns/object depending on where an allocation happened to land.
+  // node pairs and the volumes' columns start on a cache line (CacheLineVector): with
+  // malloc's 16-byte alignment, node records (and the volume records before the columns)
+  // could straddle two lines, and the passes ran 0.29 -> 0.32 ns/object depending on where
+  // an allocation happened to land.
   const std::size_t nodes = tree.nodes.size(), n = tree.objects.size();
   if (nodes >= detail::kWalkLeaf)  // (a pair index at or past the leaf bit would read as a leaf)
     throw std::length_error("CpuBvhCuller::upload: " + std::to_string(nodes) + " nodes (at most 2^31 - 1)");
@@ -193,7 +194,7 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
     while (head != frontier.size() && frontier.size() - head + tasks.size() - first_task < wanted) {
       const Task t = frontier[head++];
       const bvh::FlatNode& node = nodes[t.node_or_first];
-      if (node.leaf || node.count <= options.range_objects) {  // leaves (and small nodes) go to the threads whole
+      if (node.leaf || (options.range_objects != 0 && node.count <= options.range_objects)) {  // leaves (and small nodes) go to the threads whole
         tasks.push_back(t);
         continue;
       }
@@ -221,7 +222,14 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
 
   std::vector<Tally>& tallies = tallies_;
   tallies.assign(tasks.size(), Tally{});
+  // Every thread's work lists sized here for the largest subtree, whichever thread takes it,
+  // so a steady pass allocates nothing.
   work_.resize(pool_->size());
+  std::size_t most_work = 0;
+  for (const Task& t : tasks)
+    if (t.kind == Task::Subtree) most_work = std::max(most_work, detail::walk_work_words(nodes[t.node_or_first].skip - t.node_or_first));
+  for (std::vector<std::uint32_t>& w : work_)
+    if (w.size() < most_work) w.resize(most_work);
   // Each subtree task marks its visible objects in its own words of marks_ (a bit per object
   // of its range), from which the last step lists them.
   std::size_t mark_words = 0;
@@ -258,11 +266,9 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
       tally.visible = tally.inside = count;
       return;
     }
-    std::vector<std::uint32_t>& work = work_[pool_->thread_index()];  // kept between passes
+    std::vector<std::uint32_t>& work = work_[pool_->thread_index()];  // kept between passes, sized above
     const bvh::FlatNode& root = nodes[task.node_or_first];
     const std::size_t subtree_nodes = root.skip - task.node_or_first;
-    const std::size_t work_words = detail::walk_work_words(subtree_nodes);
-    if (work.size() < work_words) work.resize(work_words);
     detail::WalkOutput out;
     out.classes = classes ? reinterpret_cast<std::uint8_t*>(view_classes.data()) : nullptr;
     if (ids) {

@@ -89,7 +89,10 @@ class CpuBvhCuller {
   BvKind kind() const { return kind_; }
 
   /// Over OBBs or spheres the frustum needs unit plane normals (bvh::require_unit_normals;
-  /// Frustum's factories make them), else std::invalid_argument.
+  /// Frustum's factories make them), else std::invalid_argument. With default options (ranges
+  /// of kDefaultRangeObjects): the classes equal bvh::cull_hierarchical's with its defaults,
+  /// the test counts those of bvh::cull_hierarchical(tree, volumes, frustum,
+  /// {CpuBvhCullOptions::kDefaultRangeObjects}).
   bvh::HierarchicalResult cull(const Frustum& frustum);
   /// The same into `result`, reusing its storage.
   void cull(const Frustum& frustum, bvh::HierarchicalResult& result);

@@ -762,7 +762,8 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
     counts.node_tests += static_cast<unsigned>(__builtin_popcount(valid));
     const vi link = reinterpret_cast<vi>(col[7]), count = reinterpret_cast<vi>(col[3]);
     const std::uint32_t live = ~lane_bits(outside != 0) & valid;
-    const std::uint32_t ends = lane_bits(link < 0) | lane_bits(reinterpret_cast<vu>(count) <= small_limit);  // kWalkLeaf: the sign bit
+    // Leaves (kWalkLeaf: the sign bit), and with range_objects the nodes of at most that many objects.
+    const std::uint32_t ends = lane_bits(link < 0) | (t.range_objects ? lane_bits(reinterpret_cast<vu>(count) <= small_limit) : 0u);
     const std::uint32_t inner = live & ~ends & ~lane_bits(straddled == 0);
     // Straddling inner nodes: their children's pair listed, with the planes still to test.
     if (inner) {
