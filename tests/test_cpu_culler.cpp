@@ -430,8 +430,7 @@ TEST(CpuBvhCuller, EqualsTheScalarTraversalExactly) {
               std::vector<std::uint32_t> ids{7, 7, 7};
               for (bool classes : {true, false}) {
                 bvh::HierarchicalResult listed;
-                fast::CpuBvhCullOptions cull_options{classes, true};
-                cull_options.range_objects = range;
+                const fast::CpuBvhCullOptions cull_options{classes, true, range};
                 culler.cull(views[v], cull_options, listed, ids);
                 if (classes) expect_same_traversal(expected, listed, what);
                 expect_visible_list(expected, tree, ids, what + (classes ? " (list and classes)" : " (list only)"));
@@ -483,8 +482,7 @@ TEST(CpuBvhCuller, TouchingBoxesAndLargeLeavesEqualTheScalarTraversal) {
           const bvh::HierarchicalResult expected = bvh::cull_hierarchical(tree, boxes, views[v], {range});
           std::vector<std::uint32_t> ids;
           bvh::HierarchicalResult got;
-          fast::CpuBvhCullOptions cull_options{true, true};
-          cull_options.range_objects = range;
+          const fast::CpuBvhCullOptions cull_options{true, true, range};
           culler.cull(views[v], cull_options, got, ids);
           expect_same_traversal(expected, got, what);
           expect_visible_list(expected, tree, ids, what);
@@ -529,8 +527,7 @@ TEST(CpuBvhCuller, MarginEdgesAndHugeCoordinatesEqualTheScalarTraversal) {
         const std::string what = "isa=" + std::string(to_string(isa)) + " ranges " + std::to_string(range) + " view " + std::to_string(v);
         std::vector<std::uint32_t> ids;
         bvh::HierarchicalResult got;
-        fast::CpuBvhCullOptions options{true, true};
-        options.range_objects = range;
+        const fast::CpuBvhCullOptions options{true, true, range};
         culler.upload(sphere_tree, std::span<const Sphere>(spheres));
         const bvh::HierarchicalResult s = bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(spheres), views[v], {range});
         culler.cull(views[v], options, got, ids);
@@ -628,8 +625,7 @@ TEST(CpuBvhCuller, EmptyNodesDescendOnlyWithoutRanges) {
     for (Isa isa : runnable_isas()) {
       fast::CpuBvhCuller culler(1, isa);
       culler.upload(tree, std::span<const Aabb>(boxes));
-      fast::CpuBvhCullOptions options{true, true};
-      options.range_objects = range;
+      const fast::CpuBvhCullOptions options{true, true, range};
       bvh::HierarchicalResult got;
       std::vector<std::uint32_t> ids;
       culler.cull(f, options, got, ids);
@@ -691,8 +687,7 @@ TEST(CpuBvhCuller, ASteadyPassAllocatesNothing) {
   std::vector<fast::CpuBvhViewResult> results;
   bvh::HierarchicalResult single;
   std::vector<std::uint32_t> ids;
-  fast::CpuBvhCullOptions both{true, true}, ranges_of_8{false, true};
-  ranges_of_8.range_objects = 8;
+  const fast::CpuBvhCullOptions both{true, true}, ranges_of_8{false, true, 8};
   auto frame = [&] {
     culler.cull(views, both, results);
     culler.cull(views, ranges_of_8, results);

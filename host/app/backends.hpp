@@ -189,8 +189,7 @@ BackendResults cull_bvh_on_backends(const bvh::FlatTree& tree, std::span<const V
       culler.upload(tree, boxes);
       r.cpu_upload_ns = elapsed_ns(upload_start);
       std::vector<fast::CpuBvhViewResult> results;
-      fast::CpuBvhCullOptions classes_only{true, false};
-      classes_only.range_objects = traversal.range_objects;
+      const fast::CpuBvhCullOptions classes_only{true, false, traversal.range_objects};
       if (warm_up && !frusta.empty()) culler.cull(frusta.first(1), classes_only, results);
       const auto start = std::chrono::steady_clock::now();
       culler.cull(frusta, classes_only, results);  // every view in one pass

@@ -614,7 +614,7 @@ HierarchicalResult cull_hierarchical_impl(const FlatTree& tree, std::span<const 
       for (std::uint32_t k = node.first; k < node.first + node.count; ++k) r.classes[tree.objects[k]] = Classification::Inside;
       continue;
     }
-    if (node.leaf || (options.range_objects != 0 && node.count <= options.range_objects)) {
+    if (options.tests_objects_of(node)) {
       for (std::uint32_t k = node.first; k < node.first + node.count; ++k) {
         r.classes[tree.objects[k]] = classify_object(volumes[tree.objects[k]], frustum, straddled);
         ++r.object_tests;

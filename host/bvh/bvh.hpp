@@ -177,6 +177,9 @@ struct TraversalOptions {
   /// streams). 0: only leaves test their objects, and every straddling inner node descends,
   /// an empty one too (the classic traversal; the GPU culler's).
   std::uint32_t range_objects = 0;
+  /// Whether a straddling `node` tests its objects rather than descending: a leaf, or with
+  /// range_objects a node of at most that many objects.
+  bool tests_objects_of(const FlatNode& node) const { return node.leaf || (range_objects != 0 && node.count <= range_objects); }
   bool operator==(const TraversalOptions&) const = default;
 };
 

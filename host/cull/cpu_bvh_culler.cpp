@@ -194,7 +194,7 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
     while (head != frontier.size() && frontier.size() - head + tasks.size() - first_task < wanted) {
       const Task t = frontier[head++];
       const bvh::FlatNode& node = nodes[t.node_or_first];
-      if (node.leaf || (options.range_objects != 0 && node.count <= options.range_objects)) {  // leaves (and small nodes) go to the threads whole
+      if (bvh::TraversalOptions{options.range_objects}.tests_objects_of(node)) {  // leaves (and small nodes) go to the threads whole
         tasks.push_back(t);
         continue;
       }
