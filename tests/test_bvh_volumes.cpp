@@ -86,6 +86,42 @@ TEST(BvhVolumes, NonUnitPlaneNormalsAreRefused) {
   EXPECT_NO_THROW(bvh::cull_hierarchical(tree, std::span<const Sphere>(spheres), Frustum::from_planes(planes)));
 }
 
+// check_flat_structure is check_flat_tree without the volumes: the same message for a broken
+// tree, nothing for a bad volume (which check_flat_tree and volume_in_leaf find).
+TEST(BvhVolumes, TheStructureCheckIsTheTreeCheckWithoutVolumes) {
+  test::Rng rng{5};
+  const test::RandomVolumes v = test::random_volumes(rng, 500, 20.0f, 2.0f);
+  const bvh::FlatTree tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(v.obbs))));
+  const std::span<const Obb> obbs(v.obbs);
+  EXPECT_EQ(bvh::check_flat_structure(tree, obbs.size()), "");
+  EXPECT_EQ(bvh::check_flat_tree(tree, obbs), "");
+  bvh::FlatTree twice = tree, skip = tree, range = tree, box = tree;
+  twice.objects[3] = twice.objects[2];
+  skip.nodes[1].skip = std::uint32_t(tree.nodes.size()) + 2;
+  range.nodes[1].count += 1;
+  box.nodes[0].box.max.x = std::numeric_limits<float>::infinity();
+  for (const bvh::FlatTree* bad : {&twice, &skip, &range, &box}) {
+    const std::string why = bvh::check_flat_structure(*bad, obbs.size());
+    EXPECT_NE(why, "");
+    EXPECT_EQ(why, bvh::check_flat_tree(*bad, obbs));
+  }
+  EXPECT_NE(bvh::check_flat_structure(tree, obbs.size() - 1), "");
+  // A bad volume: the tree is fine, the volume is not.
+  std::vector<Obb> moved = v.obbs;
+  const std::uint32_t id = tree.objects[7];
+  moved[id].center.x += 1000.0f;
+  EXPECT_EQ(bvh::check_flat_structure(tree, moved.size()), "");
+  EXPECT_NE(bvh::check_flat_tree(tree, std::span<const Obb>(moved)), "");
+  std::size_t leaf = 0;
+  while (!(tree.nodes[leaf].leaf && tree.nodes[leaf].first <= 7 && 7 < tree.nodes[leaf].first + tree.nodes[leaf].count)) ++leaf;
+  EXPECT_TRUE(bvh::volume_in_leaf(tree.nodes[leaf].box, v.obbs[id]));
+  EXPECT_FALSE(bvh::volume_in_leaf(tree.nodes[leaf].box, moved[id]));
+  Sphere nan_sphere = v.spheres[0];
+  nan_sphere.radius = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_FALSE(bvh::volume_in_leaf(Aabb{glm::vec3(-1e30f), glm::vec3(1e30f)}, nan_sphere));
+  EXPECT_TRUE(bvh::volume_in_leaf(Aabb{glm::vec3(-1e30f), glm::vec3(1e30f)}, v.spheres[0]));
+}
+
 TEST(BvhVolumes, RandomObbsAndSpheresMatchFlat) {
   test::Rng rng{11};
   const std::vector<Frustum> frusta = {Frustum::from_view_proj(test::test_view_proj()),

@@ -732,6 +732,56 @@ TEST(CpuBvhCuller, RefusesATreeOfOtherBoxes) {
   EXPECT_EQ(culler.cull(Frustum::from_planes(all)).visible, boxes.size());
 }
 
+// The volumes are checked as the threads gather them (valid, inside their leaf's box): a bad
+// one anywhere, in any kind, is refused with bvh::check_flat_tree's message, and the upload
+// before it still culls as it did.
+TEST(CpuBvhCuller, RefusesABadVolumeWhereverItIsAndKeepsTheLastUpload) {
+  test::Rng rng{41};
+  const std::size_t n = 40000;  // many parts on every thread
+  const test::RandomVolumes v = test::random_volumes(rng, n, 30.0f, 2.0f);
+  const std::vector<Frustum> views = test_views(false);
+  const bvh::FlatTree box_tree = bvh::flatten(bvh::build("binned-sah", v.aabbs));
+  const bvh::FlatTree obb_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(v.obbs))));
+  const bvh::FlatTree sphere_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Sphere>(v.spheres))));
+  fast::CpuBvhCuller culler(3);
+  culler.upload(box_tree, std::span<const Aabb>(v.aabbs));
+  const bvh::HierarchicalResult before = culler.cull(views[0]);
+  auto expect_refused = [&](const auto& tree, const auto& volumes, const std::string& what) {
+    SCOPED_TRACE(what);
+    const std::string why = bvh::check_flat_tree(tree, std::span(volumes));
+    ASSERT_FALSE(why.empty());
+    try {
+      culler.upload(tree, std::span(volumes));
+      ADD_FAILURE() << "accepted";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_EQ(std::string(e.what()), "CpuBvhCuller::upload: " + why);
+    }
+    EXPECT_EQ(culler.kind(), BvKind::Aabb);
+    expect_same_traversal(before, culler.cull(views[0]), what);
+  };
+  for (std::size_t slot : {std::size_t(0), n / 3, n / 2 + 17, n - 1}) {  // tree-order slots: first, middle parts, last
+    const std::uint32_t id = box_tree.objects[slot];
+    std::vector<Aabb> boxes = v.aabbs;
+    boxes[id].max.x = std::numeric_limits<float>::quiet_NaN();
+    expect_refused(box_tree, boxes, "a NaN box at slot " + std::to_string(slot));
+    boxes = v.aabbs;
+    boxes[id].max.y += 1000.0f;  // valid, but out of its leaf
+    expect_refused(box_tree, boxes, "a box out of its leaf at slot " + std::to_string(slot));
+    std::vector<Obb> obbs = v.obbs;
+    obbs[obb_tree.objects[slot]].center.z -= 1000.0f;
+    expect_refused(obb_tree, obbs, "an OBB out of its leaf at slot " + std::to_string(slot));
+    std::vector<Sphere> spheres = v.spheres;
+    spheres[sphere_tree.objects[slot]].radius = -1.0f;
+    expect_refused(sphere_tree, spheres, "a negative radius at slot " + std::to_string(slot));
+  }
+  // A good upload of another kind after the refusals, then boxes again: as fresh.
+  culler.upload(sphere_tree, std::span<const Sphere>(v.spheres));
+  expect_same_traversal(bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(v.spheres), views[1], kFastTraversal),
+                        culler.cull(views[1]), "spheres after the refusals");
+  culler.upload(box_tree, std::span<const Aabb>(v.aabbs));
+  expect_same_traversal(before, culler.cull(views[0]), "boxes again");
+}
+
 // Trees of other sizes, leaf sizes and volume kinds uploaded one after another on one culler:
 // each culls as a fresh culler would (nothing of an earlier upload leaks into a later one).
 TEST(CpuBvhCuller, UploadsOneAfterAnotherCullAsAFreshCuller) {

@@ -461,6 +461,44 @@ TEST_F(GpuBvh, RecordsIntoTheCallersCommandBuffer) {
   vkDestroyCommandPool(dev, pool, nullptr);
 }
 
+// A bad volume anywhere in a large tree is refused with bvh::check_flat_tree's message before
+// anything is written, so the last upload still culls.
+TEST_F(GpuBvh, ABadVolumeInALargeTreeIsRefusedAndTheLastUploadKept) {
+  test::Rng rng{47};
+  const std::size_t n = 50000;  // several upload tasks
+  const test::RandomVolumes v = test::random_volumes(rng, n, 60.0f, 2.0f);
+  const bvh::FlatTree flat = flat_tree(v.aabbs);
+  const bvh::FlatTree obb_flat = tree_over(v.obbs);
+  const std::vector<Frustum> frusta = test_frusta();
+  culler().upload(flat, std::span<const Aabb>(v.aabbs));
+  auto expect_refused = [&](const bvh::FlatTree& tree, const auto& volumes, const std::string& what) {
+    const std::string why = bvh::check_flat_tree(tree, std::span(volumes));
+    SCOPED_TRACE(what + ": " + why);
+    ASSERT_FALSE(why.empty());
+    try {
+      culler().upload(tree, std::span(volumes));
+      ADD_FAILURE() << "accepted";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_EQ(std::string(e.what()), "BvhCuller::upload: " + why);
+    }
+  };
+  for (std::size_t slot : {std::size_t(0), n / 2, n - 1}) {
+    std::vector<Aabb> boxes = v.aabbs;
+    boxes[flat.objects[slot]].min.z -= 500.0f;  // out of its leaf
+    expect_refused(flat, boxes, "a box out of its leaf at slot " + std::to_string(slot));
+    std::vector<Obb> obbs = v.obbs;
+    obbs[obb_flat.objects[slot]].half_extents.x = NAN;
+    expect_refused(obb_flat, obbs, "a NaN OBB at slot " + std::to_string(slot));
+  }
+  const gpu::CullResult kept = culler().cull(frusta);  // no upload in between
+  ASSERT_EQ(kept.views.size(), frusta.size());
+  for (std::size_t view = 0; view < frusta.size(); ++view) {
+    const bvh::HierarchicalResult cpu = bvh::cull_hierarchical(flat, std::span<const Aabb>(v.aabbs), frusta[view]);
+    EXPECT_EQ(kept.views[view].classes, cpu.classes) << "view " << view;
+    EXPECT_EQ(kept.views[view].node_tests, cpu.node_tests) << "view " << view;
+  }
+}
+
 TEST_F(GpuBvh, BadTreesAndOptionsAreClearErrors) {
   std::vector<Aabb> boxes(100, Aabb{glm::vec3(-1), glm::vec3(1)});
   bvh::FlatTree flat = flat_tree(boxes);

@@ -526,20 +526,24 @@ FlatTree flatten(const Tree& tree) {
 
 namespace {
 
+// check_flat_tree over `n` objects; without `volumes` (check_flat_structure), without the
+// volumes' validity and the leaves' enclosure of them.
 template <class Volume>
-std::string check_flat_tree_impl(const FlatTree& tree, std::span<const Volume> volumes, std::vector<std::uint32_t>* depth_out) {
-  const std::size_t n = volumes.size(), nodes = tree.nodes.size();
-  const std::string kind(to_string(kind_of<Volume>()));
+std::string check_flat_tree_impl(const FlatTree& tree, std::size_t n, const Volume* volumes_or_null, std::vector<std::uint32_t>* depth_out) {
+  const Volume* const volumes = n ? volumes_or_null : nullptr;  // (nothing to check without objects)
+  const std::size_t nodes = tree.nodes.size();
+  const std::string kind = volumes_or_null ? std::string(to_string(kind_of<Volume>())) + " volumes" : "objects";
   if (tree.objects.size() != n)
-    return "the tree orders " + std::to_string(tree.objects.size()) + " objects, but " + std::to_string(n) + " " + kind + " volumes were given";
+    return "the tree orders " + std::to_string(tree.objects.size()) + " objects, but " + std::to_string(n) + " " + kind + " were given";
   if ((nodes == 0) != (n == 0)) return nodes ? "a tree over no objects must have no nodes" : "no nodes for " + std::to_string(n) + " objects";
   std::vector<char> seen(n, 0);
   for (std::uint32_t o : tree.objects) {
     if (o >= n) return "object id " + std::to_string(o) + " out of range (" + std::to_string(n) + " objects)";
     if (seen[o]++) return "object id " + std::to_string(o) + " appears twice";
   }
-  for (std::size_t i = 0; i < n; ++i)
-    if (!is_valid(volumes[i])) return kind + " " + std::to_string(i) + ": " + invalid_reason(volumes[i]);
+  if (volumes)  // (before the leaves' checks, which assume valid volumes for their message)
+    for (std::size_t i = 0; i < n; ++i)
+      if (!is_valid(volumes[i])) return std::string(to_string(kind_of<Volume>())) + " " + std::to_string(i) + ": " + invalid_reason(volumes[i]);
   // Depth of every node: children follow their parent in depth-first order.
   std::vector<std::uint32_t> depth(nodes, 0);
   if (nodes) {
@@ -556,13 +560,14 @@ std::string check_flat_tree_impl(const FlatTree& tree, std::span<const Volume> v
     if (!is_valid(node.box)) return at + "invalid box: " + invalid_reason(node.box);
     if (node.leaf) {
       if (node.skip != i + 1) return at + "leaf whose skip is not the next node";
-      for (std::uint32_t k = node.first; k < node.first + node.count; ++k) {
-        // (leaves cover the object order in node order, so this runs over it ahead of them)
-        if (k + kGatherAhead < n) prefetch_object(&volumes[tree.objects[k + kGatherAhead]]);
-        if (!encloses(node.box, enclosing_box(volumes[tree.objects[k]])))
-          return at + "box does not enclose " + kind + " " + std::to_string(tree.objects[k]) +
-                 (std::is_same_v<Volume, Aabb> ? "" : " (build the tree over bvh::enclosing_boxes)");
-      }
+      if (volumes)
+        for (std::uint32_t k = node.first; k < node.first + node.count; ++k) {
+          // (leaves cover the object order in node order, so this runs over it ahead of them)
+          if (k + kGatherAhead < n) prefetch_object(&volumes[tree.objects[k + kGatherAhead]]);
+          if (!volume_in_leaf(node.box, volumes[tree.objects[k]]))
+            return at + "box does not enclose " + std::string(to_string(kind_of<Volume>())) + " " + std::to_string(tree.objects[k]) +
+                   (std::is_same_v<Volume, Aabb> ? "" : " (build the tree over bvh::enclosing_boxes)");
+        }
     } else {
       if (i + 1 >= node.skip) return at + "inner node without children";
       const std::uint32_t second = tree.nodes[i + 1].skip;
@@ -582,13 +587,19 @@ std::string check_flat_tree_impl(const FlatTree& tree, std::span<const Volume> v
 }  // namespace
 
 std::string check_flat_tree(const FlatTree& tree, std::span<const Aabb> volumes, std::vector<std::uint32_t>* depth) {
-  return check_flat_tree_impl(tree, volumes, depth);
+  return check_flat_tree_impl(tree, volumes.size(), volumes.data(), depth);
 }
 std::string check_flat_tree(const FlatTree& tree, std::span<const Obb> volumes, std::vector<std::uint32_t>* depth) {
-  return check_flat_tree_impl(tree, volumes, depth);
+  return check_flat_tree_impl(tree, volumes.size(), volumes.data(), depth);
 }
 std::string check_flat_tree(const FlatTree& tree, std::span<const Sphere> volumes, std::vector<std::uint32_t>* depth) {
-  return check_flat_tree_impl(tree, volumes, depth);
+  return check_flat_tree_impl(tree, volumes.size(), volumes.data(), depth);
+}
+bool volume_in_leaf(const Aabb& leaf, const Aabb& volume) { return is_valid(volume) && encloses(leaf, volume); }
+bool volume_in_leaf(const Aabb& leaf, const Obb& volume) { return is_valid(volume) && encloses(leaf, enclosing_box(volume)); }
+bool volume_in_leaf(const Aabb& leaf, const Sphere& volume) { return is_valid(volume) && encloses(leaf, enclosing_box(volume)); }
+std::string check_flat_structure(const FlatTree& tree, std::size_t object_count, std::vector<std::uint32_t>* depth) {
+  return check_flat_tree_impl(tree, object_count, static_cast<const Aabb*>(nullptr), depth);
 }
 
 namespace {

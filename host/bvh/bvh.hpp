@@ -9,6 +9,7 @@
 #include "geom/classification.hpp"
 #include "geom/frustum.hpp"
 #include "geom/obb.hpp"
+#include "geom/prefetch.hpp"
 #include "geom/sphere.hpp"
 
 /// Bounding volume hierarchies over object AABBs (issue 4, first part): the binned-SAH
@@ -88,6 +89,37 @@ FlatTree flatten(const Tree& tree);
 std::string check_flat_tree(const FlatTree& tree, std::span<const Aabb> volumes, std::vector<std::uint32_t>* depth = nullptr);
 std::string check_flat_tree(const FlatTree& tree, std::span<const Obb> volumes, std::vector<std::uint32_t>* depth = nullptr);
 std::string check_flat_tree(const FlatTree& tree, std::span<const Sphere> volumes, std::vector<std::uint32_t>* depth = nullptr);
+/// check_flat_tree's checks of the tree alone, over `object_count` objects: all but the
+/// volumes' validity and the leaves' enclosure of them. For a caller that gathers the volumes
+/// in tree order anyway and checks those two on its copy (volume_in_leaf), sparing a second
+/// gather; on a failure there, check_flat_tree says what is wrong.
+std::string check_flat_structure(const FlatTree& tree, std::size_t object_count, std::vector<std::uint32_t>* depth = nullptr);
+/// The check check_flat_tree makes of each object in a leaf with box `leaf`: the volume is
+/// valid and its enclosing_box() inside `leaf`.
+bool volume_in_leaf(const Aabb& leaf, const Aabb& volume);
+bool volume_in_leaf(const Aabb& leaf, const Obb& volume);
+bool volume_in_leaf(const Aabb& leaf, const Sphere& volume);
+/// The volumes of the leaves among nodes [first_node, end_node) of a tree that passed
+/// check_flat_structure, in tree order (a run of nodes holds a run of the object order):
+/// visit(slot, volume) for each that passes volume_in_leaf, gathered from `volumes` by the
+/// tree's ids with prefetches ahead; false at the first that does not. Runs of nodes split a
+/// tree's volumes among threads, each gathered and checked once.
+template <class Volume, class Visit>
+bool visit_leaf_volumes(const FlatTree& tree, std::span<const Volume> volumes, std::size_t first_node, std::size_t end_node,
+                        Visit&& visit) {
+  const std::size_t n = tree.objects.size();
+  for (std::size_t i = first_node; i < end_node; ++i) {
+    const FlatNode& node = tree.nodes[i];
+    if (!node.leaf) continue;
+    for (std::size_t k = node.first, last = std::size_t(node.first) + node.count; k < last; ++k) {
+      if (k + kGatherAhead < n) prefetch_object(&volumes[tree.objects[k + kGatherAhead]]);
+      const Volume& v = volumes[tree.objects[k]];
+      if (!volume_in_leaf(node.box, v)) return false;
+      visit(k, v);
+    }
+  }
+  return true;
+}
 
 /// The p/n-vertex test of `box` against the planes of `frustum` in `mask` (bit k = plane k):
 /// OUTSIDE at the first such plane the box is behind, else INTERSECTING when it straddles any
