@@ -182,7 +182,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> builders = {"all"};
   std::vector<double> fractions = {0.01, 0.1, 0.5};
   std::size_t cull_size = 1000000;
-  std::uint32_t leaf_size = 4;
+  std::uint32_t leaf_size = bvh::kCullingLeafSize;  // (the cull part's tree)
   int repeats = 0;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];

@@ -5,6 +5,8 @@
 #include <string>
 #include <vector>
 
+#include "bvh/builders.hpp"
+
 namespace cullpipe::app {
 
 /// Which implementation classifies: the GPU, the scalar CPU reference, or both (compared).
@@ -44,7 +46,7 @@ struct RunOptions : SceneOptions {
   std::string bv = "aabb";  ///< aabb | obb | sphere
   std::string cull = "flat";            ///< flat (every object) | bvh (hierarchical)
   std::string builder = "binned-sah";   ///< --cull bvh: builder name (bvh::builders())
-  std::uint32_t leaf_size = 4;          ///< --cull bvh: most objects per leaf
+  std::uint32_t leaf_size = bvh::kCullingLeafSize;  ///< --cull bvh: most objects per leaf
   Backend backend = Backend::Both;
   std::string cpu = "reference";  ///< CPU side: reference (scalar oracle) | fast (SIMD, every core, bit-exact)
   /// --cull bvh on the CPU: bvh::TraversalOptions::range_objects (unset: the fast path's
