@@ -42,12 +42,13 @@
 
 #include "shared/cull_types.h"
 
-layout(local_size_x_id = 1) in;
+layout(local_size_x_id = 1) in;  // the device's subgroup size, at most BVH_CULL_GROUP_SIZE, set by the host
 
 // A listed leaf's objects go to records in chunks of at most BVH_CHUNK_OBJECTS (16): (first
 // slot, planes to test | (objects - 1) << CHUNK_SIZE_SHIFT), then, once tested, (first slot,
-// visible bits | INSIDE bits << BVH_CHUNK_OBJECTS).
-const uint BVH_CHUNK_OBJECTS = 16u, CHUNK_SIZE_SHIFT = 8u, CHUNK_BITS = (1u << BVH_CHUNK_OBJECTS) - 1u;  // = BVH_CULL_GROUP_SIZE, set by the host
+// visible bits | INSIDE bits << BVH_CHUNK_OBJECTS). A chunk's record is read and rewritten by
+// one lane only (the same lane in steps 3 and 4), so no lane reads another's record there.
+const uint BVH_CHUNK_OBJECTS = 16u, CHUNK_SIZE_SHIFT = 8u, CHUNK_BITS = (1u << BVH_CHUNK_OBJECTS) - 1u;
 layout(constant_id = 2) const uint BV_KIND = BV_KIND_AABB;  // the node margin and the object test
 layout(constant_id = 3) const uint WRITE_DRAWS = 0;  // also write draw commands
 
@@ -197,8 +198,8 @@ void main() {
   }
 
   // 2. The cut subtrees, by the whole subgroup. The workgroup's slice of the scratch: its cut
-  // subtrees' objects, adjacent in tree order; accepted ranges from its front, listed objects
-  // (then the visible ones among them) from its back.
+  // subtrees' objects, adjacent in tree order; accepted ranges from its front, listed chunks
+  // from its back (rewritten in place once tested).
   uint lanes = subgroupAdd(1u), rank = subgroupExclusiveAdd(1u);
   uint slice_first = subgroupMin(has_cut ? cut_first : 0xffffffffu), slice_end = subgroupMax(has_cut ? cut_first + cut_count : 0u);
   uint base = view * object_count + slice_first, back = view * object_count + slice_end - 1u;
@@ -261,15 +262,17 @@ void main() {
   }
 
   // 3. The listed chunks, a lane each: its objects tested one per round (as many rounds as
-  // the largest chunk of the subgroup's eight has objects), and the chunk's record rewritten
-  // in place with the objects found visible and INSIDE, a bit each.
+  // the largest of the subgroup's chunks has objects), and the chunk's record rewritten in
+  // place with the objects found visible and INSIDE, a bit each. A lane without a chunk
+  // tests the slice's first object, and the answer is dropped.
   subgroupMemoryBarrierBuffer();
   subgroupBarrier();
   uint tested_visible = 0u, tested_inside = 0u;  // this lane's
   for (uint first = 0u; first < listed; first += lanes) {
     bool live = first + rank < listed;
-    uint at = back - min(first + rank, listed - 1u);
-    uvec2 chunk = records[at];
+    uint at = back - (first + rank);
+    uvec2 chunk = uvec2(slice_first, 0u);
+    if (live) chunk = records[at];
     uint size = live ? (chunk.y >> CHUNK_SIZE_SHIFT) + 1u : 0u, mask = chunk.y & ALL_PLANES;
     uint visible_bits = 0u, inside_bits = 0u;
     uint rounds = subgroupMax(size);
@@ -305,10 +308,11 @@ void main() {
     for (uint k = rank; k < range.y; k += lanes) emit_visible(view, object_at(range.x + k), slot + k, CLASS_INSIDE);
     slot += range.y;
   }
-  for (uint first = 0u; first < listed; first += lanes) {  // the chunks, a lane each
+  for (uint first = 0u; first < listed; first += lanes) {  // the chunks, a lane each (as in step 3)
     bool live = first + rank < listed;
-    uvec2 chunk = records[back - min(first + rank, listed - 1u)];
-    uint bits = live ? chunk.y & CHUNK_BITS : 0u;
+    uvec2 chunk = uvec2(0u);
+    if (live) chunk = records[back - (first + rank)];
+    uint bits = chunk.y & CHUNK_BITS;
     uint found = uint(bitCount(bits));
     uint lane_slot = slot + subgroupExclusiveAdd(found);
     slot += subgroupAdd(found);

@@ -95,7 +95,7 @@ TEST_F(GpuBvh, ObbAndSphereHierarchiesAgree) {
   test::Rng rng{43};
   for (std::size_t n : {0u, 1u, 65u, 5000u}) {
     const test::RandomVolumes v = test::random_volumes(rng, n, 40.0f, 3.0f);
-    for (std::uint32_t leaf : {1u, 4u}) {
+    for (std::uint32_t leaf : {1u, 4u, 16u, 300u}) {  // (16: whole chunks; 300: leaves of many chunks)
       SCOPED_TRACE("n = " + std::to_string(n) + ", leaf " + std::to_string(leaf));
       expect_agreement(culler(), tree_over(v.obbs, leaf), v.obbs, test_frusta());
       expect_agreement(culler(), tree_over(v.spheres, leaf), v.spheres, test_frusta());
@@ -136,7 +136,7 @@ TEST_F(GpuBvh, VolumesAtThePlanesFarFromTheOriginAgree) {
   const Frustum f = test::frustum_at(eye);
   const test::TouchingVolumes set = test::touching_volumes(f, eye, rng, 20000);
   EXPECT_GT(set.contradicting, 0u);
-  for (std::uint32_t leaf : {1u, 4u}) {
+  for (std::uint32_t leaf : {1u, 4u, 16u, 40u}) {
     expect_agreement(culler(), tree_over(set.spheres, leaf), set.spheres, {f});
     expect_agreement(culler(), tree_over(set.obbs, leaf), set.obbs, {f});
   }
@@ -465,7 +465,7 @@ TEST_F(GpuBvh, RecordsIntoTheCallersCommandBuffer) {
 // anything is written, so the last upload still culls.
 TEST_F(GpuBvh, ABadVolumeInALargeTreeIsRefusedAndTheLastUploadKept) {
   test::Rng rng{47};
-  const std::size_t n = 50000;  // several upload tasks
+  const std::size_t n = 50000;
   const test::RandomVolumes v = test::random_volumes(rng, n, 60.0f, 2.0f);
   const bvh::FlatTree flat = flat_tree(v.aabbs);
   const bvh::FlatTree obb_flat = tree_over(v.obbs);
@@ -495,7 +495,11 @@ TEST_F(GpuBvh, ABadVolumeInALargeTreeIsRefusedAndTheLastUploadKept) {
   for (std::size_t view = 0; view < frusta.size(); ++view) {
     const bvh::HierarchicalResult cpu = bvh::cull_hierarchical(flat, std::span<const Aabb>(v.aabbs), frusta[view]);
     EXPECT_EQ(kept.views[view].classes, cpu.classes) << "view " << view;
+    EXPECT_EQ(kept.views[view].counts.visible, cpu.visible) << "view " << view;
+    EXPECT_EQ(kept.views[view].counts.inside, cpu.inside) << "view " << view;
     EXPECT_EQ(kept.views[view].node_tests, cpu.node_tests) << "view " << view;
+    EXPECT_EQ(kept.views[view].object_tests, cpu.object_tests) << "view " << view;
+    EXPECT_EQ(kept.views[view].visible_ids.size(), cpu.visible) << "view " << view;
   }
 }
 

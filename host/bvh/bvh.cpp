@@ -526,13 +526,14 @@ FlatTree flatten(const Tree& tree) {
 
 namespace {
 
-// check_flat_tree over `n` objects; without `volumes` (check_flat_structure), without the
-// volumes' validity and the leaves' enclosure of them.
+// check_flat_tree over `n` objects; without volumes (check_flat_structure: with_volumes false,
+// `volumes` unread), without the volumes' validity and the leaves' enclosure of them.
 template <class Volume>
-std::string check_flat_tree_impl(const FlatTree& tree, std::size_t n, const Volume* volumes_or_null, std::vector<std::uint32_t>* depth_out) {
-  const Volume* const volumes = n ? volumes_or_null : nullptr;  // (nothing to check without objects)
+std::string check_flat_tree_impl(const FlatTree& tree, std::size_t n, const Volume* all_volumes, bool with_volumes,
+                                 std::vector<std::uint32_t>* depth_out) {
+  const Volume* const volumes = with_volumes && n ? all_volumes : nullptr;  // (nothing to check without objects)
   const std::size_t nodes = tree.nodes.size();
-  const std::string kind = volumes_or_null ? std::string(to_string(kind_of<Volume>())) + " volumes" : "objects";
+  const std::string kind = with_volumes ? std::string(to_string(kind_of<Volume>())) + " volumes" : "objects";
   if (tree.objects.size() != n)
     return "the tree orders " + std::to_string(tree.objects.size()) + " objects, but " + std::to_string(n) + " " + kind + " were given";
   if ((nodes == 0) != (n == 0)) return nodes ? "a tree over no objects must have no nodes" : "no nodes for " + std::to_string(n) + " objects";
@@ -587,19 +588,19 @@ std::string check_flat_tree_impl(const FlatTree& tree, std::size_t n, const Volu
 }  // namespace
 
 std::string check_flat_tree(const FlatTree& tree, std::span<const Aabb> volumes, std::vector<std::uint32_t>* depth) {
-  return check_flat_tree_impl(tree, volumes.size(), volumes.data(), depth);
+  return check_flat_tree_impl(tree, volumes.size(), volumes.data(), true, depth);
 }
 std::string check_flat_tree(const FlatTree& tree, std::span<const Obb> volumes, std::vector<std::uint32_t>* depth) {
-  return check_flat_tree_impl(tree, volumes.size(), volumes.data(), depth);
+  return check_flat_tree_impl(tree, volumes.size(), volumes.data(), true, depth);
 }
 std::string check_flat_tree(const FlatTree& tree, std::span<const Sphere> volumes, std::vector<std::uint32_t>* depth) {
-  return check_flat_tree_impl(tree, volumes.size(), volumes.data(), depth);
+  return check_flat_tree_impl(tree, volumes.size(), volumes.data(), true, depth);
 }
 bool volume_in_leaf(const Aabb& leaf, const Aabb& volume) { return is_valid(volume) && encloses(leaf, volume); }
 bool volume_in_leaf(const Aabb& leaf, const Obb& volume) { return is_valid(volume) && encloses(leaf, enclosing_box(volume)); }
 bool volume_in_leaf(const Aabb& leaf, const Sphere& volume) { return is_valid(volume) && encloses(leaf, enclosing_box(volume)); }
 std::string check_flat_structure(const FlatTree& tree, std::size_t object_count, std::vector<std::uint32_t>* depth) {
-  return check_flat_tree_impl(tree, object_count, static_cast<const Aabb*>(nullptr), depth);
+  return check_flat_tree_impl(tree, object_count, static_cast<const Aabb*>(nullptr), false, depth);
 }
 
 namespace {

@@ -50,7 +50,7 @@ class BvhCuller {
   /// (and BVH_CUT_MAX_HEIGHT levels below their root), or single leaves. Fewer, larger subtrees mean fewer
   /// redundant tests of the nodes above them and fewer workgroups to share the walks. Default:
   /// kCpuSubtreeObjects on a CPU device (lavapipe: 4096 ran 6% faster than 1024 at 10^6 boxes and
-  /// 10 or 50% visible, interleaved A/B; 2048 and 8192 within noise of 4096), else
+  /// 10 or 50% visible, interleaved A/B, leaves of 4; 2048 and 8192 within noise of 4096), else
   /// kGpuSubtreeObjects (more invocations for a wide GPU; not measured on one). Takes effect
   /// at the next upload; throws std::invalid_argument for 0.
   static constexpr std::uint32_t kCpuSubtreeObjects = 4096, kGpuSubtreeObjects = 128;
