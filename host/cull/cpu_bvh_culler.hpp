@@ -83,8 +83,8 @@ class CpuBvhCuller {
   /// the ids of the volumes and every leaf's box encloses its volumes (their enclosing boxes):
   /// bvh::check_flat_tree, with its message; a refused upload leaves the last one. The threads
   /// gather and check the volumes together, into a second set of columns that replaces the
-  /// first when all have passed (the two take turns: twice the columns' memory, 24 bytes per
-  /// box, 60 per OBB, 16 per sphere).
+  /// first when all have passed (the two take turns, so the columns take twice their size:
+  /// 2 x 24 bytes per box, 2 x 60 per OBB, 2 x 16 per sphere).
   void upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes);
   void upload(const bvh::FlatTree& tree, std::span<const Obb> obbs);
   void upload(const bvh::FlatTree& tree, std::span<const Sphere> spheres);
