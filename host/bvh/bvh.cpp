@@ -19,7 +19,6 @@
 #include "bvh/box_ops.hpp"
 #include "geom/bv_kind.hpp"
 #include "geom/pn_vertex.hpp"
-#include "geom/prefetch.hpp"
 #include "geom/rounding.hpp"
 #include "geom/validate.hpp"
 #include "geom/volume_tests.hpp"
@@ -561,14 +560,10 @@ std::string check_flat_tree_impl(const FlatTree& tree, std::size_t n, const Volu
     if (!is_valid(node.box)) return at + "invalid box: " + invalid_reason(node.box);
     if (node.leaf) {
       if (node.skip != i + 1) return at + "leaf whose skip is not the next node";
-      if (volumes)
-        for (std::uint32_t k = node.first; k < node.first + node.count; ++k) {
-          // (leaves cover the object order in node order, so this runs over it ahead of them)
-          if (k + kGatherAhead < n) prefetch_object(&volumes[tree.objects[k + kGatherAhead]]);
-          if (!volume_in_leaf(node.box, volumes[tree.objects[k]]))
-            return at + "box does not enclose " + std::string(to_string(kind_of<Volume>())) + " " + std::to_string(tree.objects[k]) +
-                   (std::is_same_v<Volume, Aabb> ? "" : " (build the tree over bvh::enclosing_boxes)");
-        }
+      std::size_t failed = node.first;  // past the last volume that passed
+      if (volumes && !visit_leaf_volumes(tree, std::span<const Volume>(volumes, n), i, i + 1, [&](std::size_t k, const Volume&) { failed = k + 1; }))
+        return at + "box does not enclose " + std::string(to_string(kind_of<Volume>())) + " " + std::to_string(tree.objects[failed]) +
+               (std::is_same_v<Volume, Aabb> ? "" : " (build the tree over bvh::enclosing_boxes)");
     } else {
       if (i + 1 >= node.skip) return at + "inner node without children";
       const std::uint32_t second = tree.nodes[i + 1].skip;

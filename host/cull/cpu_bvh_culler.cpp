@@ -10,8 +10,6 @@
 
 #include "cull/kernel_select.hpp"
 #include "cull/thread_pool.hpp"
-#include "bvh/bvh.hpp"
-#include "geom/prefetch.hpp"
 
 namespace cullpipe::fast {
 
