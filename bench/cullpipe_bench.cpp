@@ -19,7 +19,9 @@
 // Morton curve; the camera's field of view is chosen so that about 1%, 10%, 50% are visible.
 // Every cell's answers are checked once against the reference before it is timed; ns/object
 // is the median over repeats, each method's repeats back to back after an untimed pass (so
-// objects that fit the caches are measured in cache, for every method alike).
+// objects that fit the caches are measured in cache, for every method alike). Without
+// --repeats, a cell repeats by size (3 to 51 times) and until it has taken 50 ms (at most 1001
+// times).
 //
 // usage: cullpipe-bench [--methods m,..] [--bv aabb,obb,sphere] [--sizes 1e3,..] [--fractions 0.01,..]
 //                       [--order shuffled,sorted] [--repeats R] [--threads T] [--isa NAME]
@@ -311,11 +313,18 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
 
     // Each method's repeats back to back after one untimed pass, so every method runs with the
     // caches as it leaves them (interleaving would hand one method's cache to the next).
+    // Without --repeats a method also repeats until its cell has taken kMinCellNs (at most
+    // kMaxRepeats times): a fast pass of 50 microseconds would otherwise be the median of a
+    // millisecond's worth of passes, at the mercy of whatever else the machine did then.
+    constexpr double kMinCellNs = 50e6;
+    constexpr int kMaxRepeats = 1001;
     for (Timed& t : timed) {
       if (!t.pass) continue;
       std::vector<double> warm_times, warm_walls;
       t.pass(warm_times, warm_walls);
-      for (int r = 0; r < reps; ++r) t.pass(t.times, t.walls);
+      const auto start = Clock::now();
+      for (int r = 0; r < reps || (config.repeats == 0 && r < kMaxRepeats && since(start) < kMinCellNs); ++r) t.pass(t.times, t.walls);
+      t.cell.repeats = static_cast<int>(t.times.size());
     }
     for (Timed& t : timed) {
       t.cell.ns = median(t.times);
