@@ -788,19 +788,11 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
         counts.inside += n;
         continue;
       }
-      // A straddling leaf or small node: its objects, against the planes it straddles. Each
-      // column's first and last objects' lines are prefetched, and from its 32nd float on every
-      // 16th float's. The second line is left to the hardware: prefetching it too (every 16th
-      // float from the first; a range of 17 to 32 objects can span three lines) made whole
-      // passes slower, at 10^6 objects, 10% visible, leaves of 16, A/B in turn, 3 rounds:
-      // boxes 0.050-0.062 against 0.054-0.067 ms, OBBs 0.087-0.090 against 0.106-0.114,
-      // spheres 0.057-0.059 against 0.069-0.071. Prefetching exactly the lines spanned was no
-      // faster than every 16th float; the first line alone was slower.
+      // A straddling leaf or small node: its objects, against the planes it straddles.
       for (unsigned c = 0; c < object_columns; ++c) {
         const float* column = t.columns + c * t.stride + first;
-        __builtin_prefetch(column);
-        for (std::size_t b = 32; b + 1 < n; b += 16) __builtin_prefetch(column + b);
-        if (n > 1) __builtin_prefetch(column + n - 1);
+        for (std::size_t b = 0; b < n; b += 16) __builtin_prefetch(column + b);
+        if (n) __builtin_prefetch(column + n - 1);  // the last line, when the range ends past a 16-float step
       }
       range_at[ranges] = first;
       range_count[ranges] = n;
