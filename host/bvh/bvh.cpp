@@ -561,7 +561,8 @@ std::string check_flat_tree_impl(const FlatTree& tree, std::size_t n, const Volu
     if (node.leaf) {
       if (node.skip != i + 1) return at + "leaf whose skip is not the next node";
       std::size_t failed = node.first;  // past the last volume that passed
-      if (volumes && !visit_leaf_volumes(tree, std::span<const Volume>(volumes, n), i, i + 1, [&](std::size_t k, const Volume&) { failed = k + 1; }))
+      // (every volume passed is_valid above)
+      if (volumes && !visit_leaf_volumes<true>(tree, std::span<const Volume>(volumes, n), i, i + 1, [&](std::size_t k, const Volume&) { failed = k + 1; }))
         return at + "box does not enclose " + std::string(to_string(kind_of<Volume>())) + " " + std::to_string(tree.objects[failed]) +
                (std::is_same_v<Volume, Aabb> ? "" : " (build the tree over bvh::enclosing_boxes)");
     } else {
@@ -591,9 +592,12 @@ std::string check_flat_tree(const FlatTree& tree, std::span<const Obb> volumes, 
 std::string check_flat_tree(const FlatTree& tree, std::span<const Sphere> volumes, std::vector<std::uint32_t>* depth) {
   return check_flat_tree_impl(tree, volumes.size(), volumes.data(), true, depth);
 }
-bool volume_in_leaf(const Aabb& leaf, const Aabb& volume) { return is_valid(volume) && encloses(leaf, volume); }
-bool volume_in_leaf(const Aabb& leaf, const Obb& volume) { return is_valid(volume) && encloses(leaf, enclosing_box(volume)); }
-bool volume_in_leaf(const Aabb& leaf, const Sphere& volume) { return is_valid(volume) && encloses(leaf, enclosing_box(volume)); }
+bool leaf_encloses(const Aabb& leaf, const Aabb& volume) { return encloses(leaf, volume); }
+bool leaf_encloses(const Aabb& leaf, const Obb& volume) { return encloses(leaf, enclosing_box(volume)); }
+bool leaf_encloses(const Aabb& leaf, const Sphere& volume) { return encloses(leaf, enclosing_box(volume)); }
+bool volume_in_leaf(const Aabb& leaf, const Aabb& volume) { return is_valid(volume) && leaf_encloses(leaf, volume); }
+bool volume_in_leaf(const Aabb& leaf, const Obb& volume) { return is_valid(volume) && leaf_encloses(leaf, volume); }
+bool volume_in_leaf(const Aabb& leaf, const Sphere& volume) { return is_valid(volume) && leaf_encloses(leaf, volume); }
 std::string check_flat_structure(const FlatTree& tree, std::size_t object_count, std::vector<std::uint32_t>* depth) {
   return check_flat_tree_impl(tree, object_count, static_cast<const Aabb*>(nullptr), false, depth);
 }
