@@ -272,6 +272,21 @@ inline void gather_columns(const float* records, const std::uint32_t* at, unsign
 #endif
 }
 
+/// The lanes of p[0..W) whose bit is set in `lanes` (the others 0, and not read: p may end
+/// before them).
+inline vi load_ints_where(const std::uint32_t* p, std::uint32_t lanes) {
+#if CULLPIPE_SIMD_LANES == 16 && defined(__AVX512F__)
+  return reinterpret_cast<vi>(_mm512_maskz_loadu_epi32(static_cast<__mmask16>(lanes), p));
+#elif CULLPIPE_SIMD_LANES == 8 && defined(__AVX2__)
+  return reinterpret_cast<vi>(_mm256_maskload_epi32(reinterpret_cast<const int*>(p), reinterpret_cast<__m256i>(lanes_of(lanes))));
+#else
+  vi v = {};
+  for (unsigned l = 0; l < W; ++l)
+    if (lanes & (1u << l)) v[l] = static_cast<std::int32_t>(p[l]);
+  return v;
+#endif
+}
+
 /// a * b + c, fused where the instruction set has it. Only for bounds, never for a distance
 /// the reference computes (those are written out in its order).
 inline vf mul_add(float a, vf b, vf c) {
@@ -306,7 +321,7 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
                          Resolve resolve, ChunkOutput out) {
   constexpr std::size_t kRunBlocks = kRunObjects / W;
   static_assert(kRunObjects % W == 0);
-  std::uint32_t outside_bits[kRunBlocks], crossing_bits[kRunBlocks];
+  std::uint32_t run_bits[kRunBlocks], crossing_bits[kRunBlocks];
   std::uint32_t open[kRunBlocks * W];  // objects left open in this run
   // The planes padded to six with copies of the first (a repeated plane leaves the smallest
   // distance as it is), so the loop below has a fixed trip count; the offsets as vectors once.
@@ -319,11 +334,16 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
   const bool settles = planes.unit_normals, no_planes = planes.count == 0;
   const vf margin = splat(planes.max_margin);
   const float *const c_x = a.c_x, *const c_y = a.c_y, *const c_z = a.c_z, *const bound = a.bound;  // (not reloaded per vector)
+  const bool listed_by_runs = out.ids && out.runs && out.bits;
   ChunkCounts counts;
   for (std::size_t run = begin; run < end; run += kRunBlocks * W) {
     const std::size_t run_end = smaller(end, run + kRunBlocks * W);
+    // Each vector's visible lanes, counted as they are found (open objects as visible and not
+    // INSIDE until resolved), written where a dense run leaves them: the counts and the bits
+    // need no second pass over the run.
+    std::uint32_t* const visible_bits = listed_by_runs ? out.bits + (run - begin) / W : run_bits;
     unsigned open_count = 0;
-    std::uint32_t run_outside = 0;  // objects of the run found OUTSIDE
+    std::uint32_t run_visible = 0, run_inside = 0;
     for (std::size_t i = run, b = 0; i < run_end; i += W, ++b) {
       const unsigned valid = static_cast<unsigned>(smaller(W, run_end - i));
       const std::uint32_t lanes = valid >= W ? kAllLanes : (1u << valid) - 1u;
@@ -348,9 +368,11 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
         beyond = less_bits(m, -reach);
         within = at_least_bits(m, reach);
       }
-      outside_bits[b] = beyond & lanes;
+      const std::uint32_t visible = ~beyond & lanes;
+      visible_bits[b] = visible;
       crossing_bits[b] = 0;
-      run_outside += static_cast<std::uint32_t>(__builtin_popcount(beyond & lanes));
+      run_visible += static_cast<std::uint32_t>(__builtin_popcount(visible));
+      run_inside += static_cast<std::uint32_t>(__builtin_popcount(within & visible));
       const std::uint32_t opened = ~(beyond | within) & lanes;
       for (std::uint32_t rest = opened; rest != 0; rest &= rest - 1) {
         const std::uint32_t object = static_cast<std::uint32_t>(i + static_cast<unsigned>(__builtin_ctz(rest)));
@@ -365,27 +387,46 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
       for (unsigned l = 0; l < count; ++l) {
         const std::size_t at = open[o + l] - run;
         const std::uint32_t bit = 1u << (at % W);
-        if (outside >> l & 1u) outside_bits[at / W] |= bit, ++run_outside;
-        if (crossing >> l & 1u) crossing_bits[at / W] |= bit;
+        if (outside >> l & 1u) {
+          visible_bits[at / W] &= ~bit;
+          --run_visible;
+        } else if (crossing >> l & 1u) {
+          crossing_bits[at / W] |= bit;
+        } else {
+          ++run_inside;
+        }
       }
     }
-    // With runs asked for, a dense run lists no ids: its vectors' visible lanes go to `bits`.
-    const std::uint32_t run_visible = static_cast<std::uint32_t>(run_end - run) - run_outside;
-    const bool dense = out.runs && run_visible * kDenseShare > run_end - run;
-    ChunkOutput emitted = out;
-    if (dense) {
-      emitted.ids = nullptr;
-      std::uint32_t* const bits = out.bits + (run - begin) / W;
-      for (std::size_t i = run, b = 0; i < run_end; i += W, ++b) {
-        const unsigned valid = static_cast<unsigned>(smaller(W, run_end - i));
-        bits[b] = ~outside_bits[b] & (valid >= W ? kAllLanes : (1u << valid) - 1u);
+    counts.visible += run_visible;
+    counts.inside += run_inside;
+    if (out.classes) {
+      ChunkOutput classes_only;
+      classes_only.classes = out.classes;
+      ChunkCounts unused;
+      for (std::size_t i = run, b = 0; i < run_end; i += W, ++b)
+        emit(i, begin, static_cast<unsigned>(smaller(W, end - i)), ~visible_bits[b], crossing_bits[b], classes_only, unused);
+    }
+    if (!out.ids) continue;
+    // With runs asked for, a dense run lists no ids: its vectors' visible lanes are in `bits`.
+    const std::size_t run_index = (run - begin) / kRunObjects;
+    if (listed_by_runs && run_visible * kDenseShare > run_end - run) {
+      out.runs[run_index] = kDenseRun | run_visible;
+      continue;
+    }
+    // A sparse run's ids, from the vectors with a visible lane only: found W bit words at a time.
+    const std::size_t vectors = (run_end - run + W - 1) / W;
+    std::uint32_t* ids = out.ids;
+    for (std::size_t g = 0; g < vectors; g += W) {
+      const unsigned in_group = static_cast<unsigned>(smaller(W, vectors - g));
+      const std::uint32_t group = in_group >= W ? kAllLanes : (1u << in_group) - 1u;
+      const vi words = load_ints_where(visible_bits + g, group);
+      for (std::uint32_t rest = lane_bits(words != 0) & group; rest != 0; rest &= rest - 1) {
+        const std::size_t b = g + static_cast<unsigned>(__builtin_ctz(rest));
+        ids = append_ids(ids, static_cast<std::uint32_t>(run + b * W), visible_bits[b]);
       }
     }
-    const std::uint32_t* const ids_before = emitted.ids;
-    for (std::size_t i = run, b = 0; i < run_end; i += W, ++b)
-      emit(i, begin, static_cast<unsigned>(smaller(W, end - i)), outside_bits[b], crossing_bits[b], emitted, counts);
-    if (out.runs) out.runs[(run - begin) / kRunObjects] = dense ? kDenseRun | run_visible : static_cast<std::uint32_t>(emitted.ids - ids_before);
-    if (emitted.ids) out.ids = emitted.ids;
+    if (out.runs) out.runs[run_index] = static_cast<std::uint32_t>(ids - out.ids);
+    out.ids = ids;
   }
   return counts;
 }
@@ -399,21 +440,6 @@ std::uint32_t* expand_ids(const std::uint32_t* bits, std::size_t vectors, std::u
     for (std::uint32_t rest = bits[v]; rest != 0; rest &= rest - 1) *out++ = first + static_cast<std::uint32_t>(__builtin_ctz(rest));
   }
   return out;
-}
-
-/// The lanes of p[0..W) whose bit is set in `lanes` (the others 0, and not read: p may end
-/// before them).
-inline vi load_ints_where(const std::uint32_t* p, std::uint32_t lanes) {
-#if CULLPIPE_SIMD_LANES == 16 && defined(__AVX512F__)
-  return reinterpret_cast<vi>(_mm512_maskz_loadu_epi32(static_cast<__mmask16>(lanes), p));
-#elif CULLPIPE_SIMD_LANES == 8 && defined(__AVX2__)
-  return reinterpret_cast<vi>(_mm256_maskload_epi32(reinterpret_cast<const int*>(p), reinterpret_cast<__m256i>(lanes_of(lanes))));
-#else
-  vi v = {};
-  for (unsigned l = 0; l < W; ++l)
-    if (lanes & (1u << l)) v[l] = static_cast<std::int32_t>(p[l]);
-  return v;
-#endif
 }
 
 /// Writes from[64 w + l] for every set bit l of marks[w], w = 0..words-1, in that order from
