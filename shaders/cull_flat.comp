@@ -31,6 +31,12 @@ layout(constant_id = 3) const uint WRITE_DRAWS = 0;  // 1: also write draw comma
 // contiguous run of objects per workgroup, and a workgroup covers one contiguous run of
 // group size x OBJECTS_PER_INVOCATION objects (the ordered passes' unit).
 layout(constant_id = 4) const uint OBJECTS_PER_INVOCATION = 1;
+// Arrival order: 1 writes each object's class, 0 (classes not asked for) leaves them out of the
+// pipeline. A specialization constant, not a push constant behind an `if`: lavapipe runs both
+// sides of every branch under a lane mask, and its storage-buffer store is a loop over the
+// lanes either way, so a class store switched off at run time still cost 19% of the pass's
+// instructions (10^6 boxes, 10% visible). The ordered passes always write them.
+layout(constant_id = 5) const uint WRITE_CLASSES = 1;
 
 // The volumes' vec4 words, fetched as integer texels (exact bits) from a uniform texel buffer.
 layout(set = 0, binding = BINDING_BOUNDS) uniform usamplerBuffer bounds;
@@ -210,7 +216,6 @@ void main_arrival() {
   // The parameters, read once: lavapipe reads push constants like a uniform buffer, one
   // bounds-checked gather per use, and cannot move a read past the stores to other buffers.
   uint object_count = params.object_count;
-  bool write_classes = params.write_classes != 0u;
   uint visible_capacity = params.visible_capacity;
   uint id_base = params.id_base;
   bool view_ok = view < params.view_count;
@@ -227,7 +232,7 @@ void main_arrival() {
     uint i = block + j * gl_WorkGroupSize.x;
     bool in_range = view_ok && i < object_count;
     uint c = class_of(j, outside_bits, inside_bits);
-    if (in_range && write_classes) classes[view * object_count + i] = c;
+    if (WRITE_CLASSES != 0 && in_range) classes[view * object_count + i] = c;
     ballots[j] = subgroupBallot(in_range && c != CLASS_OUTSIDE);
     prefix[j + 1] = prefix[j] + subgroupBallotBitCount(ballots[j]);
   }

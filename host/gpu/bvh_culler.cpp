@@ -50,20 +50,21 @@ BvhCuller::BvhCuller(const vk::Context& ctx)
   detail::check_subgroup_operations(ctx_, VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT |
                                               VK_SUBGROUP_FEATURE_BALLOT_BIT | VK_SUBGROUP_FEATURE_SHUFFLE_BIT,
                                     "hierarchical culling");
-  resources_ = std::make_unique<detail::PassResources>(ctx_, pipeline(false).set_layout(), BVH_BINDING_COUNT,
+  resources_ = std::make_unique<detail::PassResources>(ctx_, pipeline(false, false).set_layout(), BVH_BINDING_COUNT,
                                                       kTexelBindings);
 }
 
 BvhCuller::~BvhCuller() = default;
 
-const vk::ComputePipeline& BvhCuller::pipeline(bool draws) {
+const vk::ComputePipeline& BvhCuller::pipeline(bool draws, bool classes) {
   const auto kind = std::uint32_t(kind_);
-  std::unique_ptr<vk::ComputePipeline>& slot = pipelines_[kind][draws];
+  std::unique_ptr<vk::ComputePipeline>& slot = pipelines_[kind][draws][classes];
   if (slot) return *slot;
-  const std::string name = "hierarchical cull (" + std::string(to_string(kind_)) + (draws ? ", draws" : "") + ")";
-  // Specialization constants: 1 group size, 2 volume kind, 3 draws.
+  const std::string name =
+      "hierarchical cull (" + std::string(to_string(kind_)) + (draws ? ", draws" : "") + (classes ? ", classes" : "") + ")";
+  // Specialization constants: 1 group size, 2 volume kind, 3 draws, 4 classes.
   static_assert(BV_KIND_AABB == 0 && BV_KIND_OBB == 1 && BV_KIND_SPHERE == 2, "BvKind order must match the shader");
-  const std::uint32_t spec[4] = {0u, group_size_, kind, draws ? 1u : 0u};
+  const std::uint32_t spec[5] = {0u, group_size_, kind, draws ? 1u : 0u, classes ? 1u : 0u};
   slot = std::make_unique<vk::ComputePipeline>(
       ctx_, vk::ComputePipelineDesc{std::span<const std::uint32_t>(cullpipe_cull_bvh_spv),
                                     BVH_BINDING_COUNT, sizeof(BvhCullParams), spec, name.c_str(), kTexelBindings});
@@ -215,7 +216,7 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   last_capacity_ = capacity;
   last_view_count_ = v;
   last_options_ = options;
-  pipeline(options.draws);
+  pipeline(options.draws, options.classes);
 }
 
 void BvhCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
@@ -234,8 +235,7 @@ void BvhCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
     params.visible_capacity = std::uint32_t(last_capacity_);
     params.cut_count = std::uint32_t(cut_count_);
     params.groups_per_view = std::uint32_t(groups_per_view_);
-    params.write_classes = last_options_.classes ? 1u : 0u;
-    const vk::ComputePipeline& pipe = pipeline(last_options_.draws);
+    const vk::ComputePipeline& pipe = pipeline(last_options_.draws, last_options_.classes);
     VkDescriptorSet set = resources_->set();
     vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.pipeline());
     vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.layout(), 0, 1, &set, 0, nullptr);

@@ -89,7 +89,7 @@ class BvhCuller {
  private:
   void prepare(std::span<const Frustum> views, const CullOptions& options);
   void record_passes(VkCommandBuffer cmd, VkQueryPool timestamps);
-  const vk::ComputePipeline& pipeline(bool draws);
+  const vk::ComputePipeline& pipeline(bool draws, bool classes);
   template <class Volume>
   void upload_impl(const bvh::FlatTree& tree, std::span<const Volume> volumes);
   void update_descriptors();
@@ -98,7 +98,7 @@ class BvhCuller {
   std::uint32_t group_size_ = BVH_CULL_GROUP_SIZE;  // the device's subgroup size, at most this
   std::uint32_t subtree_objects_;
   std::uint32_t max_groups_x_ = 0;
-  std::unique_ptr<vk::ComputePipeline> pipelines_[3][2];  // [kind][draws]
+  std::unique_ptr<vk::ComputePipeline> pipelines_[3][2][2];  // [kind][draws][classes]
   BvKind kind_ = BvKind::Aabb;
   vk::Buffer bounds_, classes_, visible_, counters_, views_, templates_, draws_;
   vk::Buffer nodes_, objects_, cuts_, records_;

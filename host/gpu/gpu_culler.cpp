@@ -51,20 +51,21 @@ GpuCuller::GpuCuller(const vk::Context& ctx, const GpuCullerConfig& config) : ct
   // Every pipeline has the same set layout; the flat AABB one is built now, for the descriptor
   // set, the others on first use.
   static_assert(BV_KIND_AABB == 0 && BV_KIND_OBB == 1 && BV_KIND_SPHERE == 2, "BvKind order must match the shader");
-  pipeline(0, 0, false, false);
-  resources_ = std::make_unique<detail::PassResources>(ctx_, pipelines_[0][0][0][0]->set_layout(), kBindingCount, kTexelBindings);
+  pipeline(0, 0, false, false, false);
+  resources_ = std::make_unique<detail::PassResources>(ctx_, pipelines_[0][0][0][0][0]->set_layout(), kBindingCount, kTexelBindings);
 }
 
-const vk::ComputePipeline& GpuCuller::pipeline(int shader, std::uint32_t kind, bool ordered, bool draws) {
-  if (shader != 0) kind = 0, ordered = false;
-  std::unique_ptr<vk::ComputePipeline>& slot = pipelines_[shader][kind][ordered][draws];
+const vk::ComputePipeline& GpuCuller::pipeline(int shader, std::uint32_t kind, bool ordered, bool draws, bool classes) {
+  if (shader != 0) kind = 0, ordered = false, classes = false;
+  if (ordered) classes = true;  // the scatter pass reads them
+  std::unique_ptr<vk::ComputePipeline>& slot = pipelines_[shader][kind][ordered][draws][classes];
   if (slot) return *slot;
   std::span<const std::uint32_t> spirv;
   std::string name;
   static const char* kinds[3] = {"aabb", "obb", "sphere"};
   if (shader == 0) {
     spirv = {cullpipe_cull_flat_spv, sizeof(cullpipe_cull_flat_spv) / sizeof(std::uint32_t)};
-    name = std::string("flat cull (") + kinds[kind] + (ordered ? ", ordered" : "") + (draws ? ", draws" : "") + ")";
+    name = std::string("flat cull (") + kinds[kind] + (ordered ? ", ordered" : "") + (draws ? ", draws" : "") + (classes ? ", classes" : "") + ")";
   } else if (shader == 1) {
     spirv = {cullpipe_compact_scan_spv, sizeof(cullpipe_compact_scan_spv) / sizeof(std::uint32_t)};
     name = "ordered compaction scan";
@@ -73,8 +74,8 @@ const vk::ComputePipeline& GpuCuller::pipeline(int shader, std::uint32_t kind, b
     name = std::string("ordered compaction scatter") + (draws ? " (draws)" : "");
   }
   // Specialization constants: 0 kind, 1 group size, 2 ordered, 3 draws, 4 objects per invocation
-  // (every pass: the ordered passes' unit is a workgroup's run of objects).
-  const std::uint32_t spec[5] = {kind, group_size_, ordered ? 1u : 0u, draws ? 1u : 0u, objects_per_invocation_};
+  // (every pass: the ordered passes' unit is a workgroup's run of objects), 5 classes.
+  const std::uint32_t spec[6] = {kind, group_size_, ordered ? 1u : 0u, draws ? 1u : 0u, objects_per_invocation_, classes ? 1u : 0u};
   slot = std::make_unique<vk::ComputePipeline>(
       ctx_, vk::ComputePipelineDesc{spirv, kBindingCount, sizeof(FlatCullParams), spec, name.c_str(), kTexelBindings});
   return *slot;
@@ -275,11 +276,11 @@ void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   // Build every pipeline the pass needs now, not while recording.
   const std::uint32_t kind = kind_index(kind_);
   if (!options.ordered) {
-    pipeline(0, kind, false, options.draws);
+    pipeline(0, kind, false, options.draws, options.classes);
   } else {
-    pipeline(0, kind, true, false);
-    pipeline(1, 0, false, false);
-    pipeline(2, 0, false, options.draws);
+    pipeline(0, kind, true, false, true);
+    pipeline(1, 0, false, false, false);
+    pipeline(2, 0, false, options.draws, false);
   }
 }
 
@@ -297,9 +298,8 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
   auto compute_to_compute = [&] { detail::record_compute_to_compute(cmd); };
   const VkDescriptorSet set = resources_->set();
   // The ordered passes always write classes (the scatter pass reads them); the arrival-order
-  // pass only when they are read back (on lavapipe: spheres 5.2 -> 4.6 ns/object, AABBs within noise).
-  const FlatCullParams base_params{std::uint32_t(object_count_), 0, std::uint32_t(view_count), std::uint32_t(last_capacity_), 0,
-                                   options.classes || options.ordered ? 1u : 0u};
+  // pass only when they are read back (a pipeline of its own, see WRITE_CLASSES in cull_flat.comp).
+  const FlatCullParams base_params{std::uint32_t(object_count_), 0, std::uint32_t(view_count), std::uint32_t(last_capacity_), 0};
   // One pass over every object: per segment (its own descriptor set), in chunks of at most
   // max_groups_ workgroups.
   auto object_pass = [&](const vk::ComputePipeline& pipe, std::uint32_t objects_per_invocation) {
@@ -326,18 +326,18 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
   };
   const std::uint32_t kind = kind_index(kind_);
   if (!options.ordered) {
-    object_pass(pipeline(0, kind, false, options.draws), objects_per_invocation_);
+    object_pass(pipeline(0, kind, false, options.draws, options.classes), objects_per_invocation_);
   } else if (object_count_ > 0) {
     // Count per workgroup, scan the counts per view, scatter in object order.
-    object_pass(pipeline(0, kind, true, false), objects_per_invocation_);
+    object_pass(pipeline(0, kind, true, false, true), objects_per_invocation_);
     compute_to_compute();
-    const vk::ComputePipeline& scan = pipeline(1, 0, false, false);
+    const vk::ComputePipeline& scan = pipeline(1, 0, false, false, false);
     vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, scan.pipeline());
     vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, scan.layout(), 0, 1, &set, 0, nullptr);
     vkCmdPushConstants(cmd, scan.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(base_params), &base_params);
     vkCmdDispatch(cmd, 1, std::uint32_t(view_count), 1);
     compute_to_compute();
-    object_pass(pipeline(2, 0, false, options.draws), objects_per_invocation_);
+    object_pass(pipeline(2, 0, false, options.draws, false), objects_per_invocation_);
   }
   if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps, 1);
   detail::record_exit_barrier(ctx_, cmd);

@@ -169,7 +169,7 @@ class GpuCuller {
   SegmentPlan plan_segments(std::size_t view_count, bool ordered) const;
   void prepare(std::span<const Frustum> views, const CullOptions& options);
   void record_passes(VkCommandBuffer cmd, VkQueryPool timestamps);
-  const vk::ComputePipeline& pipeline(int shader, std::uint32_t kind, bool ordered, bool draws);
+  const vk::ComputePipeline& pipeline(int shader, std::uint32_t kind, bool ordered, bool draws, bool classes);
   void update_descriptors();
 
   const vk::Context& ctx_;
@@ -189,7 +189,7 @@ class GpuCuller {
   std::size_t object_count_ = 0;
   // Built on first use: [shader][kind][ordered][draws]; shader 0 = cull_flat, 1 = compact_scan,
   // 2 = compact_scatter (kind and ordered unused for 1 and 2).
-  std::unique_ptr<vk::ComputePipeline> pipelines_[3][3][2][2];
+  std::unique_ptr<vk::ComputePipeline> pipelines_[3][3][2][2][2];  // [shader][kind][ordered][draws][classes]
   vk::Buffer bounds_, classes_, visible_, counters_, views_, templates_, draws_, group_counts_;
   vk::Buffer centres_;  // AABBs: centre and bound per object (BINDING_CENTRES)
   std::size_t template_count_ = 0;

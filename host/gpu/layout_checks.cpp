@@ -35,13 +35,12 @@ static_assert(offsetof(GpuFrustum, plane_count) == 96);
 static_assert(offsetof(GpuFrustum, settle_margin) == 100);
 static_assert(offsetof(GpuFrustum, reserved2) == 108);
 
-static_assert(sizeof(FlatCullParams) == 24);
+static_assert(sizeof(FlatCullParams) == 20);
 static_assert(offsetof(FlatCullParams, object_count) == 0);
 static_assert(offsetof(FlatCullParams, first_object) == 4);
 static_assert(offsetof(FlatCullParams, view_count) == 8);
 static_assert(offsetof(FlatCullParams, visible_capacity) == 12);
 static_assert(offsetof(FlatCullParams, id_base) == 16);
-static_assert(offsetof(FlatCullParams, write_classes) == 20);
 
 static_assert(sizeof(ViewCounters) == 16);
 static_assert(offsetof(ViewCounters, visible_count) == 0);
@@ -57,8 +56,8 @@ static_assert(offsetof(GpuBvhNode, count) == 28);
 static_assert(offsetof(GpuBvhNode, skip) == 32);
 static_assert(offsetof(GpuBvhNode, second_child) == 36);
 static_assert(offsetof(GpuBvhNode, leaf) == 40);
-static_assert(sizeof(BvhCullParams) == 24);
-static_assert(offsetof(BvhCullParams, cut_count) == 12 && offsetof(BvhCullParams, write_classes) == 20);
+static_assert(sizeof(BvhCullParams) == 20);
+static_assert(offsetof(BvhCullParams, cut_count) == 12 && offsetof(BvhCullParams, groups_per_view) == 16);
 static_assert(BVH_STACK_PER_INVOCATION >= 1 + 2 * BVH_CUT_MAX_HEIGHT, "the walk stack holds a cut node and two nodes per level below it, per lane");
 
 // DrawCommand starts with exactly VkDrawIndexedIndirectCommand.

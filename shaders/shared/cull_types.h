@@ -84,7 +84,6 @@ struct FlatCullParams {
   uint view_count;        // views in the views buffer
   uint visible_capacity;  // capacity of each view's visible-id list
   uint id_base;           // object id of the segment's first object (added to listed ids)
-  uint write_classes;     // arrival-order pass: 0 skips the per-object classes (not asked for)
 };
 
 // Largest workgroup and objects per invocation the compaction shaders support (their shared
@@ -171,7 +170,6 @@ struct BvhCullParams {
   uint visible_capacity;  // per view
   uint cut_count;         // cut subtrees (one invocation each, per view)
   uint groups_per_view;   // workgroups per view: cut_count / BVH_CULL_GROUP_SIZE rounded up
-  uint write_classes;     // 0: per-object classes are not read back and not written
 };
 
 // Bindings of the hierarchical pass (set 0). 0..6 mean what they mean for the flat pass,
