@@ -97,8 +97,8 @@ bvh::FlatTree tree_over(const std::vector<Volume>& volumes, std::uint32_t leaf =
 }
 
 // Writing classes or not is a pipeline of its own (WRITE_CLASSES in cull_bvh.comp): without
-// them the counters, test counts and list still equal the CPU traversal's, and switching back
-// and forth on one culler takes the right pipeline each time.
+// them the counters, test counts and list still equal the CPU traversal's, and a pass asking
+// for classes after one that did not gets this pass's classes (each kind's upload changes them).
 TEST_F(GpuBvh, TheListIsTheSameWithAndWithoutClasses) {
   test::Rng rng{44};
   const test::RandomVolumes v = test::random_volumes(rng, 5000, 40.0f, 3.0f);
@@ -396,15 +396,20 @@ TEST_F(GpuBvh, DrawsAndVisibleListOverflow) {
   culler().upload_draws(templates);
   gpu::CullOptions options;
   options.draws = true;
-  const gpu::CullResult r = expect_agreement(culler(), flat, boxes, test_frusta(), options);
-  for (const gpu::ViewResult& v : r.views) {
-    ASSERT_EQ(v.draws.size(), v.visible_ids.size());
-    for (std::size_t k = 0; k < v.draws.size(); ++k) {
-      gpu::DrawCommand expected = templates[v.visible_ids[k]];
-      expected.object_id = v.visible_ids[k];
-      ASSERT_EQ(std::memcmp(&v.draws[k], &expected, sizeof expected), 0) << k;
+  for (bool classes : {true, false}) {  // (without classes: a pipeline of its own)
+    SCOPED_TRACE(classes ? "classes" : "no classes");
+    options.classes = classes;
+    const gpu::CullResult r = expect_agreement(culler(), flat, boxes, test_frusta(), options);
+    for (const gpu::ViewResult& v : r.views) {
+      ASSERT_EQ(v.draws.size(), v.visible_ids.size());
+      for (std::size_t k = 0; k < v.draws.size(); ++k) {
+        gpu::DrawCommand expected = templates[v.visible_ids[k]];
+        expected.object_id = v.visible_ids[k];
+        ASSERT_EQ(std::memcmp(&v.draws[k], &expected, sizeof expected), 0) << k;
+      }
     }
   }
+  options.classes = true;
   options.visible_capacity = 100;  // fewer than visible: counted in full, flagged, list full
   const gpu::CullResult small = expect_agreement(culler(), flat, boxes, test_frusta(), options);
   for (const gpu::ViewResult& v : small.views) {

@@ -259,7 +259,7 @@ struct CpuCuller::Impl {
   float* records = nullptr;          // per-object records after the arrays (OBB), or null
   std::size_t record_size = 0;       // floats per record
   // Per view: visible ids, written per chunk into slots of chunk + kPad, then gathered; and
-  // per chunk the visible lanes of its dense runs' vectors and a word per run (ChunkOutput).
+  // per chunk the visible lanes of every run's vectors and a word per run (ChunkOutput).
   std::vector<std::unique_ptr<std::uint32_t[]>> scratch, bits, runs;
   std::size_t scratch_size = 0, bits_size = 0, runs_size = 0;
   std::vector<detail::ChunkCounts> chunk_counts;  // [view * chunks + chunk]

@@ -66,10 +66,11 @@ constexpr std::size_t kDenseShare = 4;
 /// Where one chunk's results go. `classes` (may be null) receives the class of objects
 /// begin..end-1 at classes[0..]; `ids` (may be null) receives the ids of visible objects in
 /// object order, at most end - begin of them, and may write up to 16 values beyond them.
-/// With `runs` (and `ids`): a dense run writes no ids; it sets runs[r] = kDenseRun | its
-/// visible count and, for each of its vectors, bits[v] = the vector's visible lanes (v = the
-/// vector's first object - begin, over the kernel's lanes); any other run sets runs[r] = the
-/// number of ids it wrote. Listing the ids of dense runs from their bits, straight into the
+/// With `runs`, `bits` and `ids`: every run sets bits[v] = the visible lanes of each of its
+/// vectors (v = the vector's first object - begin, over the kernel's lanes; a sparse run's are
+/// scratch), so `bits` holds a word per vector of the chunk; a dense run writes no ids and sets
+/// runs[r] = kDenseRun | its visible count; any other run sets runs[r] = the number of ids it
+/// wrote. Without `bits` every run writes its ids. Listing the ids of dense runs from their bits, straight into the
 /// result (ExpandKernel), writes them once instead of twice (to `ids`, then copied).
 struct ChunkOutput {
   std::uint8_t* classes = nullptr;

@@ -50,7 +50,7 @@ BvhCuller::BvhCuller(const vk::Context& ctx)
   detail::check_subgroup_operations(ctx_, VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT |
                                               VK_SUBGROUP_FEATURE_BALLOT_BIT | VK_SUBGROUP_FEATURE_SHUFFLE_BIT,
                                     "hierarchical culling");
-  resources_ = std::make_unique<detail::PassResources>(ctx_, pipeline(false, false).set_layout(), BVH_BINDING_COUNT,
+  resources_ = std::make_unique<detail::PassResources>(ctx_, pipeline(false, true).set_layout(), BVH_BINDING_COUNT,
                                                       kTexelBindings);
 }
 

@@ -48,11 +48,11 @@ GpuCuller::GpuCuller(const vk::Context& ctx, const GpuCullerConfig& config) : ct
   max_groups_ = config.max_groups_per_dispatch ? std::min(config.max_groups_per_dispatch, limits.maxComputeWorkGroupCount[0])
                                                : limits.maxComputeWorkGroupCount[0];
   group_size_ = std::min(group_size_, MAX_CULL_GROUP_SIZE);
-  // Every pipeline has the same set layout; the flat AABB one is built now, for the descriptor
-  // set, the others on first use.
+  // Every pipeline has the same set layout; the flat AABB one of default options (arrival
+  // order, classes) is built now, for the descriptor set, the others on first use.
   static_assert(BV_KIND_AABB == 0 && BV_KIND_OBB == 1 && BV_KIND_SPHERE == 2, "BvKind order must match the shader");
-  pipeline(0, 0, false, false, false);
-  resources_ = std::make_unique<detail::PassResources>(ctx_, pipelines_[0][0][0][0][0]->set_layout(), kBindingCount, kTexelBindings);
+  const vk::ComputePipeline& first = pipeline(0, 0, false, false, true);
+  resources_ = std::make_unique<detail::PassResources>(ctx_, first.set_layout(), kBindingCount, kTexelBindings);
 }
 
 const vk::ComputePipeline& GpuCuller::pipeline(int shader, std::uint32_t kind, bool ordered, bool draws, bool classes) {

@@ -187,9 +187,10 @@ class GpuCuller {
   std::size_t written_segment_objects_ = 0, written_view_count_ = 0;
   BvKind kind_ = BvKind::Aabb;
   std::size_t object_count_ = 0;
-  // Built on first use: [shader][kind][ordered][draws]; shader 0 = cull_flat, 1 = compact_scan,
-  // 2 = compact_scatter (kind and ordered unused for 1 and 2).
-  std::unique_ptr<vk::ComputePipeline> pipelines_[3][3][2][2][2];  // [shader][kind][ordered][draws][classes]
+  // Built on first use: [shader][kind][ordered][draws][classes]; shader 0 = cull_flat, 1 =
+  // compact_scan, 2 = compact_scatter (kind, ordered and classes 0 for 1 and 2); classes is
+  // always 1 for the ordered pass (the scatter pass reads them).
+  std::unique_ptr<vk::ComputePipeline> pipelines_[3][3][2][2][2];
   vk::Buffer bounds_, classes_, visible_, counters_, views_, templates_, draws_, group_counts_;
   vk::Buffer centres_;  // AABBs: centre and bound per object (BINDING_CENTRES)
   std::size_t template_count_ = 0;
