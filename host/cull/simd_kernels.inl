@@ -826,12 +826,11 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
         counts.inside += n;
         continue;
       }
-      // A straddling leaf or small node: its objects, against the planes it straddles.
-      for (unsigned c = 0; c < object_columns; ++c) {
-        const float* column = t.columns + c * t.stride + first;
-        for (std::size_t b = 0; b < n; b += 16) __builtin_prefetch(column + b);
-        if (n) __builtin_prefetch(column + n - 1);  // the last line, when the range ends past a 16-float step
-      }
+      // A straddling leaf or small node: its objects, against the planes it straddles. The
+      // first line of each column prefetched (the hardware prefetcher takes the next): every
+      // line of the range (about 3 per column) took 10-13% longer back to back on a Zen 3 and
+      // measured the same with the caches full of other work.
+      for (unsigned c = 0; c < object_columns; ++c) __builtin_prefetch(t.columns + c * t.stride + first);
       range_at[ranges] = first;
       range_count[ranges] = n;
       range_mask[ranges++] = planes_left;
