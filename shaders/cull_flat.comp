@@ -96,7 +96,6 @@ void load_view() {
 // (|c|_1, |d| <= 2^120, unit normals), so every s is finite and min() is defined.
 // Spheres are tested in full at once (one texel either way).
 const uint CLASS_OPEN = 3u;
-bool finite_bits(float x) { return (floatBitsToUint(x) & 0x7f800000u) != 0x7f800000u; }
 uint settle_object(uint i) {
   if (BV_KIND == BV_KIND_SPHERE) return classify_object(i);
   vec4 centre_bound = BV_KIND == BV_KIND_AABB ? uintBitsToFloat(texelFetch(centres, int(i))) : bound(OBB_VEC4S * i);

@@ -1,12 +1,15 @@
 #include "gpu/bvh_culler.hpp"
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cstring>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 
 #include "bvh/box_ops.hpp"
+#include "cull/plane_bounds.hpp"
 #include "geom/prefetch.hpp"
 #include "geom/validate.hpp"
 #include "gpu/pass_support.hpp"
@@ -20,8 +23,10 @@ namespace {
 
 constexpr VkBufferUsageFlags kStorage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
 constexpr VkBufferUsageFlags kTexel = VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT;
-// Object volumes, views, nodes and the object order are read through uniform texel buffers (see cull_bvh.comp).
-constexpr std::uint32_t kTexelBindings = 1u << BINDING_BOUNDS | 1u << BINDING_VIEWS | 1u << BVH_BINDING_NODES | 1u << BVH_BINDING_OBJECTS;
+// Object volumes, views, nodes, the object order and the centre bounds are read through uniform
+// texel buffers (see cull_bvh.comp).
+constexpr std::uint32_t kTexelBindings =
+    1u << BINDING_BOUNDS | 1u << BINDING_VIEWS | 1u << BVH_BINDING_NODES | 1u << BVH_BINDING_OBJECTS | 1u << BVH_BINDING_CENTRES;
 constexpr std::uint32_t kStorageBindings = BVH_BINDING_COUNT - std::uint32_t(std::popcount(kTexelBindings));
 
 }  // namespace
@@ -39,7 +44,7 @@ BvhCuller::BvhCuller(const vk::Context& ctx)
   if (limits.maxComputeWorkGroupSize[0] < group_size_ || limits.maxComputeWorkGroupInvocations < group_size_)
     throw vk::Error("hierarchical culling needs workgroups of " + std::to_string(group_size_) + " invocations; " +
                     ctx_.info().name + " allows " + std::to_string(limits.maxComputeWorkGroupInvocations));
-  const std::uint32_t stack_bytes = group_size_ * BVH_STACK_PER_INVOCATION * 8;
+  const std::uint32_t stack_bytes = group_size_ * BVH_STACK_PER_INVOCATION * 4;
   if (limits.maxComputeSharedMemorySize < stack_bytes)
     throw vk::Error("hierarchical culling needs " + std::to_string(stack_bytes) + " bytes of shared memory per workgroup; " +
                     ctx_.info().name + " has " + std::to_string(limits.maxComputeSharedMemorySize));
@@ -99,6 +104,15 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
     }
   }
   const std::uint32_t levels = depth.empty() ? 0 : *std::max_element(depth.begin(), depth.end());
+  // A workgroup's walk stack holds nodes as offsets from its first cut node (cull_bvh.comp).
+  for (std::size_t g = 0; g < cuts.size(); g += group_size_) {
+    const std::uint32_t last = cuts[std::min(cuts.size(), g + group_size_) - 1];
+    const std::size_t span = std::size_t(tree.nodes[last].skip) - cuts[g];
+    if (span >= BVH_WORKGROUP_NODE_SPAN)
+      throw std::length_error("BvhCuller::upload: the subtrees of one workgroup (" + std::to_string(group_size_) + " cut subtrees from node " +
+                              std::to_string(cuts[g]) + ") span " + std::to_string(span) + " nodes; at most " +
+                              std::to_string(BVH_WORKGROUP_NODE_SPAN - 1) + " are supported (use smaller subtrees: set_subtree_objects)");
+  }
 
   using Packed = decltype(pack(boxes[0]));
   const VkDeviceSize box_bytes = VkDeviceSize(n) * sizeof(Packed), node_bytes = VkDeviceSize(nodes) * sizeof(GpuBvhNode);
@@ -107,6 +121,9 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
   // The object order as texels of four ids (padded).
   const VkDeviceSize order_bytes = (VkDeviceSize(n) + 3) / 4 * 16, cut_bytes = VkDeviceSize(cuts.size()) * sizeof(std::uint32_t);
   detail::check_texel_range(ctx_, order_bytes, std::to_string(n) + " object ids");
+  constexpr bool kBoxes = std::is_same_v<Volume, Aabb>;  // (only boxes are settled by a centre bound)
+  const VkDeviceSize centre_bytes = kBoxes ? VkDeviceSize(n) * sizeof(glm::vec4) : 0;
+  detail::check_texel_range(ctx_, centre_bytes, std::to_string(n) + " centre bounds");
   detail::check_storage_range(ctx_, cut_bytes, std::to_string(cuts.size()) + " BVH subtrees");
   object_count_ = node_count_ = cut_count_ = 0;  // stay 0 if an allocation below fails
   bool& dirty = descriptors_dirty_;
@@ -114,6 +131,7 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
   detail::ensure_buffer(ctx_, nodes_, node_bytes, kTexel, "BVH node buffer", dirty);
   detail::ensure_buffer(ctx_, objects_, order_bytes, kTexel, "BVH object order buffer", dirty);
   detail::ensure_buffer(ctx_, cuts_, cut_bytes, kStorage, "BVH cut buffer", dirty);
+  detail::ensure_buffer(ctx_, centres_, centre_bytes, kTexel, "centre bound buffer", dirty);
   // Written straight into the mapped buffers (no staging copies whose pages fault in on every
   // upload of a refitted tree).
   GpuBvhNode* gpu_nodes = nodes_.as<GpuBvhNode>().data();
@@ -123,9 +141,20 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
     gpu_nodes[i] = {node.box.min, node.first, node.box.max, node.count, node.skip, second, node.leaf ? 1u : 0u, depth[i]};
   }
   auto gpu_boxes = bounds_.as<Packed>();
-  for (std::size_t i = 0; i < n; ++i) {  // tree order
-    if (i + kGatherAhead < n) prefetch_object(&boxes[tree.objects[i + kGatherAhead]]);
-    gpu_boxes[i] = pack(boxes[tree.objects[i]]);
+  // Boxes also get their centre bounds (the flat pass's, in tree order), a block at a time.
+  constexpr std::size_t kBlock = 256;
+  std::array<Volume, kBoxes ? kBlock : 1> block;
+  for (std::size_t first = 0; first < n; first += kBlock) {
+    const std::size_t end = std::min(n, first + kBlock);
+    for (std::size_t i = first; i < end; ++i) {  // tree order
+      if (i + kGatherAhead < n) prefetch_object(&boxes[tree.objects[i + kGatherAhead]]);
+      const Volume& box = boxes[tree.objects[i]];
+      gpu_boxes[i] = pack(box);
+      if constexpr (kBoxes) block[i - first] = box;
+    }
+    if constexpr (kBoxes)
+      fast::detail::aabb_centre_bounds(std::span<const Aabb>(block.data(), end - first),
+                                       centres_.as<glm::vec4>().subspan(first, end - first));
   }
   if (n) std::memcpy(objects_.data(), tree.objects.data(), n * sizeof(std::uint32_t));
   if (!cuts.empty()) std::memcpy(cuts_.data(), cuts.data(), cuts.size() * sizeof(std::uint32_t));
@@ -154,9 +183,10 @@ void BvhCuller::update_descriptors() {
   if (!descriptors_dirty_) return;
   static_assert(BINDING_BOUNDS == 0 && BINDING_CLASSES == 1 && BINDING_VISIBLE == 2 && BINDING_COUNTERS == 3 &&
                 BINDING_VIEWS == 4 && BINDING_DRAW_TEMPLATES == 5 && BINDING_DRAWS == 6 && BVH_BINDING_NODES == 7 &&
-                BVH_BINDING_OBJECTS == 8 && BVH_BINDING_CUTS == 9 && BVH_BINDING_RECORDS == 10 && BVH_BINDING_COUNT == 11);
-  const vk::Buffer* const buffers[BVH_BINDING_COUNT] = {&bounds_, &classes_, &visible_, &counters_, &views_, &templates_,
-                                                        &draws_,  &nodes_,   &objects_, &cuts_,     &records_};
+                BVH_BINDING_OBJECTS == 8 && BVH_BINDING_CUTS == 9 && BVH_BINDING_RECORDS == 10 && BVH_BINDING_CENTRES == 11 &&
+                BVH_BINDING_COUNT == 12);
+  const vk::Buffer* const buffers[BVH_BINDING_COUNT] = {&bounds_, &classes_, &visible_, &counters_, &views_,   &templates_,
+                                                        &draws_,  &nodes_,   &objects_, &cuts_,     &records_, &centres_};
   resources_->write(buffers);
   descriptors_dirty_ = false;
 }
@@ -200,6 +230,7 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   bool& dirty = descriptors_dirty_;
   detail::ensure_buffer(ctx_, bounds_, 0, kTexel, "object volume buffer", dirty);
   detail::ensure_buffer(ctx_, nodes_, 0, kTexel, "BVH node buffer", dirty);
+  detail::ensure_buffer(ctx_, centres_, 0, kTexel, "centre bound buffer", dirty);
   detail::ensure_buffer(ctx_, objects_, 0, kTexel, "BVH object order buffer", dirty);
   detail::ensure_buffer(ctx_, cuts_, 0, kStorage, "BVH cut buffer", dirty);
   detail::ensure_buffer(ctx_, templates_, 0, kStorage, "draw template buffer", dirty);
@@ -212,7 +243,10 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   detail::ensure_buffer(ctx_, records_, record_bytes, kStorage, "BVH traversal record buffer", dirty);
   update_descriptors();
   auto gpu_views = views_.as<GpuFrustum>();
-  for (std::size_t i = 0; i < v; ++i) gpu_views[i] = pack(views[i]);
+  for (std::size_t i = 0; i < v; ++i) {
+    gpu_views[i] = pack(views[i]);
+    gpu_views[i].settle_margin = fast::detail::settle_margin(views[i]);
+  }
   last_capacity_ = capacity;
   last_view_count_ = v;
   last_options_ = options;

@@ -23,7 +23,8 @@ namespace cullpipe::gpu {
 /// it walks its subtrees together, every lane taking a node of any of them each round; every
 /// node test is counted once per view. OUTSIDE drops a subtree, INSIDE
 /// accepts its object range with no further tests, INTERSECTING descends; objects of
-/// INTERSECTING leaves are tested on the planes the leaf straddles. Any number of views per
+/// INTERSECTING leaves are tested on the planes the leaf straddles (boxes first by their centre
+/// bound, the flat pass's, and in full where it leaves them open). Any number of views per
 /// pass, each with its own outputs. Classes and test counts equal bvh::cull_hierarchical bit
 /// for bit; the visible set equals flat culling's. Objects are AABBs, OBBs or spheres (a tree
 /// over OBBs or spheres is built over bvh::enclosing_boxes; its nodes are tested with
@@ -41,7 +42,10 @@ class BvhCuller {
   /// not one over these boxes (ids out of range or repeated, links or object ranges not nested
   /// as flatten nests them, boxes invalid or not enclosing), std::length_error when a buffer
   /// would exceed one texel buffer view (maxTexelBufferElements) or, for the cut's list of
-  /// subtrees, one storage buffer. O(nodes + objects).
+  /// subtrees, one storage buffer, or when one workgroup's cut subtrees span 2^26 nodes or more
+  /// (BVH_WORKGROUP_NODE_SPAN; far past any default cut). Boxes also get a centre bound each
+  /// (16 bytes, in tree order), which settles most of a straddling leaf's boxes with one texel
+  /// (as the flat pass does). O(nodes + objects).
   void upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes);
   /// The same for OBBs or spheres; the tree's boxes must enclose bvh::enclosing_box of each.
   void upload(const bvh::FlatTree& tree, std::span<const Obb> obbs);
@@ -102,6 +106,7 @@ class BvhCuller {
   BvKind kind_ = BvKind::Aabb;
   vk::Buffer bounds_, classes_, visible_, counters_, views_, templates_, draws_;
   vk::Buffer nodes_, objects_, cuts_, records_;
+  vk::Buffer centres_;  // AABBs: centre and bound per object in tree order (BVH_BINDING_CENTRES)
   // After the buffers: destroyed first, it waits for the device (own devices) before they go.
   std::unique_ptr<detail::PassResources> resources_;
   std::size_t object_count_ = 0, node_count_ = 0, template_count_ = 0;

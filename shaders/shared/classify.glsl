@@ -23,6 +23,10 @@ float plane_distance(vec4 plane, vec3 p) {
 
 bool plane_tested(uint k, uint mask) { return k < view_plane_count && (mask & (1u << k)) != 0u; }
 
+// Whether x is finite, decided on its bits (without SignedZeroInfNanPreserve a comparison with
+// a NaN need not be false on every device).
+bool finite_bits(float x) { return (floatBitsToUint(x) & 0x7f800000u) != 0x7f800000u; }
+
 // The p/n-vertex test; `straddled` receives the tested planes whose n-vertex is behind
 // (meaningful unless OUTSIDE).
 uint classify_aabb(vec3 lo, vec3 hi, uint mask, out uint straddled) {

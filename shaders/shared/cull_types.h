@@ -68,7 +68,7 @@ struct GpuSphere {
 struct GpuFrustum {
   vec4 planes[MAX_FRUSTUM_PLANES];  // xyz = unit inward normal, w = d; inside when dot(n,p)+d >= 0
   uint plane_count;                 // planes actually used (5 when the far plane is at infinity)
-  float settle_margin;              // flat pass: the margin added to each box's centre bound (NaN or inf: none settles)
+  float settle_margin;              // the margin added to each box's centre bound (NaN or inf: none settles)
   uint reserved1;
   uint reserved2;
 };
@@ -135,10 +135,13 @@ struct ViewCounters {
 // Invocations per workgroup of the hierarchical pass, at most: a workgroup is one subgroup
 // (the device's subgroup size, up to this).
 CP_CONST BVH_CULL_GROUP_SIZE = 64u;
-// Entries per invocation of the hierarchical pass's walk stack (shared memory, 8 bytes each):
+// Entries per invocation of the hierarchical pass's walk stack (shared memory, 4 bytes each):
 // at most one cut node per lane and two nodes per lane for each of BVH_CUT_MAX_HEIGHT levels
 // below (see cull_bvh.comp).
 CP_CONST BVH_STACK_PER_INVOCATION = 40u;
+// A stack entry holds a node's offset from its workgroup's first cut node in the bits above the
+// 6 plane bits: a workgroup's cut subtrees must span fewer nodes than this (checked on upload).
+CP_CONST BVH_WORKGROUP_NODE_SPAN = 1u << 26u;
 
 // The host cuts the tree into the highest subtrees of at most so many objects (a BvhCuller
 // setting) and at most BVH_CUT_MAX_HEIGHT levels below their root (20 levels in all), or
@@ -175,12 +178,14 @@ struct BvhCullParams {
 // Bindings of the hierarchical pass (set 0). 0..6 mean what they mean for the flat pass,
 // except that BINDING_BOUNDS holds each object's volume (GpuAabb, GpuObb or GpuSphere) in tree
 // order (the order of BVH_BINDING_OBJECTS), so a leaf's volumes are read together. Bounds,
-// views, nodes and the object order are uniform texel buffers; the rest storage buffers.
+// views, nodes, the object order and the centre bounds are uniform texel buffers; the rest
+// storage buffers.
 CP_CONST BVH_BINDING_NODES = 7u;      // GpuBvhNode, depth first, three texels each
 CP_CONST BVH_BINDING_OBJECTS = 8u;    // object ids in tree order, four per texel
 CP_CONST BVH_BINDING_CUTS = 9u;       // uint: the cut nodes, depth first
 CP_CONST BVH_BINDING_RECORDS = 10u;   // uvec2 scratch: a record per object and view (each cut subtree's slice)
-CP_CONST BVH_BINDING_COUNT = 11u;
+CP_CONST BVH_BINDING_CENTRES = 11u;   // AABBs: vec4 per object in tree order, xyz = centre, w = bound (as BINDING_CENTRES)
+CP_CONST BVH_BINDING_COUNT = 12u;
 
 // ---- host/render: the headless rasteriser that draws the culled objects ----
 
