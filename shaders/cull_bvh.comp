@@ -71,8 +71,12 @@ layout(set = 0, binding = BVH_BINDING_NODES) uniform usamplerBuffer nodes;
 layout(set = 0, binding = BVH_BINDING_OBJECTS) uniform usamplerBuffer object_order;  // four ids per texel
 layout(std430, set = 0, binding = BVH_BINDING_CUTS) readonly buffer Cuts { uint cuts[]; };
 // Written by each invocation in its walk, read by the other lanes of its subgroup after
-// subgroupMemoryBarrierBuffer() and subgroupBarrier().
-layout(std430, set = 0, binding = BVH_BINDING_RECORDS) coherent buffer Records { uvec2 records[]; };
+// subgroupMemoryBarrierImage() and subgroupBarrier(). A storage texel buffer, not a storage
+// buffer: lavapipe gathers an image load's lanes into a vector, where it inserts each lane's
+// storage-buffer words through the stack (a failed store forwarding per lane and word).
+layout(set = 0, binding = BVH_BINDING_RECORDS, rg32ui) uniform coherent uimageBuffer records;
+uvec2 record_at(uint at) { return imageLoad(records, int(at)).xy; }
+void set_record(uint at, uvec2 record) { imageStore(records, int(at), uvec4(record, 0u, 0u)); }
 // AABBs: per object in tree order xyz = centre, w = bound (host/cull/plane_bounds.hpp), as the
 // flat pass's BINDING_CENTRES.
 layout(set = 0, binding = BVH_BINDING_CENTRES) uniform usamplerBuffer centres;
@@ -82,8 +86,8 @@ layout(push_constant, std430) uniform Push { BvhCullParams params; };
 // Prefix sums over the subgroup from ballots: lavapipe builds an exclusive scan's result lane by
 // lane through the stack (a vector stored, one lane written, the vector reloaded: a failed
 // store-to-load forwarding per lane), where a ballot and a bit count only read lanes. Replacing
-// the walk's six scans per round took 10^6 boxes at 10% visible from 1.05 to 0.91 ms (with the
-// range records read once per subgroup, below).
+// the walk's six scans per round (and reading each range record by one lane) took 10^6 boxes at
+// 10% visible from 1.05 to 0.91 ms.
 // The number of lower lanes where p holds, and (total) of all lanes.
 uint exclusive_count(bool p, out uint total) {
   uvec4 bits = subgroupBallot(p);
@@ -265,7 +269,7 @@ void main() {
   uint take_all = accept_all && cut_count != 0u ? 1u : 0u;
   uint take_all_count;
   uint take_all_at = exclusive_count(take_all != 0u, take_all_count);
-  if (take_all != 0u) records[base + take_all_at] = uvec2(cut_first, cut_count);
+  if (take_all != 0u) set_record(base + take_all_at, uvec2(cut_first, cut_count));
   ranges += take_all_count;
   accepted += take_all != 0u ? cut_count : 0u;
   // The walk. The stack holds at most BVH_STACK_PER_INVOCATION entries per lane: it stays
@@ -305,7 +309,7 @@ void main() {
     bool range = c == CLASS_INSIDE && n.count != 0u;
     uint range_count;
     uint range_at = ranges + exclusive_count(range, range_count);
-    if (range) records[base + range_at] = uvec2(n.first, n.count);
+    if (range) set_record(base + range_at, uvec2(n.first, n.count));
     ranges += range_count;
     accepted += range ? n.count : 0u;
     uint list = intersecting && n.leaf != 0u ? n.count : 0u;
@@ -314,7 +318,7 @@ void main() {
     uint chunk_at = listed + exclusive_sum(chunks, chunk_total);
     for (uint j = 0u; j < chunks; ++j) {
       uint size = min(BVH_CHUNK_OBJECTS, list - BVH_CHUNK_OBJECTS * j);
-      records[back - (chunk_at + j)] = uvec2(n.first + BVH_CHUNK_OBJECTS * j, straddled | (size - 1u) << CHUNK_SIZE_SHIFT);
+      set_record(back - (chunk_at + j), uvec2(n.first + BVH_CHUNK_OBJECTS * j, straddled | (size - 1u) << CHUNK_SIZE_SHIFT));
     }
     listed += chunk_total;
     tests.y += list;
@@ -326,14 +330,14 @@ void main() {
   // the largest of the subgroup's chunks has objects), and the chunk's record rewritten in
   // place with the objects found visible and INSIDE, a bit each. A lane without a chunk
   // tests the slice's first object, and the answer is dropped.
-  subgroupMemoryBarrierBuffer();
+  subgroupMemoryBarrierImage();
   subgroupBarrier();
   uint tested_visible = 0u, tested_inside = 0u;  // this lane's
   for (uint first = 0u; first < listed; first += lanes) {
     bool live = first + rank < listed;
     uint at = back - (first + rank);
     uvec2 chunk = uvec2(slice_first, 0u);
-    if (live) chunk = records[at];
+    if (live) chunk = record_at(at);
     uint size = live ? (chunk.y >> CHUNK_SIZE_SHIFT) + 1u : 0u, mask = chunk.y & ALL_PLANES;
     uint visible_bits = 0u, inside_bits = 0u;
     uint rounds = subgroupMax(size);
@@ -365,7 +369,7 @@ void main() {
     }
     tested_visible += bitCount(visible_bits);
     tested_inside += bitCount(inside_bits);
-    if (live) records[at] = uvec2(chunk.x, visible_bits | inside_bits << BVH_CHUNK_OBJECTS);
+    if (live) set_record(at, uvec2(chunk.x, visible_bits | inside_bits << BVH_CHUNK_OBJECTS));
   }
 
   // 4. The list slots and the counts: one global atomic per subgroup and counter, no
@@ -386,16 +390,14 @@ void main() {
   uint slot = subgroupBroadcastFirst(subgroup_base);
   // The accepted ranges (every object INSIDE), then the tested visible objects.
   for (uint r = 0u; r < ranges; ++r) {
-    uvec2 range = uvec2(0u);  // read by one lane (a load by every lane inserts each through the stack)
-    if (rank == 0u) range = records[base + r];
-    range = subgroupBroadcastFirst(range);
+    uvec2 range = record_at(base + r);
     for (uint k = rank; k < range.y; k += lanes) emit_visible(view, object_at(range.x + k), slot + k, CLASS_INSIDE);
     slot += range.y;
   }
   for (uint first = 0u; first < listed; first += lanes) {  // the chunks, a lane each (as in step 3)
     bool live = first + rank < listed;
     uvec2 chunk = uvec2(0u);
-    if (live) chunk = records[back - (first + rank)];
+    if (live) chunk = record_at(back - (first + rank));
     uint bits = chunk.y & CHUNK_BITS;
     uint found = uint(bitCount(bits));
     uint found_total;

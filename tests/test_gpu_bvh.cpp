@@ -590,10 +590,11 @@ TEST_F(GpuBvh, BadTreesAndOptionsAreClearErrors) {
   draws.draws = true;
   culler().upload_draws(std::vector<gpu::DrawCommand>(99));
   EXPECT_THROW(culler().cull(test_frusta(), draws), std::invalid_argument);
-  // More views than the buffers hold (here the traversal records, 8 bytes per object and
-  // view, give out first): a clear length_error before anything is allocated.
+  // More views than the buffers hold (here the classes and the visible list, 4 bytes per
+  // object and view in storage buffers, give out first): a clear length_error before anything
+  // is allocated.
   const std::size_t too_many_views =
-      GpuBvhEnvironment::context->properties().limits.maxStorageBufferRange / (8 * boxes.size()) + 1;
+      GpuBvhEnvironment::context->properties().limits.maxStorageBufferRange / (4 * boxes.size()) + 1;
   if (too_many_views < 5'000'000) {
     const std::vector<Frustum> views(too_many_views, test_frusta()[0]);
     EXPECT_THROW(culler().cull(views), std::length_error);

@@ -27,7 +27,12 @@ constexpr VkBufferUsageFlags kTexel = VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT;
 // texel buffers (see cull_bvh.comp).
 constexpr std::uint32_t kTexelBindings =
     1u << BINDING_BOUNDS | 1u << BINDING_VIEWS | 1u << BVH_BINDING_NODES | 1u << BVH_BINDING_OBJECTS | 1u << BVH_BINDING_CENTRES;
-constexpr std::uint32_t kStorageBindings = BVH_BINDING_COUNT - std::uint32_t(std::popcount(kTexelBindings));
+// The traversal records are written and read back within the pass through a storage texel
+// buffer: on lavapipe an image load gathers the lanes' records into a vector, where a
+// storage-buffer load inserts each lane's words through the stack (a stall per lane and word).
+constexpr std::uint32_t kRecordBindings = 1u << BVH_BINDING_RECORDS;
+constexpr VkBufferUsageFlags kRecordUsage = VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT;
+constexpr std::uint32_t kStorageBindings = BVH_BINDING_COUNT - std::uint32_t(std::popcount(kTexelBindings | kRecordBindings));
 
 }  // namespace
 
@@ -52,11 +57,12 @@ BvhCuller::BvhCuller(const vk::Context& ctx)
     throw vk::Error("hierarchical culling needs " + std::to_string(kStorageBindings) + " storage buffers per stage; " +
                     ctx_.info().name + " allows " + std::to_string(limits.maxPerStageDescriptorStorageBuffers));
   detail::check_texel_format(ctx_, "hierarchical culling");
+  detail::check_record_format(ctx_, "hierarchical culling");
   detail::check_subgroup_operations(ctx_, VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT |
                                               VK_SUBGROUP_FEATURE_BALLOT_BIT | VK_SUBGROUP_FEATURE_SHUFFLE_BIT,
                                     "hierarchical culling");
   resources_ = std::make_unique<detail::PassResources>(ctx_, pipeline(false, true).set_layout(), BVH_BINDING_COUNT,
-                                                      kTexelBindings);
+                                                      kTexelBindings, kRecordBindings);
 }
 
 BvhCuller::~BvhCuller() = default;
@@ -72,7 +78,7 @@ const vk::ComputePipeline& BvhCuller::pipeline(bool draws, bool classes) {
   const std::uint32_t spec[5] = {0u, group_size_, kind, draws ? 1u : 0u, classes ? 1u : 0u};
   slot = std::make_unique<vk::ComputePipeline>(
       ctx_, vk::ComputePipelineDesc{std::span<const std::uint32_t>(cullpipe_cull_bvh_spv),
-                                    BVH_BINDING_COUNT, sizeof(BvhCullParams), spec, name.c_str(), kTexelBindings});
+                                    BVH_BINDING_COUNT, sizeof(BvhCullParams), spec, name.c_str(), kTexelBindings, kRecordBindings});
   return *slot;
 }
 
@@ -226,7 +232,7 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   check(outputs, views_x + std::to_string(object_count_) + " objects of output");
   check(visible, views_x + std::to_string(capacity) + " visible ids");
   check(draw_bytes, views_x + std::to_string(capacity) + " draw commands");
-  check(record_bytes, views_x + std::to_string(object_count_) + " objects of traversal records");
+  detail::check_record_range(ctx_, record_bytes, views_x + std::to_string(object_count_) + " objects of traversal records");
   bool& dirty = descriptors_dirty_;
   detail::ensure_buffer(ctx_, bounds_, 0, kTexel, "object volume buffer", dirty);
   detail::ensure_buffer(ctx_, nodes_, 0, kTexel, "BVH node buffer", dirty);
@@ -240,7 +246,7 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
                         kStorage | VK_BUFFER_USAGE_TRANSFER_DST_BIT | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "counter buffer", dirty);
   detail::ensure_buffer(ctx_, views_, v * sizeof(GpuFrustum), kTexel, "view buffer", dirty);
   detail::ensure_buffer(ctx_, draws_, draw_bytes, kStorage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "draw buffer", dirty);
-  detail::ensure_buffer(ctx_, records_, record_bytes, kStorage, "BVH traversal record buffer", dirty);
+  detail::ensure_buffer(ctx_, records_, record_bytes, kRecordUsage, "BVH traversal record buffer", dirty);
   update_descriptors();
   auto gpu_views = views_.as<GpuFrustum>();
   for (std::size_t i = 0; i < v; ++i) {

@@ -59,6 +59,21 @@ void check_texel_range(const vk::Context& ctx, VkDeviceSize bytes, const std::st
                             " of 16 bytes, " + mib(limit) + " usable)");
 }
 
+void check_record_range(const vk::Context& ctx, VkDeviceSize bytes, const std::string& what) {
+  const VkDeviceSize limit = std::min<VkDeviceSize>(ctx.properties().limits.maxTexelBufferElements, 0x7fffffffu) * kRecordBytes;
+  if (bytes > limit)
+    throw std::length_error(what + " needs " + std::to_string(bytes) + " bytes (" + mib(bytes) + "), more than one texel buffer view covers on " +
+                            ctx.info().name + " (maxTexelBufferElements " + std::to_string(ctx.properties().limits.maxTexelBufferElements) +
+                            " of 8 bytes, " + mib(limit) + " usable)");
+}
+
+void check_record_format(const vk::Context& ctx, const std::string& who) {
+  VkFormatProperties props{};
+  vkGetPhysicalDeviceFormatProperties(ctx.physical_device(), kRecordFormat, &props);
+  if (!(props.bufferFeatures & VK_FORMAT_FEATURE_STORAGE_TEXEL_BUFFER_BIT))
+    throw vk::Error(who + ": " + ctx.info().name + " cannot read and write R32G32_UINT storage texel buffers");
+}
+
 void check_texel_format(const vk::Context& ctx, const std::string& who) {
   VkFormatProperties props{};
   vkGetPhysicalDeviceFormatProperties(ctx.physical_device(), kTexelFormat, &props);
@@ -169,8 +184,8 @@ CullResult read_outputs(const OutputBuffers& buffers, std::size_t object_count, 
 }
 
 PassResources::PassResources(const vk::Context& ctx, VkDescriptorSetLayout layout, std::uint32_t binding_count,
-                             std::uint32_t texel_bindings)
-    : ctx_(ctx), binding_count_(binding_count), texel_bindings_(texel_bindings), layout_(layout) {
+                             std::uint32_t texel_bindings, std::uint32_t record_bindings)
+    : ctx_(ctx), binding_count_(binding_count), texel_bindings_(texel_bindings), record_bindings_(record_bindings), layout_(layout) {
   try {
     VkDevice dev = ctx_.device();
     ensure_sets(1);
@@ -221,12 +236,17 @@ void PassResources::ensure_sets(std::size_t count) {
     sets_.clear();
     for (std::size_t set = 0; set < views_.size(); ++set) destroy_views(set);
   }
-  std::uint32_t texels = 0;
-  for (std::uint32_t b = 0; b < binding_count_; ++b) texels += texel(b) ? 1 : 0;
-  VkDescriptorPoolSize pool_sizes[2];
+  std::uint32_t texels = 0, records = 0;
+  for (std::uint32_t b = 0; b < binding_count_; ++b) {
+    texels += texel(b) ? 1 : 0;
+    records += record(b) ? 1 : 0;
+  }
+  VkDescriptorPoolSize pool_sizes[3];
   std::uint32_t size_count = 0;
-  if (binding_count_ > texels) pool_sizes[size_count++] = {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, (binding_count_ - texels) * std::uint32_t(count)};
+  if (binding_count_ > texels + records)
+    pool_sizes[size_count++] = {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, (binding_count_ - texels - records) * std::uint32_t(count)};
   if (texels) pool_sizes[size_count++] = {VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER, texels * std::uint32_t(count)};
+  if (records) pool_sizes[size_count++] = {VK_DESCRIPTOR_TYPE_STORAGE_TEXEL_BUFFER, records * std::uint32_t(count)};
   VkDescriptorPoolCreateInfo pool_info{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
   pool_info.maxSets = std::uint32_t(count);
   pool_info.poolSizeCount = size_count;
@@ -264,10 +284,10 @@ void PassResources::write(std::size_t index, std::span<const Range> ranges) {
   std::vector<VkBufferView> views(binding_count_, VK_NULL_HANDLE);
   try {
     for (std::uint32_t b = 0; b < binding_count_; ++b) {
-      if (!texel(b)) continue;
+      if (!texel(b) && !record(b)) continue;
       VkBufferViewCreateInfo view_info{VK_STRUCTURE_TYPE_BUFFER_VIEW_CREATE_INFO};
       view_info.buffer = ranges[b].buffer->handle();
-      view_info.format = kTexelFormat;
+      view_info.format = texel(b) ? kTexelFormat : kRecordFormat;
       view_info.offset = ranges[b].offset;
       view_info.range = ranges[b].size;
       CULLPIPE_VK_CHECK(vkCreateBufferView(ctx_.device(), &view_info, nullptr, &views[b]));
@@ -283,8 +303,8 @@ void PassResources::write(std::size_t index, std::span<const Range> ranges) {
     writes[b].dstSet = sets_[index];
     writes[b].dstBinding = b;
     writes[b].descriptorCount = 1;
-    if (texel(b)) {
-      writes[b].descriptorType = VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER;
+    if (texel(b) || record(b)) {
+      writes[b].descriptorType = texel(b) ? VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_TEXEL_BUFFER;
       writes[b].pTexelBufferView = &views[b];
     } else {
       writes[b].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;

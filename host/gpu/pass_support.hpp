@@ -20,6 +20,10 @@ namespace cullpipe::gpu::detail {
 /// unchanged: no float conversion, denormal flush or NaN canonicalisation on the way).
 inline constexpr VkFormat kTexelFormat = VK_FORMAT_R32G32B32A32_UINT;
 inline constexpr VkDeviceSize kTexelBytes = 16;
+/// Format of every storage texel buffer binding (records the shaders write and read back
+/// within a pass): two 32-bit words per element.
+inline constexpr VkFormat kRecordFormat = VK_FORMAT_R32G32_UINT;
+inline constexpr VkDeviceSize kRecordBytes = 8;
 
 /// Throws std::length_error naming `what`, its size and the device limit when `bytes` exceed
 /// one storage buffer (maxStorageBufferRange).
@@ -39,6 +43,13 @@ void check_texel_range(const vk::Context& ctx, VkDeviceSize bytes, const std::st
 /// Throws vk::Error naming `who` unless the device reads kTexelFormat from uniform texel
 /// buffers (a format the Vulkan spec makes mandatory; checked for a clear error anyway).
 void check_texel_format(const vk::Context& ctx, const std::string& who);
+
+/// Throws std::length_error naming `what`, its size and the device limit when `bytes` exceed one
+/// storage texel buffer view of kRecordFormat (maxTexelBufferElements, at most 2^31 - 1).
+void check_record_range(const vk::Context& ctx, VkDeviceSize bytes, const std::string& what);
+/// Throws vk::Error naming `who` unless the device reads and writes kRecordFormat in storage
+/// texel buffers (mandatory in Vulkan; checked for a clear error anyway).
+void check_record_format(const vk::Context& ctx, const std::string& who);
 
 /// Grows `buffer` to at least `bytes` (never shrinks). Sets `dirty` (descriptors must be
 /// rewritten) before the old buffer is freed, so a failed allocation cannot leave a descriptor
@@ -88,8 +99,10 @@ CullResult timed_pass(PassResources& resources, const std::function<void()>& pre
 class PassResources {
  public:
   /// Bindings 0..binding_count-1 of `layout`: storage buffers, except bit i of
-  /// `texel_bindings` makes binding i a uniform texel buffer of kTexelFormat.
-  PassResources(const vk::Context& ctx, VkDescriptorSetLayout layout, std::uint32_t binding_count, std::uint32_t texel_bindings = 0);
+  /// `texel_bindings` makes binding i a uniform texel buffer of kTexelFormat, and bit i of
+  /// `record_bindings` a storage texel buffer of kRecordFormat.
+  PassResources(const vk::Context& ctx, VkDescriptorSetLayout layout, std::uint32_t binding_count, std::uint32_t texel_bindings = 0,
+                std::uint32_t record_bindings = 0);
   ~PassResources();
   PassResources(const PassResources&) = delete;
   PassResources& operator=(const PassResources&) = delete;
@@ -101,8 +114,8 @@ class PassResources {
   void ensure_sets(std::size_t count);
   /// Binding i of set 0 = the whole of buffers[i].
   void write(std::span<const vk::Buffer* const> buffers);
-  /// A part of a buffer bound to one binding (for a texel binding: a multiple of kTexelBytes,
-  /// VK_WHOLE_SIZE for the rest of the buffer).
+  /// A part of a buffer bound to one binding (for a texel binding: a multiple of kTexelBytes, for
+  /// a record binding of kRecordBytes; VK_WHOLE_SIZE for the rest of the buffer).
   struct Range {
     const vk::Buffer* buffer;
     VkDeviceSize offset = 0;
@@ -121,14 +134,16 @@ class PassResources {
 
   const vk::Context& ctx_;
   bool texel(std::uint32_t binding) const { return binding < 32 && (texel_bindings_ >> binding & 1u); }
+  bool record(std::uint32_t binding) const { return binding < 32 && (record_bindings_ >> binding & 1u); }
   void destroy_views(std::size_t set);
 
   std::uint32_t binding_count_;
   std::uint32_t texel_bindings_;
+  std::uint32_t record_bindings_;
   VkDescriptorSetLayout layout_;
   VkDescriptorPool pool_ = VK_NULL_HANDLE;
   std::vector<VkDescriptorSet> sets_;
-  std::vector<std::vector<VkBufferView>> views_;  // per set, the texel bindings' views
+  std::vector<std::vector<VkBufferView>> views_;  // per set, the texel and record bindings' views
   VkCommandBuffer cmd_ = VK_NULL_HANDLE;
   VkQueryPool query_pool_ = VK_NULL_HANDLE;
 };

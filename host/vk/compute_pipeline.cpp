@@ -42,9 +42,12 @@ ComputePipeline::ComputePipeline(const Context& ctx, const ComputePipelineDesc& 
   try {
     std::vector<VkDescriptorSetLayoutBinding> bindings(desc.binding_count);
     for (std::uint32_t i = 0; i < desc.binding_count; ++i) {
-      const bool texel = i < 32 && (desc.uniform_texel_bindings >> i & 1u);
-      bindings[i] = {i, texel ? VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1,
-                     VK_SHADER_STAGE_COMPUTE_BIT, nullptr};
+      const bool texel = i < 32 && (desc.uniform_texel_bindings >> i & 1u), storage_texel = i < 32 && (desc.storage_texel_bindings >> i & 1u);
+      bindings[i] = {i,
+                     texel           ? VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER
+                     : storage_texel ? VK_DESCRIPTOR_TYPE_STORAGE_TEXEL_BUFFER
+                                     : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER,
+                     1, VK_SHADER_STAGE_COMPUTE_BIT, nullptr};
     }
     VkDescriptorSetLayoutCreateInfo set_info{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO};
     set_info.bindingCount = std::uint32_t(bindings.size());
