@@ -132,6 +132,31 @@ TEST_F(GpuBvh, BoxesAtTheEdgeOfTheirCentreBound) {
   }
 }
 
+// The walk's stacks in shared memory (a GPU's default) and in the records image (a CPU
+// device's) give the same answers and test counts.
+TEST_F(GpuBvh, BothPlacesOfTheWalkStackAgree) {
+  const bool default_place = culler().walk_stack_in_records();
+  struct Restore {
+    gpu::BvhCuller& c;
+    bool in_records;
+    ~Restore() { c.set_walk_stack_in_records(in_records); }
+  } restore{culler(), default_place};
+  test::Rng rng{45};
+  const test::RandomVolumes v = test::random_volumes(rng, 20000, 40.0f, 3.0f);
+  for (bool in_records : {false, true}) {
+    SCOPED_TRACE(in_records ? "stacks in the records" : "stacks in shared memory");
+    culler().set_walk_stack_in_records(in_records);
+    EXPECT_EQ(culler().walk_stack_in_records(), in_records);
+    for (std::uint32_t leaf : {1u, 16u}) {
+      expect_agreement(culler(), flat_tree(v.aabbs, leaf), v.aabbs, test_frusta());
+      expect_agreement(culler(), tree_over(v.spheres, leaf), v.spheres, test_frusta());
+    }
+    gpu::CullOptions no_classes;
+    no_classes.classes = false;
+    expect_agreement(culler(), tree_over(v.obbs, 16), v.obbs, test_frusta(), no_classes);
+  }
+}
+
 TEST_F(GpuBvh, ObbAndSphereHierarchiesAgree) {
   test::Rng rng{43};
   for (std::size_t n : {0u, 1u, 65u, 5000u}) {

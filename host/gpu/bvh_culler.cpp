@@ -38,7 +38,8 @@ constexpr std::uint32_t kStorageBindings = BVH_BINDING_COUNT - std::uint32_t(std
 
 BvhCuller::BvhCuller(const vk::Context& ctx)
     : ctx_(ctx),
-      subtree_objects_(ctx.properties().deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU ? kCpuSubtreeObjects : kGpuSubtreeObjects) {
+      subtree_objects_(ctx.properties().deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU ? kCpuSubtreeObjects : kGpuSubtreeObjects),
+      stack_in_records_(ctx.properties().deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU) {
   const VkPhysicalDeviceLimits& limits = ctx_.properties().limits;
   // A workgroup is one subgroup (cull_bvh.comp walks the subtrees of a subgroup together, on
   // a stack in shared memory): the device's subgroup size, at most BVH_CULL_GROUP_SIZE.
@@ -69,13 +70,14 @@ BvhCuller::~BvhCuller() = default;
 
 const vk::ComputePipeline& BvhCuller::pipeline(bool draws, bool classes) {
   const auto kind = std::uint32_t(kind_);
-  std::unique_ptr<vk::ComputePipeline>& slot = pipelines_[kind][draws][classes];
+  std::unique_ptr<vk::ComputePipeline>& slot = pipelines_[kind][draws][classes][stack_in_records_];
   if (slot) return *slot;
   const std::string name =
-      "hierarchical cull (" + std::string(to_string(kind_)) + (draws ? ", draws" : "") + (classes ? ", classes" : "") + ")";
-  // Specialization constants: 1 group size, 2 volume kind, 3 draws, 4 classes.
+      "hierarchical cull (" + std::string(to_string(kind_)) + (draws ? ", draws" : "") + (classes ? ", classes" : "") +
+      (stack_in_records_ ? ", stacks in records" : "") + ")";
+  // Specialization constants: 1 group size, 2 volume kind, 3 draws, 4 classes, 5 stacks in the records.
   static_assert(BV_KIND_AABB == 0 && BV_KIND_OBB == 1 && BV_KIND_SPHERE == 2, "BvKind order must match the shader");
-  const std::uint32_t spec[5] = {0u, group_size_, kind, draws ? 1u : 0u, classes ? 1u : 0u};
+  const std::uint32_t spec[6] = {0u, group_size_, kind, draws ? 1u : 0u, classes ? 1u : 0u, stack_in_records_ ? 1u : 0u};
   slot = std::make_unique<vk::ComputePipeline>(
       ctx_, vk::ComputePipelineDesc{std::span<const std::uint32_t>(cullpipe_cull_bvh_spv),
                                     BVH_BINDING_COUNT, sizeof(BvhCullParams), spec, name.c_str(), kTexelBindings, kRecordBindings});
@@ -226,7 +228,9 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   const VkDeviceSize visible = VkDeviceSize(capacity) * v * sizeof(std::uint32_t);
   const VkDeviceSize draw_bytes = options.draws ? VkDeviceSize(capacity) * v * sizeof(DrawCommand) : 0;
   // A cut subtree has at most as many records as objects: one scratch slot per object and view.
-  const VkDeviceSize record_bytes = VkDeviceSize(object_count_) * v * 2 * sizeof(std::uint32_t);
+  // A record per object and view, then (stacks in the records) each workgroup's walk stack.
+  const VkDeviceSize stack_records = stack_in_records_ ? VkDeviceSize(groups_per_view_) * v * group_size_ * BVH_STACK_PER_INVOCATION : 0;
+  const VkDeviceSize record_bytes = (VkDeviceSize(object_count_) * v + stack_records) * detail::kRecordBytes;
   detail::check_texel_range(ctx_, VkDeviceSize(v) * sizeof(GpuFrustum), std::to_string(v) + " views");
   check(VkDeviceSize(v) * sizeof(ViewCounters), std::to_string(v) + " view counters");
   check(outputs, views_x + std::to_string(object_count_) + " objects of output");

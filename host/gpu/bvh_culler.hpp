@@ -60,6 +60,11 @@ class BvhCuller {
   static constexpr std::uint32_t kCpuSubtreeObjects = 4096, kGpuSubtreeObjects = 128;
   void set_subtree_objects(std::uint32_t objects);
   std::uint32_t subtree_objects() const { return subtree_objects_; }
+  /// Where the walk keeps its per-workgroup stacks: in the records image (default on a CPU
+  /// device: lavapipe loads shared memory lane by lane, an image by gathers) or in shared
+  /// memory (default on a GPU). The answers are the same; tests switch it to cover both.
+  void set_walk_stack_in_records(bool in_records) { stack_in_records_ = in_records; }
+  bool walk_stack_in_records() const { return stack_in_records_; }
   /// Workgroups along x before the dispatch folds into y; 0 means the device limit
   /// (maxComputeWorkGroupCount[0]). Tests set it low to exercise the fold.
   void set_max_groups_per_dispatch(std::uint32_t groups) { max_groups_x_ = groups; }
@@ -93,7 +98,7 @@ class BvhCuller {
  private:
   void prepare(std::span<const Frustum> views, const CullOptions& options);
   void record_passes(VkCommandBuffer cmd, VkQueryPool timestamps);
-  const vk::ComputePipeline& pipeline(bool draws, bool classes);
+  const vk::ComputePipeline& pipeline(bool draws, bool classes);  // (and stack_in_records_)
   template <class Volume>
   void upload_impl(const bvh::FlatTree& tree, std::span<const Volume> volumes);
   void update_descriptors();
@@ -101,8 +106,11 @@ class BvhCuller {
   const vk::Context& ctx_;
   std::uint32_t group_size_ = BVH_CULL_GROUP_SIZE;  // the device's subgroup size, at most this
   std::uint32_t subtree_objects_;
+  // On a CPU device the walk stacks live in the records image, not in shared memory (see
+  // STACK_IN_RECORDS in cull_bvh.comp).
+  bool stack_in_records_ = false;
   std::uint32_t max_groups_x_ = 0;
-  std::unique_ptr<vk::ComputePipeline> pipelines_[3][2][2];  // [kind][draws][classes]
+  std::unique_ptr<vk::ComputePipeline> pipelines_[3][2][2][2];  // [kind][draws][classes][stack in records]
   BvKind kind_ = BvKind::Aabb;
   vk::Buffer bounds_, classes_, visible_, counters_, views_, templates_, draws_;
   vk::Buffer nodes_, objects_, cuts_, records_;
