@@ -384,6 +384,7 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
           __builtin_prefetch(c_z + first + kAhead);
           __builtin_prefetch(bound + first + kAhead);
         }
+#pragma GCC unroll 4
         for (unsigned v = 0; v < kLine / W; ++v, ++block) settle(first + v * W, block, kAllLanes);
       }
       for (; first < run_end; first += W, ++block)  // the last vectors (loads past the end stay in the columns' spare vector)
