@@ -9,24 +9,26 @@
 //      Invocations whose cut nodes share an ancestor all test it (same answer); only the one
 //      whose cut node is its first-child descendant counts the test, so every node test is
 //      counted once;
-//   2. the subgroup walks its cut subtrees together: their nodes go on one stack in shared
-//      memory, and each round every invocation takes one (the subgroup's lanes stay busy
+//   2. the subgroup walks its cut subtrees together: their nodes go on one stack (in shared
+//      memory, or with STACK_IN_RECORDS in the records image), and each round every
+//      invocation takes one (the subgroup's lanes stay busy
 //      however unevenly the work is spread over its subtrees; walking one subtree per
 //      invocation kept 3-4 of 8 lanes idle on average at 10% visible). OUTSIDE drops a node,
 //      INSIDE records its object range, an INTERSECTING inner node pushes its two children
 //      with the planes it straddles, an INTERSECTING leaf lists its objects in chunks of at
 //      most BVH_CHUNK_OBJECTS, one record each;
 //   3. each lane takes a listed chunk and tests its objects, one per round, on the planes the
-//      leaf straddles, and rewrites the chunk's record with a bit per visible and per INSIDE
-//      object;
+//      leaf straddles (boxes first by their centre bound, then in full those it leaves open),
+//      and rewrites the chunk's record with a bit per visible and per INSIDE object;
 //   4. the subgroup reserves the list slots of all its visible objects with one atomic per
 //      counter and writes them: the accepted ranges, one object per lane, then each lane a
 //      chunk's visible objects.
-// Records go to the workgroup's own slice of a scratch buffer (its cut subtrees' object
+// Records go to the workgroup's own slice of a scratch image (its cut subtrees' object
 // ranges, which are adjacent: one record per accepted range or listed chunk, so they fit), so
 // the walk needs no global atomics and no work queues. (On lavapipe every branch runs under a
-// mask and only loops skip work, so a lane's work in a round is the whole round's; and every
-// load or store of a storage buffer or shared memory is a loop over the lanes, which is why a
+// mask and only loops skip work, so a lane's work in a round is the whole round's; every
+// load or store of a storage buffer or shared memory is a loop over the lanes, and a load or a
+// scan builds its result lane by lane through the stack (see exclusive_count), which is why a
 // leaf is listed as chunks, not objects: with leaves of 16, listing each object, testing the
 // listed objects 8 to a round and recording the visible ones took 0.57-0.60 ms of a pass at
 // 10^6 boxes and 10% visible, chunks 0.46-0.52.)
