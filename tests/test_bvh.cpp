@@ -7,6 +7,7 @@
 #include <xmmintrin.h>
 #endif
 
+#include "bvh/binned_sah.hpp"
 #include "bvh/bvh.hpp"
 #include "cull/reference.hpp"
 #include "scene/generators.hpp"
@@ -148,9 +149,11 @@ TEST(Bvh, BinnedBuildIsUnchangedWhenTheCpuFlushesDenormals) {
   const bvh::Tree normal = bvh::build_binned_sah(boxes);
   const unsigned csr = _mm_getcsr();
   _mm_setcsr(csr | 0x8040);  // FTZ | DAZ
-  bvh::Tree flushed;
+  bvh::Tree flushed, flushed_baseline;
   try {
-    flushed = bvh::build_binned_sah(boxes);
+    flushed = bvh::build_binned_sah(boxes);  // the AVX2 variant where the CPU has it
+    bvh::detail::BinnedScratch scratch;
+    bvh::detail::baseline::build(boxes, {}, scratch, flushed_baseline);
   } catch (...) {
     _mm_setcsr(csr);
     throw;
@@ -158,8 +161,73 @@ TEST(Bvh, BinnedBuildIsUnchangedWhenTheCpuFlushesDenormals) {
   _mm_setcsr(csr);
   EXPECT_EQ(bvh::check_tree(flushed, boxes), "");
   EXPECT_EQ(flushed, normal);
+  EXPECT_EQ(flushed_baseline, normal);
 }
 #endif
+
+// Sets that take every path of the binned builder: boxes, points with duplicates, a line, a
+// flat sheet, equal boxes (the split by id), subnormal spreads, huge coordinates.
+std::vector<std::vector<Aabb>> builder_edge_sets() {
+  std::vector<std::vector<Aabb>> sets;
+  test::Rng rng{91};
+  std::vector<Aabb> boxes(3000), points(2000), line, sheet, tiny, huge;
+  for (Aabb& b : boxes) b = test::random_aabb(rng, 60.0f, 4.0f);
+  for (Aabb& b : points) {
+    const glm::vec3 p = rng.vec3(-20.0f, 20.0f);
+    b = {p, p};
+  }
+  for (std::size_t i = 0; i < 400; ++i) points[i] = points[i + 800];
+  for (int i = 0; i < 300; ++i) line.push_back({glm::vec3(float(i % 37), 0, 0), glm::vec3(float(i % 37) + 0.5f, 0, 0)});
+  for (int i = 0; i < 300; ++i) sheet.push_back({glm::vec3(float(i % 17), float(i / 17), 0), glm::vec3(float(i % 17), float(i / 17), 0)});
+  for (int i = 0; i < 60; ++i) tiny.push_back({glm::vec3(float(i) * 1e-44f), glm::vec3(float(i) * 1e-44f)});
+  for (int i = 0; i < 200; ++i) {
+    const glm::vec3 c = rng.vec3(-1.0f, 1.0f) * 1e37f;
+    huge.push_back({c - glm::vec3(1e36f), c + glm::vec3(1e36f)});
+  }
+  sets = {boxes, points, line, sheet, std::vector<Aabb>(700, Aabb{glm::vec3(-1), glm::vec3(2)}), tiny, huge,
+          std::vector<Aabb>(1, boxes[0]), {boxes[1], boxes[2]}};
+  return sets;
+}
+
+// The AVX2 variant (vectorised sweep, 8-lane box updates) and the baseline build the same tree,
+// bit for bit, for every bin count and leaf size.
+TEST(Bvh, BinnedBuilderVariantsBuildTheSameTree) {
+  if (!bvh::detail::binned_sah_avx2_available()) GTEST_SKIP() << "this CPU has no AVX2 (only the baseline variant runs)";
+  for (const std::vector<Aabb>& set : builder_edge_sets())
+    for (std::uint32_t leaf : {1u, 4u, 7u})
+      for (std::uint32_t bins : {2u, 5u, 16u, 33u, 256u}) {
+        bvh::detail::BinnedScratch a, b;
+        bvh::Tree base, wide;
+        bvh::detail::baseline::build(set, {leaf, bins}, a, base);
+        bvh::detail::avx2::build(set, {leaf, bins}, b, wide);
+        ASSERT_EQ(bvh::check_tree(base, set), "") << set.size() << " objects, leaf " << leaf << ", bins " << bins;
+        ASSERT_EQ(wide, base) << set.size() << " objects, leaf " << leaf << ", bins " << bins;
+      }
+}
+
+// A builder kept between builds (growing, shrinking, other options) gives build_binned_sah's
+// tree each time, into a tree it reuses; so does one moved from, moved into or released.
+TEST(Bvh, BinnedSahBuilderReusesItsMemory) {
+  const std::vector<std::vector<Aabb>> sets = builder_edge_sets();
+  bvh::BinnedSahBuilder builder;
+  bvh::Tree tree;
+  for (int round = 0; round < 2; ++round)
+    for (const std::vector<Aabb>& set : sets) {
+      const bvh::TopDownOptions options{round == 0 ? 4u : 2u, round == 0 ? 16u : 9u};
+      builder.build(set, options, tree);
+      ASSERT_EQ(tree, bvh::build_binned_sah(set, options)) << set.size() << " objects, round " << round;
+    }
+  builder.build(std::span<const Aabb>(), {}, tree);
+  EXPECT_TRUE(tree.nodes.empty() && tree.objects.empty());
+  bvh::BinnedSahBuilder moved = std::move(builder);
+  moved.build(sets[0], {}, tree);
+  EXPECT_EQ(tree, bvh::build_binned_sah(sets[0]));
+  builder.build(sets[1], {}, tree);  // NOLINT(bugprone-use-after-move): a moved-from builder still builds
+  EXPECT_EQ(tree, bvh::build_binned_sah(sets[1]));
+  moved.release();
+  moved.build(sets[2], {}, tree);
+  EXPECT_EQ(tree, bvh::build_binned_sah(sets[2]));
+}
 
 TEST(Bvh, MetricsAndDeterminism) {
   test::Rng rng{8};

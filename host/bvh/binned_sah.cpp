@@ -1,0 +1,86 @@
+// build_binned_sah and BinnedSahBuilder: the builder's two variants from one source (the
+// baseline: SSE2 on x86-64, plain C++ elsewhere; and AVX2, chosen at run time), its working
+// memory, and the choice between the variants.
+#include "bvh/binned_sah.hpp"
+
+#define CULLPIPE_BINNED_NS baseline
+#define CULLPIPE_BINNED_AVX2 0
+#include "bvh/binned_sah.inl"
+#undef CULLPIPE_BINNED_NS
+#undef CULLPIPE_BINNED_AVX2
+
+// The AVX2 variant: only the functions defined in binned_sah.inl get AVX2 (a target pragma, not
+// -mavx2 on a file, which would also compile shared inline functions such as std::vector's for
+// AVX2, and the linker may keep those copies for every caller).
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#define CULLPIPE_HAVE_X86_BUILDERS 1
+#pragma GCC push_options
+#pragma GCC target("avx2")
+#define CULLPIPE_BINNED_NS avx2
+#define CULLPIPE_BINNED_AVX2 1
+#include "bvh/binned_sah.inl"
+#undef CULLPIPE_BINNED_NS
+#undef CULLPIPE_BINNED_AVX2
+#pragma GCC pop_options
+#endif
+
+namespace cullpipe::bvh {
+
+namespace detail {
+
+void BinnedScratch::reserve(std::size_t n) {
+  if (capacity >= n) return;
+  // Released first, so the old and new buffers are never held together.
+  buffer[0].reset();
+  buffer[1].reset();
+  bin_of.reset();
+  buffer[0].reset(new Box8[n]);
+  buffer[1].reset(new Box8[n]);
+  bin_of.reset(new std::uint32_t[n]);
+  advise_huge_pages(buffer[0].get(), n * sizeof(Box8));
+  advise_huge_pages(buffer[1].get(), n * sizeof(Box8));
+  capacity = n;
+}
+
+bool binned_sah_avx2_available() {
+#if defined(CULLPIPE_HAVE_X86_BUILDERS)
+  static const bool available = __builtin_cpu_supports("avx2");
+  return available;
+#else
+  return false;
+#endif
+}
+
+#if !defined(CULLPIPE_HAVE_X86_BUILDERS)
+namespace avx2 {
+void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScratch& scratch, Tree& tree) {
+  baseline::build(boxes, options, scratch, tree);
+}
+}  // namespace avx2
+#endif
+
+}  // namespace detail
+
+BinnedSahBuilder::BinnedSahBuilder() : scratch_(std::make_unique<detail::BinnedScratch>()) {}
+BinnedSahBuilder::~BinnedSahBuilder() = default;
+BinnedSahBuilder::BinnedSahBuilder(BinnedSahBuilder&&) noexcept = default;
+BinnedSahBuilder& BinnedSahBuilder::operator=(BinnedSahBuilder&&) noexcept = default;
+
+void BinnedSahBuilder::build(std::span<const Aabb> boxes, const TopDownOptions& options, Tree& tree) {
+  if (!scratch_) scratch_ = std::make_unique<detail::BinnedScratch>();  // a moved-from builder
+  if (detail::binned_sah_avx2_available()) {
+    detail::avx2::build(boxes, options, *scratch_, tree);
+  } else {
+    detail::baseline::build(boxes, options, *scratch_, tree);
+  }
+}
+
+void BinnedSahBuilder::release() { scratch_ = std::make_unique<detail::BinnedScratch>(); }
+
+Tree build_binned_sah(std::span<const Aabb> boxes, const TopDownOptions& options) {
+  Tree tree;
+  BinnedSahBuilder().build(boxes, options, tree);
+  return tree;
+}
+
+}  // namespace cullpipe::bvh

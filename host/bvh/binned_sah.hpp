@@ -1,0 +1,48 @@
+#pragma once
+// Internal to host/bvh (and its tests): build_binned_sah's variants, one per instruction set,
+// all building the same tree, and the working memory BinnedSahBuilder keeps between builds.
+#include <bit>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <span>
+
+#include "bvh/bvh.hpp"
+
+namespace cullpipe::bvh::detail {
+
+/// A box as eight floats: its minimum corner (x, y, z, +inf) and its maximum corner negated
+/// (-x, -y, -z, w). Growing a box by another is then one minimum over all eight lanes (one AVX
+/// instruction), and -(-hi) gives hi back exactly. An object's record keeps its id's bits in w,
+/// which only ever moves with the record (never through arithmetic: a host that flushes
+/// denormals must build the same tree). 32 bytes.
+struct alignas(32) Box8 {
+  float v[8];
+  std::uint32_t id() const { return std::bit_cast<std::uint32_t>(v[7]); }
+  Aabb box() const { return {{v[0], v[1], v[2]}, {-v[4], -v[5], -v[6]}}; }
+};
+
+/// The builder's per-object working memory: two buffers of records (a split moves a node's
+/// records from one to the other) and each record's three bin indices.
+struct BinnedScratch {
+  std::size_t capacity = 0;  ///< objects the buffers hold
+  std::unique_ptr<Box8[]> buffer[2];
+  std::unique_ptr<std::uint32_t[]> bin_of;
+  /// Room for n objects (kept when there already is; left uninitialised).
+  void reserve(std::size_t n);
+};
+
+namespace baseline {
+/// SSE2 on x86-64 (every x86-64 CPU has it), plain C++ elsewhere.
+void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScratch& scratch, Tree& tree);
+}  // namespace baseline
+
+namespace avx2 {
+/// AVX2 (a target pragma on its functions alone); call only when binned_sah_avx2_available().
+void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScratch& scratch, Tree& tree);
+}  // namespace avx2
+
+/// True when the AVX2 variant is built in and this CPU runs it.
+bool binned_sah_avx2_available();
+
+}  // namespace cullpipe::bvh::detail

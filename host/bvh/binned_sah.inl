@@ -1,0 +1,446 @@
+// build_binned_sah's implementation, included twice by binned_sah.cpp: the baseline (SSE2 on
+// x86-64, plain C++ elsewhere) and, under `#pragma GCC target("avx2")`, the AVX2 variant chosen at
+// run time. Every variant computes the same values in the same order (min/max are exact and the
+// areas are the same double operations), so all of them build the same tree, bit for bit.
+//
+// Include with CULLPIPE_BINNED_NS set to the namespace (inside cullpipe::bvh::detail) to define
+// that variant's build() (declared in binned_sah.hpp) in, and CULLPIPE_BINNED_AVX2 to 0 or 1.
+// Every header is included on the first (baseline) pass, so no inline function shared with
+// other translation units is ever compiled for AVX2.
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <memory>
+#include <stdexcept>
+#include <utility>
+#include <vector>
+#if defined(__SSE2__)
+#include <immintrin.h>
+#endif
+
+#include "bvh/binned_sah.hpp"
+#include "bvh/huge_pages.hpp"
+
+namespace cullpipe::bvh::detail::CULLPIPE_BINNED_NS {
+namespace {
+
+constexpr Box8 kEmpty{{INFINITY, INFINITY, INFINITY, INFINITY, INFINITY, INFINITY, INFINITY, INFINITY}};
+
+// Centroids and bin coordinates: x, y, z and an unused fourth lane.
+struct alignas(16) Lanes {
+  float v[4];
+};
+
+#if defined(__SSE2__)
+// acc = min(b, acc) lane by lane (a NaN in b keeps acc).
+inline void grow(Box8& acc, const Box8& b) {
+#if CULLPIPE_BINNED_AVX2
+  _mm256_store_ps(acc.v, _mm256_min_ps(_mm256_load_ps(b.v), _mm256_load_ps(acc.v)));
+#else
+  _mm_store_ps(acc.v, _mm_min_ps(_mm_load_ps(b.v), _mm_load_ps(acc.v)));
+  _mm_store_ps(acc.v + 4, _mm_min_ps(_mm_load_ps(b.v + 4), _mm_load_ps(acc.v + 4)));
+#endif
+}
+inline void copy(Box8& to, const Box8& from) {
+#if CULLPIPE_BINNED_AVX2
+  _mm256_store_ps(to.v, _mm256_load_ps(from.v));
+#else
+  _mm_store_ps(to.v, _mm_load_ps(from.v));
+  _mm_store_ps(to.v + 4, _mm_load_ps(from.v + 4));
+#endif
+}
+// (lo + hi) * 0.5 per axis, as Aabb::center() (lo - (-hi) is lo + hi exactly); fourth lane 0.
+inline __m128 centroid(const Box8& r) {
+  const __m128 xyz = _mm_castsi128_ps(_mm_set_epi32(0, -1, -1, -1));
+  return _mm_mul_ps(_mm_sub_ps(_mm_and_ps(_mm_load_ps(r.v), xyz), _mm_and_ps(_mm_load_ps(r.v + 4), xyz)), _mm_set1_ps(0.5f));
+}
+inline void grow_point(Lanes& lo, Lanes& hi, __m128 c) {
+  _mm_store_ps(lo.v, _mm_min_ps(c, _mm_load_ps(lo.v)));
+  _mm_store_ps(hi.v, _mm_max_ps(c, _mm_load_ps(hi.v)));
+}
+// Per axis k < 3: the bin uint32(min((c - lo) * scale, last)); NaN goes to `last`.
+inline __m128i bin_indices(__m128 c, const Lanes& lo, const Lanes& scale, const Lanes& last) {
+  const __m128 x = _mm_mul_ps(_mm_sub_ps(c, _mm_load_ps(lo.v)), _mm_load_ps(scale.v));
+  return _mm_cvttps_epi32(_mm_min_ps(x, _mm_load_ps(last.v)));
+}
+// Half the surface area of a non-empty box, in double, as detail::half_area (e = hi - lo;
+// ex*ey + ey*ez + ez*ex): u = lo + (-hi) is -e exactly, and the products of two negated extents
+// are the same numbers.
+inline double half_area(const Box8& b) {
+#if CULLPIPE_BINNED_AVX2
+  // The fourth lanes (an id's bits, which may be a denormal) are blended out before converting.
+  const __m128 zero = _mm_setzero_ps();
+  const __m256d u = _mm256_add_pd(_mm256_cvtps_pd(_mm_blend_ps(_mm_load_ps(b.v + 4), zero, 8)),
+                                  _mm256_cvtps_pd(_mm_blend_ps(_mm_load_ps(b.v), zero, 8)));
+  const __m256d p = _mm256_mul_pd(u, _mm256_permute4x64_pd(u, _MM_SHUFFLE(3, 0, 2, 1)));  // (ux uy, uy uz, uz ux, 0)
+  const __m128d p01 = _mm256_castpd256_pd128(p);
+  return _mm_cvtsd_f64(_mm_add_sd(_mm_add_sd(p01, _mm_unpackhi_pd(p01, p01)), _mm256_extractf128_pd(p, 1)));
+#else
+  const __m128 l = _mm_load_ps(b.v), h = _mm_load_ps(b.v + 4);
+  const __m128d uxy = _mm_add_pd(_mm_cvtps_pd(h), _mm_cvtps_pd(l));
+  // Only the z lanes are converted (the fourth lanes hold an id's bits, not numbers).
+  const __m128d uz = _mm_add_sd(_mm_cvtss_sd(_mm_setzero_pd(), _mm_movehl_ps(h, h)), _mm_cvtss_sd(_mm_setzero_pd(), _mm_movehl_ps(l, l)));
+  const __m128d p = _mm_mul_pd(uxy, _mm_shuffle_pd(uxy, uz, 1));  // (ux uy, uy uz)
+  return _mm_cvtsd_f64(_mm_add_sd(_mm_add_sd(p, _mm_unpackhi_pd(p, p)), _mm_mul_sd(uz, uxy)));
+#endif
+}
+// Bit b set when counts[b] != 0, for counts[0, 4) (or [0, 8) with AVX2).
+#if CULLPIPE_BINNED_AVX2
+constexpr std::uint32_t kMaskStep = 8;
+inline std::uint32_t nonzero_mask(const std::uint32_t* counts) {
+  const __m256i c = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(counts));
+  return ~std::uint32_t(_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(c, _mm256_setzero_si256())))) & 0xffu;
+}
+// (lo | -hi) of four boxes along one axis to double(-hi) + double(lo), four lanes.
+inline __m256d negated_extents(__m256 v) {
+  return _mm256_add_pd(_mm256_cvtps_pd(_mm256_extractf128_ps(v, 1)), _mm256_cvtps_pd(_mm256_castps256_ps128(v)));
+}
+// half_area of four boxes at once (the same operations per lane): their x, y and z lanes
+// transposed into vectors, so the fourth lanes (ids) are never converted.
+inline __m256d half_areas4(const Box8* b) {
+  const __m256 r0 = _mm256_load_ps(b[0].v), r1 = _mm256_load_ps(b[1].v), r2 = _mm256_load_ps(b[2].v), r3 = _mm256_load_ps(b[3].v);
+  const __m256 t0 = _mm256_unpacklo_ps(r0, r1), t1 = _mm256_unpacklo_ps(r2, r3);  // (x0 x1 y0 y1) per half
+  const __m256 t2 = _mm256_unpackhi_ps(r0, r1), t3 = _mm256_unpackhi_ps(r2, r3);  // (z0 z1 w0 w1) per half
+  const __m256 x = _mm256_shuffle_ps(t0, t1, _MM_SHUFFLE(1, 0, 1, 0));  // lo x of the four | -hi x of the four
+  const __m256 y = _mm256_shuffle_ps(t0, t1, _MM_SHUFFLE(3, 2, 3, 2));
+  const __m256 z = _mm256_shuffle_ps(t2, t3, _MM_SHUFFLE(1, 0, 1, 0));
+  const __m256d ux = negated_extents(x), uy = negated_extents(y), uz = negated_extents(z);
+  return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ux, uy), _mm256_mul_pd(uy, uz)), _mm256_mul_pd(uz, ux));
+}
+#else
+constexpr std::uint32_t kMaskStep = 4;
+inline std::uint32_t nonzero_mask(const std::uint32_t* counts) {
+  const __m128i c = _mm_loadu_si128(reinterpret_cast<const __m128i*>(counts));
+  return ~std::uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(c, _mm_setzero_si128())))) & 0xfu;
+}
+#endif
+#else   // no SSE2: plain loops, the same results
+inline void grow(Box8& acc, const Box8& b) {
+  for (int k = 0; k < 8; ++k) acc.v[k] = b.v[k] < acc.v[k] ? b.v[k] : acc.v[k];
+}
+inline void copy(Box8& to, const Box8& from) { to = from; }
+inline Lanes centroid(const Box8& r) {
+  return {{(r.v[0] - r.v[4]) * 0.5f, (r.v[1] - r.v[5]) * 0.5f, (r.v[2] - r.v[6]) * 0.5f, 0.0f}};
+}
+inline void grow_point(Lanes& lo, Lanes& hi, const Lanes& c) {
+  for (int k = 0; k < 4; ++k) {
+    lo.v[k] = c.v[k] < lo.v[k] ? c.v[k] : lo.v[k];
+    hi.v[k] = hi.v[k] < c.v[k] ? c.v[k] : hi.v[k];
+  }
+}
+struct Indices {
+  std::uint32_t v[4];
+};
+inline Indices bin_indices(const Lanes& c, const Lanes& lo, const Lanes& scale, const Lanes& last) {
+  Indices out{};
+  for (int k = 0; k < 3; ++k) {
+    const float x = (c.v[k] - lo.v[k]) * scale.v[k];
+    out.v[k] = std::uint32_t(x < last.v[k] ? x : last.v[k]);
+  }
+  return out;
+}
+inline double half_area(const Box8& b) {
+  const double ux = double(b.v[4]) + double(b.v[0]), uy = double(b.v[5]) + double(b.v[1]), uz = double(b.v[6]) + double(b.v[2]);
+  return ux * uy + uy * uz + uz * ux;
+}
+constexpr std::uint32_t kMaskStep = 4;
+inline std::uint32_t nonzero_mask(const std::uint32_t* counts) {
+  return std::uint32_t(counts[0] != 0) | std::uint32_t(counts[1] != 0) << 1 | std::uint32_t(counts[2] != 0) << 2 |
+         std::uint32_t(counts[3] != 0) << 3;
+}
+#endif
+
+#if defined(__SSE2__)
+inline void index3(__m128i idx, std::uint32_t& a, std::uint32_t& b, std::uint32_t& c) {
+  a = std::uint32_t(_mm_cvtsi128_si32(idx));
+  b = std::uint32_t(_mm_cvtsi128_si32(_mm_shuffle_epi32(idx, 1)));
+  c = std::uint32_t(_mm_cvtsi128_si32(_mm_shuffle_epi32(idx, 2)));
+}
+#else
+inline void index3(const Indices& idx, std::uint32_t& a, std::uint32_t& b, std::uint32_t& c) {
+  a = idx.v[0];
+  b = idx.v[1];
+  c = idx.v[2];
+}
+#endif
+
+// The SAH sweep over one axis's non-empty bins. Candidate j puts used bins list[0..j] left and
+// list[j+1..k-1] right; its cost is half_area(left) * |left| + half_area(right) * |right|.
+class Sweep {
+ public:
+  explicit Sweep(std::uint32_t bins) : left_(round4(bins)), right_(round4(bins)), nl_(round4(bins)), nr_(round4(bins)), cost_(round4(bins)) {}
+
+  // The first candidate with the axis's least cost, when that cost is below best_cost (which
+  // it then becomes); else kNone. Costs that are NaN never win; neither does +infinity.
+  std::uint32_t best(const Box8* bin, const std::uint32_t* count, const std::uint32_t* list, std::uint32_t k, double& best_cost) {
+    if (k < 2) return kNone;
+    const std::uint32_t candidates = k - 1;
+#if CULLPIPE_BINNED_AVX2
+    // The children's boxes of every candidate first (a chain of minimums), then their areas and
+    // costs four candidates at a time, then the least cost: no branch per candidate.
+    Box8 acc = kEmpty;
+    std::uint32_t cnt = 0, total = 0;
+    for (std::uint32_t j = 0; j < k; ++j) total += count[list[j]];
+    for (std::uint32_t j = 0; j < candidates; ++j) {
+      grow(acc, bin[list[j]]);
+      copy(left_[j], acc);
+      cnt += count[list[j]];
+      nl_[j] = double(cnt);
+      nr_[j] = double(total - cnt);
+    }
+    acc = kEmpty;
+    for (std::uint32_t j = candidates; j > 0; --j) {
+      grow(acc, bin[list[j]]);
+      copy(right_[j - 1], acc);
+    }
+    const __m256d inf = _mm256_set1_pd(INFINITY);
+    __m256d least = inf;
+    for (std::uint32_t q = 0; q < candidates; q += 4) {
+      const __m256d cost = _mm256_add_pd(_mm256_mul_pd(half_areas4(left_.data() + q), _mm256_loadu_pd(nl_.data() + q)),
+                                         _mm256_mul_pd(half_areas4(right_.data() + q), _mm256_loadu_pd(nr_.data() + q)));
+      // Lanes past the last candidate hold stale boxes: +infinity, never chosen.
+      const __m256d live = _mm256_castsi256_pd(
+          _mm256_cmpgt_epi64(_mm256_set1_epi64x(std::int64_t(candidates - q)), _mm256_set_epi64x(3, 2, 1, 0)));
+      const __m256d c = _mm256_blendv_pd(inf, cost, live);
+      _mm256_storeu_pd(cost_.data() + q, c);
+      least = _mm256_min_pd(c, least);  // a NaN cost keeps `least`
+    }
+    __m128d m = _mm_min_pd(_mm256_castpd256_pd128(least), _mm256_extractf128_pd(least, 1));
+    m = _mm_min_sd(m, _mm_unpackhi_pd(m, m));
+    const double axis_least = _mm_cvtsd_f64(m);
+    if (!(axis_least < best_cost)) return kNone;
+    best_cost = axis_least;
+    const __m256d target = _mm256_set1_pd(axis_least);
+    for (std::uint32_t q = 0;; q += 4) {
+      const int hit = _mm256_movemask_pd(_mm256_cmp_pd(_mm256_loadu_pd(cost_.data() + q), target, _CMP_EQ_OQ));
+      if (hit != 0) return q + std::uint32_t(std::countr_zero(std::uint32_t(hit)));
+    }
+#else
+    // right areas first, then the costs in order (the first strictly better one wins).
+    Box8 acc = kEmpty;
+    std::uint32_t cnt = 0;
+    for (std::uint32_t j = candidates; j > 0; --j) {
+      grow(acc, bin[list[j]]);
+      cnt += count[list[j]];
+      cost_[j - 1] = half_area(acc);
+      nr_[j - 1] = double(cnt);
+    }
+    acc = kEmpty;
+    cnt = 0;
+    std::uint32_t chosen = kNone;
+    for (std::uint32_t j = 0; j < candidates; ++j) {
+      grow(acc, bin[list[j]]);
+      cnt += count[list[j]];
+      const double cost = half_area(acc) * double(cnt) + cost_[j] * nr_[j];
+      if (cost < best_cost) best_cost = cost, chosen = j;
+    }
+    return chosen;
+#endif
+  }
+
+ private:
+  static std::size_t round4(std::uint32_t n) { return (std::size_t(n) + 3) / 4 * 4; }
+  std::vector<Box8> left_, right_;  // candidate j's children's boxes (AVX2 only)
+  std::vector<double> nl_, nr_;     // their object counts
+  std::vector<double> cost_;
+};
+
+// The centroid box of objects: lo and hi corners (x, y, z, unused).
+struct PointBox {
+  Lanes lo{{INFINITY, INFINITY, INFINITY, INFINITY}}, hi{{-INFINITY, -INFINITY, -INFINITY, -INFINITY}};
+};
+
+// The box and the centroid box of objects [0, count).
+void bounds_of(const Box8* refs, std::uint32_t count, Box8& box, PointBox& centroids) {
+  for (std::uint32_t i = 0; i < count; ++i) {
+    grow(box, refs[i]);
+    grow_point(centroids.lo, centroids.hi, centroid(refs[i]));
+  }
+}
+
+}  // namespace
+
+// Implementation notes (the tree is fixed by the description in bvh.hpp; these only make it
+// fast): objects are copied once into 32-byte records (Box8 with the id), and a split moves
+// its node's records into the other of two buffers (stable, branch-free), so every pass reads
+// memory in order; one pass per node bins all three axes at once; the children's boxes are
+// unions of the chosen bins and their centroid boxes are gathered while the records move, so
+// no node is scanned again to find its bounds; the SAH sweep visits only non-empty bins (an
+// empty bin repeats the cost of the split before it, which is tried first and kept on ties),
+// listed from a mask of the non-zero counts; the binning pass saves each record's three bin
+// indices, so the partition reads a byte instead of recomputing a centroid; bin counts are
+// integers beside the bin boxes; the large buffers ask for transparent huge pages.
+void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScratch& scratch, Tree& tree) {
+  tree.nodes.clear();
+  tree.objects.clear();
+  const std::size_t n = boxes.size();
+  if (n == 0) return;
+  const std::uint32_t max_leaf = std::max<std::uint32_t>(options.max_leaf_size, 1);
+  const std::uint32_t bins = std::clamp<std::uint32_t>(options.bins, 2, 256);
+  // Two buffers of records, left uninitialised (they are written before they are read).
+  scratch.reserve(n);
+  Box8* const buffer[2] = {scratch.buffer[0].get(), scratch.buffer[1].get()};
+  std::uint32_t* const bin_of = scratch.bin_of.get();
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> order;  // (id, position): nodes of equal centroids
+  Box8 root_box = kEmpty;
+  PointBox root_centroids;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Aabb& b = boxes[i];
+    Box8& r = buffer[0][i];
+    r = {{b.min.x, b.min.y, b.min.z, INFINITY, -b.max.x, -b.max.y, -b.max.z, std::bit_cast<float>(std::uint32_t(i))}};
+    grow(root_box, r);
+    grow_point(root_centroids.lo, root_centroids.hi, centroid(r));
+  }
+  tree.objects.resize(n);
+
+  struct Task {
+    std::uint32_t node, first, count;
+    std::uint32_t buffer;  // which buffer holds the node's records
+    PointBox centroids;    // the box of the node's centroids (its box is in tree.nodes)
+  };
+  if (tree.nodes.capacity() < 2 * n) {
+    tree.nodes.reserve(2 * n);  // at most 2n - 1; pages never touched cost nothing
+    advise_huge_pages(tree.nodes.data(), tree.nodes.capacity() * sizeof(Node));
+  }
+  tree.nodes.emplace_back();
+  tree.nodes[0].box = root_box.box();
+  std::vector<Task> stack;
+  // A node of at most max_leaf objects becomes a leaf at once; others wait on the stack.
+  const auto add = [&](std::uint32_t node, std::uint32_t first, std::uint32_t count, std::uint32_t in, const PointBox& centroids) {
+    if (count > max_leaf) {
+      stack.push_back({node, first, count, in, centroids});
+      return;
+    }
+    tree.nodes[node].first = first;
+    tree.nodes[node].count = count;
+    const Box8* objs = buffer[in] + first;
+    for (std::uint32_t i = 0; i < count; ++i) tree.objects[first + i] = objs[i].id();
+  };
+  add(0, 0, std::uint32_t(n), 0, root_centroids);
+  // Bins of axis a are bin[a * stride, a * stride + bins), each a box, and their object counts
+  // bin_count[a * stride + b] (integers beside the boxes); all empty between nodes. The stride
+  // rounds up to whole groups of the non-zero mask (the padding counts stay 0).
+  const std::uint32_t stride = (bins + kMaskStep - 1) / kMaskStep * kMaskStep;
+  std::vector<Box8> bin(3 * std::size_t(stride), kEmpty);
+  std::vector<std::uint32_t> bin_count(3 * std::size_t(stride), 0);
+  std::vector<std::uint32_t> used(3 * std::size_t(stride));  // non-empty bins per axis, ascending
+  std::uint32_t used_count[3];
+  Sweep sweep(bins);
+  const float last_bin = float(bins - 1);
+  while (!stack.empty()) {
+    const Task task = stack.back();
+    stack.pop_back();
+    Box8* objs = buffer[task.buffer] + task.first;
+    // Bin the centroids along all three axes in one pass; a flat axis (zero or subnormal
+    // extent) is binned with scale 0 (everything in bin 0) and not considered.
+    Lanes lo{{0, 0, 0, 0}}, scale{{0, 0, 0, 0}}, last{{last_bin, last_bin, last_bin, 0}};
+    bool usable[3];
+    for (int axis = 0; axis < 3; ++axis) {
+      lo.v[axis] = task.centroids.lo.v[axis];
+      const float extent = task.centroids.hi.v[axis] - lo.v[axis];
+      scale.v[axis] = float(bins) / extent;
+      usable[axis] = extent > 0.0f && std::isfinite(extent) && std::isfinite(scale.v[axis]);
+      if (!usable[axis]) scale.v[axis] = 0.0f;
+    }
+    Box8* const bin0 = bin.data();
+    Box8* const bin1 = bin0 + stride;
+    Box8* const bin2 = bin1 + stride;
+    std::uint32_t* const count0 = bin_count.data();
+    std::uint32_t* const count1 = count0 + stride;
+    std::uint32_t* const count2 = count1 + stride;
+    for (std::uint32_t i = 0; i < task.count; ++i) {
+      const Box8& r = objs[i];
+      std::uint32_t b0, b1, b2;
+      index3(bin_indices(centroid(r), lo, scale, last), b0, b1, b2);
+      bin_of[i] = b0 | b1 << 8 | b2 << 16;
+      grow(bin0[b0], r);
+      ++count0[b0];
+      grow(bin1[b1], r);
+      ++count1[b1];
+      grow(bin2[b2], r);
+      ++count2[b2];
+    }
+    for (int axis = 0; axis < 3; ++axis) {
+      const std::uint32_t* counts = bin_count.data() + std::size_t(axis) * stride;
+      std::uint32_t* list = used.data() + std::size_t(axis) * stride;
+      std::uint32_t k = 0;
+      for (std::uint32_t b0 = 0; b0 < stride; b0 += kMaskStep)
+        for (std::uint32_t m = nonzero_mask(counts + b0); m != 0; m &= m - 1) list[k++] = b0 + std::uint32_t(std::countr_zero(m));
+      used_count[axis] = k;
+    }
+    // Best binned SAH split over the three axes: bins [0, best_split] go left.
+    double best_cost = INFINITY;
+    int best_axis = -1;
+    std::uint32_t best_split = 0;
+    for (int axis = 0; axis < 3; ++axis) {
+      if (!usable[axis]) continue;
+      const std::uint32_t* list = used.data() + std::size_t(axis) * stride;
+      const std::uint32_t j = sweep.best(bin.data() + std::size_t(axis) * stride, bin_count.data() + std::size_t(axis) * stride, list,
+                                         used_count[axis], best_cost);
+      if (j != kNone) best_axis = axis, best_split = list[j];
+    }
+    std::uint32_t mid = 0, child_buffer = task.buffer;
+    Box8 left_box = kEmpty, right_box = kEmpty;
+    PointBox left_centroids, right_centroids;
+    if (best_axis >= 0) {
+      const int axis = best_axis;
+      const Box8* axis_bin = bin.data() + std::size_t(axis) * stride;
+      const std::uint32_t* list = used.data() + std::size_t(axis) * stride;
+      for (std::uint32_t j = 0; j < used_count[axis]; ++j) {
+        const std::uint32_t b = list[j];
+        if (b <= best_split) mid += bin_count[std::size_t(axis) * stride + b];
+        grow(b <= best_split ? left_box : right_box, axis_bin[b]);
+      }
+      // Stable partition into the other buffer, bins [0, best_split] to the front, gathering
+      // each side's centroid box on the way.
+      child_buffer = 1 - task.buffer;
+      Box8* out = buffer[child_buffer] + task.first;
+      std::uint32_t l = 0, r = mid;
+      for (std::uint32_t i = 0; i < task.count; ++i) {
+        const Box8& ref = objs[i];
+        const std::uint32_t go_left = (bin_of[i] >> (8 * axis) & 0xffu) <= best_split;
+        const std::uint32_t at = r + (l - r) * go_left;  // l or r, without a branch to mispredict
+        copy(out[at], ref);
+        PointBox& side = go_left ? left_centroids : right_centroids;
+        grow_point(side.lo, side.hi, centroid(ref));
+        l += go_left;
+        r += go_left ^ 1u;
+      }
+      if (l != mid || r != task.count) throw std::logic_error("build_binned_sah: bin counts disagree with the partition");
+    }
+    // Empty the bins for the next node.
+    for (int axis = 0; axis < 3; ++axis)
+      for (std::uint32_t j = 0; j < used_count[axis]; ++j) {
+        const std::size_t b = std::size_t(axis) * stride + used[std::size_t(axis) * stride + j];
+        bin[b] = kEmpty;
+        bin_count[b] = 0;
+      }
+    if (mid == 0 || mid == task.count) {  // equal centroids: split the range in half (by id, deterministic)
+      mid = task.count / 2;
+      child_buffer = task.buffer;
+      // Sorted by id through the other buffer's range of this node (free until a split).
+      order.resize(task.count);
+      for (std::uint32_t i = 0; i < task.count; ++i) order[i] = {objs[i].id(), i};
+      std::sort(order.begin(), order.end());
+      Box8* sorted = buffer[1 - task.buffer] + task.first;
+      for (std::uint32_t i = 0; i < task.count; ++i) copy(sorted[i], objs[order[i].second]);
+      for (std::uint32_t i = 0; i < task.count; ++i) copy(objs[i], sorted[i]);
+      left_box = right_box = kEmpty;
+      left_centroids = right_centroids = PointBox{};
+      bounds_of(objs, mid, left_box, left_centroids);
+      bounds_of(objs + mid, task.count - mid, right_box, right_centroids);
+    }
+    const std::uint32_t left = std::uint32_t(tree.nodes.size());
+    tree.nodes.emplace_back();
+    tree.nodes.emplace_back();
+    tree.nodes[task.node].left = left;
+    tree.nodes[task.node].right = left + 1;
+    tree.nodes[left].box = left_box.box();
+    tree.nodes[left + 1].box = right_box.box();
+    add(left + 1, task.first + mid, task.count - mid, child_buffer, right_centroids);
+    add(left, task.first, mid, child_buffer, left_centroids);
+  }
+}
+
+}  // namespace cullpipe::bvh::detail::CULLPIPE_BINNED_NS
