@@ -85,9 +85,8 @@ inline double half_area(const Box8& b) {
   return _mm_cvtsd_f64(_mm_add_sd(_mm_add_sd(p, _mm_unpackhi_pd(p, p)), _mm_mul_sd(uz, uxy)));
 #endif
 }
-// Bit b set when counts[b] != 0, for counts[0, 4) (or [0, 8) with AVX2).
+// Bit b set when counts[b] != 0, for counts[0, 8).
 #if CULLPIPE_BINNED_AVX2
-constexpr std::uint32_t kMaskStep = 8;
 inline std::uint32_t nonzero_mask(const std::uint32_t* counts) {
   const __m256i c = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(counts));
   return ~std::uint32_t(_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(c, _mm256_setzero_si256())))) & 0xffu;
@@ -109,10 +108,12 @@ inline __m256d half_areas4(const Box8* b) {
   return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ux, uy), _mm256_mul_pd(uy, uz)), _mm256_mul_pd(uz, ux));
 }
 #else
-constexpr std::uint32_t kMaskStep = 4;
 inline std::uint32_t nonzero_mask(const std::uint32_t* counts) {
-  const __m128i c = _mm_loadu_si128(reinterpret_cast<const __m128i*>(counts));
-  return ~std::uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(c, _mm_setzero_si128())))) & 0xfu;
+  const __m128i zero = _mm_setzero_si128();
+  const __m128i a = _mm_loadu_si128(reinterpret_cast<const __m128i*>(counts)), b = _mm_loadu_si128(reinterpret_cast<const __m128i*>(counts + 4));
+  const std::uint32_t empty = std::uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(a, zero)))) |
+                              std::uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(b, zero)))) << 4;
+  return ~empty & 0xffu;
 }
 #endif
 #else   // no SSE2: plain loops, the same results
@@ -144,10 +145,10 @@ inline double half_area(const Box8& b) {
   const double ux = double(b.v[4]) + double(b.v[0]), uy = double(b.v[5]) + double(b.v[1]), uz = double(b.v[6]) + double(b.v[2]);
   return ux * uy + uy * uz + uz * ux;
 }
-constexpr std::uint32_t kMaskStep = 4;
 inline std::uint32_t nonzero_mask(const std::uint32_t* counts) {
-  return std::uint32_t(counts[0] != 0) | std::uint32_t(counts[1] != 0) << 1 | std::uint32_t(counts[2] != 0) << 2 |
-         std::uint32_t(counts[3] != 0) << 3;
+  std::uint32_t m = 0;
+  for (std::uint32_t k = 0; k < 8; ++k) m |= std::uint32_t(counts[k] != 0) << k;
+  return m;
 }
 #endif
 
@@ -246,6 +247,34 @@ class Sweep {
   std::vector<double> cost_;
 };
 
+// For each 8-bit mask, its set bits' positions in ascending order (then zeros): a group of
+// eight bins' non-empty ones listed without a branch per bin.
+constexpr std::uint32_t kMaskStep = 8;
+struct BitLists {
+  std::uint8_t at[256][8];
+};
+constexpr BitLists make_bit_lists() {
+  BitLists t{};
+  for (std::uint32_t m = 0; m < 256; ++m) {
+    std::uint32_t k = 0;
+    for (std::uint8_t b = 0; b < 8; ++b)
+      if (m >> b & 1u) t.at[m][k++] = b;
+  }
+  return t;
+}
+constexpr BitLists kBitLists = make_bit_lists();
+
+// The non-empty bins of one axis, ascending, into list (room for `stride`); returns how many.
+inline std::uint32_t list_used(const std::uint32_t* counts, std::uint32_t stride, std::uint32_t* list) {
+  std::uint32_t k = 0;
+  for (std::uint32_t b0 = 0; b0 < stride; b0 += kMaskStep) {
+    const std::uint32_t m = nonzero_mask(counts + b0);
+    for (std::uint32_t i = 0; i < 8; ++i) list[k + i] = b0 + kBitLists.at[m][i];  // k <= b0: stays in [0, stride)
+    k += std::uint32_t(std::popcount(m));
+  }
+  return k;
+}
+
 // The centroid box of objects: lo and hi corners (x, y, z, unused).
 struct PointBox {
   Lanes lo{{INFINITY, INFINITY, INFINITY, INFINITY}}, hi{{-INFINITY, -INFINITY, -INFINITY, -INFINITY}};
@@ -305,19 +334,28 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
   }
   tree.nodes.emplace_back();
   tree.nodes[0].box = root_box.box();
-  std::vector<Task> stack;
-  // A node of at most max_leaf objects becomes a leaf at once; others wait on the stack.
-  const auto add = [&](std::uint32_t node, std::uint32_t first, std::uint32_t count, std::uint32_t in, const PointBox& centroids) {
-    if (count > max_leaf) {
-      stack.push_back({node, first, count, in, centroids});
-      return;
-    }
+  std::vector<Task> stack;  // nodes of more than max_leaf objects, waiting to be split
+  // A node of at most max_leaf objects becomes a leaf: its range and its objects' ids. Up to
+  // kFixedLeafWrite ids go as a fixed run of that many slots (no branch on the count), the slots
+  // past the leaf's range rewritten with what they hold.
+  constexpr std::uint32_t kFixedLeafWrite = 4;
+  const bool fixed_leaf_write = max_leaf <= kFixedLeafWrite;
+  const auto make_leaf = [&](std::uint32_t node, std::uint32_t first, std::uint32_t count, std::uint32_t in) {
     tree.nodes[node].first = first;
     tree.nodes[node].count = count;
     const Box8* objs = buffer[in] + first;
-    for (std::uint32_t i = 0; i < count; ++i) tree.objects[first + i] = objs[i].id();
+    std::uint32_t* ids = tree.objects.data() + first;
+    if (fixed_leaf_write && first + kFixedLeafWrite <= n) {
+      for (std::uint32_t i = 0; i < kFixedLeafWrite; ++i) ids[i] = i < count ? objs[i].id() : ids[i];
+    } else {
+      for (std::uint32_t i = 0; i < count; ++i) ids[i] = objs[i].id();
+    }
   };
-  add(0, 0, std::uint32_t(n), 0, root_centroids);
+  if (n <= max_leaf) {
+    make_leaf(0, 0, std::uint32_t(n), 0);
+  } else {
+    stack.push_back({0, 0, std::uint32_t(n), 0, root_centroids});
+  }
   // Bins of axis a are bin[a * stride, a * stride + bins), each a box, and their object counts
   // bin_count[a * stride + b] (integers beside the boxes); all empty between nodes. The stride
   // rounds up to whole groups of the non-zero mask (the padding counts stay 0).
@@ -361,14 +399,8 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
       grow(bin2[b2], r);
       ++count2[b2];
     }
-    for (int axis = 0; axis < 3; ++axis) {
-      const std::uint32_t* counts = bin_count.data() + std::size_t(axis) * stride;
-      std::uint32_t* list = used.data() + std::size_t(axis) * stride;
-      std::uint32_t k = 0;
-      for (std::uint32_t b0 = 0; b0 < stride; b0 += kMaskStep)
-        for (std::uint32_t m = nonzero_mask(counts + b0); m != 0; m &= m - 1) list[k++] = b0 + std::uint32_t(std::countr_zero(m));
-      used_count[axis] = k;
-    }
+    for (int axis = 0; axis < 3; ++axis)
+      used_count[axis] = list_used(bin_count.data() + std::size_t(axis) * stride, stride, used.data() + std::size_t(axis) * stride);
     // Best binned SAH split over the three axes: bins [0, best_split] go left.
     double best_cost = INFINITY;
     int best_axis = -1;
@@ -438,8 +470,15 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
     tree.nodes[task.node].right = left + 1;
     tree.nodes[left].box = left_box.box();
     tree.nodes[left + 1].box = right_box.box();
-    add(left + 1, task.first + mid, task.count - mid, child_buffer, right_centroids);
-    add(left, task.first, mid, child_buffer, left_centroids);
+    // The leaves, then the inner children onto the stack, the left one on top.
+    const std::uint32_t right_count = task.count - mid;
+    if (mid <= max_leaf) make_leaf(left, task.first, mid, child_buffer);
+    if (right_count <= max_leaf) {
+      make_leaf(left + 1, task.first + mid, right_count, child_buffer);
+    } else {
+      stack.push_back({left + 1, task.first + mid, right_count, child_buffer, right_centroids});
+    }
+    if (mid > max_leaf) stack.push_back({left, task.first, mid, child_buffer, left_centroids});
   }
 }
 
