@@ -174,15 +174,16 @@ class Sweep {
 
   // The first candidate with the axis's least cost, when that cost is below best_cost (which
   // it then becomes); else kNone. Costs that are NaN never win; neither does +infinity.
-  std::uint32_t best(const Box8* bin, const std::uint32_t* count, const std::uint32_t* list, std::uint32_t k, double& best_cost) {
+  // `total`: the node's object count (the sum of count over the list).
+  std::uint32_t best(const Box8* bin, const std::uint32_t* count, const std::uint32_t* list, std::uint32_t k, std::uint32_t total,
+                     double& best_cost) {
     if (k < 2) return kNone;
     const std::uint32_t candidates = k - 1;
 #if CULLPIPE_BINNED_AVX2
     // The children's boxes of every candidate first (a chain of minimums), then their areas and
     // costs four candidates at a time, then the least cost: no branch per candidate.
     Box8 acc = kEmpty;
-    std::uint32_t cnt = 0, total = 0;
-    for (std::uint32_t j = 0; j < k; ++j) total += count[list[j]];
+    std::uint32_t cnt = 0;
     for (std::uint32_t j = 0; j < candidates; ++j) {
       grow(acc, bin[list[j]]);
       copy(left_[j], acc);
@@ -236,6 +237,7 @@ class Sweep {
       const double cost = half_area(acc) * double(cnt) + cost_[j] * nr_[j];
       if (cost < best_cost) best_cost = cost, chosen = j;
     }
+    (void)total;
     return chosen;
 #endif
   }
@@ -409,7 +411,7 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
       if (!usable[axis]) continue;
       const std::uint32_t* list = used.data() + std::size_t(axis) * stride;
       const std::uint32_t j = sweep.best(bin.data() + std::size_t(axis) * stride, bin_count.data() + std::size_t(axis) * stride, list,
-                                         used_count[axis], best_cost);
+                                         used_count[axis], task.count, best_cost);
       if (j != kNone) best_axis = axis, best_split = list[j];
     }
     std::uint32_t mid = 0, child_buffer = task.buffer;
