@@ -3,6 +3,9 @@
 // memory, and the choice between the variants.
 #include "bvh/binned_sah.hpp"
 
+#include <cstdlib>
+#include <string_view>
+
 #define CULLPIPE_BINNED_NS baseline
 #define CULLPIPE_BINNED_AVX2 0
 #include "bvh/binned_sah.inl"
@@ -51,6 +54,17 @@ bool binned_sah_avx2_available() {
 #endif
 }
 
+namespace {
+
+// The variant build_binned_sah and BinnedSahBuilder use: AVX2 where the CPU has it, unless
+// CULLPIPE_ISA=portable (which also keeps the fast CPU path on its portable kernels).
+bool use_avx2() {
+  static const bool use = binned_sah_avx2_available() && !(std::getenv("CULLPIPE_ISA") && std::string_view(std::getenv("CULLPIPE_ISA")) == "portable");
+  return use;
+}
+
+}  // namespace
+
 #if !defined(CULLPIPE_HAVE_X86_BUILDERS)
 namespace avx2 {
 void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScratch& scratch, Tree& tree) {
@@ -68,7 +82,7 @@ BinnedSahBuilder& BinnedSahBuilder::operator=(BinnedSahBuilder&&) noexcept = def
 
 void BinnedSahBuilder::build(std::span<const Aabb> boxes, const TopDownOptions& options, Tree& tree) {
   if (!scratch_) scratch_ = std::make_unique<detail::BinnedScratch>();  // a moved-from builder
-  if (detail::binned_sah_avx2_available()) {
+  if (detail::use_avx2()) {
     detail::avx2::build(boxes, options, *scratch_, tree);
   } else {
     detail::baseline::build(boxes, options, *scratch_, tree);
