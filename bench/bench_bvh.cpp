@@ -41,10 +41,10 @@ using namespace cullpipe::bench;
 
 namespace {
 
-// Largest n each builder is run at (quadratic and cubic builders are oracles, not tools).
 // Not a registry name: binned SAH through a BinnedSahBuilder kept between builds.
 const char* const kReusedBuilder = "binned-sah (reused)";
 
+// Largest n each builder is run at (quadratic and cubic builders are oracles, not tools).
 std::size_t size_limit(const std::string& builder) {
   if (builder == "agglomerative-brute") return 1000;
   if (builder == "agglomerative-pq") return 20000;

@@ -8,6 +8,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "bvh/binned_sah.hpp"
 #include "bvh/builders.hpp"
 #include "cull/reference.hpp"
 #include "scene/generators.hpp"
@@ -292,7 +293,17 @@ TEST(TopDown, GenericBinnedSahMatchesTheFastBuilder) {
       o.max_leaf_size = leaf;
       o.bins = bins;
       o.cost = SplitCost::SahOverlapGuarded;
-      EXPECT_EQ(bvh::build_top_down(points, o), bvh::build_binned_sah(points, {leaf, bins})) << leaf << " " << bins;
+      const bvh::Tree generic = bvh::build_top_down(points, o);
+      EXPECT_EQ(generic, bvh::build_binned_sah(points, {leaf, bins})) << leaf << " " << bins;
+      // Each variant of the fast builder on its own (build_binned_sah runs one of them).
+      bvh::detail::BinnedScratch scratch;
+      bvh::Tree variant;
+      bvh::detail::baseline::build(points, {leaf, bins}, scratch, variant);
+      EXPECT_EQ(generic, variant) << "baseline, " << leaf << " " << bins;
+      if (bvh::detail::binned_sah_avx2_available()) {
+        bvh::detail::avx2::build(points, {leaf, bins}, scratch, variant);
+        EXPECT_EQ(generic, variant) << "AVX2, " << leaf << " " << bins;
+      }
     }
 }
 

@@ -15,7 +15,7 @@
 // The AVX2 variant: only the functions defined in binned_sah.inl get AVX2 (a target pragma, not
 // -mavx2 on a file, which would also compile shared inline functions such as std::vector's for
 // AVX2, and the linker may keep those copies for every caller).
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#if defined(__x86_64__) && defined(__SSE2__) && defined(__GNUC__) && !defined(__clang__)
 #define CULLPIPE_HAVE_X86_BUILDERS 1
 #pragma GCC push_options
 #pragma GCC target("avx2")
@@ -33,7 +33,9 @@ namespace detail {
 
 void BinnedScratch::reserve(std::size_t n) {
   if (capacity >= n) return;
-  // Released first, so the old and new buffers are never held together.
+  // Released first, so the old and new buffers are never held together (and, should an
+  // allocation throw, the scratch holds nothing rather than null buffers it claims to have).
+  capacity = 0;
   buffer[0].reset();
   buffer[1].reset();
   bin_of.reset();
@@ -47,7 +49,8 @@ void BinnedScratch::reserve(std::size_t n) {
 
 bool binned_sah_avx2_available() {
 #if defined(CULLPIPE_HAVE_X86_BUILDERS)
-  static const bool available = __builtin_cpu_supports("avx2");
+  // __builtin_cpu_init first: a build from a static initialiser may run before the runtime's.
+  static const bool available = (__builtin_cpu_init(), __builtin_cpu_supports("avx2"));
   return available;
 #else
   return false;

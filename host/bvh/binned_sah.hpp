@@ -14,8 +14,9 @@ namespace cullpipe::bvh::detail {
 /// A box as eight floats: its minimum corner (x, y, z, +inf) and its maximum corner negated
 /// (-x, -y, -z, w). Growing a box by another is then one minimum over all eight lanes (one AVX
 /// instruction), and -(-hi) gives hi back exactly. An object's record keeps its id's bits in w,
-/// which only ever moves with the record (never through arithmetic: a host that flushes
-/// denormals must build the same tree). 32 bytes.
+/// which is only ever read from records, never from the result of arithmetic (the bins' w lanes
+/// take minimums of id bits and are never read): a host that flushes denormals builds the same
+/// tree. 32 bytes.
 struct alignas(32) Box8 {
   float v[8];
   std::uint32_t id() const { return std::bit_cast<std::uint32_t>(v[7]); }

@@ -13,7 +13,6 @@
 #include <cstring>
 #include <memory>
 #include <stdexcept>
-#include <utility>
 #include <vector>
 #if defined(__SSE2__)
 #include <immintrin.h>
@@ -68,22 +67,12 @@ inline __m128i bin_indices(__m128 c, const Lanes& lo, const Lanes& scale, const 
 // ex*ey + ey*ez + ez*ex): u = lo + (-hi) is -e exactly, and the products of two negated extents
 // are the same numbers.
 inline double half_area(const Box8& b) {
-#if CULLPIPE_BINNED_AVX2
-  // The fourth lanes (an id's bits, which may be a denormal) are blended out before converting.
-  const __m128 zero = _mm_setzero_ps();
-  const __m256d u = _mm256_add_pd(_mm256_cvtps_pd(_mm_blend_ps(_mm_load_ps(b.v + 4), zero, 8)),
-                                  _mm256_cvtps_pd(_mm_blend_ps(_mm_load_ps(b.v), zero, 8)));
-  const __m256d p = _mm256_mul_pd(u, _mm256_permute4x64_pd(u, _MM_SHUFFLE(3, 0, 2, 1)));  // (ux uy, uy uz, uz ux, 0)
-  const __m128d p01 = _mm256_castpd256_pd128(p);
-  return _mm_cvtsd_f64(_mm_add_sd(_mm_add_sd(p01, _mm_unpackhi_pd(p01, p01)), _mm256_extractf128_pd(p, 1)));
-#else
   const __m128 l = _mm_load_ps(b.v), h = _mm_load_ps(b.v + 4);
   const __m128d uxy = _mm_add_pd(_mm_cvtps_pd(h), _mm_cvtps_pd(l));
   // Only the z lanes are converted (the fourth lanes hold an id's bits, not numbers).
   const __m128d uz = _mm_add_sd(_mm_cvtss_sd(_mm_setzero_pd(), _mm_movehl_ps(h, h)), _mm_cvtss_sd(_mm_setzero_pd(), _mm_movehl_ps(l, l)));
   const __m128d p = _mm_mul_pd(uxy, _mm_shuffle_pd(uxy, uz, 1));  // (ux uy, uy uz)
   return _mm_cvtsd_f64(_mm_add_sd(_mm_add_sd(p, _mm_unpackhi_pd(p, p)), _mm_mul_sd(uz, uxy)));
-#endif
 }
 // Bit b set when counts[b] != 0, for counts[0, 8).
 #if CULLPIPE_BINNED_AVX2
@@ -244,8 +233,10 @@ class Sweep {
 
  private:
   static std::size_t round4(std::uint32_t n) { return (std::size_t(n) + 3) / 4 * 4; }
-  std::vector<Box8> left_, right_;  // candidate j's children's boxes (AVX2 only)
-  std::vector<double> nl_, nr_;     // their object counts
+  // AVX2: each candidate's children's boxes, object counts and cost. Baseline: nr_ the right
+  // side's counts and cost_ its areas.
+  std::vector<Box8> left_, right_;
+  std::vector<double> nl_, nr_;
   std::vector<double> cost_;
 };
 
@@ -313,7 +304,6 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
   scratch.reserve(n);
   Box8* const buffer[2] = {scratch.buffer[0].get(), scratch.buffer[1].get()};
   std::uint32_t* const bin_of = scratch.bin_of.get();
-  std::vector<std::pair<std::uint32_t, std::uint32_t>> order;  // (id, position): nodes of equal centroids
   Box8 root_box = kEmpty;
   PointBox root_centroids;
   for (std::size_t i = 0; i < n; ++i) {
@@ -453,13 +443,8 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
     if (mid == 0 || mid == task.count) {  // equal centroids: split the range in half (by id, deterministic)
       mid = task.count / 2;
       child_buffer = task.buffer;
-      // Sorted by id through the other buffer's range of this node (free until a split).
-      order.resize(task.count);
-      for (std::uint32_t i = 0; i < task.count; ++i) order[i] = {objs[i].id(), i};
-      std::sort(order.begin(), order.end());
-      Box8* sorted = buffer[1 - task.buffer] + task.first;
-      for (std::uint32_t i = 0; i < task.count; ++i) copy(sorted[i], objs[order[i].second]);
-      for (std::uint32_t i = 0; i < task.count; ++i) copy(objs[i], sorted[i]);
+      // Every node's records are already in id order (the root's are, and the partition and
+      // this split keep the order), so the halves are the lower and the upper ids.
       left_box = right_box = kEmpty;
       left_centroids = right_centroids = PointBox{};
       bounds_of(objs, mid, left_box, left_centroids);

@@ -55,9 +55,10 @@ struct BinnedScratch;
 }
 
 /// build_binned_sah for an engine that rebuilds every frame: the same tree, but the builder
-/// keeps its working memory (about 68 bytes per object) and `tree` keeps its storage between
-/// builds, so a rebuild touches no fresh pages. Uses AVX2 where the CPU has it, like
-/// build_binned_sah. Not thread-safe: one builder per thread.
+/// keeps its per-object working memory (68 bytes per object) and `tree` keeps its storage
+/// between builds, so a rebuild of no more objects than before faults in no fresh pages (a
+/// first build of 10^6 objects spends about 10% of its time doing that). Uses AVX2 where the
+/// CPU has it, like build_binned_sah. Not thread-safe: one builder per thread.
 class BinnedSahBuilder {
  public:
   BinnedSahBuilder();
