@@ -62,6 +62,27 @@ inline __m128i bin_indices(__m128 c, const Lanes& lo, const Lanes& scale, const 
   const __m128 x = _mm_mul_ps(_mm_sub_ps(c, _mm_load_ps(lo.v)), _mm_load_ps(scale.v));
   return _mm_cvttps_epi32(_mm_min_ps(x, _mm_load_ps(last.v)));
 }
+// A record held in registers (loaded once for its three bins: the compiler cannot tell that
+// the bins' stores leave the record alone).
+#if CULLPIPE_BINNED_AVX2
+using Rec = __m256;
+inline Rec load(const Box8& b) { return _mm256_load_ps(b.v); }
+inline void grow(Box8& acc, Rec r) { _mm256_store_ps(acc.v, _mm256_min_ps(r, _mm256_load_ps(acc.v))); }
+#else
+struct Rec {
+  __m128 lo, hi;
+};
+inline Rec load(const Box8& b) { return {_mm_load_ps(b.v), _mm_load_ps(b.v + 4)}; }
+inline void grow(Box8& acc, Rec r) {
+  _mm_store_ps(acc.v, _mm_min_ps(r.lo, _mm_load_ps(acc.v)));
+  _mm_store_ps(acc.v + 4, _mm_min_ps(r.hi, _mm_load_ps(acc.v + 4)));
+}
+#endif
+// Bin indices below 256 (x, y, z, 0) as the bytes of one word: x | y << 8 | z << 16.
+inline std::uint32_t packed(__m128i idx) {
+  const __m128i words = _mm_packs_epi32(idx, idx);
+  return std::uint32_t(_mm_cvtsi128_si32(_mm_packus_epi16(words, words)));
+}
 // Half the surface area of a non-empty box, in double, as detail::half_area (e = hi - lo;
 // ex*ey + ey*ez + ez*ex): u = lo + (-hi) is -e exactly, and the products of two negated extents
 // are the same numbers.
@@ -129,6 +150,8 @@ inline Indices bin_indices(const Lanes& c, const Lanes& lo, const Lanes& scale, 
   }
   return out;
 }
+using Rec = Box8;
+inline Rec load(const Box8& b) { return b; }
 inline double half_area(const Box8& b) {
   const double ux = double(b.v[4]) + double(b.v[0]), uy = double(b.v[5]) + double(b.v[1]), uz = double(b.v[6]) + double(b.v[2]);
   return ux * uy + uy * uz + uz * ux;
@@ -152,7 +175,27 @@ inline void index3(const Indices& idx, std::uint32_t& a, std::uint32_t& b, std::
   b = idx.v[1];
   c = idx.v[2];
 }
+inline std::uint32_t packed(const Indices& idx) { return idx.v[0] | idx.v[1] << 8 | idx.v[2] << 16; }
 #endif
+
+#if defined(__SSE2__)
+inline __m128i times4(__m128i idx) { return _mm_slli_epi32(idx, 2); }
+#else
+inline Indices times4(Indices idx) {
+  for (int k = 0; k < 4; ++k) idx.v[k] *= 4;
+  return idx;
+}
+#endif
+// The bin whose count sits `offset` bytes into counts (bins are 8 times as large as counts, so
+// one offset addresses both without a shift).
+inline Box8& box_at(Box8* bins, std::uint32_t offset) { return *reinterpret_cast<Box8*>(reinterpret_cast<char*>(bins) + std::size_t(offset) * 8); }
+inline std::uint32_t& count_at(std::uint32_t* counts, std::uint32_t offset) {
+  return *reinterpret_cast<std::uint32_t*>(reinterpret_cast<char*>(counts) + offset);
+}
+static_assert(sizeof(Box8) == 8 * sizeof(std::uint32_t));
+// The byte of a packed word (x | y << 8 | z << 16) that holds axis a's bin, in memory order.
+constexpr std::size_t kByteOf[3] = {std::endian::native == std::endian::little ? 0u : 3u, std::endian::native == std::endian::little ? 1u : 2u,
+                                    std::endian::native == std::endian::little ? 2u : 1u};
 
 // The SAH sweep over one axis's non-empty bins. Candidate j puts used bins list[0..j] left and
 // list[j+1..k-1] right; its cost is half_area(left) * |left| + half_area(right) * |right|.
@@ -379,16 +422,18 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
     std::uint32_t* const count1 = count0 + stride;
     std::uint32_t* const count2 = count1 + stride;
     for (std::uint32_t i = 0; i < task.count; ++i) {
-      const Box8& r = objs[i];
-      std::uint32_t b0, b1, b2;
-      index3(bin_indices(centroid(r), lo, scale, last), b0, b1, b2);
-      bin_of[i] = b0 | b1 << 8 | b2 << 16;
-      grow(bin0[b0], r);
-      ++count0[b0];
-      grow(bin1[b1], r);
-      ++count1[b1];
-      grow(bin2[b2], r);
-      ++count2[b2];
+      const Rec r = load(objs[i]);
+      const auto idx = bin_indices(centroid(objs[i]), lo, scale, last);
+      bin_of[i] = packed(idx);
+      // Byte offsets of the bins' counts (4 bytes each); their boxes are at 8 times those.
+      std::uint32_t o0, o1, o2;
+      index3(times4(idx), o0, o1, o2);
+      grow(box_at(bin0, o0), r);
+      ++count_at(count0, o0);
+      grow(box_at(bin1, o1), r);
+      ++count_at(count1, o1);
+      grow(box_at(bin2, o2), r);
+      ++count_at(count2, o2);
     }
     for (int axis = 0; axis < 3; ++axis)
       used_count[axis] = list_used(bin_count.data() + std::size_t(axis) * stride, stride, used.data() + std::size_t(axis) * stride);
@@ -420,9 +465,11 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
       child_buffer = 1 - task.buffer;
       Box8* out = buffer[child_buffer] + task.first;
       std::uint32_t l = 0, r = mid;
+      // Each record's bin along the split axis: byte `axis` of its packed indices.
+      const std::uint8_t* const split_bin = reinterpret_cast<const std::uint8_t*>(bin_of) + kByteOf[axis];
       for (std::uint32_t i = 0; i < task.count; ++i) {
         const Box8& ref = objs[i];
-        const std::uint32_t go_left = (bin_of[i] >> (8 * axis) & 0xffu) <= best_split;
+        const std::uint32_t go_left = split_bin[4 * i] <= best_split;
         const std::uint32_t at = r + (l - r) * go_left;  // l or r, without a branch to mispredict
         copy(out[at], ref);
         PointBox& side = go_left ? left_centroids : right_centroids;
