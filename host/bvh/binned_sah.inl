@@ -188,14 +188,17 @@ inline Indices times4(Indices idx) {
 #endif
 // The bin whose count sits `offset` bytes into counts (bins are 8 times as large as counts, so
 // one offset addresses both without a shift).
-inline Box8& box_at(Box8* bins, std::uint32_t offset) { return *reinterpret_cast<Box8*>(reinterpret_cast<char*>(bins) + std::size_t(offset) * 8); }
+inline Box8& box_at(Box8* bins, std::uint32_t offset) {
+  return *reinterpret_cast<Box8*>(reinterpret_cast<char*>(bins) + std::size_t(offset) * 8);
+}
 inline std::uint32_t& count_at(std::uint32_t* counts, std::uint32_t offset) {
   return *reinterpret_cast<std::uint32_t*>(reinterpret_cast<char*>(counts) + offset);
 }
 static_assert(sizeof(Box8) == 8 * sizeof(std::uint32_t));
 // The byte of a packed word (x | y << 8 | z << 16) that holds axis a's bin, in memory order.
-constexpr std::size_t kByteOf[3] = {std::endian::native == std::endian::little ? 0u : 3u, std::endian::native == std::endian::little ? 1u : 2u,
-                                    std::endian::native == std::endian::little ? 2u : 1u};
+static_assert(std::endian::native == std::endian::little || std::endian::native == std::endian::big);
+constexpr bool kLittle = std::endian::native == std::endian::little;
+constexpr std::size_t kByteOf[3] = {kLittle ? 0u : 3u, kLittle ? 1u : 2u, kLittle ? 2u : 1u};
 
 // The SAH sweep over one axis's non-empty bins. Candidate j puts used bins list[0..j] left and
 // list[j+1..k-1] right; its cost is half_area(left) * |left| + half_area(right) * |right|.
@@ -469,7 +472,7 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
       const std::uint8_t* const split_bin = reinterpret_cast<const std::uint8_t*>(bin_of) + kByteOf[axis];
       for (std::uint32_t i = 0; i < task.count; ++i) {
         const Box8& ref = objs[i];
-        const std::uint32_t go_left = split_bin[4 * i] <= best_split;
+        const std::uint32_t go_left = split_bin[sizeof(std::uint32_t) * std::size_t(i)] <= best_split;  // size_t: nodes past 2^30 objects
         const std::uint32_t at = r + (l - r) * go_left;  // l or r, without a branch to mispredict
         copy(out[at], ref);
         PointBox& side = go_left ? left_centroids : right_centroids;
