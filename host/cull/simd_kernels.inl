@@ -338,12 +338,13 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
   ChunkCounts counts;
   for (std::size_t run = begin; run < end; run += kRunBlocks * W) {
     const std::size_t run_end = smaller(end, run + kRunBlocks * W);
-    // Each vector's visible lanes, counted as they are found (open objects as visible and not
-    // INSIDE until resolved), written where a dense run leaves them: the counts and the bits
-    // need no second pass over the run.
+    // Each vector's visible lanes, counted as they are found (open objects as visible until
+    // resolved), written where a dense run leaves them: the counts and the bits need no second
+    // pass over the run. The settled visible objects are the INSIDE ones, so the INSIDE count
+    // is the visible count less the open objects, plus those resolved INSIDE.
     std::uint32_t* const visible_bits = listed_by_runs ? out.bits + (run - begin) / W : run_bits;
     unsigned open_count = 0;
-    std::uint32_t run_visible = 0, run_inside = 0;
+    std::uint32_t run_visible = 0;
     // crossing_bits is read only for classes; the open objects found crossing set their bits.
     if (out.classes) __builtin_memset(crossing_bits, 0, sizeof crossing_bits);
     // Vector b (objects i..i+W-1, `lanes` of them in range) found OUTSIDE (`beyond`) and
@@ -352,7 +353,6 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
       const std::uint32_t visible = ~beyond & lanes;
       visible_bits[b] = visible;
       run_visible += static_cast<std::uint32_t>(__builtin_popcount(visible));
-      run_inside += static_cast<std::uint32_t>(__builtin_popcount(within & visible));
       const std::uint32_t opened = ~(beyond | within) & lanes;
       for (std::uint32_t rest = opened; rest != 0; rest &= rest - 1) {
         const std::uint32_t object = static_cast<std::uint32_t>(i + static_cast<unsigned>(__builtin_ctz(rest)));
@@ -393,6 +393,7 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
       for (; first < run_end; first += W, ++block)  // no bound holds (every object open), or no planes (every object INSIDE)
         record(first, block, run_end - first >= W ? kAllLanes : (1u << (run_end - first)) - 1u, 0, no_planes ? kAllLanes : 0);
     }
+    std::uint32_t run_inside = run_visible - open_count;
     for (unsigned o = 0; o < open_count; o += W) {
       const unsigned count = static_cast<unsigned>(smaller(W, open_count - o));
       std::uint32_t outside, crossing;
@@ -426,18 +427,12 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
       out.runs[run_index] = kDenseRun | run_visible;
       continue;
     }
-    // A sparse run's ids, from the vectors with a visible lane only: found W bit words at a time.
     const std::size_t vectors = (run_end - run + W - 1) / W;
     std::uint32_t* ids = out.ids;
-    for (std::size_t g = 0; g < vectors; g += W) {
-      const unsigned in_group = static_cast<unsigned>(smaller(W, vectors - g));
-      const std::uint32_t group = in_group >= W ? kAllLanes : (1u << in_group) - 1u;
-      const vi words = load_ints_where(visible_bits + g, group);
-      for (std::uint32_t rest = lane_bits(words != 0) & group; rest != 0; rest &= rest - 1) {
-        const std::size_t b = g + static_cast<unsigned>(__builtin_ctz(rest));
-        ids = append_ids(ids, static_cast<std::uint32_t>(run + b * W), visible_bits[b]);
-      }
-    }
+    // A sparse run's ids: every vector's visible lanes appended, none skipped. Skipping the
+    // vectors with no visible lane cost a mispredicted branch about every 64 objects (4*10^6
+    // boxes at 10% visible, one thread: 1.085 -> 0.93 ns/object; NOTES).
+    for (std::size_t b = 0; b < vectors; ++b) ids = append_ids(ids, static_cast<std::uint32_t>(run + b * W), visible_bits[b]);
     if (out.runs) out.runs[run_index] = static_cast<std::uint32_t>(ids - out.ids);
     out.ids = ids;
   }
