@@ -464,7 +464,6 @@ std::uint32_t* list_marked(const std::uint64_t* marks, std::size_t words, const 
     }
     for (unsigned q = 0; q < 64 / W; ++q) {
       const std::uint32_t lanes = static_cast<std::uint32_t>(word >> (q * W)) & kAllLanes;
-      if (lanes == 0) continue;
       if (out_end - out >= static_cast<std::ptrdiff_t>(W)) {  // room for the vector store
         compress_store(out, load_ints_where(from + q * W, lanes), lanes);
         out += __builtin_popcount(lanes);
