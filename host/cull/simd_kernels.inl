@@ -462,6 +462,7 @@ std::uint32_t* list_marked(const std::uint64_t* marks, std::size_t words, const 
       out += 64;
       continue;
     }
+    // Every group of W marks, those with none too: a branch on them mispredicts (NOTES).
     for (unsigned q = 0; q < 64 / W; ++q) {
       const std::uint32_t lanes = static_cast<std::uint32_t>(word >> (q * W)) & kAllLanes;
       if (out_end - out >= static_cast<std::ptrdiff_t>(W)) {  // room for the vector store
