@@ -462,6 +462,17 @@ std::uint32_t* list_marked(const std::uint64_t* marks, std::size_t words, const 
       out += 64;
       continue;
     }
+    // A word with room for all its stores (at most 64 ids past `out`) and ids readable past its
+    // last mark (not the last word: that one may end the array) takes plain loads and no room
+    // check per group (10^6 boxes at 10% visible, one thread: 0.200 -> 0.192 ms; NOTES).
+    if (w + 1 < words && out_end - out >= 64) {
+      for (unsigned q = 0; q < 64 / W; ++q) {
+        const std::uint32_t lanes = static_cast<std::uint32_t>(word >> (q * W)) & kAllLanes;
+        compress_store(out, load_ints(from + q * W), lanes);
+        out += __builtin_popcount(lanes);
+      }
+      continue;
+    }
     // Every group of W marks, those with none too, without a branch on them (10^6 boxes, one
     // thread: 0.41 -> 0.39 ms at 50% visible; NOTES).
     for (unsigned q = 0; q < 64 / W; ++q) {
@@ -846,46 +857,53 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
       }
   for (std::size_t r = 0; r < ranges; ++r) {
     const std::uint32_t first = range_at[r], n = range_count[r], m = range_mask[r];
-    const vi mask = vi{} + static_cast<std::int32_t>(m);
     counts.object_tests += n;
-    for (std::uint32_t j = 0; j < n; j += W) {
-      const std::uint32_t at = first + j;
-      std::uint32_t outside_bits = 0, crossing_bits = 0;
-      if constexpr (Kind == WalkKind::Aabb) {  // test_boxes's operations, for one mask
+    // A block of up to 64 of the range's objects at a time, tested plane by plane (a plane's
+    // coefficients and columns set up once), its outside and crossing lanes gathered a bit per
+    // object in two words, then counted, marked and classed once per block, not per vector
+    // (10^6 boxes at 10% visible, one thread: 0.192 -> 0.167 ms; NOTES).
+    for (std::uint32_t block = 0; block < n; block += 64) {
+      const std::uint32_t at = first + block, size = n - block < 64 ? n - block : 64;
+      std::uint64_t outside_bits = 0, crossing_bits = 0;
+      if constexpr (Kind == WalkKind::Aabb) {  // test_boxes's operations, plane by plane
         const vf zero = {};
         for (std::uint32_t any = m; any != 0; any &= any - 1) {
           const std::uint32_t k = static_cast<std::uint32_t>(__builtin_ctz(any));
           const float nx = planes.nx[k], ny = planes.ny[k], nz = planes.nz[k], d = planes.d[k];
           const float* const* v = vertex_column[k];
-          const vf dp = ((nx * load(v[0] + at) + ny * load(v[1] + at)) + nz * load(v[2] + at)) + d;
-          const vf dn = ((nx * load(v[3] + at) + ny * load(v[4] + at)) + nz * load(v[5] + at)) + d;
-          outside_bits |= less_bits(dp, zero);
-          crossing_bits |= less_bits(dn, zero);
+          const float *const px = v[0] + at, *const py = v[1] + at, *const pz = v[2] + at;
+          const float *const qx = v[3] + at, *const qy = v[4] + at, *const qz = v[5] + at;
+          for (std::uint32_t j = 0; j < size; j += W) {
+            const vf dp = ((nx * load(px + j) + ny * load(py + j)) + nz * load(pz + j)) + d;
+            const vf dn = ((nx * load(qx + j) + ny * load(qy + j)) + nz * load(qz + j)) + d;
+            outside_bits |= std::uint64_t(less_bits(dp, zero)) << j;
+            crossing_bits |= std::uint64_t(less_bits(dn, zero)) << j;
+          }
         }
       } else {
-        vf col[object_columns];
-        for (unsigned c = 0; c < object_columns; ++c) col[c] = load(t.columns + c * t.stride + at);
-        vi outside, crossing;
-        if constexpr (Kind == WalkKind::Obb)
-          test_obbs(col, mask, m, planes, outside, crossing);
-        else
-          test_spheres(col, mask, m, planes, outside, crossing);
-        outside_bits = lane_bits(outside != 0);
-        crossing_bits = lane_bits(crossing != 0);
+        const vi mask = vi{} + static_cast<std::int32_t>(m);
+        for (std::uint32_t j = 0; j < size; j += W) {
+          vf col[object_columns];
+          for (unsigned c = 0; c < object_columns; ++c) col[c] = load(t.columns + c * t.stride + at + j);
+          vi outside, crossing;
+          if constexpr (Kind == WalkKind::Obb)
+            test_obbs(col, mask, m, planes, outside, crossing);
+          else
+            test_spheres(col, mask, m, planes, outside, crossing);
+          outside_bits |= std::uint64_t(lane_bits(outside != 0)) << j;
+          crossing_bits |= std::uint64_t(lane_bits(crossing != 0)) << j;
+        }
       }
-      const unsigned take = static_cast<unsigned>(smaller(W, n - j));
-      const std::uint32_t lanes = take >= W ? kAllLanes : (1u << take) - 1u;
-      const std::uint32_t visible = ~outside_bits & lanes;
-      counts.visible += static_cast<std::uint32_t>(__builtin_popcount(visible));
-      counts.inside += static_cast<std::uint32_t>(__builtin_popcount(visible & ~crossing_bits));
-      if (out.classes) {
-        const vi cls = (kInside + lanes_of(crossing_bits)) & ~lanes_of(outside_bits);  // crossing is -1: Inside - 1 = Intersecting
-        for (unsigned l = 0; l < take; ++l) out.classes[t.ids[at + l]] = static_cast<std::uint8_t>(cls[l]);
-      }
+      const std::uint64_t visible = ~outside_bits & (size == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << size) - 1u);
+      counts.visible += static_cast<std::uint32_t>(__builtin_popcountll(visible));
+      counts.inside += static_cast<std::uint32_t>(__builtin_popcountll(visible & ~crossing_bits));
+      if (out.classes)
+        for (std::uint32_t l = 0; l < size; ++l)
+          out.classes[t.ids[at + l]] = visible >> l & 1u ? (crossing_bits >> l & 1u ? kIntersecting : kInside) : kOutside;
       if (marks) {
         const std::uint32_t p = at - range_first, shift = p % 64;
-        marks[p / 64] |= std::uint64_t(visible) << shift;
-        if (shift + take > 64) marks[p / 64 + 1] |= std::uint64_t(visible) >> (64 - shift);
+        marks[p / 64] |= visible << shift;
+        if (shift + size > 64) marks[p / 64 + 1] |= visible >> (64 - shift);
       }
     }
   }
