@@ -602,9 +602,9 @@ std::uint32_t touch(const float* data, std::size_t begin, std::size_t end) {
 // (the two children of a straddling node, with the planes it straddles) is taken W / 2 pairs
 // per step, their records transposed into vectors (one node per lane) and tested against the
 // planes one by one. The object ranges of straddling leaves (and, with range_objects, of
-// straddling nodes of at most that many objects) go to a second list, tested at the end, W
-// objects of a range at a time, loaded straight from the volumes' columns in tree order
-// against the planes their node straddles. Every lane does the scalar test's float operations in its
+// straddling nodes of at most that many objects) go to a second list, tested at the end in
+// blocks of up to 64 objects, W at a time, loaded straight from the volumes' columns in tree
+// order against the planes their node straddles. Every lane does the scalar test's float operations in its
 // order (bvh::classify_masked for boxes, classify_masked_margin for the nodes of OBB and
 // sphere trees, classify_planes for OBBs and spheres) and the planes outside its mask count
 // for nothing. The scalar tests stop at the first plane that rejects, which does not change
@@ -761,7 +761,7 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
   std::uint32_t* const work_first = work_mask + span;
   // The object ranges to test (first, count, planes): straddling leaves, and straddling nodes
   // of at most t.range_objects objects. Listed as they are found (their columns prefetched)
-  // and tested at the end, W objects of a range at a time, straight from the columns.
+  // and tested at the end, in blocks of up to 64 objects, straight from the columns.
   std::uint32_t* const range_at = work_first + span;
   std::uint32_t* const range_count = range_at + span;
   std::uint32_t* const range_mask = range_count + span;
