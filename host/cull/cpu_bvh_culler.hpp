@@ -49,17 +49,16 @@ struct CpuBvhViewResult {
 /// classes do not depend on range_objects; the test counts do.)
 ///
 /// The top of the tree is walked breadth first on the calling thread until there are enough
-/// subtrees for the threads (about 16 per thread, fewer for small trees: one per 8192
-/// objects); each subtree is then tested by one thread with the SIMD walk kernels of the
-/// culler's instruction set (detail::WalkKernel): W nodes at a time, one per lane, tested plane
-/// by plane, each lane doing the scalar test's float operations in its order on the planes of
-/// its own mask; then the object ranges it found, in blocks of up to 64 objects tested plane
-/// by plane, W at a time, read straight from columns of the volumes in tree order (a range is
-/// contiguous there). The tests are the
-/// scalar traversal's, in another order; the visible objects are marked in a bitmap and listed
-/// in tree order. INSIDE ranges are split into chunks so one large accepted subtree still uses
-/// every core. Objects are written by id, and a subtree's objects are its own, so no two
-/// threads write the same class.
+/// subtrees for the threads (about 16 per thread, fewer for small trees: one per 8192 objects);
+/// each subtree is then tested by one thread with the SIMD walk kernels of the culler's
+/// instruction set (detail::WalkKernel): W nodes at a time, one per lane, tested plane by
+/// plane, each lane doing the scalar test's float operations in its order on the planes of its
+/// own mask; then the object ranges it found, in blocks of up to 64 objects tested plane by
+/// plane, W at a time, read straight from columns of the volumes in tree order (a range is
+/// contiguous there). The tests are the scalar traversal's, in another order; the visible
+/// objects are marked in a bitmap and listed in tree order. INSIDE ranges are split into chunks
+/// so one large accepted subtree still uses every core. Objects are written by id, and a
+/// subtree's objects are its own, so no two threads write the same class.
 ///
 /// Why object ranges: a node test costs about 13 cycles (records gathered into lanes, work
 /// lists kept, prefetches), an object of a range under 2 (contiguous loads); near the leaves a node's
