@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <cstddef>
 #include <memory>
 #include <stdexcept>
 #include <vector>
@@ -313,10 +314,120 @@ inline std::uint32_t list_used(const std::uint32_t* counts, std::uint32_t stride
   return k;
 }
 
+// r = object `id`'s record: (min, +inf, -max, id's bits), stored whole (a record written as
+// eight floats and read back as one vector waits for the stores to drain instead of taking
+// the value from them).
+static_assert(sizeof(Aabb) == 6 * sizeof(float) && offsetof(Aabb, max) == 3 * sizeof(float));
+inline void store_record(Box8& r, const Aabb& b, std::uint32_t id) {
+#if defined(__SSE2__)
+  const float* const p = &b.min.x;
+  const __m128 xyz = _mm_castsi128_ps(_mm_set_epi32(0, -1, -1, -1));
+  const __m128 a = _mm_loadu_ps(p);      // min.x min.y min.z max.x
+  const __m128 c = _mm_loadu_ps(p + 2);  // min.z max.x max.y max.z: both loads within the box
+  const __m128 lo = _mm_or_ps(_mm_and_ps(a, xyz), _mm_andnot_ps(xyz, _mm_set1_ps(INFINITY)));
+  const __m128 neg = _mm_xor_ps(_mm_shuffle_ps(c, c, _MM_SHUFFLE(0, 3, 2, 1)), _mm_set1_ps(-0.0f));  // -max, -min.z
+  const __m128 nh = _mm_or_ps(_mm_and_ps(neg, xyz), _mm_castsi128_ps(_mm_slli_si128(_mm_cvtsi32_si128(std::int32_t(id)), 12)));
+#if CULLPIPE_BINNED_AVX2
+  _mm256_store_ps(r.v, _mm256_set_m128(nh, lo));
+#else
+  _mm_store_ps(r.v, lo);
+  _mm_store_ps(r.v + 4, nh);
+#endif
+#else
+  r = {{b.min.x, b.min.y, b.min.z, INFINITY, -b.max.x, -b.max.y, -b.max.z, std::bit_cast<float>(id)}};
+#endif
+}
+
 // The centroid box of objects: lo and hi corners (x, y, z, unused).
 struct PointBox {
   Lanes lo{{INFINITY, INFINITY, INFINITY, INFINITY}}, hi{{-INFINITY, -INFINITY, -INFINITY, -INFINITY}};
 };
+
+// The two children's centroid boxes, gathered while a split moves its records: each side's box
+// is its centroids' minimum and their negated maximum, held in registers, and a record that goes
+// to the other side offers NaN (all bits set), which a minimum ignores. The minimums take the
+// same operands in the same order as grow_point's min(c, lo) and max(c, hi) (-max(c, hi) is
+// min(-c, -hi), ties keeping the accumulated value), so the boxes are the same, bit for bit; a
+// box held in memory behind a pointer chosen per record made each record wait for the last
+// one's store.
+#if defined(__SSE2__)
+class SideCentroids {
+ public:
+  // Written out (not member initialisers): an implicit constructor would not get the AVX2
+  // target pragma.
+  SideCentroids() {
+#if CULLPIPE_BINNED_AVX2
+    left_ = right_ = _mm256_set1_ps(INFINITY);
+#else
+    left_lo_ = left_nh_ = right_lo_ = right_nh_ = _mm_set1_ps(INFINITY);
+#endif
+  }
+  // go_left: 1 when the record goes left, 0 when it goes right.
+  inline void add(const Box8& r, std::uint32_t go_left) {
+#if CULLPIPE_BINNED_AVX2
+    const __m256 xyz = _mm256_castsi256_ps(_mm256_set_epi32(0, -1, -1, -1, 0, -1, -1, -1));
+    const __m256 a = _mm256_and_ps(_mm256_load_ps(r.v), xyz);                                     // (lo, 0, -hi, 0)
+    const __m256 v = _mm256_mul_ps(_mm256_sub_ps(a, _mm256_permute2f128_ps(a, a, 1)), _mm256_set1_ps(0.5f));  // (c, 0, -c, 0)
+    const __m256 to_right = _mm256_castsi256_ps(_mm256_set1_epi32(std::int32_t(go_left) - 1));
+    left_ = _mm256_min_ps(_mm256_or_ps(v, to_right), left_);
+    right_ = _mm256_min_ps(_mm256_or_ps(v, _mm256_xor_ps(to_right, _mm256_castsi256_ps(_mm256_set1_epi32(-1)))), right_);
+#else
+    const __m128 xyz = _mm_castsi128_ps(_mm_set_epi32(0, -1, -1, -1));
+    const __m128 lo = _mm_and_ps(_mm_load_ps(r.v), xyz), nh = _mm_and_ps(_mm_load_ps(r.v + 4), xyz);
+    const __m128 half = _mm_set1_ps(0.5f);
+    const __m128 c = _mm_mul_ps(_mm_sub_ps(lo, nh), half), nc = _mm_mul_ps(_mm_sub_ps(nh, lo), half);
+    const __m128 to_right = _mm_castsi128_ps(_mm_set1_epi32(std::int32_t(go_left) - 1));
+    const __m128 to_left = _mm_castsi128_ps(_mm_set1_epi32(-std::int32_t(go_left)));
+    left_lo_ = _mm_min_ps(_mm_or_ps(c, to_right), left_lo_);
+    left_nh_ = _mm_min_ps(_mm_or_ps(nc, to_right), left_nh_);
+    right_lo_ = _mm_min_ps(_mm_or_ps(c, to_left), right_lo_);
+    right_nh_ = _mm_min_ps(_mm_or_ps(nc, to_left), right_nh_);
+#endif
+  }
+  PointBox left() const {
+#if CULLPIPE_BINNED_AVX2
+    return point_box(_mm256_castps256_ps128(left_), _mm256_extractf128_ps(left_, 1));
+#else
+    return point_box(left_lo_, left_nh_);
+#endif
+  }
+  PointBox right() const {
+#if CULLPIPE_BINNED_AVX2
+    return point_box(_mm256_castps256_ps128(right_), _mm256_extractf128_ps(right_, 1));
+#else
+    return point_box(right_lo_, right_nh_);
+#endif
+  }
+
+ private:
+  // lo and -hi to a PointBox (-(-hi) by flipping the sign bit: exact, zeros too). The fourth
+  // lanes are never read.
+  static PointBox point_box(__m128 lo, __m128 nh) {
+    PointBox b;
+    _mm_store_ps(b.lo.v, lo);
+    _mm_store_ps(b.hi.v, _mm_xor_ps(nh, _mm_set1_ps(-0.0f)));
+    return b;
+  }
+#if CULLPIPE_BINNED_AVX2
+  __m256 left_, right_;
+#else
+  __m128 left_lo_, left_nh_, right_lo_, right_nh_;
+#endif
+};
+#else   // no SSE2: the chosen side's box grown in place
+class SideCentroids {
+ public:
+  void add(const Box8& r, std::uint32_t go_left) {
+    PointBox& side = go_left ? left_ : right_;
+    grow_point(side.lo, side.hi, centroid(r));
+  }
+  PointBox left() const { return left_; }
+  PointBox right() const { return right_; }
+
+ private:
+  PointBox left_, right_;
+};
+#endif
 
 // The box and the centroid box of objects [0, count).
 void bounds_of(const Box8* refs, std::uint32_t count, Box8& box, PointBox& centroids) {
@@ -352,9 +463,8 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
   Box8 root_box = kEmpty;
   PointBox root_centroids;
   for (std::size_t i = 0; i < n; ++i) {
-    const Aabb& b = boxes[i];
     Box8& r = buffer[0][i];
-    r = {{b.min.x, b.min.y, b.min.z, INFINITY, -b.max.x, -b.max.y, -b.max.z, std::bit_cast<float>(std::uint32_t(i))}};
+    store_record(r, boxes[i], std::uint32_t(i));
     grow(root_box, r);
     grow_point(root_centroids.lo, root_centroids.hi, centroid(r));
   }
@@ -468,6 +578,7 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
       child_buffer = 1 - task.buffer;
       Box8* out = buffer[child_buffer] + task.first;
       std::uint32_t l = 0, r = mid;
+      SideCentroids sides;
       // Each record's bin along the split axis: byte `axis` of its packed indices.
       const std::uint8_t* const split_bin = reinterpret_cast<const std::uint8_t*>(bin_of) + kByteOf[axis];
       for (std::uint32_t i = 0; i < task.count; ++i) {
@@ -475,12 +586,13 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
         const std::uint32_t go_left = split_bin[sizeof(std::uint32_t) * std::size_t(i)] <= best_split;  // size_t: nodes past 2^30 objects
         const std::uint32_t at = r + (l - r) * go_left;  // l or r, without a branch to mispredict
         copy(out[at], ref);
-        PointBox& side = go_left ? left_centroids : right_centroids;
-        grow_point(side.lo, side.hi, centroid(ref));
+        sides.add(ref, go_left);
         l += go_left;
         r += go_left ^ 1u;
       }
       if (l != mid || r != task.count) throw std::logic_error("build_binned_sah: bin counts disagree with the partition");
+      left_centroids = sides.left();
+      right_centroids = sides.right();
     }
     // Empty the bins for the next node.
     for (int axis = 0; axis < 3; ++axis)
