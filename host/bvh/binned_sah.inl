@@ -215,27 +215,30 @@ class Sweep {
     if (k < 2) return kNone;
     const std::uint32_t candidates = k - 1;
 #if CULLPIPE_BINNED_AVX2
-    // The children's boxes of every candidate first (a chain of minimums), then their areas and
-    // costs four candidates at a time, then the least cost: no branch per candidate.
-    Box8 acc = kEmpty;
+    // The children's boxes of every candidate first (two chains of minimums, left to right and
+    // right to left, in one loop), then their areas and costs four candidates at a time, then
+    // the least cost: no branch per candidate.
+    Box8 acc_left = kEmpty, acc_right = kEmpty;
     std::uint32_t cnt = 0;
     for (std::uint32_t j = 0; j < candidates; ++j) {
-      grow(acc, bin[list[j]]);
-      copy(left_[j], acc);
+      grow(acc_left, bin[list[j]]);
+      copy(left_[j], acc_left);
       cnt += count[list[j]];
-      nl_[j] = double(cnt);
-      nr_[j] = double(total - cnt);
-    }
-    acc = kEmpty;
-    for (std::uint32_t j = candidates; j > 0; --j) {
-      grow(acc, bin[list[j]]);
-      copy(right_[j - 1], acc);
+      nl_[j] = cnt;
+      grow(acc_right, bin[list[candidates - j]]);
+      copy(right_[candidates - 1 - j], acc_right);
     }
     const __m256d inf = _mm256_set1_pd(INFINITY);
     __m256d least = inf;
     for (std::uint32_t q = 0; q < candidates; q += 4) {
-      const __m256d cost = _mm256_add_pd(_mm256_mul_pd(half_areas4(left_.data() + q), _mm256_loadu_pd(nl_.data() + q)),
-                                         _mm256_mul_pd(half_areas4(right_.data() + q), _mm256_loadu_pd(nr_.data() + q)));
+      // The counts as doubles, exactly: an unsigned count is its signed conversion, plus 2^32
+      // where that came out negative; the right side's is total minus the left's (integers
+      // below 2^53: exact).
+      const __m128i counts = _mm_loadu_si128(reinterpret_cast<const __m128i*>(nl_.data() + q));
+      const __m256d signed_nl = _mm256_cvtepi32_pd(counts);
+      const __m256d nl = _mm256_add_pd(signed_nl, _mm256_and_pd(_mm256_cmp_pd(signed_nl, _mm256_setzero_pd(), _CMP_LT_OQ), _mm256_set1_pd(4294967296.0)));
+      const __m256d nr = _mm256_sub_pd(_mm256_set1_pd(double(total)), nl);
+      const __m256d cost = _mm256_add_pd(_mm256_mul_pd(half_areas4(left_.data() + q), nl), _mm256_mul_pd(half_areas4(right_.data() + q), nr));
       // Lanes past the last candidate hold stale boxes: +infinity, never chosen.
       const __m256d live = _mm256_castsi256_pd(
           _mm256_cmpgt_epi64(_mm256_set1_epi64x(std::int64_t(candidates - q)), _mm256_set_epi64x(3, 2, 1, 0)));
@@ -279,10 +282,11 @@ class Sweep {
 
  private:
   static std::size_t round4(std::uint32_t n) { return (std::size_t(n) + 3) / 4 * 4; }
-  // AVX2: each candidate's children's boxes, object counts and cost. Baseline: nr_ the right
-  // side's counts and cost_ its areas.
+  // AVX2: each candidate's children's boxes, left object count (nl_) and cost. Baseline: nr_
+  // the right side's counts and cost_ its areas.
   std::vector<Box8> left_, right_;
-  std::vector<double> nl_, nr_;
+  std::vector<std::uint32_t> nl_;
+  std::vector<double> nr_;
   std::vector<double> cost_;
 };
 
