@@ -538,9 +538,19 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
     std::uint32_t* const count0 = bin_count.data();
     std::uint32_t* const count1 = count0 + stride;
     std::uint32_t* const count2 = count1 + stride;
+    // Each record's bin indices are computed three records ahead of its bin updates: their
+    // long chain of dependent operations (about 20 cycles) then never holds up the updates,
+    // and more records are in flight at once (10^6 objects: 203 -> 184 ms; two ahead, 188;
+    // four, the same as three). Past the last record, the last one is computed again.
+    const std::uint32_t final_i = task.count - 1;
+    const auto indices_of = [&](std::uint32_t i) { return bin_indices(centroid(objs[std::min(i, final_i)]), lo, scale, last); };
+    auto ahead1 = indices_of(0), ahead2 = indices_of(1), ahead3 = indices_of(2);
     for (std::uint32_t i = 0; i < task.count; ++i) {
       const Rec r = load(objs[i]);
-      const auto idx = bin_indices(centroid(objs[i]), lo, scale, last);
+      const auto idx = ahead1;
+      ahead1 = ahead2;
+      ahead2 = ahead3;
+      ahead3 = indices_of(i + 3);
       bin_of[i] = packed(idx);
       // Byte offsets of the bins' counts (4 bytes each); their boxes are at 8 times those.
       std::uint32_t o0, o1, o2;
