@@ -598,7 +598,7 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
       for (std::uint32_t i = 0; i < task.count; ++i) {
         const Box8& ref = objs[i];
         const std::uint32_t go_left = split_bin[sizeof(std::uint32_t) * std::size_t(i)] <= best_split;  // size_t: nodes past 2^30 objects
-        const std::uint32_t at = r + (l - r) * go_left;  // l or r, without a branch to mispredict
+        const std::uint32_t at = go_left ? l : r;  // a conditional move (GCC 12, both variants), no branch to mispredict
         copy(out[at], ref);
         sides.add(ref, go_left);
         l += go_left;
