@@ -350,10 +350,18 @@ ConvexHull convex_hull(std::span<const glm::vec3> points) {
     hull.faces.push_back(tri);
   }
   finish(used);
+  // A live face whose neighbour was retired (near-degenerate input can leave the horizon
+  // inconsistent, and this Quickhull does not merge faces) has lost its adjacency across that
+  // edge: the hull is flagged, and the face lists itself there, so every index in
+  // face_neighbours stays a face of the hull for whoever walks it.
   for (std::uint32_t f = 0; f < qh.faces_.size(); ++f) {
     if (!qh.faces_[f].alive) continue;
     std::array<std::uint32_t, 3> nb;
-    for (int k = 0; k < 3; ++k) nb[std::size_t(k)] = face_id[qh.faces_[f].nb[k]];
+    for (int k = 0; k < 3; ++k) {
+      const std::uint32_t g = qh.faces_[f].nb[k];
+      nb[std::size_t(k)] = g < face_id.size() && face_id[g] != kNone ? face_id[g] : face_id[f];
+      if (nb[std::size_t(k)] == face_id[f]) hull.valid = false;
+    }
     hull.face_neighbours.push_back(nb);
   }
   for (const auto& tri : hull.faces)

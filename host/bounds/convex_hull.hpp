@@ -22,7 +22,9 @@ struct ConvexHull {
   std::vector<std::uint32_t> input_index;
   /// Polyhedron only: triangles as vertex indices, counter-clockwise seen from outside.
   std::vector<std::array<std::uint32_t, 3>> faces;
-  /// Polyhedron only: face_neighbours[f][i] is the face across edge (faces[f][i], faces[f][(i+1)%3]).
+  /// Polyhedron only: face_neighbours[f][i] is the face across edge (faces[f][i], faces[f][(i+1)%3]),
+  /// always an index into `faces`; f itself where the build lost that adjacency (then `valid`
+  /// is false).
   std::vector<std::array<std::uint32_t, 3>> face_neighbours;
   /// For each vertex, the vertices joined to it by a hull edge (sorted).
   std::vector<std::vector<std::uint32_t>> vertex_neighbours;
@@ -33,8 +35,8 @@ struct ConvexHull {
   /// the plane through vertices[0] with `normal`); for a Polyhedron, a bound
   /// on Quickhull's rounding (16 x Lloyd's tolerance), which holds when `valid`.
   double tolerance = 0.0;
-  /// Polyhedron only: false when the built surface failed validation (non-reciprocal
-  /// adjacency, a zero-area face, or an edge not convex to within `tolerance`), which
+  /// Polyhedron only: false when the built surface failed validation (a lost or
+  /// non-reciprocal adjacency, a zero-area face, or an edge not convex to within `tolerance`), which
   /// near-degenerate inputs can cause. Users that rely on convexity must not trust it then.
   bool valid = true;
 };
