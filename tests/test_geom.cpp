@@ -65,6 +65,26 @@ TEST(Aabb, TransformedEnclosesTransformedCorners) {
   }
 }
 
+// A box 10^32 long and 4.5 wide, rotated (found by the bounds fuzzer): the centre/extent form
+// of Arvo's method computed c' and |M| h near 10^32 each, and their sum lost the far side of
+// the 4.5 (max.x came out 0 where a corner lies at 3). Every corner, transformed in double as
+// AabbUpdate::Recompute transforms points, must be inside.
+TEST(Aabb, TransformedKeepsASmallSideBesideAHugeOne) {
+  const Aabb box{{0.0f, 0.0f, 0.0f}, {4.5f, 7.301667457314601e+32f, 562954315497472.0f}};
+  for (const glm::vec3& axis : {glm::vec3(1, 2, 3), glm::vec3(-3, 1, 2), glm::vec3(0, 0, 1)})
+    for (float angle : {0.7f, 2.0f, -1.1f}) {
+      const glm::mat4 m = glm::rotate(glm::mat4(1.0f), angle, glm::normalize(axis));
+      const Aabb t = box.transformed(m);
+      for (const glm::vec3& c : box.corners()) {
+        const glm::dvec3 p = glm::dvec3(glm::dmat4(m) * glm::dvec4(glm::dvec3(c), 1.0));
+        for (int k = 0; k < 3; ++k) {
+          ASSERT_LE(double(t.min[k]), p[k]) << "angle " << angle << " axis " << k;
+          ASSERT_GE(double(t.max[k]), p[k]) << "angle " << angle << " axis " << k;
+        }
+      }
+    }
+}
+
 TEST(Obb, BaseAxesRoundTrip) {
   test::Rng rng{11};
   for (int i = 0; i < 1000; ++i) {

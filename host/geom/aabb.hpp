@@ -25,10 +25,11 @@ struct Aabb {
     return c;
   }
 
-  /// The AABB of this box after an affine transform (Arvo 1990: the new half extent along
-  /// axis i is sum_j |M[j][i]| * h_j), evaluated in double and rounded outward to float, so it
-  /// encloses the exactly transformed box and is the tightest float box doing so (up to the
-  /// double rounding).
+  /// The AABB of this box after an affine transform (Arvo 1990: along axis i, the least value
+  /// is t_i + sum_j min(M[j][i] * min_j, M[j][i] * max_j), the greatest likewise), evaluated in
+  /// double in the order glm transforms a point and rounded outward to float: it encloses every
+  /// point of the box transformed in double (as AabbUpdate::Recompute transforms them), and is
+  /// the tightest float box doing so.
   Aabb transformed(const glm::mat4& m) const;
 
   bool operator==(const Aabb&) const = default;

@@ -11,14 +11,26 @@
 namespace cullpipe {
 
 Aabb Aabb::transformed(const glm::mat4& m) const {
-  // Arvo in double, rounded outward: encloses the exactly transformed corners.
-  const glm::dvec3 c = (glm::dvec3(min) + glm::dvec3(max)) * 0.5, h = (glm::dvec3(max) - glm::dvec3(min)) * 0.5;
+  // Arvo in its direct form: along world axis i, the least (greatest) value is
+  // t_i + sum_j min (max) of M_ij * min_j and M_ij * max_j. Each product of two floats is exact
+  // in double, and the four terms are added as glm adds them in M * (p, 1), ((x + y) + (z + t)):
+  // rounding is monotone, so the result is at least (at most) every point of the box transformed
+  // in double the same way, and rounded outward to float it encloses them. (The centre/extent
+  // form, c' +- |M| h, computed c' and |M| h separately; where they nearly cancel, their double
+  // rounding could lose a box's small far side: found by the bounds fuzzer with a box 10^32
+  // long and 4.5 wide.)
   const glm::dmat4 dm(m);
-  const glm::dvec3 new_c = glm::dvec3(dm * glm::dvec4(c, 1.0));
-  glm::dvec3 new_h(0.0);
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) new_h[i] += std::abs(dm[j][i]) * h[j];
-  const glm::dvec3 lo = new_c - new_h, hi = new_c + new_h;
+  glm::dvec3 lo, hi;
+  for (int i = 0; i < 3; ++i) {
+    double a[3], b[3];
+    for (int j = 0; j < 3; ++j) {
+      const double p = dm[j][i] * double(min[j]), q = dm[j][i] * double(max[j]);
+      a[j] = std::min(p, q);
+      b[j] = std::max(p, q);
+    }
+    lo[i] = (a[0] + a[1]) + (a[2] + dm[3][i]);
+    hi[i] = (b[0] + b[1]) + (b[2] + dm[3][i]);
+  }
   return {{round_down(lo.x), round_down(lo.y), round_down(lo.z)}, {round_up(hi.x), round_up(hi.y), round_up(hi.z)}};
 }
 
