@@ -451,6 +451,35 @@ TEST(AabbUpdate, NearDegenerateSetsStillEnclose) {
   std::printf("near-degenerate sets whose hull failed validation (recomputed from all points): %d\n", invalid);
 }
 
+// Point sets the bounds fuzzer found each hull-based update missing points on (tests/fuzz/
+// regressions/bounds): subnormal points beside unit ones (flat and linear hulls lacked a
+// rounding margin; a flat ring's walk stopped inside a tiny cluster), and a flat hull whose
+// points lie twice its tolerance from its vertices. Every update must enclose the recompute.
+TEST(AabbUpdate, FuzzFoundFlatAndTinySetsEnclose) {
+  const std::vector<Points> sets = {
+      {{0x1.0000000000000p-149f, 0x1.8000000000000p-126f, 0x1.0100000000000p-127f}, {-0x1.0000800000000p+1f, 0x1.0000000000000p-127f, 0x1.8000000000000p-126f}},  // 38434195
+      {{-0x1.0000000000000p+0f, -0x1.0000000000000p+0f, -0x1.0000000000000p+0f}, {-0x1.0000000000000p+0f, -0x1.0000000000000p+0f, 0x1.0000000000000p+0f}, {-0x1.0000000000000p-127f, -0x1.7e00000000000p-142f, -0x1.f800000000000p-144f}, {-0x1.7e00000000000p-142f, -0x1.7e00000000000p-142f, 0x1.ecfc000000000p-135f}, {0x1.fc00000000000p-136f, 0x1.fc00000000000p-136f, 0x1.7f00000000000p-134f}, {0x1.7f00000000000p-134f, 0x1.fc00000000000p-136f, 0x1.7f00000000000p-134f}, {0x1.fc00000000000p-136f, 0x1.fc00000000000p-136f, 0x1.fc00000000000p-136f}, {0x1.7f00000000000p-134f, 0x1.fc00000000000p-136f, 0x1.fc00000000000p-136f}},  // b8996f3d
+      {{-0x1.0000000000000p-149f, 0x1.c080000000000p+1f, 0x1.0000000000000p+1f}, {0x1.4c00000000000p+1f, -0x1.7600000000000p+1f, 0x1.0000800000000p+1f}, {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f}, {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f}, {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f}, {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f}, {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f}, {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f}, {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f}, {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f}, {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f}, {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f}, {-0x1.d1d1d00000000p+82f, 0x1.0281d00000000p-125f, 0x1.0300000000000p-135f}, {0x1.8220000000000p+1f, 0x1.0000000000000p-95f, -0x1.3c00820000000p-95f}, {0x1.0000800000000p-95f, 0x1.0000820000000p+49f, 0x1.0000000000000p-149f}},  // 464ec138
+      {{-0x1.0000000000000p+0f, -0x1.0000000000000p+0f, -0x1.0000000000000p+0f}, {-0x1.0000000000000p+0f, -0x1.0000000000000p+0f, -0x1.4000000000000p-128f}, {-0x1.4fc0000000000p-139f, -0x1.7e00000000000p-142f, -0x1.f800000000000p-144f}, {-0x1.5e00000000000p-142f, -0x1.7e00000000000p-142f, -0x1.f800000000000p-144f}, {-0x1.f800000000000p-144f, -0x1.f800000000000p-144f, -0x1.7e00000000000p-142f}, {-0x1.7e00000000000p-142f, -0x1.f800000000000p-144f, -0x1.7e00000000000p-142f}, {-0x1.f800000000000p-144f, -0x1.f800000000000p-144f, -0x1.f800000000000p-144f}, {-0x1.7e00000000000p-142f, -0x1.f800000000000p-144f, -0x1.f800000000000p-144f}},  // 874dc54c
+      {{-0x1.0000000000000p+0f, -0x1.0000000000000p+0f, -0x1.0000000000000p+0f}, {-0x1.0000000000000p+0f, -0x1.aa00000000000p-126f, -0x1.7e00000000000p-142f}, {-0x1.f800000000000p-144f, -0x1.7e00000000000p-142f, -0x1.f800000000000p-144f}, {-0x1.5e00000000000p-142f, 0x1.7f00800000000p-126f, 0x1.fc00000000000p-128f}, {0x1.fc00000000000p-128f, 0x1.fc00000000000p-128f, 0x1.7f00000000000p-126f}},  // 50d9e2cc
+      {{-0x1.0000000000000p+0f, -0x1.0000000000000p+0f, 0x1.7e00000000000p-126f}, {0x1.fc00000000000p-128f, 0x1.7f00000000000p-126f, 0x1.7f00000000000p-126f}, {0x1.fc00000000000p-128f, 0x1.fc00000000000p-128f, 0x1.8000000000000p-140f}, {0.0f, 0x1.7f00000000000p-126f, 0x1.fc00000000000p-128f}, {0x1.7f00000000000p-126f, 0x1.fc00000000000p-128f, 0x1.fc00000000000p-128f}, {0x1.fc00000000000p-128f, 0x1.7f00000000000p-126f, 0x1.1900000000000p+0f}},  // f601e373
+      {{-0x1.a1a1a00000000p+34f, -0x1.a1a1a00000000p+34f, -0x1.a1a1a00000000p+34f}, {-0x1.a1a1a00000000p+34f, -0x1.a1a1a00000000p+34f, -0x1.a1a1a00000000p+34f}, {-0x1.a1a1a00000000p+34f, -0x1.a1a1a00000000p+34f, 0x1.0100000000000p-141f}, {-0x1.0000000000000p+1f, 0x1.8000000000000p+1f, -0.0f}, {0x1.8000000000000p+1f, -0x1.0000000000000p+1f, -0.0f}},  // 8278c06e
+  };
+  for (std::size_t s = 0; s < sets.size(); ++s) {
+    AabbTracker tracker(sets[s]);
+    for (const glm::mat4& m : {glm::mat4(1.0f), glm::rotate(glm::mat4(1.0f), 0.7f, glm::normalize(glm::vec3(1, 2, 3)))}) {
+      const Aabb full = tracker.update(m, AabbUpdate::Recompute);
+      for (AabbUpdate method : {AabbUpdate::HullRecompute, AabbUpdate::HillClimb, AabbUpdate::TransformBox}) {
+        const Aabb b = tracker.update(m, method);
+        for (int k = 0; k < 3; ++k) {
+          EXPECT_LE(b.min[k], full.min[k]) << "set " << s << " " << to_string(method) << " axis " << k;
+          EXPECT_GE(b.max[k], full.max[k]) << "set " << s << " " << to_string(method) << " axis " << k;
+        }
+      }
+    }
+  }
+}
+
 TEST(ConvexHull, LowerDimensionalToleranceCoversEveryPoint) {
   for (const Points& p : near_degenerate_sets()) {
     const ConvexHull h = convex_hull(p);

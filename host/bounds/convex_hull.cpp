@@ -199,9 +199,13 @@ std::vector<std::uint32_t> hull_2d(const std::vector<dvec3>& p, const dvec3& u, 
     const auto [ox, oy] = uv(o);
     const auto [ax, ay] = uv(a);
     const auto [bx, by] = uv(b);
-    // A strict left turn: points on or near a chord are dropped only when exactly collinear
-    // in double, so no input point ends up outside the ring by more than rounding.
-    return (ax - ox) * (by - oy) - (ay - oy) * (bx - ox) > 0.0;
+    // A certain left turn: larger than the double rounding of the determinant can reach
+    // (8 DBL_EPSILON times the sum of its two products' magnitudes, above Shewchuk's 3u
+    // filter), so the ring is convex in (u, v) exactly and hill climbing over it cannot stop
+    // at a local maximum. A point dropped as uncertain lies within that rounding of its chord:
+    // at most 16 DBL_EPSILON times the larger (u, v) distance, inside the hull's margin.
+    const double left = (ax - ox) * (by - oy), right = (ay - oy) * (bx - ox);
+    return left - right > 8.0 * DBL_EPSILON * (std::abs(left) + std::abs(right));
   };
   std::vector<std::uint32_t> h(2 * idx.size());
   std::size_t k = 0;
@@ -259,12 +263,18 @@ ConvexHull convex_hull(std::span<const glm::vec3> points) {
   const auto [seed_a, seed_b] = most_separated_axis_extremes(unique_points);
   const std::uint32_t a = std::uint32_t(seed_a), b = std::uint32_t(seed_b);
   // For the lower-dimensional hulls the tolerance is measured: the largest distance of any
-  // point from the point, line or plane of the result.
+  // point from the point, line or plane of the result, plus the polyhedron's rounding margin
+  // (16 x Lloyd's tolerance). The margin covers what the measure does not: a point the
+  // in-line or in-plane hull dropped by rounding (its ends and ring are chosen on double
+  // projections) may lie outside by a few ulps of the magnitude, which matters beside tiny
+  // coordinates (the bounds fuzzer found subnormal points missed by the hull's AABB).
+  const double rounding_margin = 16.0 * hull_tol;
   if (glm::length(p[b] - p[a]) <= tol) {
     hull.dimension = ConvexHull::Dimension::Point;
     finish({a});
     hull.tolerance = 0.0;
     for (const dvec3& q : p) hull.tolerance = std::max(hull.tolerance, glm::length(q - p[a]));
+    hull.tolerance += rounding_margin;
     return hull;
   }
 
@@ -293,6 +303,7 @@ ConvexHull convex_hull(std::span<const glm::vec3> points) {
     const dvec3 line = glm::normalize(p[s1] - p[s0]);
     hull.tolerance = 0.0;
     for (const dvec3& q : p) hull.tolerance = std::max(hull.tolerance, glm::length(glm::cross(q - p[s0], line)));
+    hull.tolerance += rounding_margin;
     return hull;
   }
 
@@ -311,12 +322,15 @@ ConvexHull convex_hull(std::span<const glm::vec3> points) {
     hull.dimension = ConvexHull::Dimension::Polygon;
     hull.normal = glm::vec3(n);
     const dvec3 u = dir, v = glm::cross(n, dir);
+    hull.plane_u = u;
+    hull.plane_v = v;
     const std::vector<std::uint32_t> ring = hull_2d(p, u, v);
     finish(ring);
     hull.tolerance = 0.0;
     // Measured from the plane through vertices[0], which users of the hull can rebuild.
     const dvec3 stored_n(hull.normal), first(hull.vertices[0]);
     for (const dvec3& q : p) hull.tolerance = std::max(hull.tolerance, std::abs(glm::dot(q - first, stored_n)) / glm::length(stored_n));
+    hull.tolerance += rounding_margin;
     const std::uint32_t m = std::uint32_t(ring.size());
     for (std::uint32_t i = 0; i < m; ++i) {
       hull.vertex_neighbours[i] = {(i + m - 1) % m, (i + 1) % m};

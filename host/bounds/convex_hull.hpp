@@ -30,10 +30,17 @@ struct ConvexHull {
   std::vector<std::vector<std::uint32_t>> vertex_neighbours;
   /// Polygon only: the unit normal of the plane of the points.
   glm::vec3 normal{0.0f};
-  /// How far an input point may lie outside the result: measured for a Point, Segment or
-  /// Polygon (distance from vertices[0], from the line through vertices[0] and [1], or from
-  /// the plane through vertices[0] with `normal`); for a Polyhedron, a bound
-  /// on Quickhull's rounding (16 x Lloyd's tolerance), which holds when `valid`.
+  /// Polygon only: the in-plane axes the ring was built on. Its vertices' coordinates along
+  /// them, dot(dvec3(vertex), axis) in double, make a ring convex exactly (every turn larger
+  /// than its rounding), which walks over the ring (hill climbing) can rely on.
+  glm::dvec3 plane_u{0.0}, plane_v{0.0};
+  /// How far an input point may lie outside the result: for a Point, Segment or Polygon, the
+  /// measured distance (from vertices[0], from the line through vertices[0] and [1], or from
+  /// the plane through vertices[0] with `normal`) plus a rounding margin of 16 x Lloyd's
+  /// tolerance (for points the in-line or in-plane hull dropped by rounding); for a
+  /// Polyhedron, that margin alone, a bound on Quickhull's rounding, which holds when `valid`
+  /// and the coordinates' magnitudes are not too far apart (points at 3*10^10 and at 1 were
+  /// found outside by 60 times it; see bounds/aabb_update.hpp).
   double tolerance = 0.0;
   /// Polyhedron only: false when the built surface failed validation (a lost or
   /// non-reciprocal adjacency, a zero-area face, or an edge not convex to within `tolerance`), which
