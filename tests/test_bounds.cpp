@@ -492,7 +492,7 @@ TEST(ConvexHull, LowerDimensionalToleranceCoversEveryPoint) {
       if (h.dimension == ConvexHull::Dimension::Segment)
         off = glm::length(glm::cross(d, glm::normalize(glm::dvec3(h.vertices[1]) - origin)));
       if (h.dimension == ConvexHull::Dimension::Polygon)
-        off = std::abs(glm::dot(d, glm::dvec3(h.normal))) / glm::length(glm::dvec3(h.normal));
+        off = std::abs(glm::dot(d, glm::cross(h.plane_u, h.plane_v))) / glm::length(glm::cross(h.plane_u, h.plane_v));
       ASSERT_LE(off, h.tolerance * (1 + 1e-12) + 1e-300);
     }
   }

@@ -54,25 +54,28 @@ std::optional<AabbUpdate> parse_aabb_update(std::string_view name) {
 
 AabbTracker::AabbTracker(std::span<const glm::vec3> local_points)
     : points_(local_points.begin(), local_points.end()), hull_(convex_hull(local_points)), local_(aabb_of_points(local_points)) {
-  // Climb over the hull vertices; for a flat or linear hull, over their projections onto its
-  // plane or line (a flat ring compared in its own plane coordinates, below, where it is
-  // convex exactly). Off-plane scatter is covered by the tolerance padding; climbing over the
-  // raw points could stop at a local maximum the scatter creates.
+  // Climb over the hull vertices; for a linear hull, over their projections onto its line; for
+  // a flat one, over its ring in the ring's own plane coordinates (U, V along plane_u and
+  // plane_v), where it is convex exactly, with the plane's normal n = plane_u x plane_v, the
+  // one the hull's tolerance is measured from. A point is U u + V v + N n (to rounding far
+  // inside the hull's margin), so dir . p is du U + dv V + dn N, and N lies within the
+  // tolerance of the plane's N. Both the walk and the value it reports use that form: 3D
+  // projections round by about the magnitude's ulp, which scrambles the order of ring
+  // vertices far closer together than that (a tiny cluster beside large points), where a walk
+  // stopped inside the cluster, far from the maximum. Off-plane scatter is covered by the
+  // tolerance padding; climbing over the raw points could stop at a local maximum it creates.
   const dvec3 origin(hull_.vertices[0]);
+  if (hull_.dimension == ConvexHull::Dimension::Polygon) {
+    plane_n_ = glm::cross(hull_.plane_u, hull_.plane_v);
+    plane_c_ = glm::dot(origin, plane_n_);
+  }
   for (const glm::vec3& v : hull_.vertices) {
     dvec3 q(v);
-    if (hull_.dimension == ConvexHull::Dimension::Polygon) {
-      const dvec3 n(hull_.normal);
-      q -= glm::dot(q - origin, n) / glm::dot(n, n) * n;
-    } else if (hull_.dimension == ConvexHull::Dimension::Segment) {
+    if (hull_.dimension == ConvexHull::Dimension::Segment) {
       const dvec3 line = glm::normalize(dvec3(hull_.vertices[1]) - origin);
       q = origin + glm::dot(q - origin, line) * line;
     }
     climb_points_.push_back(q);
-    // The ring's own coordinates, in which it is convex exactly: the walk compares these. The
-    // 3D projections above round by about the magnitude's ulp, which scrambles the order of
-    // ring vertices far closer together than that (a tiny cluster beside large points), and a
-    // walk compared on them could stop inside the cluster, far from the maximum.
     if (hull_.dimension == ConvexHull::Dimension::Polygon)
       ring_uv_.push_back({glm::dot(dvec3(v), hull_.plane_u), glm::dot(dvec3(v), hull_.plane_v)});
   }
@@ -87,7 +90,7 @@ AabbTracker::AabbTracker(std::span<const glm::vec3> local_points)
   // A walk finds the maximum only where the surface is convex: a hull that passed validation
   // may still fold inward by up to its tolerance at an edge, and along a direction nearly
   // tangent to a long face such a fold can hold a walk far below the maximum (the bounds
-  // fuzzer found one 0.6 short at a scale of 10^5). Walk only a hull with no edge certainly
+  // fuzzer found one 0.6 short of 4.9*10^5 among points at 7*10^9, 1.7*10^6 and 1). Walk only a hull with no edge certainly
   // concave: for each edge, the far vertex of the face across it is not above this face's
   // plane beyond the rounding of the orientation determinant (8 DBL_EPSILON times its
   // permanent, above Shewchuk's orient3d bound); otherwise hill climbing transforms the hull
@@ -118,7 +121,10 @@ Aabb AabbTracker::update(const glm::mat4& world, AabbUpdate method, Extremes& ex
   // A hull that failed validation may not contain the points: use every point instead.
   if (!hull_.valid && (method == AabbUpdate::HullRecompute || method == AabbUpdate::HillClimb)) method = AabbUpdate::Recompute;
   // A hull with an edge certainly folded inward is not walked (see the constructor).
-  if (method == AabbUpdate::HillClimb && !climb_safe_) method = AabbUpdate::HullRecompute;
+  if (method == AabbUpdate::HillClimb && !climb_safe_) {
+    if (steps) *steps = 0;  // no walk
+    method = AabbUpdate::HullRecompute;
+  }
   switch (method) {
     case AabbUpdate::Recompute: return transform_points(points_, world, 0.0);
     case AabbUpdate::HullRecompute: {
@@ -143,8 +149,7 @@ Aabb AabbTracker::update(const glm::mat4& world, AabbUpdate method, Extremes& ex
     for (int side = 0; side < 2; ++side) {
       const dvec3 dir = side ? r : -r;
       std::uint32_t& v = extremes[std::size_t(2 * axis + side)];
-      // A flat hull's ring is walked in its plane coordinates: dir . p is, on the plane,
-      // du * u + dv * v plus a constant.
+      // A flat hull's ring is walked in its plane coordinates (see the constructor).
       const glm::dvec2 in_plane = ring_uv_.empty() ? glm::dvec2(0.0) : glm::dvec2(glm::dot(dir, hull_.plane_u), glm::dot(dir, hull_.plane_v));
       const auto key = [&](std::uint32_t w) { return ring_uv_.empty() ? glm::dot(dir, climb_points_[w]) : glm::dot(in_plane, ring_uv_[w]); };
       double best = key(v);
@@ -160,7 +165,11 @@ Aabb AabbTracker::update(const glm::mat4& world, AabbUpdate method, Extremes& ex
         }
         ++climb_steps;
       }
-      const double world_value = glm::dot(r, climb_points_[v]) + dm[3][axis];
+      const double world_value =
+          (ring_uv_.empty() ? glm::dot(r, climb_points_[v])
+                            : glm::dot(glm::dvec2(glm::dot(r, hull_.plane_u), glm::dot(r, hull_.plane_v)), ring_uv_[v]) +
+                                  glm::dot(r, plane_n_) * plane_c_) +
+          dm[3][axis];
       (side ? hi : lo)[axis] = world_value;
     }
   }

@@ -201,9 +201,11 @@ std::vector<std::uint32_t> hull_2d(const std::vector<dvec3>& p, const dvec3& u, 
     const auto [bx, by] = uv(b);
     // A certain left turn: larger than the double rounding of the determinant can reach
     // (8 DBL_EPSILON times the sum of its two products' magnitudes, above Shewchuk's 3u
-    // filter), so the ring is convex in (u, v) exactly and hill climbing over it cannot stop
-    // at a local maximum. A point dropped as uncertain lies within that rounding of its chord:
-    // at most 16 DBL_EPSILON times the larger (u, v) distance, inside the hull's margin.
+    // filter), so the ring is convex in (u, v) exactly and a walk over it cannot stop at a
+    // local maximum beyond the rounding of its own comparisons. A point dropped as uncertain
+    // lies within that rounding of its chord: under 14 DBL_EPSILON times the larger (u, v)
+    // distance, so under 28 DBL_EPSILON times the magnitude; the hull's margin (48) leaves
+    // room for a dropped point's chord to have been dropped in turn once.
     const double left = (ax - ox) * (by - oy), right = (ay - oy) * (bx - ox);
     return left - right > 8.0 * DBL_EPSILON * (std::abs(left) + std::abs(right));
   };
@@ -327,9 +329,10 @@ ConvexHull convex_hull(std::span<const glm::vec3> points) {
     const std::vector<std::uint32_t> ring = hull_2d(p, u, v);
     finish(ring);
     hull.tolerance = 0.0;
-    // Measured from the plane through vertices[0], which users of the hull can rebuild.
-    const dvec3 stored_n(hull.normal), first(hull.vertices[0]);
-    for (const dvec3& q : p) hull.tolerance = std::max(hull.tolerance, std::abs(glm::dot(q - first, stored_n)) / glm::length(stored_n));
+    // Measured from the plane through vertices[0] with normal plane_u x plane_v, which users of
+    // the hull can rebuild (AabbTracker walks the ring in that frame).
+    const dvec3 plane_n = glm::cross(u, v), first(hull.vertices[0]);
+    for (const dvec3& q : p) hull.tolerance = std::max(hull.tolerance, std::abs(glm::dot(q - first, plane_n)) / glm::length(plane_n));
     hull.tolerance += rounding_margin;
     const std::uint32_t m = std::uint32_t(ring.size());
     for (std::uint32_t i = 0; i < m; ++i) {

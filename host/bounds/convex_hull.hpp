@@ -28,7 +28,7 @@ struct ConvexHull {
   std::vector<std::array<std::uint32_t, 3>> face_neighbours;
   /// For each vertex, the vertices joined to it by a hull edge (sorted).
   std::vector<std::vector<std::uint32_t>> vertex_neighbours;
-  /// Polygon only: the unit normal of the plane of the points.
+  /// Polygon only: the unit normal of the plane of the points (plane_u x plane_v, to rounding).
   glm::vec3 normal{0.0f};
   /// Polygon only: the in-plane axes the ring was built on. Its vertices' coordinates along
   /// them, dot(dvec3(vertex), axis) in double, make a ring convex exactly (every turn larger
@@ -36,7 +36,8 @@ struct ConvexHull {
   glm::dvec3 plane_u{0.0}, plane_v{0.0};
   /// How far an input point may lie outside the result: for a Point, Segment or Polygon, the
   /// measured distance (from vertices[0], from the line through vertices[0] and [1], or from
-  /// the plane through vertices[0] with `normal`) plus a rounding margin of 16 x Lloyd's
+  /// the plane through vertices[0] with normal plane_u x plane_v, which `normal` rounds to
+  /// float) plus a rounding margin of 16 x Lloyd's
   /// tolerance (for points the in-line or in-plane hull dropped by rounding); for a
   /// Polyhedron, that margin alone, a bound on Quickhull's rounding, which holds when `valid`
   /// and the coordinates' magnitudes are not too far apart (points at 3*10^10 and at 1 were

@@ -6,7 +6,7 @@
 // (hull, hill-climb) run too, but only for crashes and sanitizer reports: their bounds rest on
 // Quickhull containing every point within its tolerance, which fails for sets whose
 // coordinates span about ten orders of magnitude (this fuzzer found points at 3*10^10 and at
-// 1 missed by 0.05, and a hill-climbing walk stopped 0.6 short among points at 10^9 and 1;
+// 1 missed by 0.05, and a hill-climbing walk stopped 0.6 short among points at 7*10^9 and 1;
 // documented in bounds/aabb_update.hpp). The first byte's low bit also runs the exact OBB
 // (slow on large hulls, so only for sets of at most 64 points).
 #include <glm/ext/matrix_transform.hpp>
@@ -96,7 +96,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       check_sphere(bounds::exact_sphere(p), p, "exact_sphere");
       bounds::AabbTracker tracker(p);
       check_hull(tracker.hull(), p);
-      for (const glm::mat4& m : {glm::mat4(1.0f), glm::rotate(glm::mat4(1.0f), 0.7f, glm::normalize(glm::vec3(1, 2, 3)))}) {
+      const glm::mat4 turn = glm::rotate(glm::mat4(1.0f), 0.7f, glm::normalize(glm::vec3(1, 2, 3)));
+      for (const glm::mat4& m : {glm::mat4(1.0f), turn, glm::translate(glm::mat4(1.0f), glm::vec3(3.0f, -2.0f, 0.5f)) * turn}) {
         const Aabb full = tracker.update(m, bounds::AabbUpdate::Recompute);
         tracker.update(m, bounds::AabbUpdate::HillClimb);
         tracker.update(m, bounds::AabbUpdate::HullRecompute);
