@@ -205,7 +205,8 @@ constexpr std::size_t kByteOf[3] = {kLittle ? 0u : 3u, kLittle ? 1u : 2u, kLittl
 // list[j+1..k-1] right; its cost is half_area(left) * |left| + half_area(right) * |right|.
 class Sweep {
  public:
-  explicit Sweep(std::uint32_t bins) : left_(round4(bins)), right_(round4(bins)), nl_(round4(bins)), nr_(round4(bins)), cost_(round4(bins)) {}
+  explicit Sweep(std::uint32_t bins)
+      : left_(round4(bins)), right_(round4(bins)), nl_(round4(bins)), nr_(CULLPIPE_BINNED_AVX2 ? 0 : round4(bins)), cost_(round4(bins)) {}
 
   // The first candidate with the axis's least cost, when that cost is below best_cost (which
   // it then becomes); else kNone. Costs that are NaN never win; neither does +infinity.
@@ -282,8 +283,8 @@ class Sweep {
 
  private:
   static std::size_t round4(std::uint32_t n) { return (std::size_t(n) + 3) / 4 * 4; }
-  // AVX2: each candidate's children's boxes, left object count (nl_) and cost. Baseline: nr_
-  // the right side's counts and cost_ its areas.
+  // AVX2: each candidate's children's boxes, left object count (nl_) and cost (nr_ unused,
+  // empty). Baseline: nr_ the right side's counts and cost_ its areas.
   std::vector<Box8> left_, right_;
   std::vector<std::uint32_t> nl_;
   std::vector<double> nr_;
