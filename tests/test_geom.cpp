@@ -181,13 +181,47 @@ TEST(Rounding, FloatStepsAreNextafterBitForBit) {
     }
   }
 #endif
-  for (int i = 0; i < 100000; ++i) {
-    const double v = (double(rng.next() >> 11) * 0x1p-53 - 0.5) * std::ldexp(1.0, int(rng.next() % 300) - 150);  // 53 random bits
+  // Doubles of 53 random bits from 2^-151 to 2^150 (the float subnormals and both ends of
+  // the float range), the float boundaries and their neighbours, double subnormals, zeros and
+  // infinities.
+  std::vector<double> doubles;
+  for (int i = 0; i < 100000; ++i)
+    doubles.push_back((double(rng.next() >> 11) * 0x1p-53 - 0.5) * std::ldexp(1.0, int(rng.next() % 300) - 150));
+  for (double b : {0x1p-126, 0x1p-149, 0x1p-150, 0x1.8p-150, 0x1p-1000, 0x1p-1074, 0x1p-1022, 0.0, 3e-40, 1e-45,
+                   double(std::numeric_limits<float>::max()), 0x1.fffffffp127, 0x1p128, 1e300, std::numeric_limits<double>::infinity()})
+    for (double v : {b, std::nextafter(b, 0.0), std::nextafter(b, 1.0)}) doubles.push_back(v), doubles.push_back(-v);
+  std::vector<float> lows, highs;
+  for (double v : doubles) {
     const float lo = round_down(v), hi = round_up(v);
     EXPECT_LE(double(lo), v);
     EXPECT_GE(double(hi), v);
     EXPECT_TRUE(lo == hi ? double(lo) == v : float_above(lo) == hi) << v;
+    lows.push_back(lo), highs.push_back(hi);
   }
+#if defined(__SSE__)
+  // The same floats, bit for bit, in every rounding direction, with and without FTZ + DAZ
+  // (under FTZ a conversion to float flushes a subnormal result to zero: round_up of 3e-40
+  // was 2^-149 there, below it).
+  for (unsigned mode : {0x0000u, 0x8040u, 0x2000u, 0x4000u, 0x6000u, 0x2000u | 0x8040u, 0x4000u | 0x8040u, 0x6000u | 0x8040u}) {
+    std::vector<float> mode_lows(doubles.size()), mode_highs(doubles.size());
+    {
+      struct Mode {
+        unsigned saved = _mm_getcsr();
+        explicit Mode(unsigned bits) { _mm_setcsr((saved & ~0xE040u) | bits); }
+        ~Mode() { _mm_setcsr(saved); }
+      } set(mode);
+      for (std::size_t i = 0; i < doubles.size(); ++i) mode_lows[i] = round_down(doubles[i]), mode_highs[i] = round_up(doubles[i]);
+    }
+    int wrong = 0;
+    for (std::size_t i = 0; i < doubles.size() && wrong < 5; ++i)
+      if (std::bit_cast<std::uint32_t>(mode_lows[i]) != std::bit_cast<std::uint32_t>(lows[i]) ||
+          std::bit_cast<std::uint32_t>(mode_highs[i]) != std::bit_cast<std::uint32_t>(highs[i])) {
+        ++wrong;
+        ADD_FAILURE() << "MXCSR bits " << std::hex << mode << ": " << std::hexfloat << doubles[i] << " rounds to [" << mode_lows[i]
+                      << ", " << mode_highs[i] << "], not [" << lows[i] << ", " << highs[i] << "]";
+      }
+  }
+#endif
 }
 
 // is_valid is invalid_reason(v).empty(), on volumes broken one value at a time.

@@ -24,15 +24,38 @@ inline float float_above(float f) {
   return std::bit_cast<float>(u >> 31 ? u - 1 : u + 1);
 }
 
-/// The largest float <= v (v finite or infinite, never NaN).
+namespace detail {
+/// round_down / round_up for |v| below the smallest normal float (2^-126), on the bits: a
+/// conversion to float would flush such a result to zero under FTZ, and a comparison would
+/// read a subnormal as zero under DAZ. v * 2^149 is exact (a power of two, and for |v| >=
+/// 2^-1000 a normal double), so its floor or ceiling is the float's integer significand: at
+/// most 2^23, which is the smallest normal float's bit pattern, as it should be.
+inline float tiny_to_float(double v, bool up) {
+  const std::uint64_t bits = std::bit_cast<std::uint64_t>(v), magnitude = bits & 0x7fffffffffffffffu;
+  const bool negative = bits >> 63;
+  const std::uint32_t sign = negative ? 0x80000000u : 0u;
+  if (magnitude == 0) return std::bit_cast<float>(sign);  // +-0 as it is
+  if (magnitude < std::bit_cast<std::uint64_t>(0x1p-1000))  // (a double subnormal too: DAZ reads it as 0)
+    return std::bit_cast<float>(up != negative ? sign | 1u : sign);  // the smallest subnormal away from zero, or zero
+  const double scaled = std::fabs(v) * 0x1p149;
+  // Away from zero for round_up of a positive v and round_down of a negative one.
+  const double significand = up != negative ? std::ceil(scaled) : std::floor(scaled);
+  return std::bit_cast<float>(sign | static_cast<std::uint32_t>(significand));
+}
+}  // namespace detail
+
+/// The largest float <= v (v finite or infinite, never NaN), whatever the floating-point mode
+/// (rounding direction, FTZ, DAZ).
 inline float round_down(double v) {
+  if ((std::bit_cast<std::uint64_t>(v) & 0x7fffffffffffffffu) < std::bit_cast<std::uint64_t>(0x1p-126)) return detail::tiny_to_float(v, false);
   float f = static_cast<float>(v);
   if (static_cast<double>(f) > v) f = float_below(f);
   return f;
 }
 
-/// The smallest float >= v.
+/// The smallest float >= v, whatever the floating-point mode.
 inline float round_up(double v) {
+  if ((std::bit_cast<std::uint64_t>(v) & 0x7fffffffffffffffu) < std::bit_cast<std::uint64_t>(0x1p-126)) return detail::tiny_to_float(v, true);
   float f = static_cast<float>(v);
   if (static_cast<double>(f) < v) f = float_above(f);
   return f;
