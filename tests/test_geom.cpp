@@ -168,8 +168,14 @@ TEST(Rounding, FloatStepsAreNextafterBitForBit) {
     {
       struct Mode {
         unsigned saved = _mm_getcsr();
-        Mode() { _mm_setcsr(saved | 0x8040u); }
-        ~Mode() { _mm_setcsr(saved); }
+        Mode() {
+          _mm_setcsr(saved | 0x8040u);
+          asm volatile("" ::: "memory");  // (the float work stays between the mode changes)
+        }
+        ~Mode() {
+          asm volatile("" ::: "memory");
+          _mm_setcsr(saved);
+        }
       } mode;
       for (std::size_t i = 0; i < values.size(); ++i) below[i] = float_below(values[i]), above[i] = float_above(values[i]);
     }
@@ -181,9 +187,9 @@ TEST(Rounding, FloatStepsAreNextafterBitForBit) {
     }
   }
 #endif
-  // Doubles of 53 random bits from 2^-151 to 2^150 (the float subnormals and both ends of
-  // the float range), the float boundaries and their neighbours, double subnormals, zeros and
-  // infinities.
+  // Doubles of 53 random bits with exponents from -151 to 148 (the float subnormals, and
+  // smaller where the leading bits are zeros), the float boundaries and their neighbours,
+  // double subnormals, zeros and infinities.
   std::vector<double> doubles;
   for (int i = 0; i < 100000; ++i)
     doubles.push_back((double(rng.next() >> 11) * 0x1p-53 - 0.5) * std::ldexp(1.0, int(rng.next() % 300) - 150));
@@ -199,28 +205,38 @@ TEST(Rounding, FloatStepsAreNextafterBitForBit) {
     lows.push_back(lo), highs.push_back(hi);
   }
 #if defined(__SSE__)
-  // The same floats, bit for bit, in every rounding direction, with and without FTZ + DAZ
-  // (under FTZ a conversion to float flushes a subnormal result to zero: round_up of 3e-40
-  // was 2^-149 there, below it).
-  for (unsigned mode : {0x0000u, 0x8040u, 0x2000u, 0x4000u, 0x6000u, 0x2000u | 0x8040u, 0x4000u | 0x8040u, 0x6000u | 0x8040u}) {
-    std::vector<float> mode_lows(doubles.size()), mode_highs(doubles.size());
-    {
-      struct Mode {
-        unsigned saved = _mm_getcsr();
-        explicit Mode(unsigned bits) { _mm_setcsr((saved & ~0xE040u) | bits); }
-        ~Mode() { _mm_setcsr(saved); }
-      } set(mode);
-      for (std::size_t i = 0; i < doubles.size(); ++i) mode_lows[i] = round_down(doubles[i]), mode_highs[i] = round_up(doubles[i]);
-    }
-    int wrong = 0;
-    for (std::size_t i = 0; i < doubles.size() && wrong < 5; ++i)
-      if (std::bit_cast<std::uint32_t>(mode_lows[i]) != std::bit_cast<std::uint32_t>(lows[i]) ||
-          std::bit_cast<std::uint32_t>(mode_highs[i]) != std::bit_cast<std::uint32_t>(highs[i])) {
-        ++wrong;
-        ADD_FAILURE() << "MXCSR bits " << std::hex << mode << ": " << std::hexfloat << doubles[i] << " rounds to [" << mode_lows[i]
-                      << ", " << mode_highs[i] << "], not [" << lows[i] << ", " << highs[i] << "]";
+  // The same floats, bit for bit, in every rounding direction with FTZ, DAZ, both or neither
+  // (under FTZ a conversion to float flushed a subnormal result to zero, so round_up of 3e-40
+  // was 2^-149; under DAZ a comparison read a subnormal as zero, so round_down could come out
+  // above v). The barriers keep the compiler from moving the float work across the mode
+  // changes (it does not know the mode is state).
+  for (unsigned rounding : {0x0000u, 0x2000u, 0x4000u, 0x6000u})
+    for (unsigned flush : {0x0000u, 0x8000u, 0x0040u, 0x8040u}) {
+      const unsigned mode = rounding | flush;
+      std::vector<float> mode_lows(doubles.size()), mode_highs(doubles.size());
+      {
+        struct Mode {
+          unsigned saved = _mm_getcsr();
+          explicit Mode(unsigned bits) {
+            _mm_setcsr((saved & ~0xE040u) | bits);
+            asm volatile("" ::: "memory");
+          }
+          ~Mode() {
+            asm volatile("" ::: "memory");
+            _mm_setcsr(saved);
+          }
+        } set(mode);
+        for (std::size_t i = 0; i < doubles.size(); ++i) mode_lows[i] = round_down(doubles[i]), mode_highs[i] = round_up(doubles[i]);
       }
-  }
+      int wrong = 0;
+      for (std::size_t i = 0; i < doubles.size() && wrong < 5; ++i)
+        if (std::bit_cast<std::uint32_t>(mode_lows[i]) != std::bit_cast<std::uint32_t>(lows[i]) ||
+            std::bit_cast<std::uint32_t>(mode_highs[i]) != std::bit_cast<std::uint32_t>(highs[i])) {
+          ++wrong;
+          ADD_FAILURE() << "MXCSR bits " << std::hex << mode << ": " << std::hexfloat << doubles[i] << " rounds to ["
+                        << mode_lows[i] << ", " << mode_highs[i] << "], not [" << lows[i] << ", " << highs[i] << "]";
+        }
+    }
 #endif
 }
 

@@ -25,11 +25,16 @@ inline float float_above(float f) {
 }
 
 namespace detail {
-/// round_down / round_up for |v| below the smallest normal float (2^-126), on the bits: a
-/// conversion to float would flush such a result to zero under FTZ, and a comparison would
-/// read a subnormal as zero under DAZ. v * 2^149 is exact (a power of two, and for |v| >=
-/// 2^-1000 a normal double), so its floor or ceiling is the float's integer significand: at
-/// most 2^23, which is the smallest normal float's bit pattern, as it should be.
+/// |v| < 2^-126 (the smallest normal float), decided on the bits.
+inline bool below_normal_float(double v) {
+  return (std::bit_cast<std::uint64_t>(v) & 0x7fffffffffffffffu) < std::bit_cast<std::uint64_t>(0x1p-126);
+}
+
+/// round_down / round_up for |v| below the smallest normal float, on the bits: a conversion
+/// to float would flush such a result to zero under FTZ, and under DAZ a comparison reads a
+/// subnormal as zero. v * 2^149 is exact (a power of two, and for |v| >= 2^-1000 a normal
+/// double), so its floor or ceiling is the float's integer significand: at most 2^23, which is
+/// the smallest normal float's bit pattern, as it should be.
 inline float tiny_to_float(double v, bool up) {
   const std::uint64_t bits = std::bit_cast<std::uint64_t>(v), magnitude = bits & 0x7fffffffffffffffu;
   const bool negative = bits >> 63;
@@ -45,9 +50,10 @@ inline float tiny_to_float(double v, bool up) {
 }  // namespace detail
 
 /// The largest float <= v (v finite or infinite, never NaN), whatever the floating-point mode
-/// (rounding direction, FTZ, DAZ).
+/// (rounding direction, FTZ, DAZ) it runs in. (A caller's own arithmetic before it is another
+/// matter: under DAZ a subnormal float input converts to a double 0.)
 inline float round_down(double v) {
-  if ((std::bit_cast<std::uint64_t>(v) & 0x7fffffffffffffffu) < std::bit_cast<std::uint64_t>(0x1p-126)) return detail::tiny_to_float(v, false);
+  if (detail::below_normal_float(v)) return detail::tiny_to_float(v, false);
   float f = static_cast<float>(v);
   if (static_cast<double>(f) > v) f = float_below(f);
   return f;
@@ -55,7 +61,7 @@ inline float round_down(double v) {
 
 /// The smallest float >= v, whatever the floating-point mode.
 inline float round_up(double v) {
-  if ((std::bit_cast<std::uint64_t>(v) & 0x7fffffffffffffffu) < std::bit_cast<std::uint64_t>(0x1p-126)) return detail::tiny_to_float(v, true);
+  if (detail::below_normal_float(v)) return detail::tiny_to_float(v, true);
   float f = static_cast<float>(v);
   if (static_cast<double>(f) < v) f = float_above(f);
   return f;
