@@ -650,19 +650,27 @@ TEST(CpuBvhCuller, EmptyNodesDescendOnlyWithoutRanges) {
 }
 
 // The visible-list kernel of every instruction set against a scalar listing: zero, full and
-// partial words, a partial last word, and room for the vector stores or only for the ids.
+// partial words, a partial last word, and room for the vector stores or only for the ids; and
+// runs of zero words of every length around the vector of words the kernel skips at once
+// (8 with AVX-512, 4 with AVX2, 2 portable), ending anywhere, the last word too.
 TEST(CpuBvhCuller, ListKernelListsTheMarkedIds) {
   test::Rng rng{43};
   for (Isa isa : runnable_isas()) {
     const fast::detail::KernelTable table = fast::detail::kernels(isa);
-    for (std::size_t objects : {1u, 63u, 64u, 65u, 200u, 448u}) {
+    for (std::size_t objects : {1u, 63u, 64u, 65u, 200u, 448u, 1100u, 4160u}) {
       const std::size_t words = (objects + 63) / 64;
       std::vector<std::uint32_t> from(objects);
       for (std::size_t k = 0; k < objects; ++k) from[k] = static_cast<std::uint32_t>(1000 + 7 * k);
-      for (int pattern = 0; pattern < 6; ++pattern) {
+      for (int pattern = 0; pattern < 24; ++pattern) {
         std::vector<std::uint64_t> marks(words);
         for (std::size_t w = 0; w < words; ++w) {
-          const int kind = (pattern + static_cast<int>(w)) % 4;  // zero, full, sparse, dense words in turn
+          // Patterns 0-5: zero, full, sparse, dense words in turn. 6 and up: zero words but
+          // every (pattern - 5)th, which is sparse, full or dense in turn (23: all zero).
+          int kind = (pattern + static_cast<int>(w)) % 4;
+          if (pattern >= 6) {
+            const std::size_t gap = static_cast<std::size_t>(pattern - 5);
+            kind = pattern == 23 || (w + 1) % gap != 0 ? 0 : 1 + static_cast<int>((w + 1) / gap % 3);
+          }
           std::uint64_t bits = 0;
           for (unsigned b = 0; b < 64; ++b)
             if (kind == 1 || (kind == 2 && rng.uniform(0.0f, 1.0f) < 0.1f) || (kind == 3 && rng.uniform(0.0f, 1.0f) < 0.7f)) bits |= 1ull << b;

@@ -60,6 +60,17 @@ inline std::uint32_t lane_bits(vi mask) {
 
 constexpr std::uint32_t kAllLanes = (1u << W) - 1u;
 
+/// True when every bit of `v` is 0.
+inline bool all_zero(vi v) {
+#if CULLPIPE_SIMD_LANES == 16 && defined(__AVX512F__)
+  return _mm512_test_epi32_mask(reinterpret_cast<__m512i>(v), reinterpret_cast<__m512i>(v)) == 0;
+#elif CULLPIPE_SIMD_LANES == 8 && defined(__AVX2__)
+  return _mm256_testz_si256(reinterpret_cast<__m256i>(v), reinterpret_cast<__m256i>(v)) != 0;
+#else
+  return lane_bits(v != 0) == 0;
+#endif
+}
+
 /// lane_bits(a < b) and lane_bits(a >= b) (both false where either is NaN), straight into a
 /// mask where the instruction set has mask registers.
 inline std::uint32_t less_bits(vf a, vf b) {
@@ -454,9 +465,19 @@ std::uint32_t* expand_ids(const std::uint32_t* bits, std::size_t vectors, std::u
 /// `out`, and returns the new end; never writes at or past out_end.
 std::uint32_t* list_marked(const std::uint64_t* marks, std::size_t words, const std::uint32_t* from, std::uint32_t* out,
                            const std::uint32_t* out_end) {
+  constexpr std::size_t kVectorWords = W / 2;  // the words one vector load reads
   for (std::size_t w = 0; w < words; ++w, from += 64) {
     const std::uint64_t word = marks[w];
-    if (word == 0) continue;
+    if (word == 0) {
+      // Most words are 0 (the objects out of view): the zero words after one are skipped a
+      // vector of words at a time (10^6 boxes at 10% visible, 2 threads: the pass 44.6 -> 40.0
+      // microseconds; NOTES).
+      while (w + 1 + kVectorWords <= words && all_zero(load_ints(reinterpret_cast<const std::uint32_t*>(marks + w + 1)))) {
+        w += kVectorWords;
+        from += 64 * kVectorWords;
+      }
+      continue;
+    }
     if (word == ~std::uint64_t{0}) {
       __builtin_memcpy(out, from, 64 * sizeof *out);
       out += 64;
