@@ -651,8 +651,8 @@ TEST(CpuBvhCuller, EmptyNodesDescendOnlyWithoutRanges) {
 
 // The visible-list kernel of every instruction set against a scalar listing: zero, full and
 // partial words, a partial last word, and room for the vector stores or only for the ids; and
-// runs of zero words of every length around the vector of words the kernel skips at once
-// (8 with AVX-512, 4 with AVX2, 2 portable), ending anywhere, the last word too.
+// runs of zero words of every length up to three times the vector of words the kernel skips at
+// once (8 with AVX-512, 4 with AVX2, 2 portable), ending anywhere, the last word too.
 TEST(CpuBvhCuller, ListKernelListsTheMarkedIds) {
   test::Rng rng{43};
   for (Isa isa : runnable_isas()) {
@@ -661,15 +661,16 @@ TEST(CpuBvhCuller, ListKernelListsTheMarkedIds) {
       const std::size_t words = (objects + 63) / 64;
       std::vector<std::uint32_t> from(objects);
       for (std::size_t k = 0; k < objects; ++k) from[k] = static_cast<std::uint32_t>(1000 + 7 * k);
-      for (int pattern = 0; pattern < 24; ++pattern) {
+      for (int pattern = 0; pattern < 32; ++pattern) {
         std::vector<std::uint64_t> marks(words);
         for (std::size_t w = 0; w < words; ++w) {
-          // Patterns 0-5: zero, full, sparse, dense words in turn. 6 and up: zero words but
-          // every (pattern - 5)th, which is sparse, full or dense in turn (23: all zero).
+          // Patterns 0-5: zero, full, sparse, dense words in turn. 6-30: zero words but every
+          // (pattern - 5)th, which is sparse, dense or full in turn (runs of 1-24 zero words:
+          // up to three vectors' worth with AVX-512). 31: all zero.
           int kind = (pattern + static_cast<int>(w)) % 4;
           if (pattern >= 6) {
             const std::size_t gap = static_cast<std::size_t>(pattern - 5);
-            kind = pattern == 23 || (w + 1) % gap != 0 ? 0 : 1 + static_cast<int>((w + 1) / gap % 3);
+            kind = pattern == 31 || (w + 1) % gap != 0 ? 0 : 1 + static_cast<int>((w + 1) / gap % 3);
           }
           std::uint64_t bits = 0;
           for (unsigned b = 0; b < 64; ++b)

@@ -470,8 +470,8 @@ std::uint32_t* list_marked(const std::uint64_t* marks, std::size_t words, const 
     const std::uint64_t word = marks[w];
     if (word == 0) {
       // Most words are 0 (the objects out of view): the zero words after one are skipped a
-      // vector of words at a time (10^6 boxes at 10% visible, 2 threads: the pass 44.6 -> 40.0
-      // microseconds; NOTES).
+      // vector of words at a time (10^6 boxes at 10% visible, 2 threads: the pass 3% faster,
+      // 42.4 -> 41.0 microseconds; NOTES).
       while (w + 1 + kVectorWords <= words && all_zero(load_ints(reinterpret_cast<const std::uint32_t*>(marks + w + 1)))) {
         w += kVectorWords;
         from += 64 * kVectorWords;
