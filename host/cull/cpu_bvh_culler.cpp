@@ -65,7 +65,7 @@ template <class Volume>
 void CpuBvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> volumes) {
   // The whole of bvh::check_flat_tree, in two parts: the tree's own checks here, and each
   // volume's (valid, inside its leaf's box: bvh::volume_in_leaf) as the threads gather the
-  // volumes into columns below, so they are gathered once, on every core. A failure in either
+  // volumes into blocks below, so they are gathered once, on every core. A failure in either
   // is reported as check_flat_tree reports it.
   auto refuse = [&] {
     const std::string why = bvh::check_flat_tree(tree, volumes);
@@ -75,20 +75,21 @@ void CpuBvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume
   // Each id exactly once (checked): the threads write classes by id without racing.
   // Everything that can fail is checked, and the arrays' room reserved, before anything
   // changes, so a failure leaves the old upload: the volumes are gathered into a second set of
-  // columns, which replaces the first only when every volume has passed (the two sets take
-  // turns, so the memory is twice the columns'). The arrays are rewritten in place: an
+  // blocks, which replaces the first only when every volume has passed (the two sets take
+  // turns, so the memory is twice the blocks'). The arrays are rewritten in place: an
   // engine that refits and uploads every frame reuses their memory instead of faulting in
   // ~90 bytes per object of fresh pages per upload (10^6 boxes: 109 -> 61 ns/object). The
-  // node pairs and the volumes' columns start on a cache line (CacheLineVector): with
-  // malloc's 16-byte alignment, node records (and the volume records before the columns)
-  // could straddle two lines, and the passes ran 0.29 -> 0.32 ns/object depending on where
+  // node pairs and the volumes' blocks start on a cache line (CacheLineVector): with
+  // malloc's 16-byte alignment, node records (and the volume records before the columns, now
+  // blocks) could straddle two lines, and the passes ran 0.29 -> 0.32 ns/object depending on where
   // an allocation happened to land.
   const std::size_t nodes = tree.nodes.size(), n = tree.objects.size();
   if (nodes >= detail::kWalkLeaf)  // (a pair index at or past the leaf bit would read as a leaf)
     throw std::length_error("CpuBvhCuller::upload: " + std::to_string(nodes) + " nodes (at most 2^31 - 1)");
   constexpr std::size_t columns = std::tuple_size_v<decltype(walk_columns(std::declval<const Volume&>()))>;
-  // Each column padded to whole cache lines, with room for a vector load from its last object.
-  const std::size_t stride = (n + detail::kWalkColumnPadding + 15) / 16 * 16;
+  constexpr std::size_t block = detail::kWalkBlock, block_floats = block * columns;
+  // Whole blocks, and one more of zeros (detail::WalkTree::blocks).
+  const std::size_t block_count = (n + block - 1) / block + 1;
   // Slots: the root alone in pair 0, then a pair per inner node for its two children, in
   // depth-first order (a subtree's pairs are adjacent). A binary tree of `nodes` nodes has
   // (nodes - 1) / 2 inner nodes: nodes + 1 slots.
@@ -97,24 +98,28 @@ void CpuBvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume
   tree_.objects.reserve(n);
   walk_nodes_.reserve(slots * detail::kWalkNodeFloats);
   slot_of_.reserve(nodes);
-  spare_columns_.reserve(columns * stride);
+  spare_blocks_.reserve(block_count * block_floats);
 
-  // The volumes, gathered in tree order into the spare columns by runs of leaves (a run of
+  // The volumes, gathered in tree order into the spare blocks by runs of leaves (a run of
   // nodes holds a contiguous run of the object order), each checked on the way.
-  spare_columns_.resize(columns * stride);  // (within the reserved capacity)
-  float* const column = spare_columns_.data();
+  spare_blocks_.resize(block_count * block_floats);  // (within the reserved capacity)
+  float* const blocks = spare_blocks_.data();
   const std::size_t parts = n < kTaskObjects ? 1 : std::min<std::size_t>(nodes, std::size_t(pool_->size()) * 8);
   std::atomic<bool> all_in_leaves{true};
   pool_->parallel_for(parts, [&](std::size_t part) {
-    auto to_columns = [&](std::size_t slot, const Volume& v) {
+    auto to_blocks = [&](std::size_t slot, const Volume& v) {
       const auto record = walk_columns(v);
-      for (std::size_t c = 0; c < columns; ++c) column[c * stride + slot] = record[c];
+      float* const out = blocks + slot / block * block_floats + slot % block;
+      for (std::size_t c = 0; c < columns; ++c) out[c * block] = record[c];
     };
-    if (!bvh::visit_leaf_volumes(tree, volumes, nodes * part / parts, nodes * (part + 1) / parts, to_columns))
+    if (!bvh::visit_leaf_volumes(tree, volumes, nodes * part / parts, nodes * (part + 1) / parts, to_blocks))
       all_in_leaves.store(false, std::memory_order_relaxed);
   });
   if (!all_in_leaves.load()) refuse();
-  for (std::size_t c = 0; c < columns; ++c) std::fill(column + c * stride + n, column + (c + 1) * stride, 0.0f);
+  // Zeros past the last object: in its block's columns, and the block after.
+  for (std::size_t c = 0; c < columns; ++c)
+    std::fill(blocks + n / block * block_floats + c * block + n % block, blocks + n / block * block_floats + (c + 1) * block, 0.0f);
+  std::fill(blocks + (block_count - 1) * block_floats, blocks + block_count * block_floats, 0.0f);
 
   // Nothing below throws: every resize is within the reserved capacity.
   tree_.nodes.assign(tree.nodes.begin(), tree.nodes.end());
@@ -137,8 +142,7 @@ void CpuBvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume
                                               node.box.max.x, node.box.max.y, node.box.max.z, float_bits(link)};
     std::copy(std::begin(r), std::end(r), out);
   }
-  walk_columns_.swap(spare_columns_);
-  walk_stride_ = stride;
+  walk_blocks_.swap(spare_blocks_);
   kind_ = kind_of<Volume>();
 }
 
@@ -260,8 +264,8 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
   if (ids && marks_.size() < mark_words) marks_.resize(mark_words);
   planes_.clear();
   for (const Frustum& f : views) planes_.push_back(detail::plane_set(f));
-  const detail::WalkTree walk_tree{walk_nodes_.data(),    walk_columns_.data(),  walk_stride_,          objects.data(),
-                                   options.range_objects, bvh::kBvhMarginScale, bvh::kBvhMarginFloor, bvh::kBvhMarginLimit};
+  const detail::WalkTree walk_tree{walk_nodes_.data(),   walk_blocks_.data(),   objects.data(),        options.range_objects,
+                                   bvh::kBvhMarginScale, bvh::kBvhMarginFloor, bvh::kBvhMarginLimit};
   const detail::WalkKernel walk = kind_ == BvKind::Obb      ? kernels_->walk_obb
                                   : kind_ == BvKind::Sphere ? kernels_->walk_sphere
                                                             : kernels_->walk_aabb;

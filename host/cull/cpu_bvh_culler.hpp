@@ -53,9 +53,9 @@ struct CpuBvhViewResult {
 /// each subtree is then tested by one thread with the SIMD walk kernels of the culler's
 /// instruction set (detail::WalkKernel): W nodes at a time, one per lane, tested plane by
 /// plane, each lane doing the scalar test's float operations in its order on the planes of its
-/// own mask; then the object ranges it found, in blocks of up to 64 objects tested plane by
-/// plane, W at a time, read straight from columns of the volumes in tree order (a range is
-/// contiguous there). The tests are the scalar traversal's, in another order; the visible
+/// own mask; then the object ranges it found, up to 64 objects at a time tested plane by
+/// plane, W at a time, read straight from the volumes in tree order, in blocks of 16 objects
+/// with a vector per column (a range is one run of cache lines there). The tests are the scalar traversal's, in another order; the visible
 /// objects are marked in a bitmap and listed in tree order. INSIDE ranges are split into chunks
 /// so one large accepted subtree still uses every core. Objects are written by id, and a
 /// subtree's objects are its own, so no two threads write the same class.
@@ -81,12 +81,12 @@ class CpuBvhCuller {
   CpuBvhCuller(const CpuBvhCuller&) = delete;
   CpuBvhCuller& operator=(const CpuBvhCuller&) = delete;
 
-  /// Copies the tree and the volumes (as columns in tree order, so a node's volumes are
-  /// adjacent in each). Throws std::invalid_argument unless the tree's object list is a permutation of
+  /// Copies the tree and the volumes (in tree order, in blocks of 16 with a vector per
+  /// column, so a node's volumes are one run of memory). Throws std::invalid_argument unless the tree's object list is a permutation of
   /// the ids of the volumes and every leaf's box encloses its volumes (their enclosing boxes):
   /// bvh::check_flat_tree, with its message; a refused upload leaves the last one. The threads
-  /// gather and check the volumes together, into a second set of columns that replaces the
-  /// first when all have passed (the two take turns, so the columns take twice their size:
+  /// gather and check the volumes together, into a second set of blocks that replaces the
+  /// first when all have passed (the two take turns, so the blocks take twice their size:
   /// 2 x 24 bytes per box, 2 x 60 per OBB, 2 x 16 per sphere).
   void upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes);
   void upload(const bvh::FlatTree& tree, std::span<const Obb> obbs);
@@ -134,13 +134,12 @@ class CpuBvhCuller {
   bvh::FlatTree tree_;
   BvKind kind_ = BvKind::Aabb;
   // The tree as the walk kernels read it (detail::WalkTree): nodes in sibling pairs (64-byte
-  // records on cache lines), each flat node's slot there, and the volumes in tree order as
-  // columns of kind_ (a node's range is contiguous in each), walk_stride_ floats apart.
+  // records on cache lines), each flat node's slot there, and the volumes in tree order in
+  // blocks of detail::kWalkBlock (a node's range is one run of lines).
   detail::CacheLineVector<float> walk_nodes_;
   std::vector<std::uint32_t> slot_of_;
-  detail::CacheLineVector<float> walk_columns_;
-  detail::CacheLineVector<float> spare_columns_;  // the next upload's columns (then the last one's)
-  std::size_t walk_stride_ = 0;
+  detail::CacheLineVector<float> walk_blocks_;
+  detail::CacheLineVector<float> spare_blocks_;  // the next upload's blocks (then the last one's)
   // Per-pass working storage, kept so passes reuse it.
   std::vector<Task> tasks_;
   std::vector<Task> frontier_;  // the top of the tree, breadth first

@@ -624,8 +624,8 @@ std::uint32_t touch(const float* data, std::size_t begin, std::size_t end) {
 // per step, their records transposed into vectors (one node per lane) and tested against the
 // planes one by one. The object ranges of straddling leaves (and, with range_objects, of
 // straddling nodes of at most that many objects) go to a second list, tested at the end in
-// blocks of up to 64 objects, W at a time, loaded straight from the volumes' columns in tree
-// order against the planes their node straddles. Every lane does the scalar test's float operations in its
+// groups of up to 64 objects, W at a time, loaded straight from the volumes' blocks in tree
+// order (WalkTree::blocks) against the planes their node straddles. Every lane does the scalar test's float operations in its
 // order (bvh::classify_masked for boxes, classify_masked_margin for the nodes of OBB and
 // sphere trees, classify_planes for OBBs and spheres) and the planes outside its mask count
 // for nothing. The scalar tests stop at the first plane that rejects, which does not change
@@ -754,6 +754,7 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
   static_assert(W % 2 == 0, "a step takes whole sibling pairs");
   const WalkTree* margin = Kind == WalkKind::Aabb ? nullptr : &t;
   const BoxPlanes columns(planes);
+  constexpr std::size_t block_floats = kWalkBlock * object_columns;  // a block of the volumes (WalkTree::blocks)
   WalkCounts counts;
   const std::uint32_t range_first = root.first;
   // Visible objects, one bit per position in the subtree's range.
@@ -781,8 +782,8 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
   std::uint32_t* const work_mask = work_pair + span;
   std::uint32_t* const work_first = work_mask + span;
   // The object ranges to test (first, count, planes): straddling leaves, and straddling nodes
-  // of at most t.range_objects objects. Listed as they are found (their columns prefetched)
-  // and tested at the end, in blocks of up to 64 objects, straight from the columns.
+  // of at most t.range_objects objects. Listed as they are found (their first lines
+  // prefetched) and tested at the end, up to 64 objects at a time, straight from the blocks.
   std::uint32_t* const range_at = work_first + span;
   std::uint32_t* const range_count = range_at + span;
   std::uint32_t* const range_mask = range_count + span;
@@ -855,48 +856,53 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
         counts.inside += n;
         continue;
       }
-      // A straddling leaf or small node: its objects, against the planes it straddles. The
-      // first line of each column prefetched (the hardware prefetcher takes the next): every
-      // line of the range (about 3 per column) took 10-13% longer back to back on a Zen 3 and
-      // measured the same with the caches full of other work.
-      for (unsigned c = 0; c < object_columns; ++c) __builtin_prefetch(t.columns + c * t.stride + first);
+      // A straddling leaf or small node: its objects, against the planes it straddles. Its
+      // blocks are one run of lines: the first line of its first block and of the next
+      // prefetched, the hardware prefetcher takes the rest (one line per column, or every
+      // line, measured slower; none about the same; NOTES).
+      const float* const range_block = t.blocks + std::size_t(first / kWalkBlock) * block_floats + first % kWalkBlock;
+      __builtin_prefetch(range_block);
+      __builtin_prefetch(range_block + block_floats);
       range_at[ranges] = first;
       range_count[ranges] = n;
       range_mask[ranges++] = planes_left;
     }
   }
 
-  // Boxes: each plane's p- and n-vertex columns (BoxPlanes), so a range's vectors are loaded
-  // straight from the columns the plane needs.
-  const float* vertex_column[6][6] = {};  // [plane][p x y z, n x y z]
+  // Boxes: each plane's p- and n-vertex columns (BoxPlanes) as offsets in a block, so a
+  // range's vectors are loaded straight from the columns the plane needs.
+  unsigned vertex_offset[6][6] = {};  // [plane][p x y z, n x y z]
   if constexpr (Kind == WalkKind::Aabb)
     for (std::uint32_t k = 0; k < planes.count; ++k)
       for (unsigned a = 0; a < 3; ++a) {
-        const std::uint32_t p = columns.p[k][a] & 4 ? 3 + a : a;  // max or min column
-        vertex_column[k][a] = t.columns + p * t.stride;
-        vertex_column[k][3 + a] = t.columns + (p >= 3 ? p - 3 : p + 3) * t.stride;
+        const unsigned p = columns.p[k][a] & 4 ? 3 + a : a;  // max or min column
+        vertex_offset[k][a] = static_cast<unsigned>(p * kWalkBlock);
+        vertex_offset[k][3 + a] = static_cast<unsigned>((p >= 3 ? p - 3 : p + 3) * kWalkBlock);
       }
   for (std::size_t r = 0; r < ranges; ++r) {
-    const std::uint32_t first = range_at[r], n = range_count[r], m = range_mask[r];
+    const std::uint32_t first = range_at[r], n = range_count[r], m = range_mask[r], end = first + n;
     counts.object_tests += n;
-    // A block of up to 64 of the range's objects at a time, tested plane by plane (a plane's
-    // coefficients and columns set up once), its outside and crossing lanes gathered a bit per
-    // object in two words, then counted, marked and classed once per block, not per vector
-    // (10^6 boxes at 10% visible, one thread: 0.192 -> 0.167 ms; NOTES).
-    for (std::uint32_t block = 0; block < n; block += 64) {
-      const std::uint32_t at = first + block, size = n - block < 64 ? n - block : 64;
+    // Up to 64 of the range's objects at a time, tested plane by plane (a plane's coefficients
+    // and columns set up once), in vectors aligned to W (so within a block) from the one
+    // holding `first`; the lanes before `first` and from `end` count for nothing. Their outside
+    // and crossing lanes are gathered a bit per object in two words, then counted, marked and
+    // classed once per 64, not per vector (10^6 boxes at 10% visible, one thread: 0.192 ->
+    // 0.167 ms; NOTES). Blocks instead of a column each: 41.4 -> 38.4 microseconds per pass,
+    // 2 threads (NOTES).
+    for (std::uint32_t at = first & ~(W - 1); at < end; at += 64) {
+      const std::uint32_t size = end - at < 64 ? end - at : 64, low = at < first ? first - at : 0;
       std::uint64_t outside_bits = 0, crossing_bits = 0;
       if constexpr (Kind == WalkKind::Aabb) {  // test_boxes's operations, plane by plane
         const vf zero = {};
         for (std::uint32_t any = m; any != 0; any &= any - 1) {
           const std::uint32_t k = static_cast<std::uint32_t>(__builtin_ctz(any));
           const float nx = planes.nx[k], ny = planes.ny[k], nz = planes.nz[k], d = planes.d[k];
-          const float* const* v = vertex_column[k];
-          const float *const px = v[0] + at, *const py = v[1] + at, *const pz = v[2] + at;
-          const float *const qx = v[3] + at, *const qy = v[4] + at, *const qz = v[5] + at;
+          const unsigned* const o = vertex_offset[k];
           for (std::uint32_t j = 0; j < size; j += W) {
-            const vf dp = ((nx * load(px + j) + ny * load(py + j)) + nz * load(pz + j)) + d;
-            const vf dn = ((nx * load(qx + j) + ny * load(qy + j)) + nz * load(qz + j)) + d;
+            const std::uint32_t pos = at + j;
+            const float* const b = t.blocks + std::size_t(pos / kWalkBlock) * block_floats + pos % kWalkBlock;
+            const vf dp = ((nx * load(b + o[0]) + ny * load(b + o[1])) + nz * load(b + o[2])) + d;
+            const vf dn = ((nx * load(b + o[3]) + ny * load(b + o[4])) + nz * load(b + o[5])) + d;
             outside_bits |= std::uint64_t(less_bits(dp, zero)) << j;
             crossing_bits |= std::uint64_t(less_bits(dn, zero)) << j;
           }
@@ -904,8 +910,10 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
       } else {
         const vi mask = vi{} + static_cast<std::int32_t>(m);
         for (std::uint32_t j = 0; j < size; j += W) {
+          const std::uint32_t pos = at + j;
+          const float* const b = t.blocks + std::size_t(pos / kWalkBlock) * block_floats + pos % kWalkBlock;
           vf col[object_columns];
-          for (unsigned c = 0; c < object_columns; ++c) col[c] = load(t.columns + c * t.stride + at + j);
+          for (unsigned c = 0; c < object_columns; ++c) col[c] = load(b + c * kWalkBlock);
           vi outside, crossing;
           if constexpr (Kind == WalkKind::Obb)
             test_obbs(col, mask, m, planes, outside, crossing);
@@ -915,16 +923,21 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
           crossing_bits |= std::uint64_t(lane_bits(crossing != 0)) << j;
         }
       }
-      const std::uint64_t visible = ~outside_bits & (size == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << size) - 1u);
+      const std::uint64_t valid = (size == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << size) - 1u) & (~std::uint64_t{0} << low);
+      const std::uint64_t visible = ~outside_bits & valid;
       counts.visible += static_cast<std::uint32_t>(__builtin_popcountll(visible));
       counts.inside += static_cast<std::uint32_t>(__builtin_popcountll(visible & ~crossing_bits));
       if (out.classes)
-        for (std::uint32_t l = 0; l < size; ++l)
+        for (std::uint32_t l = low; l < size; ++l)
           out.classes[t.ids[at + l]] = visible >> l & 1u ? (crossing_bits >> l & 1u ? kIntersecting : kInside) : kOutside;
       if (marks) {
-        const std::uint32_t p = at - range_first, shift = p % 64;
-        marks[p / 64] |= visible << shift;
-        if (shift + size > 64) marks[p / 64 + 1] |= visible >> (64 - shift);
+        if (at < range_first) {  // the subtree's range starts inside this vector (no lane below it is valid)
+          marks[0] |= visible >> (range_first - at);
+        } else {
+          const std::uint32_t p = at - range_first, shift = p % 64;
+          marks[p / 64] |= visible << shift;
+          if (shift + size > 64) marks[p / 64 + 1] |= visible >> (64 - shift);
+        }
       }
     }
   }
