@@ -144,6 +144,7 @@ class CpuBvhCuller {
   std::vector<Task> tasks_;
   std::vector<Task> frontier_;  // the top of the tree, breadth first
   std::vector<std::uint32_t> order_;  // the tasks in the order the threads take them
+  std::vector<std::uint64_t> sort_keys_;
   std::vector<Tally> tallies_;
   std::vector<std::uint64_t> marks_;  // the subtree tasks' visible objects, a bit each
   std::vector<std::vector<std::uint32_t>> work_;  // per pool thread: a walk's work lists
