@@ -18,6 +18,7 @@ namespace {
 
 constexpr std::uint32_t kRangeChunk = 16384;  // objects per accepted-range task
 constexpr std::size_t kTaskObjects = 8192;     // at most one subtree task per this many objects
+constexpr std::size_t kLargeTaskObjects = 131072;  // subtree tasks of about this many objects where there are enough
 
 }  // namespace
 
@@ -200,9 +201,16 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
   }
 
   // The top of each view's tree, breadth first, until there are subtrees enough for the
-  // threads: about 16 per thread, but at most one per kTaskObjects objects (a small tree is
-  // one task on the calling thread: a task costs more than walking a few hundred nodes).
-  const std::size_t wanted = std::clamp<std::size_t>(n / kTaskObjects, 1, std::size_t(pool_->size()) * 16);
+  // threads: one per kLargeTaskObjects objects, but at least 4 per thread (for balance; the
+  // threads take the largest first) and at most 16, and never more than one per kTaskObjects
+  // objects (a small tree is one task on the calling thread: a task costs more than walking a
+  // few hundred nodes). Fewer, larger subtrees start fewer walks, whose first steps test a node
+  // or two each; much larger ones list more object ranges than the caches keep until they are
+  // tested. Against 16 per thread, 2 threads, 10^6 boxes (passes in turn): 49.3-50.0 -> 43.0-44.0
+  // microseconds at 10%, 25.0-25.6 -> 18.9-19.8 at 1%, 87.7-87.9 -> 81.8-83.7 at 50%; 10^5
+  // 8-18% faster; 4*10^6 and 16*10^6 the same (30 and 32 subtrees either way); NOTES.
+  const std::size_t threads = pool_->size();
+  const std::size_t wanted = std::clamp<std::size_t>(std::max(n / kLargeTaskObjects, std::min(n / kTaskObjects, threads * 4)), 1, threads * 16);
   std::vector<Task>& tasks = tasks_;
   tasks.clear();
   for (std::uint32_t v = 0; v < view_count; ++v) {

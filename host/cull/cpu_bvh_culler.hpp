@@ -49,7 +49,8 @@ struct CpuBvhViewResult {
 /// classes do not depend on range_objects; the test counts do.)
 ///
 /// The top of the tree is walked breadth first on the calling thread until there are enough
-/// subtrees for the threads (about 16 per thread, fewer for small trees: one per 8192 objects);
+/// subtrees for the threads (one per 131,072 objects, but 4 to 16 per thread, fewer for small
+/// trees: at most one per 8192 objects);
 /// each subtree is then tested by one thread with the SIMD walk kernels of the culler's
 /// instruction set (detail::WalkKernel): W nodes at a time, one per lane, tested plane by
 /// plane, each lane doing the scalar test's float operations in its order on the planes of its
