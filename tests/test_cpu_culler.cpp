@@ -649,6 +649,51 @@ TEST(CpuBvhCuller, EmptyNodesDescendOnlyWithoutRanges) {
   }
 }
 
+// An empty straddling leaf at a position that is not a multiple of the vector width, walked
+// as a subtree task of its own (its marks are zero words): it lists nothing and marks nothing.
+// (A range loop over vectors aligned below its first object once wrote a mark word past its
+// own: past the bitmap here, which AddressSanitizer reports.)
+TEST(CpuBvhCuller, AnEmptyLeafTaskAtAnUnalignedPositionMarksNothing) {
+  test::Rng rng{47};
+  const std::uint32_t n = 16385;  // two subtree tasks (one per 8192 objects), 16385 % 16 = 1
+  std::vector<Aabb> boxes(n);
+  for (Aabb& b : boxes) {
+    const glm::vec3 c{rng.uniform(-9.0f, 9.0f), rng.uniform(-9.0f, 9.0f), rng.uniform(-9.0f, 9.0f)};
+    b = {c - 0.5f, c + 0.5f};
+  }
+  const Aabb big{{-10, -10, -10}, {10, 10, 10}};
+  auto node = [&](std::uint32_t skip, std::uint32_t first, std::uint32_t count, bool leaf) {
+    bvh::FlatNode f;
+    f.box = big;
+    f.skip = skip;
+    f.first = first;
+    f.count = count;
+    f.leaf = leaf;
+    return f;
+  };
+  bvh::FlatTree tree;
+  // The root; a leaf of every object; an empty leaf after them.
+  tree.nodes = {node(3, 0, n, false), node(2, 0, n, true), node(3, n, 0, true)};
+  tree.objects.resize(n);
+  for (std::uint32_t k = 0; k < n; ++k) tree.objects[k] = k;
+  ASSERT_EQ(bvh::check_flat_tree(tree, std::span<const Aabb>(boxes)), "");
+  const glm::vec4 plane[1] = {{1, 0, 0, 0}};  // x >= 0: both leaves straddle it
+  const Frustum f = Frustum::from_planes(plane);
+  const bvh::HierarchicalResult expected =
+      bvh::cull_hierarchical(tree, std::span<const Aabb>(boxes), f, {fast::CpuBvhCullOptions::kDefaultRangeObjects});
+  for (Isa isa : runnable_isas())
+    for (unsigned threads : {1u, 2u}) {
+      fast::CpuBvhCuller culler(threads, isa);
+      culler.upload(tree, std::span<const Aabb>(boxes));
+      bvh::HierarchicalResult got;
+      std::vector<std::uint32_t> ids;
+      culler.cull(f, {true, true}, got, ids);
+      const std::string what = "isa=" + std::string(to_string(isa)) + " threads " + std::to_string(threads);
+      expect_same_traversal(expected, got, what);
+      expect_visible_list(expected, tree, ids, what);
+    }
+}
+
 // The visible-list kernel of every instruction set against a scalar listing: zero, full and
 // partial words, a partial last word, and room for the vector stores or only for the ids; and
 // runs of zero words of every length up to three times the vector of words the kernel skips at

@@ -208,7 +208,8 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
   // or two each; much larger ones list more object ranges than the caches keep until they are
   // tested. Against 16 per thread, 2 threads, 10^6 boxes (passes in turn): 49.3-50.0 -> 43.0-44.0
   // microseconds at 10%, 25.0-25.6 -> 18.9-19.8 at 1%, 87.7-87.9 -> 81.8-83.7 at 50%; 10^5
-  // 8-18% faster; 4*10^6 and 16*10^6 the same (30 and 32 subtrees either way); NOTES.
+  // 4-18% faster; 4*10^6 (32 -> 30 subtrees) the same at 10% and 50%, 2-3% slower at 1%;
+  // 16*10^6 (32 either way) the same. Measured on a Zen 5 only (NOTES).
   const std::size_t threads = pool_->size();
   const std::size_t wanted = std::clamp<std::size_t>(std::max(n / kLargeTaskObjects, std::min(n / kTaskObjects, threads * 4)), 1, threads * 16);
   std::vector<Task>& tasks = tasks_;
@@ -262,9 +263,10 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
   if (ids) {
     sort_order([&](const Task& t) { return std::uint64_t(t.view) << 32 | (t.kind == Task::Inside ? t.node_or_first : nodes[t.node_or_first].first); },
                std::less<std::uint64_t>());
-    frontier_.clear();  // (the walk's queue, done with: the tasks in their new order)
+    frontier_.clear();  // (the walk's queue, done with: the tasks in their new order, copied back
+                        // so each vector keeps its role and a steady pass allocates nothing)
     for (std::uint32_t t : order) frontier_.push_back(tasks[t]);
-    tasks.swap(frontier_);
+    tasks.assign(frontier_.begin(), frontier_.end());
   }
 
   std::vector<Tally>& tallies = tallies_;

@@ -63,12 +63,13 @@ struct CpuBvhViewResult {
 ///
 /// Why object ranges: a node test costs about 13 cycles (records gathered into lanes, work
 /// lists kept, prefetches), an object of a range under 2 (contiguous loads); near the leaves a node's
-/// test saves fewer object tests than it costs. Ranges are tested in blocks of up to 64
+/// test saves fewer object tests than it costs. Ranges are tested in groups of up to 64
 /// objects, plane by plane, a bit per object: on 10^6 boxes and spheres (one thread), ranges
 /// of 96 objects took 0.140-0.151 ms at 10% visible against 0.171-0.179 for 32 (64 and 128 in
 /// between or equal; at 4*10^6, 0.106-0.112 ns/object against 0.133-0.144), and 96 is the
-/// default. (Before the blocks, ranges of 24 to 128 measured within a few percent of each
-/// other and 1.3-1.7x faster than none.)
+/// default; with the volumes in blocks of 16 (since), boxes and spheres gain 2-4% from 160-192
+/// and OBBs lose. (Before the groups, ranges of 24 to 128 measured within a few percent of
+/// each other and 1.3-1.7x faster than none.)
 ///
 /// The objects may be AABBs, OBBs or spheres (bvh::cull_hierarchical's three forms: a tree
 /// over OBBs or spheres is built over bvh::enclosing_boxes and its nodes are tested with a
@@ -143,9 +144,9 @@ class CpuBvhCuller {
   detail::CacheLineVector<float> spare_blocks_;  // the next upload's blocks (then the last one's)
   // Per-pass working storage, kept so passes reuse it.
   std::vector<Task> tasks_;
-  std::vector<Task> frontier_;  // the top of the tree, breadth first
+  std::vector<Task> frontier_;  // the top of the tree, breadth first; then the tasks' sort
   std::vector<std::uint32_t> order_;  // the tasks in the order the threads take them
-  std::vector<std::uint64_t> sort_keys_;
+  std::vector<std::uint64_t> sort_keys_;  // per task, the key of the sort at hand
   std::vector<Tally> tallies_;
   std::vector<std::uint64_t> marks_;  // the subtree tasks' visible objects, a bit each
   std::vector<std::vector<std::uint32_t>> work_;  // per pool thread: a walk's work lists

@@ -104,15 +104,16 @@ constexpr std::uint32_t kWalkLeaf = 0x80000000u;
 constexpr std::size_t kWalkAabbColumns = 6;     ///< min x y z, max x y z
 constexpr std::size_t kWalkObbColumns = 15;     ///< centre, u0, u1, u2, half extents
 constexpr std::size_t kWalkSphereColumns = 4;   ///< centre, radius
-/// The volumes' blocks: kWalkBlock objects in tree order, each of their columns a vector
-/// (a cache line), so an object range is one run of lines in memory, not a run per column.
+/// The volumes' blocks: kWalkBlock objects in tree order, each of their columns 16 floats (a
+/// cache line), so an object range is one run of lines in memory, not a run per column.
 constexpr std::size_t kWalkBlock = 16;
 struct WalkTree {
   const float* nodes;           ///< kWalkNodeFloats per slot, 2 slots per pair
   /// The volumes in tree order, in blocks (kWalk*Columns columns for the kind): column c of
   /// the object at tree position k is blocks[(k / kWalkBlock) * kWalkBlock * columns +
   /// c * kWalkBlock + k % kWalkBlock]; the last block is padded with zeros, and one more
-  /// block of zeros follows it (a prefetch of the block after a range stays in the array).
+  /// block of zeros follows it (a prefetch of the block after a nonempty range stays in the
+  /// array).
   const float* blocks;
   const std::uint32_t* ids;     ///< per object in tree order, its id
   std::uint32_t range_objects;  ///< bvh::TraversalOptions::range_objects

@@ -755,6 +755,7 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
   const WalkTree* margin = Kind == WalkKind::Aabb ? nullptr : &t;
   const BoxPlanes columns(planes);
   constexpr std::size_t block_floats = kWalkBlock * object_columns;  // a block of the volumes (WalkTree::blocks)
+  static_assert(kWalkBlock % W == 0, "a vector aligned to W lies within one block's column");
   WalkCounts counts;
   const std::uint32_t range_first = root.first;
   // Visible objects, one bit per position in the subtree's range.
@@ -856,10 +857,13 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
         counts.inside += n;
         continue;
       }
+      // An empty straddling leaf (a tree may have them) has nothing to test; listed, its
+      // range's first vector (aligned below `first`) would mark a word the subtree does not own.
+      if (n == 0) continue;
       // A straddling leaf or small node: its objects, against the planes it straddles. Its
       // blocks are one run of lines: the first line of its first block and of the next
-      // prefetched, the hardware prefetcher takes the rest (one line per column, or every
-      // line, measured slower; none about the same; NOTES).
+      // prefetched, the hardware prefetcher takes the rest (the first line of every block of
+      // the range measured slower, none about the same; NOTES).
       const float* const range_block = t.blocks + std::size_t(first / kWalkBlock) * block_floats + first % kWalkBlock;
       __builtin_prefetch(range_block);
       __builtin_prefetch(range_block + block_floats);
