@@ -34,10 +34,10 @@ struct CacheLineAllocator {
 #endif
     return static_cast<T*>(p);
   }
+  // (The unsized forms: clang before 19 declares the sized ones only with -fsized-deallocation.)
   void deallocate(T* p, std::size_t n) {
-    const std::size_t bytes = n * sizeof(T);
-    if (bytes < kHugeFrom) return ::operator delete(p, bytes, kAlign);
-    ::operator delete(p, (bytes + kHuge - 1) / kHuge * kHuge, std::align_val_t(kHuge));
+    if (n * sizeof(T) < kHugeFrom) return ::operator delete(p, kAlign);
+    ::operator delete(p, std::align_val_t(kHuge));
   }
   template <class U>
   bool operator==(const CacheLineAllocator<U>&) const {
