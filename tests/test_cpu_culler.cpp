@@ -62,12 +62,18 @@ using fast::CpuCullOptions;
 using fast::CpuViewResult;
 using fast::Isa;
 
-std::vector<Isa> runnable_isas() {
-  std::vector<Isa> isas;
-  for (Isa isa : {Isa::Portable, Isa::Avx2, Isa::Avx512})
-    if (fast::isa_supported(isa)) isas.push_back(isa);
-  return isas;
+/// A node of a hand-made flat tree.
+bvh::FlatNode flat_node(const Aabb& box, std::uint32_t skip, std::uint32_t first, std::uint32_t count, bool leaf) {
+  bvh::FlatNode n;
+  n.box = box;
+  n.skip = skip;
+  n.first = first;
+  n.count = count;
+  n.leaf = leaf;
+  return n;
 }
+
+std::vector<Isa> runnable_isas() { return fast::supported_isas(); }
 
 /// `scaled_normals`: also a frustum whose normals are not unit (which hierarchies over OBBs and
 /// spheres refuse).
@@ -616,15 +622,8 @@ TEST(CpuBvhCuller, SeveralViewsInOnePassEqualOnePassEach) {
 // 32 the root is one range (1). The fast culler makes the scalar traversal's tests each time.
 TEST(CpuBvhCuller, EmptyNodesDescendOnlyWithoutRanges) {
   const std::vector<Aabb> boxes = {{{-1, -1, -1}, {1, 1, 1}}, {{2, 2, 2}, {3, 3, 3}}};
-  const Aabb big{{-10, -10, -10}, {10, 10, 10}};
-  auto node = [&](std::uint32_t skip, std::uint32_t first, std::uint32_t count, bool leaf) {
-    bvh::FlatNode n;
-    n.box = big;
-    n.skip = skip;
-    n.first = first;
-    n.count = count;
-    n.leaf = leaf;
-    return n;
+  auto node = [](std::uint32_t skip, std::uint32_t first, std::uint32_t count, bool leaf) {
+    return flat_node({{-10, -10, -10}, {10, 10, 10}}, skip, first, count, leaf);
   };
   bvh::FlatTree tree;
   tree.nodes = {node(5, 0, 2, false), node(4, 0, 0, false), node(3, 0, 0, true), node(4, 0, 0, true), node(5, 0, 2, true)};
@@ -661,15 +660,8 @@ TEST(CpuBvhCuller, AnEmptyLeafTaskAtAnUnalignedPositionMarksNothing) {
     const glm::vec3 c{rng.uniform(-9.0f, 9.0f), rng.uniform(-9.0f, 9.0f), rng.uniform(-9.0f, 9.0f)};
     b = {c - 0.5f, c + 0.5f};
   }
-  const Aabb big{{-10, -10, -10}, {10, 10, 10}};
-  auto node = [&](std::uint32_t skip, std::uint32_t first, std::uint32_t count, bool leaf) {
-    bvh::FlatNode f;
-    f.box = big;
-    f.skip = skip;
-    f.first = first;
-    f.count = count;
-    f.leaf = leaf;
-    return f;
+  auto node = [](std::uint32_t skip, std::uint32_t first, std::uint32_t count, bool leaf) {
+    return flat_node({{-10, -10, -10}, {10, 10, 10}}, skip, first, count, leaf);
   };
   bvh::FlatTree tree;
   // The root; a leaf of every object; an empty leaf after them.

@@ -236,6 +236,13 @@ std::optional<Isa> parse_isa(std::string_view name) {
 
 bool isa_supported(Isa isa) { return cpu_runs(isa); }
 
+std::vector<Isa> supported_isas() {
+  std::vector<Isa> isas;
+  for (Isa isa : {Isa::Portable, Isa::Avx2, Isa::Avx512})
+    if (cpu_runs(isa)) isas.push_back(isa);
+  return isas;
+}
+
 Isa best_isa() {
   Isa best = Isa::Portable;
   for (Isa isa : {Isa::Avx2, Isa::Avx512})

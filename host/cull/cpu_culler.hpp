@@ -29,6 +29,9 @@ std::string_view to_string(Isa isa);
 std::optional<Isa> parse_isa(std::string_view name);
 /// True when the kernels for `isa` are built into this binary and the CPU runs them.
 bool isa_supported(Isa isa);
+/// Every instruction set isa_supported() accepts, narrowest first (Portable always): to run a
+/// check or a benchmark on each.
+std::vector<Isa> supported_isas();
 /// The widest supported instruction set. The environment variable CULLPIPE_ISA
 /// (portable / avx2 / avx512) lowers it, e.g. to compare kernels or to test the portable path.
 Isa best_isa();

@@ -152,13 +152,6 @@ struct SplitTree {
   }
 };
 
-std::vector<Isa> runnable_isas() {
-  std::vector<Isa> isas;
-  for (Isa isa : {Isa::Portable, Isa::Avx2, Isa::Avx512})
-    if (fast::isa_supported(isa)) isas.push_back(isa);
-  return isas;
-}
-
 template <class Volume>
 void run(Bytes& in, std::uint8_t flags) {
   static const float kScales[] = {1.0f, 0.25f, 1.0f / 1024, 1000.0f, 3.0f, 1e-30f, 1e30f / 64, 0.1f};
@@ -232,7 +225,7 @@ void run(Bytes& in, std::uint8_t flags) {
   for (std::uint32_t o : tree.objects)
     if (is_visible(ref[o])) tree_ids.push_back(o);
 
-  for (Isa isa : runnable_isas()) {
+  for (Isa isa : fast::supported_isas()) {
     const std::string at = std::string(" (isa ") + std::string(to_string(isa)) + ", " + std::to_string(threads) + " threads, range " +
                            std::to_string(range) + ", " + std::to_string(n) + " objects, " + std::to_string(tree.nodes.size()) + " nodes)";
     // Flat.
