@@ -73,8 +73,6 @@ bvh::FlatNode flat_node(const Aabb& box, std::uint32_t skip, std::uint32_t first
   return n;
 }
 
-std::vector<Isa> runnable_isas() { return fast::supported_isas(); }
-
 /// `scaled_normals`: also a frustum whose normals are not unit (which hierarchies over OBBs and
 /// spheres refuse).
 std::vector<Frustum> test_views(bool scaled_normals = true) {
@@ -126,7 +124,7 @@ void expect_equal_to_reference(std::span<const Volume> volumes, const Frustum& f
 template <class Volume>
 void check_everywhere(const std::vector<Volume>& volumes, const std::string& what, std::vector<Frustum> views = test_views(),
                       std::vector<unsigned> thread_counts = {1u, 2u, 3u}, std::vector<std::size_t> chunks = {16u, 48u, 16384u}) {
-  for (Isa isa : runnable_isas())
+  for (Isa isa : fast::supported_isas())
     for (unsigned threads : thread_counts)
       for (std::size_t chunk : chunks) {
         CpuCullerConfig config;
@@ -426,7 +424,7 @@ TEST(CpuBvhCuller, EqualsTheScalarTraversalExactly) {
       bvh::BuildOptions options;
       options.max_leaf_size = n % 2 ? 1 : 6;
       const bvh::FlatTree tree = bvh::flatten(bvh::build(builder, boxes, options));
-      for (Isa isa : runnable_isas())
+      for (Isa isa : fast::supported_isas())
         for (unsigned threads : {1u, 2u, 3u}) {
           fast::CpuBvhCuller culler(threads, isa);
           culler.upload(tree, boxes);
@@ -491,7 +489,7 @@ TEST(CpuBvhCuller, TouchingBoxesAndLargeLeavesEqualTheScalarTraversal) {
     bvh::BuildOptions options;
     options.max_leaf_size = leaf;
     const bvh::FlatTree tree = bvh::flatten(bvh::build("binned-sah", boxes, options));
-    for (Isa isa : runnable_isas()) {
+    for (Isa isa : fast::supported_isas()) {
       fast::CpuBvhCuller culler(2, isa);
       culler.upload(tree, boxes);
       for (std::uint32_t range : {0u, 3u, fast::CpuBvhCullOptions::kDefaultRangeObjects, 1000u})
@@ -539,7 +537,7 @@ TEST(CpuBvhCuller, MarginEdgesAndHugeCoordinatesEqualTheScalarTraversal) {
   views.push_back(Frustum::from_planes(far_planes));
   const bvh::FlatTree sphere_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Sphere>(spheres))));
   const bvh::FlatTree obb_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(obbs))));
-  for (Isa isa : runnable_isas()) {
+  for (Isa isa : fast::supported_isas()) {
     fast::CpuBvhCuller culler(2, isa);
     for (std::uint32_t range : {0u, fast::CpuBvhCullOptions::kDefaultRangeObjects, 100000u})  // (the last: the whole tree one range)
       for (std::size_t v = 0; v < views.size(); ++v) {
@@ -634,7 +632,7 @@ TEST(CpuBvhCuller, EmptyNodesDescendOnlyWithoutRanges) {
   for (std::uint32_t range : {0u, 1u, 32u}) {
     const bvh::HierarchicalResult expected = bvh::cull_hierarchical(tree, std::span<const Aabb>(boxes), f, {range});
     EXPECT_EQ(expected.node_tests, range == 0 ? 5u : range == 1 ? 3u : 1u) << "ranges " << range;  // (32: the root is a range)
-    for (Isa isa : runnable_isas()) {
+    for (Isa isa : fast::supported_isas()) {
       fast::CpuBvhCuller culler(1, isa);
       culler.upload(tree, std::span<const Aabb>(boxes));
       const fast::CpuBvhCullOptions options{true, true, range};
@@ -673,7 +671,7 @@ TEST(CpuBvhCuller, AnEmptyLeafTaskAtAnUnalignedPositionMarksNothing) {
   const Frustum f = Frustum::from_planes(plane);
   const bvh::HierarchicalResult expected =
       bvh::cull_hierarchical(tree, std::span<const Aabb>(boxes), f, {fast::CpuBvhCullOptions::kDefaultRangeObjects});
-  for (Isa isa : runnable_isas())
+  for (Isa isa : fast::supported_isas())
     for (unsigned threads : {1u, 2u}) {
       fast::CpuBvhCuller culler(threads, isa);
       culler.upload(tree, std::span<const Aabb>(boxes));
@@ -692,7 +690,7 @@ TEST(CpuBvhCuller, AnEmptyLeafTaskAtAnUnalignedPositionMarksNothing) {
 // once (8 with AVX-512, 4 with AVX2, 2 portable), ending anywhere, the last word too.
 TEST(CpuBvhCuller, ListKernelListsTheMarkedIds) {
   test::Rng rng{43};
-  for (Isa isa : runnable_isas()) {
+  for (Isa isa : fast::supported_isas()) {
     const fast::detail::KernelTable table = fast::detail::kernels(isa);
     for (std::size_t objects : {1u, 63u, 64u, 65u, 200u, 448u, 1100u, 4160u}) {
       const std::size_t words = (objects + 63) / 64;
@@ -879,7 +877,7 @@ TEST(CpuBvhCuller, ObbsAndSpheresEqualTheScalarTraversalAndFlatCulling) {
     const test::RandomVolumes v = test::random_volumes(rng, n, 30.0f, 2.0f);
     const bvh::FlatTree obb_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(v.obbs))));
     const bvh::FlatTree sphere_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Sphere>(v.spheres))));
-    for (Isa isa : runnable_isas())
+    for (Isa isa : fast::supported_isas())
       for (unsigned threads : {1u, 2u, 3u}) {
         fast::CpuBvhCuller culler(threads, isa);
         bvh::HierarchicalResult got;

@@ -111,7 +111,7 @@ void CpuBvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume
   pool_->parallel_for(parts, [&](std::size_t part) {
     auto to_blocks = [&](std::size_t slot, const Volume& v) {
       const auto record = walk_columns(v);
-      float* const out = blocks + slot / block * block_floats + slot % block;
+      float* const out = blocks + detail::walk_block_offset(slot, columns);
       for (std::size_t c = 0; c < columns; ++c) out[c * block] = record[c];
     };
     if (!bvh::visit_leaf_volumes(tree, volumes, nodes * part / parts, nodes * (part + 1) / parts, to_blocks))
@@ -120,7 +120,7 @@ void CpuBvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume
   if (!all_in_leaves.load()) refuse();
   // Zeros past the last object: in its block's columns, and the block after.
   for (std::size_t c = 0; c < columns; ++c)
-    std::fill(blocks + n / block * block_floats + c * block + n % block, blocks + n / block * block_floats + (c + 1) * block, 0.0f);
+    std::fill(blocks + detail::walk_block_offset(n, columns) + c * block, blocks + n / block * block_floats + (c + 1) * block, 0.0f);
   std::fill(blocks + (block_count - 1) * block_floats, blocks + block_count * block_floats, 0.0f);
 
   // Nothing below throws: every resize is within the reserved capacity.

@@ -107,6 +107,11 @@ constexpr std::size_t kWalkSphereColumns = 4;   ///< centre, radius
 /// The volumes' blocks: kWalkBlock objects in tree order, each of their columns 16 floats (a
 /// cache line), so an object range is one run of lines in memory, not a run per column.
 constexpr std::size_t kWalkBlock = 16;
+/// Where column 0 of the object at tree position `pos` lies in WalkTree::blocks, for volumes of
+/// `columns` columns (column c is kWalkBlock floats further on).
+constexpr std::size_t walk_block_offset(std::size_t pos, std::size_t columns) {
+  return pos / kWalkBlock * kWalkBlock * columns + pos % kWalkBlock;
+}
 struct WalkTree {
   const float* nodes;           ///< kWalkNodeFloats per slot, 2 slots per pair
   /// The volumes in tree order, in blocks (kWalk*Columns columns for the kind): column c of

@@ -755,6 +755,7 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
   const WalkTree* margin = Kind == WalkKind::Aabb ? nullptr : &t;
   const BoxPlanes columns(planes);
   constexpr std::size_t block_floats = kWalkBlock * object_columns;  // a block of the volumes (WalkTree::blocks)
+  auto block_at = [&](std::uint32_t pos) { return t.blocks + walk_block_offset(pos, object_columns); };
   static_assert(kWalkBlock % W == 0, "a vector aligned to W lies within one block's column");
   WalkCounts counts;
   const std::uint32_t range_first = root.first;
@@ -864,7 +865,7 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
       // blocks are one run of lines: the first line of its first block and of the next
       // prefetched, the hardware prefetcher takes the rest (the first line of every block of
       // the range measured slower, none about the same; NOTES).
-      const float* const range_block = t.blocks + std::size_t(first / kWalkBlock) * block_floats + first % kWalkBlock;
+      const float* const range_block = block_at(first);
       __builtin_prefetch(range_block);
       __builtin_prefetch(range_block + block_floats);
       range_at[ranges] = first;
@@ -903,8 +904,7 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
           const float nx = planes.nx[k], ny = planes.ny[k], nz = planes.nz[k], d = planes.d[k];
           const unsigned* const o = vertex_offset[k];
           for (std::uint32_t j = 0; j < size; j += W) {
-            const std::uint32_t pos = at + j;
-            const float* const b = t.blocks + std::size_t(pos / kWalkBlock) * block_floats + pos % kWalkBlock;
+            const float* const b = block_at(at + j);
             const vf dp = ((nx * load(b + o[0]) + ny * load(b + o[1])) + nz * load(b + o[2])) + d;
             const vf dn = ((nx * load(b + o[3]) + ny * load(b + o[4])) + nz * load(b + o[5])) + d;
             outside_bits |= std::uint64_t(less_bits(dp, zero)) << j;
@@ -914,8 +914,7 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
       } else {
         const vi mask = vi{} + static_cast<std::int32_t>(m);
         for (std::uint32_t j = 0; j < size; j += W) {
-          const std::uint32_t pos = at + j;
-          const float* const b = t.blocks + std::size_t(pos / kWalkBlock) * block_floats + pos % kWalkBlock;
+          const float* const b = block_at(at + j);
           vf col[object_columns];
           for (unsigned c = 0; c < object_columns; ++c) col[c] = load(b + c * kWalkBlock);
           vi outside, crossing;
