@@ -419,6 +419,21 @@ std::uint32_t CpuCuller::touch_bounds(bool streamed_only) {
   return touch_spans(impl_->pool, impl_->table, spans, impl_->chunk);
 }
 
+std::uint32_t CpuCuller::touch_streamed_side_by_side() {
+  if (!count_) return 0;
+  const std::size_t used = (count_ + kPad - 1) / kPad * kPad, chunks = (used + impl_->chunk - 1) / impl_->chunk;
+  static_assert(kStreamedBytesPerObject == 4 * sizeof(float));  // the first four arrays
+  const float* const columns[4] = {impl_->arrays[0], impl_->arrays[1], impl_->arrays[2], impl_->arrays[3]};
+  std::vector<std::uint32_t> bits(chunks, 0);
+  impl_->pool.parallel_for(chunks, [&](std::size_t t) {
+    const std::size_t begin = t * impl_->chunk;
+    bits[t] = impl_->table.touch_columns(columns, begin, std::min(used, begin + impl_->chunk));
+  });
+  std::uint32_t all = 0;
+  for (std::uint32_t b : bits) all |= b;
+  return all;
+}
+
 std::vector<CpuViewResult> CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& options) {
   std::vector<CpuViewResult> results;
   cull(views, options, results);
@@ -449,7 +464,7 @@ void CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& optio
       }
       if (buffers.size() < views.size()) buffers.resize(views.size());
       for (std::size_t v = 0; v < views.size(); ++v)
-        if (!buffers[v]) buffers[v].reset(new std::uint32_t[size]);
+        if (!buffers[v]) buffers[v].reset(new std::uint32_t[size]());  // zeros: the kernels read `runs` as a guess
     };
     room(m.scratch, m.scratch_size, chunks * slot);
     room(m.bits, m.bits_size, chunks * bits_slot);
@@ -516,8 +531,9 @@ void CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& optio
         const std::size_t vectors = (std::min(end, run + detail::kRunObjects) - run + m.table.lanes - 1) / m.table.lanes;
         out = m.table.expand(bits + (run - begin) / m.table.lanes, vectors, static_cast<std::uint32_t>(run), out, out_end);
       } else {
-        out = std::copy(ids, ids + runs[r], out);
-        ids += runs[r];
+        const std::uint32_t count = runs[r] & detail::kRunCount;
+        out = std::copy(ids, ids + count, out);
+        ids += count;
       }
     }
   });

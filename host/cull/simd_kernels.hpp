@@ -60,6 +60,11 @@ constexpr std::size_t kRunObjects = 4096;
 /// ChunkOutput::runs: the run wrote no ids, only its vectors' visible lanes (the low bits are
 /// its visible count).
 constexpr std::uint32_t kDenseRun = 0x80000000u;
+/// ChunkOutput::runs: the run wrote its ids although it was dense (it guessed sparse), so the
+/// next pass's guess for it is dense.
+constexpr std::uint32_t kListedDense = 0x40000000u;
+/// ChunkOutput::runs: the visible count (or the number of ids written) under the flags.
+constexpr std::uint32_t kRunCount = 0x3fffffffu;
 /// A run is dense when more than 1 / kDenseShare of its objects are visible.
 constexpr std::size_t kDenseShare = 4;
 
@@ -67,11 +72,16 @@ constexpr std::size_t kDenseShare = 4;
 /// begin..end-1 at classes[0..]; `ids` (may be null) receives the ids of visible objects in
 /// object order, at most end - begin of them, and may write up to 16 values beyond them.
 /// With `runs`, `bits` and `ids`: every run sets bits[v] = the visible lanes of each of its
-/// vectors (v = the vector's first object - begin, over the kernel's lanes; a sparse run's are
-/// scratch), so `bits` holds a word per vector of the chunk; a dense run writes no ids and sets
-/// runs[r] = kDenseRun | its visible count; any other run sets runs[r] = the number of ids it
-/// wrote. Without `bits` every run writes its ids. Listing the ids of dense runs from their bits, straight into the
-/// result (ExpandKernel), writes them once instead of twice (to `ids`, then copied).
+/// vectors (v = the vector's first object - begin, over the kernel's lanes; scratch where the
+/// run wrote its ids), so `bits` holds a word per vector of the chunk. A run either writes its
+/// ids and sets runs[r] = their number, | kListedDense if it was dense, or, if it was dense,
+/// writes none and sets runs[r] = kDenseRun | its visible count. Which, is guessed from what
+/// runs[r] holds on entry (the last pass's word, or 0): a run guessed sparse (neither flag)
+/// appends its ids as it classifies its vectors, where the work overlaps the loads; one guessed
+/// dense lists them afterwards only if it was sparse. So `runs` must hold initialised words.
+/// Without `bits` every run writes its ids. Listing the ids of dense runs from their bits,
+/// straight into the result (ExpandKernel), writes them once instead of twice (to `ids`, then
+/// copied).
 struct ChunkOutput {
   std::uint8_t* classes = nullptr;
   std::uint32_t* ids = nullptr;
@@ -92,6 +102,10 @@ using SphereKernel = ChunkCounts (*)(const SphereArrays&, std::size_t begin, std
 /// Reads data[begin..end) (end - begin a multiple of 16 or data padded to one) and returns
 /// the OR of its bits: the memory floor of a pass, with the same loads as the kernels.
 using TouchKernel = std::uint32_t (*)(const float* data, std::size_t begin, std::size_t end);
+/// Reads columns[0..3][begin..end) side by side, a vector of each per step (as the flat
+/// kernels read the centres and bounds; end - begin a multiple of 16 or the columns padded to
+/// one) and returns the OR of their bits.
+using TouchColumnsKernel = std::uint32_t (*)(const float* const* columns, std::size_t begin, std::size_t end);
 
 /// A hierarchy as the walk kernels read it (fast::CpuBvhCuller builds it on upload from a
 /// bvh::FlatTree; object order is the flat tree's). Nodes are stored in sibling pairs: the two
@@ -175,6 +189,7 @@ struct KernelTable {
   ObbKernel obb;
   SphereKernel sphere;
   TouchKernel touch;
+  TouchColumnsKernel touch_columns;
   WalkKernel walk_aabb, walk_obb, walk_sphere;
   ExpandKernel expand;
   ListKernel list;
