@@ -129,11 +129,7 @@ void check_everywhere(const std::vector<Volume>& volumes, const std::string& wha
   for (Isa isa : fast::supported_isas())
     for (unsigned threads : thread_counts)
       for (std::size_t chunk : chunks) {
-        CpuCullerConfig config;
-        config.isa = isa;
-        config.threads = threads;
-        config.chunk_objects = chunk;
-        CpuCuller culler(config);
+        CpuCuller culler({threads, isa, chunk});
         culler.upload(std::span<const Volume>(volumes));
         // Both outputs, the list alone (the benchmarks' pass: no class writes, no crossing
         // bits) and the classes alone.
@@ -221,11 +217,7 @@ TEST(CpuCuller, VisibleListsStayExactWhenRunsChangeBetweenPasses) {
   for (Isa isa : fast::supported_isas())
     for (unsigned threads : {1u, 2u})
       for (std::size_t chunk : {4096u, 16384u}) {
-        CpuCullerConfig config;
-        config.isa = isa;
-        config.threads = threads;
-        config.chunk_objects = chunk;
-        CpuCuller culler(config);
+        CpuCuller culler({threads, isa, chunk});
         culler.upload(std::span<const Aabb>(boxes));
         std::vector<CpuViewResult> results;
         int pass = 0;
@@ -258,11 +250,7 @@ TEST(CpuCuller, BothReadOrdersOfTheMemoryFloorReadEveryCentreAndBound) {
         std::uint32_t expected = 0;
         for (const glm::vec4& c : centre_bounds)
           for (int k = 0; k < 4; ++k) expected |= std::bit_cast<std::uint32_t>(c[k]);
-        CpuCullerConfig config;
-        config.isa = isa;
-        config.threads = 2;
-        config.chunk_objects = chunk;
-        CpuCuller culler(config);
+        CpuCuller culler({2, isa, chunk});
         culler.upload(std::span<const Aabb>(boxes));
         EXPECT_EQ(culler.touch_bounds(true), expected) << to_string(isa) << " n=" << n << " chunk=" << chunk;
         EXPECT_EQ(culler.touch_streamed_side_by_side(), expected) << to_string(isa) << " n=" << n << " chunk=" << chunk;
