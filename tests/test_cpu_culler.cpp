@@ -237,19 +237,26 @@ TEST(CpuCuller, VisibleListsStayExactWhenRunsChangeBetweenPasses) {
 
 TEST(CpuCuller, BothReadOrdersOfTheMemoryFloorReadEveryCentreAndBound) {
   // The benchmarks' floor reads the centres and bounds one array after another or side by
-  // side: each gives the OR of the bits of every centre coordinate and bound. The centres'
-  // coordinates have a mantissa bit of their own (1.5, 1.25, 1.125; the last box 1.0625 in x),
-  // so a read that skips the tail or reads one array for another gives another OR.
+  // side; either gives the OR of the bits of every centre coordinate and bound. The boxes are
+  // chosen so that each of the four arrays has a bit no other array has, and the last box's
+  // centre x a bit no other float has (both checked below): a read that skips an array, reads
+  // one for another or stops before the last object gives another OR.
+  auto bits = [](float f) { return std::bit_cast<std::uint32_t>(f); };
   for (Isa isa : fast::supported_isas())
     for (std::size_t n : {1u, 16u, 17u, 40000u})
       for (std::size_t chunk : {16u, 48u, 16384u}) {
-        std::vector<Aabb> boxes(n, Aabb{{1.0f, 0.75f, 0.625f}, {2.0f, 1.75f, 1.625f}});
-        boxes.back() = {{0.5625f, 0.75f, 0.625f}, {1.5625f, 1.75f, 1.625f}};
+        std::vector<Aabb> boxes(n, Aabb{{1e-3f, 5e-10f, -2.5f}, {1e-3f, 5e-10f, -1.5f}});
+        boxes.back() = {{3e-3f, 5e-10f, -2.5f}, {3e-3f, 5e-10f, -1.5f}};
         std::vector<glm::vec4> centre_bounds(n);
         fast::detail::aabb_centre_bounds(boxes, centre_bounds);
-        std::uint32_t expected = 0;
-        for (const glm::vec4& c : centre_bounds)
-          for (int k = 0; k < 4; ++k) expected |= std::bit_cast<std::uint32_t>(c[k]);
+        std::uint32_t column[4] = {}, x_before_last = 0;
+        for (std::size_t i = 0; i < n; ++i)
+          for (int k = 0; k < 4; ++k) column[k] |= bits(centre_bounds[i][k]);
+        for (std::size_t i = 0; i + 1 < n; ++i) x_before_last |= bits(centre_bounds[i].x);
+        const std::uint32_t expected = column[0] | column[1] | column[2] | column[3];
+        for (int k = 0; k < 4; ++k)
+          ASSERT_NE(column[k] & ~(column[(k + 1) % 4] | column[(k + 2) % 4] | column[(k + 3) % 4]), 0u) << "array " << k << " has no bit of its own";
+        ASSERT_NE(bits(centre_bounds.back().x) & ~(x_before_last | column[1] | column[2] | column[3]), 0u) << "the last x has no bit of its own";
         CpuCuller culler({2, isa, chunk});
         culler.upload(std::span<const Aabb>(boxes));
         EXPECT_EQ(culler.touch_bounds(true), expected) << to_string(isa) << " n=" << n << " chunk=" << chunk;

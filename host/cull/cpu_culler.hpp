@@ -86,8 +86,9 @@ class CpuCuller {
   /// bounds, 16 bytes per object); else every byte the upload stored.
   std::uint32_t touch_bounds(bool streamed_only = false);
   /// Reads the centres and bounds in a pass's own order: chunk by chunk, the four arrays side
-  /// by side, a vector of each per step. With touch_bounds(true), the memory floor of a pass,
-  /// whichever of the two orders the machine reads faster (on a Zen 5, this one, by 8-23%).
+  /// by side, a vector of each per step (without the pass's software prefetch, which makes
+  /// this plain read slower). With touch_bounds(true), the memory floor of a pass, whichever
+  /// of the two orders the machine reads faster (on a Zen 5, this one, by 3-23%).
   std::uint32_t touch_streamed_side_by_side();
   /// What a pass reads of every object (touch_bounds(true)): centre x y z and bound.
   static constexpr std::size_t kStreamedBytesPerObject = 4 * sizeof(float);
