@@ -75,12 +75,13 @@ constexpr std::size_t kDenseShare = 4;
 /// vectors (v = the vector's first object - begin, over the kernel's lanes; scratch where the
 /// run wrote its ids), so `bits` holds a word per vector of the chunk. A run either writes its
 /// ids and sets runs[r] = their number, | kListedDense if it was dense, or, if it was dense,
-/// writes none and sets runs[r] = kDenseRun | its visible count. Which, is guessed from what
-/// runs[r] holds on entry (the last pass's word, or 0): a run guessed sparse (neither flag)
-/// appends its ids as it classifies its vectors, where the work overlaps the loads (where the
-/// bound can settle objects: unit normals and a finite margin); one guessed dense, or one
-/// whose objects the bound cannot settle, lists them afterwards only if it was sparse. So `runs` must hold initialised words.
-/// Without `bits` every run writes its ids. Listing the ids of dense runs from their bits,
+/// writes none and sets runs[r] = kDenseRun | its visible count. Which of the two a run does
+/// follows a guess from what runs[r] holds on entry (the last pass's word, or 0; so `runs`
+/// must hold initialised words): a run guessed sparse (neither flag) appends its ids as it
+/// classifies its vectors, where the work overlaps the loads (where the bound can settle
+/// objects: unit normals and a finite margin); one guessed dense, or one whose objects the
+/// bound cannot settle, lists them afterwards only if it was sparse. Without `bits` every run
+/// writes its ids. Listing the ids of dense runs from their bits,
 /// straight into the result (ExpandKernel), writes them once instead of twice (to `ids`, then
 /// copied).
 struct ChunkOutput {
