@@ -27,8 +27,10 @@
 #include <type_traits>
 #include <vector>
 
+#include "bvh/box_ops.hpp"
 #include "bvh/builders.hpp"
 #include "bvh/bvh.hpp"
+#include "cull/compare.hpp"
 #include "cull/cpu_bvh_culler.hpp"
 #include "cull/cpu_culler.hpp"
 #include "cull/reference.hpp"
@@ -52,30 +54,12 @@ class Bytes {
   std::size_t size_, at_ = 0;
 };
 
-std::string describe(const Aabb& b) {
-  char s[200];
-  std::snprintf(s, sizeof s, "box min (%a, %a, %a) max (%a, %a, %a)", b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z);
-  return s;
-}
-std::string describe(const Sphere& v) {
-  char s[160];
-  std::snprintf(s, sizeof s, "sphere centre (%a, %a, %a) radius %a", v.center.x, v.center.y, v.center.z, v.radius);
-  return s;
-}
-std::string describe(const Obb& b) {
-  char s[400];
-  std::snprintf(s, sizeof s, "obb centre (%a, %a, %a) half extents (%a, %a, %a) axes (%a %a %a) (%a %a %a) (%a %a %a)", b.center.x,
-                b.center.y, b.center.z, b.half_extents.x, b.half_extents.y, b.half_extents.z, b.basis[0].x, b.basis[0].y, b.basis[0].z,
-                b.basis[1].x, b.basis[1].y, b.basis[1].z, b.basis[2].x, b.basis[2].y, b.basis[2].z);
-  return s;
-}
-
 template <class Volume>
 [[noreturn]] void fail(const std::string& what, const std::vector<Volume>& volumes, const Frustum& f, std::size_t object, int expected,
                        int got) {
   std::fprintf(stderr, "fuzz_cull: %s\n", what.c_str());
   if (object < volumes.size()) std::fprintf(stderr, "  object %zu: %s\n", object, describe(volumes[object]).c_str());
-  for (const Plane& p : f.active()) std::fprintf(stderr, "  plane (%a, %a, %a, %a)\n", p.normal.x, p.normal.y, p.normal.z, p.d);
+  std::fprintf(stderr, "  planes %s\n", describe(f).c_str());
   std::fprintf(stderr, "  expected %d, got %d\n", expected, got);
   std::abort();
 }
@@ -107,8 +91,6 @@ Obb moved(Obb b, glm::vec3 by) {
   return b;
 }
 
-Aabb merge(const Aabb& a, const Aabb& b) { return {glm::min(a.min, b.min), glm::max(a.max, b.max)}; }
-
 /// A tree split at the bytes' positions: any split of a node's range, an empty side too; a node
 /// becomes a leaf when the bytes say so, at depth 40, or when it is empty. Boxes enclose their
 /// objects' enclosing boxes (an empty leaf gets a box of its own from the bytes).
@@ -130,7 +112,7 @@ struct SplitTree {
         box = make(in, scale, static_cast<Aabb*>(nullptr));
       } else {
         box = boxes[objects[first]];
-        for (std::uint32_t k = first + 1; k < first + count; ++k) box = merge(box, boxes[objects[k]]);
+        for (std::uint32_t k = first + 1; k < first + count; ++k) box = bvh::detail::merged(box, boxes[objects[k]]);
       }
     } else {
       // Mostly near the middle (so trees of many objects stay shallow); sometimes anywhere, or
@@ -140,7 +122,7 @@ struct SplitTree {
                                  : how % 8 == 3 ? in.u32() % (count + 1)
                                                 : count / 2 + (count > 8 ? in.u8() % (count / 4 + 1) : 0) - count / 8;
       box = build(first, left, depth + 1);
-      box = merge(box, build(first + left, count - left, depth + 1));
+      box = bvh::detail::merged(box, build(first + left, count - left, depth + 1));
     }
     bvh::FlatNode& node = tree.nodes[index];
     node.box = box;
