@@ -170,7 +170,7 @@ nlohmann::json bench_cull(std::size_t n, std::uint32_t leaf_size, const std::vec
     }
     const gpu::CullResult g = bvh_culler.cull(views);
     // The fast hierarchy's traversal (object ranges of small nodes): the scalar one's counts with its range_objects.
-    const bvh::HierarchicalResult hf = bvh::cull_hierarchical(flat, boxes, f, {fast::CpuBvhCullOptions::kDefaultRangeObjects});
+    const bvh::HierarchicalResult hf = bvh::cull_hierarchical(flat, boxes, f, {fast::CpuBvhCullOptions::default_range_objects(BvKind::Aabb)});
     std::vector<std::uint32_t> tree_order;  // the fast hierarchy's list: the visible ids in the tree's object order
     for (std::uint32_t o : flat.objects)
       if (is_visible(h.classes[o])) tree_order.push_back(o);
@@ -189,7 +189,7 @@ nlohmann::json bench_cull(std::size_t n, std::uint32_t leaf_size, const std::vec
                      {"fast_flat_ns", ff}, {"fast_bvh_ns", fb},
                      {"gpu_flat_ns", gf}, {"gpu_bvh_ns", gb}, {"node_tests", h.node_tests}, {"object_tests", h.object_tests},
                      {"fast_node_tests", hf.node_tests}, {"fast_object_tests", hf.object_tests},
-                     {"fast_range_objects", fast::CpuBvhCullOptions::kDefaultRangeObjects}, {"agree", agree}});
+                     {"fast_range_objects", fast::CpuBvhCullOptions::default_range_objects(BvKind::Aabb)}, {"agree", agree}});
   }
   return cells;
 }

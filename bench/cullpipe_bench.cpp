@@ -263,7 +263,7 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
       if (h.classes.empty()) h = bvh::cull_hierarchical(tree, vspan, f);
       // Its traversal tests the objects of small straddling nodes as ranges: the scalar
       // traversal's counts with the same range_objects; the classes do not depend on it.
-      const bvh::HierarchicalResult hf = bvh::cull_hierarchical(tree, vspan, f, {fast::CpuBvhCullOptions::kDefaultRangeObjects});
+      const bvh::HierarchicalResult hf = bvh::cull_hierarchical(tree, vspan, f, {fast::CpuBvhCullOptions::default_range_objects(kind_of<Volume>())});
       fast_bvh.cull(f, fast_h);
       bool ok = fast_h.classes == h.classes && hf.classes == h.classes && fast_h.node_tests == hf.node_tests &&
                 fast_h.object_tests == hf.object_tests && fast_h.visible == h.visible && fast_h.inside == h.inside;

@@ -466,7 +466,7 @@ TEST(CpuCuller, ReportsItsKernelsAndRejectsOnesTheCpuLacks) {
 }
 
 // The traversal a CpuBvhCuller pass with default options makes.
-const bvh::TraversalOptions kFastTraversal{fast::CpuBvhCullOptions::kDefaultRangeObjects};
+bvh::TraversalOptions fast_traversal(BvKind kind) { return {fast::CpuBvhCullOptions::default_range_objects(kind)}; }
 
 void expect_same_traversal(const bvh::HierarchicalResult& expected, const bvh::HierarchicalResult& got, const std::string& what) {
   ASSERT_EQ(got.classes.size(), expected.classes.size()) << what;
@@ -514,7 +514,7 @@ TEST(CpuBvhCuller, EqualsTheScalarTraversalExactly) {
             const std::string what = std::string(builder) + " n=" + std::to_string(n) + " isa=" + std::string(to_string(isa)) +
                                      " threads=" + std::to_string(threads) + " view " + std::to_string(v);
             culler.cull(views[v], reused);  // the default options
-            expect_same_traversal(bvh::cull_hierarchical(tree, boxes, views[v], kFastTraversal), reused, what);
+            expect_same_traversal(bvh::cull_hierarchical(tree, boxes, views[v], fast_traversal(BvKind::Aabb)), reused, what);
             if (HasFatalFailure()) return;
           }
           // Object ranges from leaves only, from nodes of up to 5 objects, and from nodes larger
@@ -573,7 +573,7 @@ TEST(CpuBvhCuller, TouchingBoxesAndLargeLeavesEqualTheScalarTraversal) {
     for (Isa isa : fast::supported_isas()) {
       fast::CpuBvhCuller culler(2, isa);
       culler.upload(tree, boxes);
-      for (std::uint32_t range : {0u, 3u, fast::CpuBvhCullOptions::kDefaultRangeObjects, 1000u})
+      for (std::uint32_t range : {0u, 3u, fast::CpuBvhCullOptions::default_range_objects(BvKind::Aabb), 1000u})
         for (std::size_t v = 0; v < views.size(); ++v) {
           const std::string what = "leaf " + std::to_string(leaf) + " isa=" + std::string(to_string(isa)) + " ranges " +
                                    std::to_string(range) + " view " + std::to_string(v);
@@ -620,7 +620,7 @@ TEST(CpuBvhCuller, MarginEdgesAndHugeCoordinatesEqualTheScalarTraversal) {
   const bvh::FlatTree obb_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(obbs))));
   for (Isa isa : fast::supported_isas()) {
     fast::CpuBvhCuller culler(2, isa);
-    for (std::uint32_t range : {0u, fast::CpuBvhCullOptions::kDefaultRangeObjects, 100000u})  // (the last: the whole tree one range)
+    for (std::uint32_t range : {0u, fast::CpuBvhCullOptions::default_range_objects(BvKind::Obb), fast::CpuBvhCullOptions::default_range_objects(BvKind::Aabb), 100000u})  // (the last: the whole tree one range)
       for (std::size_t v = 0; v < views.size(); ++v) {
         const std::string what = "isa=" + std::string(to_string(isa)) + " ranges " + std::to_string(range) + " view " + std::to_string(v);
         std::vector<std::uint32_t> ids;
@@ -672,9 +672,9 @@ TEST(CpuBvhCuller, SeveralViewsInOnePassEqualOnePassEach) {
           const std::string what = "kind " + std::to_string(kind) + " threads=" + std::to_string(threads) + " view " + std::to_string(view) +
                                    (options.classes ? " classes" : "") + (options.visible_ids ? " list" : "");
           const bvh::HierarchicalResult expected =
-              kind == 0   ? bvh::cull_hierarchical(tree, std::span<const Aabb>(v.aabbs), views[view], kFastTraversal)
-              : kind == 1 ? bvh::cull_hierarchical(tree, std::span<const Obb>(v.obbs), views[view], kFastTraversal)
-                          : bvh::cull_hierarchical(tree, std::span<const Sphere>(v.spheres), views[view], kFastTraversal);
+              kind == 0   ? bvh::cull_hierarchical(tree, std::span<const Aabb>(v.aabbs), views[view], fast_traversal(BvKind::Aabb))
+              : kind == 1 ? bvh::cull_hierarchical(tree, std::span<const Obb>(v.obbs), views[view], fast_traversal(BvKind::Obb))
+                          : bvh::cull_hierarchical(tree, std::span<const Sphere>(v.spheres), views[view], fast_traversal(BvKind::Sphere));
           const bvh::HierarchicalResult& got = results[view].result;
           if (options.classes) {
             expect_same_traversal(expected, got, what);
@@ -751,7 +751,7 @@ TEST(CpuBvhCuller, AnEmptyLeafTaskAtAnUnalignedPositionMarksNothing) {
   const glm::vec4 plane[1] = {{1, 0, 0, 0}};  // x >= 0: both leaves straddle it
   const Frustum f = Frustum::from_planes(plane);
   const bvh::HierarchicalResult expected =
-      bvh::cull_hierarchical(tree, std::span<const Aabb>(boxes), f, {fast::CpuBvhCullOptions::kDefaultRangeObjects});
+      bvh::cull_hierarchical(tree, std::span<const Aabb>(boxes), f, fast_traversal(BvKind::Aabb));
   for (Isa isa : fast::supported_isas())
     for (unsigned threads : {1u, 2u}) {
       fast::CpuBvhCuller culler(threads, isa);
@@ -836,7 +836,7 @@ TEST(CpuBvhCuller, ASteadyPassAllocatesNothing) {
   const long before = g_allocations.load();
   for (int i = 0; i < 10; ++i) frame();
   EXPECT_EQ(g_allocations.load() - before, 0) << "allocations in ten steady frames";
-  const bvh::HierarchicalResult expected = bvh::cull_hierarchical(tree, std::span<const Aabb>(v.aabbs), views[0], kFastTraversal);
+  const bvh::HierarchicalResult expected = bvh::cull_hierarchical(tree, std::span<const Aabb>(v.aabbs), views[0], fast_traversal(BvKind::Aabb));
   expect_same_traversal(expected, single, "steady");
 }
 
@@ -914,7 +914,7 @@ TEST(CpuBvhCuller, RefusesABadVolumeWhereverItIsAndKeepsTheLastUpload) {
   }
   // A good upload of another kind after the refusals, then boxes again: as fresh.
   culler.upload(sphere_tree, std::span<const Sphere>(v.spheres));
-  expect_same_traversal(bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(v.spheres), views[1], kFastTraversal),
+  expect_same_traversal(bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(v.spheres), views[1], fast_traversal(BvKind::Sphere)),
                         culler.cull(views[1]), "spheres after the refusals");
   culler.upload(box_tree, std::span<const Aabb>(v.aabbs));
   expect_same_traversal(before, culler.cull(views[0]), "boxes again");
@@ -938,13 +938,13 @@ TEST(CpuBvhCuller, UploadsOneAfterAnotherCullAsAFreshCuller) {
     for (const Frustum& view : views) {
       culler.upload(box_tree, std::span<const Aabb>(v.aabbs));
       culler.cull(view, got);
-      expect_same_traversal(bvh::cull_hierarchical(box_tree, std::span<const Aabb>(v.aabbs), view, kFastTraversal), got, "boxes n=" + std::to_string(n));
+      expect_same_traversal(bvh::cull_hierarchical(box_tree, std::span<const Aabb>(v.aabbs), view, fast_traversal(BvKind::Aabb)), got, "boxes n=" + std::to_string(n));
       culler.upload(obb_tree, std::span<const Obb>(v.obbs));
       culler.cull(view, got);
-      expect_same_traversal(bvh::cull_hierarchical(obb_tree, std::span<const Obb>(v.obbs), view, kFastTraversal), got, "obbs n=" + std::to_string(n));
+      expect_same_traversal(bvh::cull_hierarchical(obb_tree, std::span<const Obb>(v.obbs), view, fast_traversal(BvKind::Obb)), got, "obbs n=" + std::to_string(n));
       culler.upload(sphere_tree, std::span<const Sphere>(v.spheres));
       culler.cull(view, got);
-      expect_same_traversal(bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(v.spheres), view, kFastTraversal), got,
+      expect_same_traversal(bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(v.spheres), view, fast_traversal(BvKind::Sphere)), got,
                             "spheres n=" + std::to_string(n));
       if (HasFatalFailure()) return;
     }
@@ -968,7 +968,7 @@ TEST(CpuBvhCuller, ObbsAndSpheresEqualTheScalarTraversalAndFlatCulling) {
           culler.upload(obb_tree, std::span<const Obb>(v.obbs));
           EXPECT_EQ(culler.kind(), BvKind::Obb);
           culler.cull(views[view], got);
-          expect_same_traversal(bvh::cull_hierarchical(obb_tree, std::span<const Obb>(v.obbs), views[view], kFastTraversal), got, "obb " + what);
+          expect_same_traversal(bvh::cull_hierarchical(obb_tree, std::span<const Obb>(v.obbs), views[view], fast_traversal(BvKind::Obb)), got, "obb " + what);
           std::vector<Classification> flat(n);
           reference::classify_all(std::span<const Obb>(v.obbs), views[view], flat);
           EXPECT_EQ(got.classes, flat) << "obb " << what;
@@ -980,7 +980,7 @@ TEST(CpuBvhCuller, ObbsAndSpheresEqualTheScalarTraversalAndFlatCulling) {
           culler.cull(views[view], got);
           culler.cull(views[view], {false, true}, listed, ids);
           expect_visible_list(got, sphere_tree, ids, "sphere list " + what);
-          expect_same_traversal(bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(v.spheres), views[view], kFastTraversal), got, "sphere " + what);
+          expect_same_traversal(bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(v.spheres), views[view], fast_traversal(BvKind::Sphere)), got, "sphere " + what);
           reference::classify_all(std::span<const Sphere>(v.spheres), views[view], flat);
           EXPECT_EQ(got.classes, flat) << "sphere " << what;
           if (HasFatalFailure()) return;

@@ -159,10 +159,10 @@ void compare_backends(BackendResults& r, std::span<const Volume> volumes, std::s
   }
 }
 
-/// The CPU traversal's range_objects: `asked`, else the fast path's default for CpuPath::Fast
-/// and 0 (the classic traversal, the GPU's) for the reference.
-inline std::uint32_t cpu_range_objects(CpuPath cpu, std::optional<std::uint32_t> asked) {
-  return asked.value_or(cpu == CpuPath::Fast ? fast::CpuBvhCullOptions::kDefaultRangeObjects : 0);
+/// The CPU traversal's range_objects over volumes of `kind`: `asked`, else the fast path's
+/// default for CpuPath::Fast and 0 (the classic traversal, the GPU's) for the reference.
+inline std::uint32_t cpu_range_objects(CpuPath cpu, std::optional<std::uint32_t> asked, BvKind kind) {
+  return asked.value_or(cpu == CpuPath::Fast ? fast::CpuBvhCullOptions::default_range_objects(kind) : 0);
 }
 
 /// Hierarchical culling of `boxes` (AABBs, OBBs or spheres) through `tree`: on the CPU the
@@ -175,7 +175,7 @@ BackendResults cull_bvh_on_backends(const bvh::FlatTree& tree, std::span<const V
                                     Backend backend, GpuSession& session, bool warm_up, CpuPath cpu = CpuPath::Reference,
                                     std::optional<std::uint32_t> range_objects = std::nullopt, std::size_t max_reports = 10) {
   BackendResults r;
-  const bvh::TraversalOptions traversal{cpu_range_objects(cpu, range_objects)};
+  const bvh::TraversalOptions traversal{cpu_range_objects(cpu, range_objects, kind_of<Volume>())};
   if (backend != Backend::Gpu) {
     auto take = [&](bvh::HierarchicalResult& h) {
       r.cpu_counts.push_back({h.visible, h.inside, h.visible - h.inside});

@@ -51,8 +51,9 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--cpu", run.cpu, "CPU side: reference (scalar oracle) | fast (SIMD on every core, bit-exact with the reference)")->capture_default_str()->check(CLI::IsMember({"reference", "fast"}));
   run_cmd->add_option("--range-objects", run.range_objects,
                       "--cull bvh on the CPU: a straddling node of at most N objects tests its objects instead of descending (default: " +
-                          std::to_string(cullpipe::fast::CpuBvhCullOptions::kDefaultRangeObjects) +
-                          " with --cpu fast, 0 with --cpu reference; the GPU always descends to the leaves; no effect with --cull flat or --backend gpu)");
+                          std::to_string(cullpipe::fast::CpuBvhCullOptions::default_range_objects(cullpipe::BvKind::Aabb)) +
+                          " for AABBs and spheres, " + std::to_string(cullpipe::fast::CpuBvhCullOptions::default_range_objects(cullpipe::BvKind::Obb)) +
+                          " for OBBs with --cpu fast, 0 with --cpu reference; the GPU always descends to the leaves; no effect with --cull flat or --backend gpu)");
   run_cmd->add_option("--views", run.views, "Number of views on a camera path around the scene")->capture_default_str()->check(CLI::PositiveNumber);
   run_cmd->add_option("--json", run.json_path, "Write a summary as JSON");
   run_cmd->add_option("--dump", run.dump_path, "Write planes, volumes and classes (the classify schema)");

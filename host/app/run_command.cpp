@@ -177,7 +177,7 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
       if (hierarchical) {
         j["builder"] = o.builder;
         j["leaf_size"] = o.leaf_size;
-        j["range_objects"] = have_cpu ? cpu_range_objects(cpu_path(o), o.range_objects) : 0;
+        j["range_objects"] = have_cpu ? cpu_range_objects(cpu_path(o), o.range_objects, *bv) : 0;
         j["build_ns"] = built.build_ns;
         j["bvh"] = {{"nodes", built.metrics.nodes},
                     {"leaves", built.metrics.leaves},
@@ -216,7 +216,7 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
     if (!o.dump_path.empty()) {
       CullCase c{frusta, frusta.size() > 1, std::move(dump_volumes), {}, {}};
       // The counts are the CPU traversal's when the CPU ran, else the GPU's (which descends to the leaves).
-      const std::uint32_t range_objects = have_cpu ? cpu_range_objects(cpu_path(o), o.range_objects) : 0;
+      const std::uint32_t range_objects = have_cpu ? cpu_range_objects(cpu_path(o), o.range_objects, *bv) : 0;
       for (std::size_t v = 0; v < frusta.size(); ++v) c.tests.push_back({o.cull, r.node_tests[v], r.object_tests[v], range_objects});
       if (from_gltf) {
         // Where each object came from, and all its world-space volumes.

@@ -29,9 +29,14 @@ struct CpuBvhCullOptions {
   /// bvh::TraversalOptions::range_objects: straddling nodes of at most this many objects test
   /// their objects as one range instead of descending (see the class comment for why and what
   /// was measured); 0 is the classic traversal, bvh::cull_hierarchical's default and the GPU
-  /// culler's. The classes do not depend on it; the node and object test counts do.
-  std::uint32_t range_objects = kDefaultRangeObjects;
-  static constexpr std::uint32_t kDefaultRangeObjects = 96;
+  /// culler's. The classes do not depend on it; the node and object test counts do. Unset:
+  /// default_range_objects of the kind of volumes uploaded.
+  std::optional<std::uint32_t> range_objects;
+  /// The default ranges: 160 objects for boxes and spheres, 96 for OBBs (whose objects cost
+  /// 15 columns each to test, against 6 and 4).
+  static constexpr std::uint32_t default_range_objects(BvKind kind) { return kind == BvKind::Obb ? 96 : 160; }
+  /// range_objects, or the default for volumes of `kind`.
+  std::uint32_t range_objects_for(BvKind kind) const { return range_objects.value_or(default_range_objects(kind)); }
 };
 
 /// One view's result of a multi-view CpuBvhCuller pass.
@@ -66,10 +71,12 @@ struct CpuBvhViewResult {
 /// test saves fewer object tests than it costs. Ranges are tested in groups of up to 64
 /// objects, plane by plane, a bit per object: on 10^6 boxes and spheres (one thread), ranges
 /// of 96 objects took 0.140-0.151 ms at 10% visible against 0.171-0.179 for 32 (64 and 128 in
-/// between or equal; at 4*10^6, 0.106-0.112 ns/object against 0.133-0.144), and 96 is the
-/// default; with the volumes in blocks of 16 (since), boxes and spheres gain 2-4% from 160-192
-/// and OBBs lose. (Before the groups, ranges of 24 to 128 measured within a few percent of
-/// each other and 1.3-1.7x faster than none.)
+/// between or equal; at 4*10^6, 0.106-0.112 ns/object against 0.133-0.144). With the volumes
+/// in blocks of 16 (since), boxes and spheres are 3-5% faster with ranges of 160 than of 96 at
+/// 10% and 50% visible (10^5 to 4*10^6 objects, 2 threads), and OBBs 2-5% slower, so the
+/// default is 160 for boxes and spheres and 96 for OBBs (CpuBvhCullOptions::default_range_objects).
+/// (Before the groups, ranges of 24 to 128 measured within a few percent of each other and
+/// 1.3-1.7x faster than none.)
 ///
 /// The objects may be AABBs, OBBs or spheres (bvh::cull_hierarchical's three forms: a tree
 /// over OBBs or spheres is built over bvh::enclosing_boxes and its nodes are tested with a
@@ -99,9 +106,9 @@ class CpuBvhCuller {
 
   /// Over OBBs or spheres the frustum needs unit plane normals (bvh::require_unit_normals;
   /// Frustum's factories make them), else std::invalid_argument. With default options (ranges
-  /// of kDefaultRangeObjects): the classes equal bvh::cull_hierarchical's with its defaults,
-  /// the test counts those of bvh::cull_hierarchical(tree, volumes, frustum,
-  /// {CpuBvhCullOptions::kDefaultRangeObjects}).
+  /// of CpuBvhCullOptions::default_range_objects(kind())): the classes equal
+  /// bvh::cull_hierarchical's with its defaults, the test counts those of
+  /// bvh::cull_hierarchical(tree, volumes, frustum, {CpuBvhCullOptions::default_range_objects(kind())}).
   bvh::HierarchicalResult cull(const Frustum& frustum);
   /// The same into `result`, reusing its storage.
   void cull(const Frustum& frustum, bvh::HierarchicalResult& result);
