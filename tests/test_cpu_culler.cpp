@@ -768,7 +768,8 @@ TEST(CpuBvhCuller, AnEmptyLeafTaskAtAnUnalignedPositionMarksNothing) {
 // The visible-list kernel of every instruction set against a scalar listing: zero, full and
 // partial words, a partial last word, and room for the vector stores or only for the ids; and
 // runs of zero words of every length up to three times the vector of words the kernel skips at
-// once (8 with AVX-512, 4 with AVX2, 2 portable), ending anywhere, the last word too.
+// once (8 with AVX-512, 4 with AVX2, 2 portable), ending anywhere, the last word too; and
+// leaves every word clear for the next pass.
 TEST(CpuBvhCuller, ListKernelListsTheMarkedIds) {
   test::Rng rng{43};
   for (Isa isa : fast::supported_isas()) {
@@ -799,9 +800,11 @@ TEST(CpuBvhCuller, ListKernelListsTheMarkedIds) {
           if (marks[k / 64] >> (k % 64) & 1u) want.push_back(from[k]);
         for (std::size_t slack : {0u, 16u}) {
           std::vector<std::uint32_t> out(want.size() + slack + 1, 0xdeadbeefu);  // one guard past the room
-          std::uint32_t* end = table.list(marks.data(), words, from.data(), out.data(), out.data() + want.size() + slack);
+          std::vector<std::uint64_t> cleared = marks;  // (the kernel clears the words it lists)
+          std::uint32_t* end = table.list(cleared.data(), words, from.data(), out.data(), out.data() + want.size() + slack);
           const std::string what = std::string(to_string(isa)) + " objects " + std::to_string(objects) + " pattern " +
                                    std::to_string(pattern) + " slack " + std::to_string(slack);
+          EXPECT_EQ(cleared, std::vector<std::uint64_t>(words, 0)) << what << ": marks left set";
           ASSERT_EQ(end - out.data(), static_cast<std::ptrdiff_t>(want.size())) << what;
           EXPECT_EQ(std::vector<std::uint32_t>(out.begin(), out.begin() + std::ptrdiff_t(want.size())), want) << what;
           if (slack == 0) {
@@ -1054,6 +1057,27 @@ TEST(ThreadPool, WakesAfterSleepingAndIndexesItsThreads) {
     std::atomic<int> ran{0};
     short_lived.parallel_for(8, [&](std::size_t) { ++ran; });
     EXPECT_EQ(ran.load(), 8);
+  }
+}
+
+// Calls back to back, of 2 to 40 tasks, with pauses past the spin now and then (so the
+// workers sleep and the caller may sleep waiting for them): every task runs once, in its own
+// call. Each call's tasks write to storage that ends with the call, so a task run after its
+// call returned (a worker that read a call late) is a use after scope under AddressSanitizer,
+// and a task of one call run with another's count or lambda shows in the hits.
+TEST(ThreadPool, CallsBackToBackRunEveryTaskOnceInItsOwnCall) {
+  fast::ThreadPool pool(3);
+  for (int round = 0; round < 20000; ++round) {
+    if (round % 2500 == 1249) std::this_thread::sleep_for(std::chrono::microseconds(300));
+    const std::size_t tasks = 2 + static_cast<std::size_t>(round * 7919 % 39);
+    std::vector<int> hits(tasks, 0);
+    std::atomic<int> wrong_call{0};
+    pool.parallel_for(tasks, [&](std::size_t t) {
+      if (t >= hits.size()) wrong_call.fetch_add(1);
+      else ++hits[t];
+    });
+    ASSERT_EQ(wrong_call.load(), 0) << "round " << round;
+    for (std::size_t t = 0; t < tasks; ++t) ASSERT_EQ(hits[t], 1) << "round " << round << " task " << t;
   }
 }
 

@@ -292,7 +292,17 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
     tallies[t].marks = mark_words;
     mark_words += (std::size_t(nodes[tasks[t].node_or_first].count) + 63) / 64;
   }
-  if (ids && marks_.size() < mark_words) marks_.resize(mark_words);
+  if (ids) {
+    // The marks are all zero between passes: the listing clears every word it finds set, so
+    // a walk starts on clear words without clearing its subtree's (10^6 boxes, passes in turn:
+    // 7-8% faster at 1% visible, 2-2.5% at 10%, 0.5% at 50%; NOTES). A pass stopped between
+    // its walk and its listing (by an exception from a list's resize) leaves marks set;
+    // marks_clean_ says so, and the next pass clears them all first.
+    if (!marks_clean_) std::fill(marks_.begin(), marks_.end(), std::uint64_t{0});
+    marks_clean_ = true;
+    if (marks_.size() < mark_words) marks_.resize(mark_words);  // (new words are zero)
+    marks_clean_ = false;
+  }
   planes_.clear();
   for (const Frustum& f : views) planes_.push_back(detail::plane_set(f));
   const detail::WalkTree walk_tree{walk_nodes_.data(),   walk_blocks_.data(),   objects.data(),        range_objects,
@@ -324,10 +334,7 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
     const std::size_t subtree_nodes = root.skip - task.node_or_first;
     detail::WalkOutput out;
     out.classes = classes ? reinterpret_cast<std::uint8_t*>(view_classes.data()) : nullptr;
-    if (ids) {
-      out.marks = marks_.data() + tally.marks;
-      std::fill_n(out.marks, (std::size_t(root.count) + 63) / 64, std::uint64_t{0});
-    }
+    if (ids) out.marks = marks_.data() + tally.marks;  // (clear: see marks_clean_)
     out.work = work.data();
     out.work_capacity = subtree_nodes;
     const detail::WalkRoot walk_root{slot_of_[task.node_or_first], root.first, root.count, task.mask_or_count};
@@ -365,9 +372,10 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
     }
     const bvh::FlatNode& root = nodes[task.node_or_first];
     const std::uint32_t* from = objects.data() + root.first;
-    const std::uint64_t* marks = marks_.data() + tallies[index].marks;
+    std::uint64_t* marks = marks_.data() + tallies[index].marks;
     kernels_->list(marks, (std::size_t(root.count) + 63) / 64, from, out, out + tallies[index].visible);
   });
+  marks_clean_ = true;  // every subtree task's words listed, and so cleared
 }
 
 }  // namespace cullpipe::fast

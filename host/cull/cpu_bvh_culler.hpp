@@ -155,7 +155,8 @@ class CpuBvhCuller {
   std::vector<std::uint32_t> order_;  // the tasks in the order the threads take them
   std::vector<std::uint64_t> sort_keys_;  // per task, the key of the sort at hand
   std::vector<Tally> tallies_;
-  std::vector<std::uint64_t> marks_;  // the subtree tasks' visible objects, a bit each
+  std::vector<std::uint64_t> marks_;  // the subtree tasks' visible objects, a bit each; zero between passes
+  bool marks_clean_ = true;            // false from a pass's walk until its listing has cleared marks_
   std::vector<std::vector<std::uint32_t>> work_;  // per pool thread: a walk's work lists
   std::vector<std::size_t> offsets_;
   std::vector<detail::PlaneSet> planes_;  // per view

@@ -183,7 +183,8 @@ using ExpandKernel = std::uint32_t* (*)(const std::uint32_t* bits, std::size_t v
 /// Writes from[64 w + l] for every set bit l of marks[w], w = 0..words-1, in that order from
 /// `out`, and returns the new end; never writes at or past out_end. Reads from[0, 64 (words -
 /// 1)) whole (the words before the last) and, in the last word, only where a bit is set.
-using ListKernel = std::uint32_t* (*)(const std::uint64_t* marks, std::size_t words, const std::uint32_t* from, std::uint32_t* out,
+/// Leaves every word of marks zero.
+using ListKernel = std::uint32_t* (*)(std::uint64_t* marks, std::size_t words, const std::uint32_t* from, std::uint32_t* out,
                                       const std::uint32_t* out_end);
 
 struct KernelTable {

@@ -502,8 +502,9 @@ std::uint32_t* expand_ids(const std::uint32_t* bits, std::size_t vectors, std::u
 }
 
 /// Writes from[64 w + l] for every set bit l of marks[w], w = 0..words-1, in that order from
-/// `out`, and returns the new end; never writes at or past out_end.
-std::uint32_t* list_marked(const std::uint64_t* marks, std::size_t words, const std::uint32_t* from, std::uint32_t* out,
+/// `out`, and returns the new end; never writes at or past out_end. Clears each word it finds
+/// set, so the marks are zero again after it.
+std::uint32_t* list_marked(std::uint64_t* marks, std::size_t words, const std::uint32_t* from, std::uint32_t* out,
                            const std::uint32_t* out_end) {
   constexpr std::size_t kVectorWords = W / 2;  // the words one vector load reads
   for (std::size_t w = 0; w < words; ++w, from += 64) {
@@ -518,6 +519,7 @@ std::uint32_t* list_marked(const std::uint64_t* marks, std::size_t words, const 
       }
       continue;
     }
+    marks[w] = 0;
     if (word == ~std::uint64_t{0}) {
       __builtin_memcpy(out, from, 64 * sizeof *out);
       out += 64;

@@ -21,6 +21,7 @@ class TaskRef {
 
  private:
   TaskRef() : object_(nullptr), call_([](void*, std::size_t) {}) {}
+  friend class ThreadPool;  // (copies the two pointers into its own atomics)
   void* object_;
   void (*call_)(void*, std::size_t);
 };
@@ -31,7 +32,8 @@ class TaskRef {
 /// balance themselves. Tasks run with the caller's floating-point mode (on x86, its MXCSR:
 /// flush-to-zero, denormals-are-zero, rounding), so a result does not depend on which thread
 /// ran it. After a parallel_for the workers (and, while it waits for them, the caller) spin
-/// for up to 50 microseconds before they sleep, so the next call finds them awake. Not
+/// for up to 50 microseconds before they sleep, so the next call finds them awake; an awake
+/// pool hands a call to its workers and takes it back without a lock (thread_pool.cpp). Not
 /// reentrant: call parallel_for from one thread at a time.
 class ThreadPool {
  public:
@@ -57,23 +59,32 @@ class ThreadPool {
  private:
   void worker_loop();
   void stop_workers();  // wakes, stops and joins the workers
-  void run_tasks(std::size_t generation, const TaskRef& task, std::size_t tasks);
+  void run_tasks(std::uint64_t generation, const TaskRef& task, std::size_t tasks);
 
   std::vector<std::thread> workers_;
-  std::mutex mutex_;
-  std::condition_variable wake_, done_;
-  const TaskRef* task_ = nullptr;
-  std::size_t task_count_ = 0;
+  // A call is published like a seqlock: the caller makes generation_ odd, writes the call
+  // (job_*), then makes it even; a worker reads the call between two reads of the same even
+  // generation. Workers in a call count themselves in busy_ before they read it, and the
+  // caller returns only when busy_ is 0 again, so no task runs after its call returned.
+  // (Each of generation_ with the call, claim_ and busy_ on a cache line of its own: the caller
+  // waiting on busy_ must not take the claims' line from a worker claiming its next task.)
+  alignas(64) std::atomic<std::uint64_t> generation_ = 0;
+  std::atomic<void*> job_object_ = nullptr;
+  std::atomic<void (*)(void*, std::size_t)> job_call_ = nullptr;
+  std::atomic<std::size_t> job_tasks_ = 0;
+  std::atomic<std::uint32_t> job_fp_mode_ = 0;  // the caller's MXCSR (x86)
   // The generation's low 32 bits over the next task to claim, taken by compare-and-swap: a
   // thread claims a task of its own generation only, and never waits on a lock to claim one.
   static constexpr std::uint64_t kTaskMask = 0xffffffffu;
-  std::atomic<std::uint64_t> claim_ = 0;
-  // Written under mutex_; atomic so that threads may spin on them before they sleep.
-  std::atomic<std::size_t> generation_ = 0;  // bumped per parallel_for
-  std::atomic<unsigned> busy_ = 0;           // workers inside the current generation
-  std::exception_ptr error_;
-  std::uint32_t fp_mode_ = 0;  // the caller's MXCSR for this parallel_for (x86)
+  alignas(64) std::atomic<std::uint64_t> claim_ = 0;
+  alignas(64) std::atomic<unsigned> busy_ = 0;  // workers inside a call
+  // Sleeping: workers wait on wake_ (counted in sleepers_), the caller on done_ (caller_waits_).
+  alignas(64) std::mutex mutex_;
+  std::condition_variable wake_, done_;
+  std::atomic<unsigned> sleepers_ = 0;
+  std::atomic<bool> caller_waits_ = false;
   std::atomic<bool> stop_ = false;
+  std::exception_ptr error_;  // under mutex_
 };
 
 }  // namespace cullpipe::fast
