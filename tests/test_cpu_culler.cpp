@@ -1092,6 +1092,14 @@ TEST(ThreadPool, RunsEveryTaskOnceAndRethrows) {
   int after = 0;
   pool.parallel_for(1, [&](std::size_t) { ++after; });
   EXPECT_EQ(after, 1);
+  // On one thread too, the tasks after a throwing one still run.
+  fast::ThreadPool alone(1);
+  std::vector<int> hits(10, 0);
+  EXPECT_THROW(alone.parallel_for(hits.size(), [&](std::size_t t) {
+    ++hits[t];
+    if (t == 3) throw std::runtime_error("task 3");
+  }), std::runtime_error);
+  EXPECT_EQ(hits, std::vector<int>(10, 1));
 }
 
 }  // namespace

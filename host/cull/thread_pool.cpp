@@ -115,8 +115,10 @@ void ThreadPool::worker_loop() {
       sleepers_.fetch_sub(1);
     }
     if (stop_.load()) return;
-    // In the call before reading it: the caller does not return (and its task does not end)
-    // while this worker may run one of its tasks.
+    // Counted in busy_ before claiming a task: a claim (acq_rel, on the caller's claim word)
+    // orders this count before the caller's wait for busy_ == 0, so the caller does not
+    // return (and its task does not end) while this worker runs one of its tasks. A worker
+    // late for a finished call claims nothing: the claim word says all are taken.
     busy_.fetch_add(1);
     const TaskRef task = [&] {
       TaskRef t = TaskRef::none();
@@ -127,7 +129,7 @@ void ThreadPool::worker_loop() {
     const std::size_t tasks = job_tasks_.load(std::memory_order_relaxed);
     [[maybe_unused]] const std::uint32_t fp_mode = job_fp_mode_.load(std::memory_order_relaxed);
     std::atomic_thread_fence(std::memory_order_acquire);
-    if (generation_.load(std::memory_order_relaxed) == g) {  // a whole call, not one half rewritten
+    if (generation_.load() == g) {  // a whole call, not one half rewritten
       seen = g;
 #if defined(__SSE__)
       const unsigned own_mode = _mm_getcsr();
@@ -150,7 +152,13 @@ void ThreadPool::parallel_for(std::size_t tasks, TaskRef task) {
   if (tasks == 0) return;
   if (tasks > kTaskMask) throw std::length_error("ThreadPool::parallel_for: more than 2^32 - 1 tasks");
   if (workers_.empty() || tasks == 1) {
-    for (std::size_t t = 0; t < tasks; ++t) task(t);
+    std::exception_ptr first;  // (the remaining tasks still run, as on several threads)
+    for (std::size_t t = 0; t < tasks; ++t) try {
+        task(t);
+      } catch (...) {
+        if (!first) first = std::current_exception();
+      }
+    if (first) std::rethrow_exception(first);
     return;
   }
   // Publish the call: odd while it is written, even once whole.
@@ -171,7 +179,7 @@ void ThreadPool::parallel_for(std::size_t tasks, TaskRef task) {
   }
   run_tasks(generation, task, tasks);
   // Every task has been claimed; wait for the workers still running one (or reading the call).
-  if (!spin_until([&] { return busy_.load(std::memory_order_acquire) == 0; })) {
+  if (!spin_until([&] { return busy_.load() == 0; })) {
     std::unique_lock lock(mutex_);
     caller_waits_.store(true);
     done_.wait(lock, [&] { return busy_.load() == 0; });

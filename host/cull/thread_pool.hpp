@@ -64,7 +64,7 @@ class ThreadPool {
   std::vector<std::thread> workers_;
   // A call is published like a seqlock: the caller makes generation_ odd, writes the call
   // (job_*), then makes it even; a worker reads the call between two reads of the same even
-  // generation. Workers in a call count themselves in busy_ before they read it, and the
+  // generation. Workers count themselves in busy_ before they claim a task of it, and the
   // caller returns only when busy_ is 0 again, so no task runs after its call returned.
   // (Each of generation_ with the call, claim_ and busy_ on a cache line of its own: the caller
   // waiting on busy_ must not take the claims' line from a worker claiming its next task.)
