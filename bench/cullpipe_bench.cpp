@@ -10,7 +10,8 @@
 //              the faster median taken
 //   cpu-bvh    scalar hierarchical traversal (bvh::cull_hierarchical), a class per object
 //   cpu-fast-bvh  the same traversal on every core with SIMD kernels (fast::CpuBvhCuller), the visible
-//                 list; straddling nodes of <= 96 objects test their objects as one range (its default)
+//                 list; straddling nodes of <= 160 objects (96 for OBBs) test their objects as one
+//                 range (its defaults)
 //   gpu-flat   GpuCuller, visible list compacted on the device (time between timestamps)
 //   gpu-bvh    BvhCuller, visible list
 // Each method that keeps its own copy of the scene (cpu-fast, cpu-fast-bvh, gpu-flat, gpu-bvh)

@@ -181,10 +181,11 @@ TEST(Cli, RunWithTheBvhAgreesAndDumpsTestCounts) {
   // 96 for OBBs (CpuBvhCullOptions::default_range_objects).
   for (const auto& [bv, range] : {std::pair{"aabb", 160}, std::pair{"sphere", 160}, std::pair{"obb", 96}}) {
     const Result g = cullpipe("run --generate city:2000 --cull bvh --backend cpu --cpu fast --bv " + std::string(bv) + " --json '" +
-                              json.string() + "'");
+                              json.string() + "' --dump '" + dump.string() + "'");
     ASSERT_EQ(g.code, 0) << g.out << g.err;
     EXPECT_NE(g.out.find("ranges of <= " + std::to_string(range) + " objects"), std::string::npos) << bv << "\n" << g.out;
     EXPECT_EQ(nlohmann::json::parse(slurp(json))["range_objects"], range) << bv;
+    EXPECT_EQ(nlohmann::json::parse(slurp(dump))["tests"][0]["range_objects"], range) << bv;
   }
   // Flat culling records one object test per object and no node tests.
   const Result f = cullpipe("run --generate city:500 --dump '" + dump.string() + "'");

@@ -3,6 +3,7 @@
 // (objects exactly on planes, -0 normals, NaN and infinite values, denormals), several views.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <bit>
 #include <cfenv>
@@ -36,6 +37,7 @@
 // Counts operator new calls, so a test can check that a steady pass allocates nothing.
 namespace {
 std::atomic<long> g_allocations{0};
+std::atomic<bool> g_fail_next_allocation{false};  // the next operator new throws std::bad_alloc
 }
 // The replacement new allocates with malloc, so its deletes free; GCC cannot see that
 // pairing through inlined allocators and warns.
@@ -44,6 +46,7 @@ std::atomic<long> g_allocations{0};
 #pragma GCC diagnostic ignored "-Wmismatched-new-delete"
 void* operator new(std::size_t n) {
   ++g_allocations;
+  if (g_fail_next_allocation.exchange(false)) throw std::bad_alloc();
   if (void* p = std::malloc(n ? n : 1)) return p;
   throw std::bad_alloc();
 }
@@ -465,7 +468,11 @@ TEST(CpuCuller, ReportsItsKernelsAndRejectsOnesTheCpuLacks) {
   EXPECT_EQ(CpuCuller(config).threads(), 3u);
 }
 
-// The traversal a CpuBvhCuller pass with default options makes.
+// The traversal a CpuBvhCuller pass with default options makes (ranges of 160 objects for
+// boxes and spheres, 96 for OBBs: pinned here, as the README and the CLI say).
+static_assert(fast::CpuBvhCullOptions::default_range_objects(BvKind::Aabb) == 160 &&
+              fast::CpuBvhCullOptions::default_range_objects(BvKind::Sphere) == 160 &&
+              fast::CpuBvhCullOptions::default_range_objects(BvKind::Obb) == 96);
 bvh::TraversalOptions fast_traversal(BvKind kind) { return {fast::CpuBvhCullOptions::default_range_objects(kind)}; }
 
 void expect_same_traversal(const bvh::HierarchicalResult& expected, const bvh::HierarchicalResult& got, const std::string& what) {
@@ -811,6 +818,18 @@ TEST(CpuBvhCuller, ListKernelListsTheMarkedIds) {
             EXPECT_EQ(out[want.size()], 0xdeadbeefu) << what << ": wrote past out_end";
           }
         }
+        // Less room than marks (marks left set by a pass that stopped): the first ids, up to
+        // out_end and not past it.
+        const std::size_t room = want.size() / 2;
+        std::vector<std::uint32_t> out(room + 1, 0xdeadbeefu);
+        std::vector<std::uint64_t> cleared = marks;
+        std::uint32_t* end = table.list(cleared.data(), words, from.data(), out.data(), out.data() + room);
+        const std::string what = std::string(to_string(isa)) + " objects " + std::to_string(objects) + " pattern " +
+                                 std::to_string(pattern) + " room " + std::to_string(room);
+        ASSERT_EQ(end - out.data(), static_cast<std::ptrdiff_t>(room)) << what;
+        EXPECT_EQ(std::vector<std::uint32_t>(out.begin(), out.begin() + std::ptrdiff_t(room)),
+                  std::vector<std::uint32_t>(want.begin(), want.begin() + std::ptrdiff_t(room))) << what;
+        EXPECT_EQ(out[room], 0xdeadbeefu) << what << ": wrote past out_end";
       }
     }
   }
@@ -841,6 +860,45 @@ TEST(CpuBvhCuller, ASteadyPassAllocatesNothing) {
   EXPECT_EQ(g_allocations.load() - before, 0) << "allocations in ten steady frames";
   const bvh::HierarchicalResult expected = bvh::cull_hierarchical(tree, std::span<const Aabb>(v.aabbs), views[0], fast_traversal(BvKind::Aabb));
   expect_same_traversal(expected, single, "steady");
+}
+
+// The marks a walk sets are cleared by the listing, so a pass stopped between the two (here by
+// a visible list that cannot grow) leaves them set: the next pass must clear them before it
+// walks, or the objects the stopped pass found visible show up in its list.
+TEST(CpuBvhCuller, APassStoppedBeforeItsListingLeavesTheNextOneExact) {
+  test::Rng rng{47};
+  const test::RandomVolumes v = test::random_volumes(rng, 20000, 30.0f, 2.0f);
+  const std::span<const Aabb> boxes(v.aabbs);
+  const bvh::FlatTree tree = bvh::flatten(bvh::build("binned-sah", v.aabbs));
+  const std::vector<Frustum> views = test_views(false);
+  auto listed = [&](const Frustum& f) {  // the scalar traversal's visible ids, in tree order
+    const bvh::HierarchicalResult h = bvh::cull_hierarchical(tree, boxes, f, fast_traversal(BvKind::Aabb));
+    std::vector<std::uint32_t> ids;
+    for (std::uint32_t o : tree.objects)
+      if (is_visible(h.classes[o])) ids.push_back(o);
+    return ids;
+  };
+  const std::vector<std::uint32_t> first = listed(views[0]), second = listed(views[2]);
+  // (The premise: the stopped pass sees objects the next one does not.)
+  ASSERT_FALSE(second.empty());
+  std::vector<bool> in_second(v.aabbs.size());
+  for (std::uint32_t o : second) in_second[o] = true;
+  ASSERT_TRUE(std::any_of(first.begin(), first.end(), [&](std::uint32_t o) { return !in_second[o]; }));
+  for (unsigned threads : {1u, 2u}) {
+    fast::CpuBvhCuller culler(threads);
+    culler.upload(tree, boxes);
+    const fast::CpuBvhCullOptions ids_only{false, true};
+    bvh::HierarchicalResult r;
+    std::vector<std::uint32_t> settled, empty, ids;
+    culler.cull(views[0], ids_only, r, settled);  // the culler's own storage sized
+    g_fail_next_allocation = true;                // the next allocation: `empty`'s, after the walk
+    EXPECT_THROW(culler.cull(views[0], ids_only, r, empty), std::bad_alloc);
+    ASSERT_FALSE(g_fail_next_allocation.load());
+    culler.cull(views[2], ids_only, r, ids);
+    EXPECT_EQ(ids, second) << threads << " threads";
+    culler.cull(views[0], ids_only, r, ids);
+    EXPECT_EQ(ids, first) << threads << " threads";
+  }
 }
 
 TEST(CpuBvhCuller, RejectsKernelsTheCpuLacks) {

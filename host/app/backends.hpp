@@ -167,7 +167,7 @@ inline std::uint32_t cpu_range_objects(CpuPath cpu, std::optional<std::uint32_t>
 
 /// Hierarchical culling of `boxes` (AABBs, OBBs or spheres) through `tree`: on the CPU the
 /// scalar traversal (bvh::cull_hierarchical) or, with CpuPath::Fast, fast::CpuBvhCuller, with
-/// cpu_range_objects(cpu, range_objects); on the GPU BvhCuller (range_objects 0); compared
+/// cpu_range_objects(cpu, range_objects, kind); on the GPU BvhCuller (range_objects 0); compared
 /// object by object (the classes do not depend on range_objects; the test counts do, and each
 /// side's are proved against the scalar traversal with its own).
 template <class Volume>

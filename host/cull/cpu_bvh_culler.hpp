@@ -73,8 +73,9 @@ struct CpuBvhViewResult {
 /// of 96 objects took 0.140-0.151 ms at 10% visible against 0.171-0.179 for 32 (64 and 128 in
 /// between or equal; at 4*10^6, 0.106-0.112 ns/object against 0.133-0.144). With the volumes
 /// in blocks of 16 (since), boxes and spheres are 3-5% faster with ranges of 160 than of 96 at
-/// 10% and 50% visible (10^5 to 4*10^6 objects, 2 threads), and OBBs 2-5% slower, so the
-/// default is 160 for boxes and spheres and 96 for OBBs (CpuBvhCullOptions::default_range_objects).
+/// 10^6 objects and 10% or 50% visible (2 threads; at 10^5 2-3%, at 4*10^6 1-3% at 10% and
+/// 2-4% slower at 50%), and OBBs 2-5% slower, so the default is 160 for boxes and spheres and
+/// 96 for OBBs (CpuBvhCullOptions::default_range_objects).
 /// (Before the groups, ranges of 24 to 128 measured within a few percent of each other and
 /// 1.3-1.7x faster than none.)
 ///

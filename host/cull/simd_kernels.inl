@@ -520,7 +520,7 @@ std::uint32_t* list_marked(std::uint64_t* marks, std::size_t words, const std::u
       continue;
     }
     marks[w] = 0;
-    if (word == ~std::uint64_t{0}) {
+    if (word == ~std::uint64_t{0} && out_end - out >= 64) {
       __builtin_memcpy(out, from, 64 * sizeof *out);
       out += 64;
       continue;
@@ -545,7 +545,7 @@ std::uint32_t* list_marked(std::uint64_t* marks, std::size_t words, const std::u
         out += __builtin_popcount(lanes);
         continue;
       }
-      for (std::uint32_t rest = lanes; rest != 0; rest &= rest - 1) *out++ = from[q * W + static_cast<unsigned>(__builtin_ctz(rest))];
+      for (std::uint32_t rest = lanes; rest != 0 && out != out_end; rest &= rest - 1) *out++ = from[q * W + static_cast<unsigned>(__builtin_ctz(rest))];
     }
   }
   return out;
