@@ -299,7 +299,6 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
     // its walk and its listing (by an exception from a list's resize) leaves marks set;
     // marks_clean_ says so, and the next pass clears them all first.
     if (!marks_clean_) std::fill(marks_.begin(), marks_.end(), std::uint64_t{0});
-    marks_clean_ = true;
     if (marks_.size() < mark_words) marks_.resize(mark_words);  // (new words are zero)
     marks_clean_ = false;
   }

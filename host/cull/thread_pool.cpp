@@ -120,12 +120,7 @@ void ThreadPool::worker_loop() {
     // return (and its task does not end) while this worker runs one of its tasks. A worker
     // late for a finished call claims nothing: the claim word says all are taken.
     busy_.fetch_add(1);
-    const TaskRef task = [&] {
-      TaskRef t = TaskRef::none();
-      t.object_ = job_object_.load(std::memory_order_relaxed);
-      t.call_ = job_call_.load(std::memory_order_relaxed);
-      return t;
-    }();
+    const TaskRef task(job_object_.load(std::memory_order_relaxed), job_call_.load(std::memory_order_relaxed));
     const std::size_t tasks = job_tasks_.load(std::memory_order_relaxed);
     [[maybe_unused]] const std::uint32_t fp_mode = job_fp_mode_.load(std::memory_order_relaxed);
     std::atomic_thread_fence(std::memory_order_acquire);

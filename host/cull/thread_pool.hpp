@@ -21,7 +21,8 @@ class TaskRef {
 
  private:
   TaskRef() : object_(nullptr), call_([](void*, std::size_t) {}) {}
-  friend class ThreadPool;  // (copies the two pointers into its own atomics)
+  TaskRef(void* object, void (*call)(void*, std::size_t)) : object_(object), call_(call) {}
+  friend class ThreadPool;  // (copies the two pointers into its own atomics and back)
   void* object_;
   void (*call_)(void*, std::size_t);
 };
