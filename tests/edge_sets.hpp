@@ -255,4 +255,86 @@ inline EdgeSet<Sphere> sphere_edge_set() {
   return {spheres, views};
 }
 
+// The kernels also settle a straddling object without its full test when its fused centre
+// distance is nearer every plane than a lower bound on its reach (the smallest half extent
+// or the radius) less every rounding (pack_lower in cpu_culler.cpp). Objects where that lower
+// bound is exact or nearly so, within float steps of a straddling threshold (the n-vertex or
+// the p-vertex on the plane, the centre at +-r), far along planes through the origin (10^3 to
+// 10^6 away, so the centre's rounding share decides) and near planes farther out:
+// - boxes: cubes (their reach along n is the half extent times |n|_1);
+// - OBBs: cubes with an axis along the normal (reach = the half extent), and boxes whose two
+//   axes make 20 degrees, placed on the normal so that n.u0 = -n.u1 (reach 0.35 of the
+//   extent, far below the extent the axes would give if they were orthogonal).
+// Remove a rounding term from any of the lower bounds, or the Gershgorin term from the OBBs',
+// and these disagree with the reference.
+inline std::vector<Frustum> lower_edge_views(Rng& rng) { return slanted_views(rng, {0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 900.0f, -3000.0f}); }
+
+inline glm::vec3 far_along(Rng& rng, const Plane& plane, int i) {
+  const float reach = i % 4 == 0 ? 1e6f : i % 4 == 1 ? 1e5f : i % 4 == 2 ? 1e3f : 10.0f;
+  const glm::vec3 along = rng.vec3(-reach, reach), n = plane.normal;
+  return -plane.d * n + (along - glm::dot(along, n) * n);
+}
+
+// Moves every coordinate of `p` by |steps| float steps along +-n (the sign of `steps`).
+inline void nudge(glm::vec3& p, const glm::vec3& n, int steps) {
+  for (int k = 0; k < 3; ++k)
+    for (int t = 0; t < std::abs(steps); ++t) p[k] = std::nextafter(p[k], (steps > 0) == (n[k] > 0) ? 1e30f : -1e30f);
+}
+
+inline EdgeSet<Aabb> aabb_lower_edge_set() {
+  Rng rng(41);
+  std::vector<Frustum> views = lower_edge_views(rng);
+  std::vector<Aabb> boxes;
+  for (const Frustum& view : views) {
+    const Plane& plane = view.planes[0];
+    for (int i = 0; i < 1200; ++i) {
+      const glm::vec3 e(rng.uniform(0.05f, 3.0f));
+      const glm::vec3 c = far_along(rng, plane, i);
+      Aabb b{c - e, c + e};
+      const PnVertices v = pn_vertices(plane.normal, b);
+      const glm::vec3 shift = -plane.distance(i % 2 ? v.p : v.n) * plane.normal;
+      b.min += shift;
+      b.max += shift;
+      const int steps = i % 17 - 8;
+      nudge(b.min, plane.normal, steps);
+      nudge(b.max, plane.normal, steps);
+      boxes.push_back(b);
+    }
+  }
+  while (boxes.size() < 12000) boxes.push_back(boxes[rng.next() % boxes.size()]);
+  return {boxes, views};
+}
+
+inline EdgeSet<Obb> obb_lower_edge_set() {
+  Rng rng(43);
+  std::vector<Frustum> views = lower_edge_views(rng);
+  std::vector<Obb> obbs;
+  for (const Frustum& view : views) {
+    const Plane& plane = view.planes[0];
+    const glm::vec3 n = plane.normal;
+    for (int i = 0; i < 1200; ++i) {
+      const glm::vec3 a = glm::normalize(glm::cross(n, glm::normalize(rng.vec3(-1, 1) + glm::vec3(0.01f)))), w = glm::cross(n, a);
+      Obb o;
+      const float h = rng.uniform(0.05f, 3.0f);
+      o.half_extents = glm::vec3(h);
+      if (i % 3 == 0) {
+        const float phi = 10.0f * 3.14159265f / 180.0f;  // u0 and u1 20 degrees apart, n between their normals
+        o.basis = glm::mat3(std::cos(phi) * a - std::sin(phi) * n, std::cos(phi) * a + std::sin(phi) * n, w);
+      } else {
+        o.basis = glm::mat3(n, a, w);
+      }
+      float r = 0;  // the reference's projected radius
+      for (int k = 0; k < 3; ++k) {
+        const glm::vec3 u = o.basis[k];
+        r = k == 0 ? std::fabs((n.x * u.x + n.y * u.y) + n.z * u.z) * o.half_extents[k] : r + std::fabs((n.x * u.x + n.y * u.y) + n.z * u.z) * o.half_extents[k];
+      }
+      o.center = far_along(rng, plane, i) + (i % 2 ? r : -r) * n;
+      nudge(o.center, n, i % 17 - 8);
+      obbs.push_back(o);
+    }
+  }
+  while (obbs.size() < 12000) obbs.push_back(obbs[rng.next() % obbs.size()]);
+  return {obbs, views};
+}
+
 }  // namespace cullpipe::test

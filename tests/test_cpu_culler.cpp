@@ -328,6 +328,10 @@ TEST(CpuCuller, AabbsAtTheEdgeOfTheirPlaneBound) { check_edge_set(aabb_edge_set(
 
 TEST(CpuCuller, SpheresAtTheEdgeOfTheirPlaneBound) { check_edge_set(sphere_edge_set(), 1, "sphere at the bound"); }
 
+TEST(CpuCuller, AabbsAtTheEdgeOfTheirLowerBound) { check_edge_set(test::aabb_lower_edge_set(), 0, "aabb at the lower bound"); }
+
+TEST(CpuCuller, ObbsAtTheEdgeOfTheirLowerBound) { check_edge_set(test::obb_lower_edge_set(), 0, "obb at the lower bound"); }
+
 #if defined(__SSE__)
 TEST(CpuCuller, AgreesUnderFlushToZeroSetAfterThePoolStarted) {
   // An engine may turn FTZ/DAZ on at any time, on its own thread. Planes through the origin

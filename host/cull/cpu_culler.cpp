@@ -1,6 +1,7 @@
 #include "cull/cpu_culler.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -90,6 +91,17 @@ PlaneSet plane_set(const Frustum& f) {
     const float margin = d <= 0x1p120 ? round_up(0x1p-18 * d + 0x1p-100) : std::numeric_limits<float>::quiet_NaN();
     s.max_margin = std::isnan(s.max_margin) || std::isnan(margin) ? std::numeric_limits<float>::quiet_NaN() : std::max(s.max_margin, margin);
   }
+  // The lower bounds' factors: the smallest |n|_1 and |n|_2, rounded down, times 2^-8 (q's
+  // step) and 1 - 2^-12, which covers the packing's 2^-15 and the kernel's three roundings.
+  double l1 = std::numeric_limits<double>::infinity(), l2 = l1;
+  for (std::uint32_t k = 0; k < s.count; ++k) {
+    const double x = s.nx[k], y = s.ny[k], z = s.nz[k];
+    l1 = std::min(l1, std::fabs(x) + std::fabs(y) + std::fabs(z));
+    l2 = std::min(l2, std::sqrt(x * x + y * y + z * z));
+  }
+  auto scale = [](double c) { return c >= 0.5 && c <= 2.0 ? static_cast<float>(c * (1.0 - 0x1p-30) * 0x1p-8 * (1.0 - 0x1p-12)) : 0.0f; };
+  s.lower_scale_l1 = scale(l1);
+  s.lower_scale_l2 = scale(l2);
   return s;
 }
 
@@ -151,6 +163,84 @@ float sphere_plane_bound(const Sphere& s) {
   const double radius = std::fabs(double(s.radius));
   if (!(size <= 0x1p120) || !std::isfinite(radius)) return std::numeric_limits<float>::quiet_NaN();
   return round_up(radius * (1.0 + 0x1p-20) + 0x1p-18 * size + 0x1p-100);
+}
+
+// The lower bounds packed into the bounds' low bits (CentreArrays in simd_kernels.inl): per
+// object a value X such that, for every plane k of a unit-normal PlaneSet, the reference's
+// straddling threshold less every rounding of both centre distances is at least c_k X - m,
+// with m the plane's margin (PlaneSet::max_margin) and c_k the factor the kind names (|n_k|_1
+// for boxes, |n_k|_2 for OBBs, 1 for spheres). Then a fused smallest centre distance with
+// |s| < c X - m, c the smallest c_k, means the reference's INTERSECTING: every plane's
+// reference distance is above -(threshold) (not OUTSIDE) and the nearest one's below it. 0
+// where none holds (negative extents or radius, non-orthogonal axes).
+//
+// Spheres: the reference says OUTSIDE on a plane when s_ref < -r and straddles it when
+// s_ref < r; s and s_ref are within 12e (1 + 2^-20)(|c|_1 + |d|) of each other (see
+// obb_plane_bound), under 2^-18 |c|_1 + m. X = r (1 - 2^-20) - 2^-18 |c|_1; c_k = 1.
+double sphere_lower(const Sphere& s) {
+  const double size = std::fabs(double(s.center.x)) + std::fabs(double(s.center.y)) + std::fabs(double(s.center.z));
+  return double(s.radius) * (1.0 - 0x1p-20) - 0x1p-18 * size;
+}
+
+// Boxes: with E_i >= 0 the exact vertex distances are D_c +- R, R = sum |n_i| E_i >=
+// |n|_1 min E_i, and the reference's d_p, d_n and the kernel's s are within
+// 11e (|n|_2 (|C|_1 + |E|_1) + |d|) of them and D_c (see aabb_plane_bound), which is at most
+// |n|_1 2^-18 (|C|_1 + |E|_1) + m. X = min E_i (1 - 2^-50) - 2^-18 (|C|_1 + |E|_1) (the
+// double sums round by 2^-52); c_k = |n_k|_1. Subnormal roundings and DAZ / FTZ change the
+// distances by a few 2^-126, inside the 2^-100 of m.
+double aabb_lower(const Aabb& b) {
+  double size = 0.0, smallest = std::numeric_limits<double>::infinity();
+  for (int a = 0; a < 3; ++a) {
+    const double lo = b.min[a], hi = b.max[a], c = (lo + hi) / 2, e = (hi - lo) / 2;
+    size += std::fabs(c) + std::fabs(e);
+    smallest = std::min(smallest, e);
+  }
+  return smallest * (1.0 - 0x1p-50) - 0x1p-18 * size;  // (NaN for non-finite boxes: packs 0)
+}
+
+// OBBs: with h_i >= 0, r_ref = (|a0| h0 + |a1| h1) + |a2| h2 rounds each of its three
+// products and sums down by at most a factor 1 - e, and |a_i| >= |n.u_i| - 3.01 e |n|_2 |u_i|
+// (Cauchy-Schwarz on the dot product's rounding); sum |n.u_i| h_i >= min h |U^T n|_2 >=
+// min h sqrt(g) |n|_2, g a Gershgorin bound on the smallest eigenvalue of U^T U (the axes'
+// Gram matrix, in double: less 2^-48 of its largest diagonal for the sums' roundings; none
+// for axes far from orthogonal). DAZ / FTZ and subnormal roundings take at most 2^-122 h_i
+// more from each a_i h_i, and a few 2^-126 from the products and sums (inside m's 2^-100);
+// the centre distances are within 12e |n|_2 |c|_1 + 12e |d| of each other. With
+// |n|_2 >= 1/2 (PlaneSet::lower_scale_l2 is 0 otherwise),
+// X = (min h sqrt(g) (1 - 2^-40) - 2^-21 sum |u_i| h_i)(1 - 2^-20) - 2^-17 |c|_1
+// - 2^-118 sum h_i; c_k = |n_k|_2.
+double obb_lower(const Obb& b) {
+  double smallest = std::numeric_limits<double>::infinity(), sum = 0.0, spread = 0.0, size = 0.0;
+  double gram[3][3];
+  for (int i = 0; i < 3; ++i) {
+    const double h = b.half_extents[i];
+    if (!(h >= 0.0) || !std::isfinite(h)) return 0.0;
+    smallest = std::min(smallest, h);
+    sum += h;
+    for (int j = 0; j < 3; ++j)
+      gram[i][j] = double(b.basis[i].x) * b.basis[j].x + double(b.basis[i].y) * b.basis[j].y + double(b.basis[i].z) * b.basis[j].z;
+    spread += std::sqrt(gram[i][i]) * h;
+    size += std::fabs(double(b.center[i]));
+  }
+  double g = std::numeric_limits<double>::infinity();
+  for (int i = 0; i < 3; ++i) g = std::min(g, gram[i][i] - std::fabs(gram[i][(i + 1) % 3]) - std::fabs(gram[i][(i + 2) % 3]));
+  g -= 0x1p-48 * std::max({gram[0][0], gram[1][1], gram[2][2]});
+  if (!(g > 0.0) || !std::isfinite(g)) return 0.0;
+  return (smallest * std::sqrt(g) * (1.0 - 0x1p-40) - 0x1p-21 * spread) * (1.0 - 0x1p-20) - 0x1p-17 * size - 0x1p-118 * sum;
+}
+
+/// `bound` (a float bound from the functions here) with its lowest 8 bits replaced by
+/// q = floor(256 lower / bound') (0 to 255), bound' the bound rounded up to a multiple of 2^8
+/// float steps: still a bound (it only grew, by at most 2^-15 of itself), and the kernels read
+/// q bound / 256 <= lower (1 + 2^-15) back. NaN, infinite and zero bounds are kept as they are
+/// (each settles nothing either way).
+float pack_lower(float bound, double lower) {
+  if (!(bound > 0.0f) || !std::isfinite(bound)) return bound;
+  std::uint32_t bits = (std::bit_cast<std::uint32_t>(bound) + 255u) & ~255u;  // (a carry into the exponent is still larger)
+  const float rounded = std::bit_cast<float>(bits);
+  if (!std::isfinite(rounded)) return rounded;
+  const double q = lower > 0.0 ? std::floor(std::min(255.0, 256.0 * (lower / double(rounded)) * (1.0 - 0x1p-40))) : 0.0;
+  return std::bit_cast<float>(bits | static_cast<std::uint32_t>(q));
 }
 
 /// AabbArrays::bound of `b`, and its centre (min + max) / 2 rounded to a float. With a margin
@@ -334,11 +424,12 @@ void CpuCuller::upload_columns(std::span<const Volume> volumes, Store store) {
   count_ = volumes.size();
 }
 
+
 void CpuCuller::upload(std::span<const Aabb> volumes) {
   static_assert(detail::kAabbRecordFloats == 8);
   upload_columns<4, detail::kAabbRecordFloats>(volumes, [](const Aabb& b, float* const* c, std::size_t i) {
     glm::vec3 centre;
-    c[3][i] = aabb_plane_bound(b, centre);
+    c[3][i] = pack_lower(aabb_plane_bound(b, centre), aabb_lower(b));
     c[0][i] = centre.x, c[1][i] = centre.y, c[2][i] = centre.z;
     float* record = c[4] + i * detail::kAabbRecordFloats;  // as cull_aabb's resolve reads it
     for (int a = 0; a < 3; ++a) {
@@ -353,7 +444,7 @@ void CpuCuller::upload(std::span<const Obb> volumes) {
   static_assert(detail::kObbRecordFloats == 16);
   upload_columns<4, detail::kObbRecordFloats>(volumes, [](const Obb& b, float* const* c, std::size_t i) {
     c[0][i] = b.center.x, c[1][i] = b.center.y, c[2][i] = b.center.z;
-    c[3][i] = obb_plane_bound(b);
+    c[3][i] = pack_lower(obb_plane_bound(b), obb_lower(b));
     float* record = c[4] + i * detail::kObbRecordFloats;  // as classify_obb_records reads it
     for (int a = 0; a < 3; ++a) {
       record[a] = b.center[a];
@@ -369,7 +460,7 @@ void CpuCuller::upload(std::span<const Obb> volumes) {
 void CpuCuller::upload(std::span<const Sphere> volumes) {
   upload_columns<5, 0>(volumes, [](const Sphere& s, float* const* c, std::size_t i) {
     c[0][i] = s.center.x, c[1][i] = s.center.y, c[2][i] = s.center.z;
-    c[3][i] = sphere_plane_bound(s);
+    c[3][i] = pack_lower(sphere_plane_bound(s), sphere_lower(s));
     c[4][i] = s.radius;
   });
 }

@@ -18,6 +18,10 @@ struct PlaneSet {
   /// The share of the settling margin that depends on the plane, 2^-18 |d| rounded up,
   /// at its largest over the planes (NaN past |d| = 2^120: nothing is settled).
   float max_margin = 0.0f;
+  /// The factors of the lower bounds packed in the bounds (CentreArrays in simd_kernels.inl):
+  /// the smallest |n|_1 (boxes) and |n|_2 (OBBs) over the planes, rounded down, times 2^-8
+  /// (1 - 2^-12); 0 (nothing settled by them) where that smallest norm is outside [1/2, 2].
+  float lower_scale_l1 = 0.0f, lower_scale_l2 = 0.0f;
 };
 
 /// Structure-of-arrays bounds; every array holds at least `padded` floats (a multiple of 16),
@@ -29,7 +33,8 @@ constexpr std::size_t kAabbRecordFloats = 8;
 struct AabbArrays {
   const float *c_x, *c_y, *c_z;  ///< centres, (min + max) / 2 rounded to nearest
   /// Per box, aabb_plane_bound(): with PlaneSet::max_margin, covers the half diagonal and every
-  /// rounding of the reference's and the kernel's distances (or NaN: no bound).
+  /// rounding of the reference's and the kernel's distances (or NaN: no bound); its lowest 8
+  /// bits a lower bound (pack_lower).
   const float* bound;
   const float* records;  ///< box i at records + i * kAabbRecordFloats, 32-byte aligned
 };
@@ -41,7 +46,8 @@ struct ObbArrays {
   const float *c_x, *c_y, *c_z;
   /// Per object, obb_plane_bound(): with PlaneSet::max_margin, at least |r| for the reference's
   /// projected radius r against any plane of a unit-normal PlaneSet, plus every rounding of the
-  /// reference's and the kernel's centre distances (or NaN: no bound).
+  /// reference's and the kernel's centre distances (or NaN: no bound); its lowest 8 bits a
+  /// lower bound (pack_lower).
   const float* bound;
   const float* records;  ///< object i at records + i * kObbRecordFloats, 64-byte aligned
 };
@@ -50,7 +56,8 @@ struct ObbArrays {
 struct SphereArrays {
   const float *c_x, *c_y, *c_z;
   /// Per sphere, sphere_plane_bound(): with PlaneSet::max_margin, covers |radius| and every
-  /// rounding of the reference's and the kernel's centre distances (or NaN: no bound).
+  /// rounding of the reference's and the kernel's centre distances (or NaN: no bound); its
+  /// lowest 8 bits a lower bound (pack_lower).
   const float* bound;
   const float* radius;
 };
