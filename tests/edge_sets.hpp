@@ -281,60 +281,57 @@ inline void nudge(glm::vec3& p, const glm::vec3& n, int steps) {
     for (int t = 0; t < std::abs(steps); ++t) p[k] = std::nextafter(p[k], (steps > 0) == (n[k] > 0) ? 1e30f : -1e30f);
 }
 
-inline EdgeSet<Aabb> aabb_lower_edge_set() {
-  Rng rng(41);
+// Per view of lower_edge_views, 1200 volumes make(rng, plane, i), then copies of them up to
+// 12,000 (more than two runs of the kernel).
+template <class Volume, class Make>
+EdgeSet<Volume> lower_edge_set(std::uint64_t seed, Make make) {
+  Rng rng(seed);
   std::vector<Frustum> views = lower_edge_views(rng);
-  std::vector<Aabb> boxes;
-  for (const Frustum& view : views) {
-    const Plane& plane = view.planes[0];
-    for (int i = 0; i < 1200; ++i) {
-      const glm::vec3 e(rng.uniform(0.05f, 3.0f));
-      const glm::vec3 c = far_along(rng, plane, i);
-      Aabb b{c - e, c + e};
-      const PnVertices v = pn_vertices(plane.normal, b);
-      const glm::vec3 shift = -plane.distance(i % 2 ? v.p : v.n) * plane.normal;
-      b.min += shift;
-      b.max += shift;
-      const int steps = i % 17 - 8;
-      nudge(b.min, plane.normal, steps);
-      nudge(b.max, plane.normal, steps);
-      boxes.push_back(b);
-    }
-  }
-  while (boxes.size() < 12000) boxes.push_back(boxes[rng.next() % boxes.size()]);
-  return {boxes, views};
+  std::vector<Volume> volumes;
+  for (const Frustum& view : views)
+    for (int i = 0; i < 1200; ++i) volumes.push_back(make(rng, view.planes[0], i));
+  while (volumes.size() < 12000) volumes.push_back(volumes[rng.next() % volumes.size()]);
+  return {volumes, views};
+}
+
+inline EdgeSet<Aabb> aabb_lower_edge_set() {
+  return lower_edge_set<Aabb>(41, [](Rng& rng, const Plane& plane, int i) {
+    const glm::vec3 e(rng.uniform(0.05f, 3.0f));
+    const glm::vec3 c = far_along(rng, plane, i);
+    Aabb b{c - e, c + e};
+    const PnVertices v = pn_vertices(plane.normal, b);
+    const glm::vec3 shift = -plane.distance(i % 2 ? v.p : v.n) * plane.normal;
+    b.min += shift;
+    b.max += shift;
+    const int steps = i % 17 - 8;
+    nudge(b.min, plane.normal, steps);
+    nudge(b.max, plane.normal, steps);
+    return b;
+  });
 }
 
 inline EdgeSet<Obb> obb_lower_edge_set() {
-  Rng rng(43);
-  std::vector<Frustum> views = lower_edge_views(rng);
-  std::vector<Obb> obbs;
-  for (const Frustum& view : views) {
-    const Plane& plane = view.planes[0];
+  return lower_edge_set<Obb>(43, [](Rng& rng, const Plane& plane, int i) {
     const glm::vec3 n = plane.normal;
-    for (int i = 0; i < 1200; ++i) {
-      const glm::vec3 a = glm::normalize(glm::cross(n, glm::normalize(rng.vec3(-1, 1) + glm::vec3(0.01f)))), w = glm::cross(n, a);
-      Obb o;
-      const float h = rng.uniform(0.05f, 3.0f);
-      o.half_extents = glm::vec3(h);
-      if (i % 3 == 0) {
-        const float phi = 10.0f * 3.14159265f / 180.0f;  // u0 and u1 20 degrees apart, n between their normals
-        o.basis = glm::mat3(std::cos(phi) * a - std::sin(phi) * n, std::cos(phi) * a + std::sin(phi) * n, w);
-      } else {
-        o.basis = glm::mat3(n, a, w);
-      }
-      float r = 0;  // the reference's projected radius
-      for (int k = 0; k < 3; ++k) {
-        const glm::vec3 u = o.basis[k];
-        r = k == 0 ? std::fabs((n.x * u.x + n.y * u.y) + n.z * u.z) * o.half_extents[k] : r + std::fabs((n.x * u.x + n.y * u.y) + n.z * u.z) * o.half_extents[k];
-      }
-      o.center = far_along(rng, plane, i) + (i % 2 ? r : -r) * n;
-      nudge(o.center, n, i % 17 - 8);
-      obbs.push_back(o);
+    const glm::vec3 a = glm::normalize(glm::cross(n, glm::normalize(rng.vec3(-1, 1) + glm::vec3(0.01f)))), w = glm::cross(n, a);
+    Obb o;
+    o.half_extents = glm::vec3(rng.uniform(0.05f, 3.0f));
+    if (i % 3 == 0) {
+      const float phi = 10.0f * 3.14159265f / 180.0f;  // u0 and u1 20 degrees apart, n between their normals
+      o.basis = glm::mat3(std::cos(phi) * a - std::sin(phi) * n, std::cos(phi) * a + std::sin(phi) * n, w);
+    } else {
+      o.basis = glm::mat3(n, a, w);
     }
-  }
-  while (obbs.size() < 12000) obbs.push_back(obbs[rng.next() % obbs.size()]);
-  return {obbs, views};
+    float r = 0;  // the reference's projected radius, its operations in its order
+    for (int k = 0; k < 3; ++k) {
+      const glm::vec3 u = o.basis[k];
+      const float term = std::fabs((n.x * u.x + n.y * u.y) + n.z * u.z) * o.half_extents[k];
+      r = k == 0 ? term : r + term;
+    }
+    o.center = far_along(rng, plane, i) + (i % 2 ? r : -r) * n;
+    nudge(o.center, n, i % 17 - 8);
+    return o;
+  });
 }
 
 }  // namespace cullpipe::test
