@@ -259,18 +259,42 @@ inline EdgeSet<Sphere> sphere_edge_set() {
 // distance is nearer every plane than a lower bound on its reach (the smallest half extent
 // or the radius) less every rounding (pack_lower in cpu_culler.cpp). Objects where that lower
 // bound is exact or nearly so, within float steps of a straddling threshold (the n-vertex or
-// the p-vertex on the plane, the centre at +-r), far along planes through the origin (10^3 to
-// 10^6 away, so the centre's rounding share decides) and near planes farther out:
+// the p-vertex on the plane, the centre at +-r), along planes through the origin (10 to 10^6
+// away, so the centre's rounding share decides) and near planes farther out:
 // - boxes: cubes (their reach along n is the half extent times |n|_1);
 // - OBBs: cubes with an axis along the normal (reach = the half extent), and boxes whose two
 //   axes make 20 degrees, placed on the normal so that n.u0 = -n.u1 (reach 0.35 of the
-//   extent, far below the extent the axes would give if they were orthogonal).
+//   extent, far below the extent the axes would give if they were orthogonal);
+// - spheres: centres at +-r.
 // Remove a rounding term from any of the lower bounds, or the Gershgorin term from the OBBs',
-// and these disagree with the reference.
+// and these disagree with the reference. Each set also gets the views of add_unbounded_views
+// and the same planes with normals of length 0.75 and 0.4 (the lower bounds scale with the
+// shortest; below 1/2 the OBBs' settle nothing by them), and volumes past 2^119 whose packed
+// lower bound would overflow the kernels' product if it were kept.
 inline std::vector<Frustum> lower_edge_views(Rng& rng) { return slanted_views(rng, {0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 900.0f, -3000.0f}); }
 
+// The views above plus: each of the first six with its plane scaled by 0.75 and by 0.4 (built
+// by hand: from_planes would normalise them), planes x = 0 and x = -+2^120 (for the huge
+// volumes), and add_unbounded_views.
+inline void add_lower_edge_views(std::vector<Frustum>& views) {
+  for (std::size_t v = 0; v < 6; ++v)
+    for (float scale : {0.75f, 0.4f}) {
+      Frustum scaled = views[v];
+      scaled.planes[0].normal *= scale;
+      scaled.planes[0].d *= scale;
+      views.push_back(scaled);
+    }
+  for (float d : {0.0f, 0x1p120f, -0x1p120f}) {
+    const glm::vec4 plane(1, 0, 0, d);
+    views.push_back(Frustum::from_planes({&plane, 1}));
+  }
+  add_unbounded_views(views);
+}
+
 inline glm::vec3 far_along(Rng& rng, const Plane& plane, int i) {
-  const float reach = i % 4 == 0 ? 1e6f : i % 4 == 1 ? 1e5f : i % 4 == 2 ? 1e3f : 10.0f;
+  // (At 10^6 the centre's share, 3.8, exceeds every extent: nothing settles by the lower bound,
+  // but a lower bound without that share would settle many.)
+  const float reach = i % 5 == 0 ? 1e6f : i % 5 == 1 ? 1e5f : i % 5 == 2 ? 1e4f : i % 5 == 3 ? 1e3f : 10.0f;
   const glm::vec3 along = rng.vec3(-reach, reach), n = plane.normal;
   return -plane.d * n + (along - glm::dot(along, n) * n);
 }
@@ -281,16 +305,18 @@ inline void nudge(glm::vec3& p, const glm::vec3& n, int steps) {
     for (int t = 0; t < std::abs(steps); ++t) p[k] = std::nextafter(p[k], (steps > 0) == (n[k] > 0) ? 1e30f : -1e30f);
 }
 
-// Per view of lower_edge_views, 1200 volumes make(rng, plane, i), then copies of them up to
-// 12,000 (more than two runs of the kernel).
+// Per view of lower_edge_views, 1200 volumes make(rng, plane, i), then `extra`, then copies of
+// them up to 12,000 (more than two runs of the kernel); the views of add_lower_edge_views.
 template <class Volume, class Make>
-EdgeSet<Volume> lower_edge_set(std::uint64_t seed, Make make) {
+EdgeSet<Volume> lower_edge_set(std::uint64_t seed, Make make, std::initializer_list<Volume> extra) {
   Rng rng(seed);
   std::vector<Frustum> views = lower_edge_views(rng);
   std::vector<Volume> volumes;
   for (const Frustum& view : views)
     for (int i = 0; i < 1200; ++i) volumes.push_back(make(rng, view.planes[0], i));
+  volumes.insert(volumes.end(), extra);
   while (volumes.size() < 12000) volumes.push_back(volumes[rng.next() % volumes.size()]);
+  add_lower_edge_views(views);
   return {volumes, views};
 }
 
@@ -307,7 +333,7 @@ inline EdgeSet<Aabb> aabb_lower_edge_set() {
     nudge(b.min, plane.normal, steps);
     nudge(b.max, plane.normal, steps);
     return b;
-  });
+  }, {Aabb{{0x1p120f, -1, -1}, {0x1p121f, 1, 1}}, Aabb{{-0x1p119f, -0x1p119f, -0x1p119f}, {0x1p119f, 0x1p119f, 0x1p119f}}});
 }
 
 inline EdgeSet<Obb> obb_lower_edge_set() {
@@ -331,7 +357,21 @@ inline EdgeSet<Obb> obb_lower_edge_set() {
     o.center = far_along(rng, plane, i) + (i % 2 ? r : -r) * n;
     nudge(o.center, n, i % 17 - 8);
     return o;
-  });
+  }, {// Past 2^119: bound about 2^122.6, q would be 85 and q bound overflow (INSIDE at x = 2^120).
+      Obb{{0x1p120f, 0, 0}, glm::mat3(0x1p100f), glm::vec3(0x1p21f)}, Obb{{-0x1p120f, 0, 0}, glm::mat3(0x1p100f), glm::vec3(0x1p21f)},
+      // Subnormal extents on long axes: DAZ reads them as 0 (INSIDE at x = 0), so no lower bound.
+      Obb{{0, 0, 0}, glm::mat3(0x1p40f), glm::vec3(0x1p-127f)}, Obb{{0x1p-100f, 0, 0}, glm::mat3(0x1p60f), glm::vec3(0x1p-130f)}});
+}
+
+inline EdgeSet<Sphere> sphere_lower_edge_set() {
+  return lower_edge_set<Sphere>(47, [](Rng& rng, const Plane& plane, int i) {
+    const float r = rng.uniform(0.05f, 3.0f);
+    Sphere sp{far_along(rng, plane, i) + (i % 2 ? r : -r) * plane.normal, r};
+    nudge(sp.center, plane.normal, i % 17 - 8);
+    return sp;
+  }, {// Past 2^119 (q bound would overflow): OUTSIDE, INSIDE and OUTSIDE of x = 0, x = -2^120, x = 2^120.
+      Sphere{{-1.01f * 0x1p120f - 0x1p100f, 0, 0}, 1.01f * 0x1p120f}, Sphere{{0x1p120f, 0, 0}, 1.01f * 0x1p120f},
+      Sphere{{-0x1p120f, 0, 0}, 1.01f * 0x1p120f}, Sphere{{0, 0, 0}, 0x1p-127f}});
 }
 
 }  // namespace cullpipe::test

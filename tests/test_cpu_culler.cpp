@@ -253,6 +253,8 @@ TEST(CpuCuller, BothReadOrdersOfTheMemoryFloorReadEveryCentreAndBound) {
         boxes.back() = {{3e-3f, 5e-10f, -2.5f}, {3e-3f, 5e-10f, -1.5f}};
         std::vector<glm::vec4> centre_bounds(n);
         fast::detail::aabb_centre_bounds(boxes, centre_bounds);
+        for (std::size_t i = 0; i < n; ++i)  // as the culler stores them
+          centre_bounds[i].w = fast::detail::pack_lower(centre_bounds[i].w, fast::detail::aabb_lower(boxes[i]));
         std::uint32_t column[4] = {}, x_before_last = 0;
         for (std::size_t i = 0; i < n; ++i)
           for (int k = 0; k < 4; ++k) column[k] |= bits(centre_bounds[i][k]);
@@ -332,6 +334,36 @@ TEST(CpuCuller, AabbsAtTheEdgeOfTheirLowerBound) { check_edge_set(test::aabb_low
 
 TEST(CpuCuller, ObbsAtTheEdgeOfTheirLowerBound) { check_edge_set(test::obb_lower_edge_set(), 0, "obb at the lower bound"); }
 
+TEST(CpuCuller, SpheresAtTheEdgeOfTheirLowerBound) { check_edge_set(test::sphere_lower_edge_set(), 0, "sphere at the lower bound"); }
+
+TEST(CpuCuller, PackedLowerBoundsStayBoundsAndReadBackBelowTheLowerBound) {
+  using fast::detail::pack_lower;
+  auto bits = [](float f) { return std::bit_cast<std::uint32_t>(f); };
+  const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
+  test::Rng rng(5);
+  for (int i = 0; i < 100000; ++i) {
+    const float bound = std::ldexp(rng.uniform(1.0f, 2.0f), static_cast<int>(rng.next() % 250) - 125);
+    const double lower = double(bound) * rng.uniform(-0.5f, 1.5f);
+    const float packed = pack_lower(bound, lower);
+    ASSERT_GE(packed, bound) << bound;
+    ASSERT_LE(double(packed), double(bound) * (1.0 + 0x1p-14)) << bound;
+    const std::uint32_t q = bits(packed) & 255u;
+    ASSERT_LE(double(q) * double(packed) / 256.0, std::max(0.0, lower) * (1.0 + 0x1p-15)) << bound << " " << lower;
+    if (bound > 0x1p119f || lower <= 0.0) {
+      ASSERT_EQ(q, 0u) << bound << " " << lower;
+    }
+    if (bound <= 0x1p118f && lower > double(bound) * 0.5) {
+      ASSERT_GE(q, 127u) << bound << " " << lower;  // (it does carry one)
+    }
+    ASSERT_LT(double(q) * double(packed), 0x1p127) << bound;
+  }
+  EXPECT_EQ(bits(pack_lower(nan, 1.0)), bits(nan));
+  EXPECT_EQ(pack_lower(inf, 1.0), inf);
+  EXPECT_EQ(bits(pack_lower(0.0f, 1.0)), 0u);
+  EXPECT_EQ(pack_lower(std::numeric_limits<float>::max(), 1e38), inf);  // rounding up carries into the exponent
+  EXPECT_EQ(bits(pack_lower(std::nextafter(2.0f, 0.0f), 1.9)), bits(2.0f) | 243u);  // 1.999... carries to 2, q = floor(256 * 0.95 = 243.2)
+}
+
 #if defined(__SSE__)
 TEST(CpuCuller, AgreesUnderFlushToZeroSetAfterThePoolStarted) {
   // An engine may turn FTZ/DAZ on at any time, on its own thread. Planes through the origin
@@ -407,6 +439,9 @@ TEST(CpuCuller, BoundsHoldInEveryFloatModeAtUploadAndCull) {
   expect_mode_independent(obb_edge_set(), "obb");
   expect_mode_independent(aabb_edge_set(), "aabb");
   expect_mode_independent(sphere_edge_set(), "sphere");
+  expect_mode_independent(test::aabb_lower_edge_set(), "aabb, lower bound");
+  expect_mode_independent(test::obb_lower_edge_set(), "obb, lower bound");
+  expect_mode_independent(test::sphere_lower_edge_set(), "sphere, lower bound");
 }
 #endif
 

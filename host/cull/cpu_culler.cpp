@@ -165,6 +165,10 @@ float sphere_plane_bound(const Sphere& s) {
   return round_up(radius * (1.0 + 0x1p-20) + 0x1p-18 * size + 0x1p-100);
 }
 
+}  // namespace
+
+namespace detail {
+
 // The lower bounds packed into the bounds' low bits (CentreArrays in simd_kernels.inl): per
 // object a value X such that, for every plane k of a unit-normal PlaneSet, the reference's
 // straddling threshold less every rounding of both centre distances is at least c_k X - m,
@@ -203,8 +207,9 @@ double aabb_lower(const Aabb& b) {
 // (Cauchy-Schwarz on the dot product's rounding); sum |n.u_i| h_i >= min h |U^T n|_2 >=
 // min h sqrt(g) |n|_2, g a Gershgorin bound on the smallest eigenvalue of U^T U (the axes'
 // Gram matrix, in double: less 2^-48 of its largest diagonal for the sums' roundings; none
-// for axes far from orthogonal). DAZ / FTZ and subnormal roundings take at most 2^-122 h_i
-// more from each a_i h_i, and a few 2^-126 from the products and sums (inside m's 2^-100);
+// for axes far from orthogonal). With every h_i normal (none for a subnormal one, which DAZ
+// reads as 0), DAZ / FTZ and subnormal roundings take at most 2^-122 h_i more from each
+// a_i h_i, and a few 2^-126 from the products and sums (inside m's 2^-100);
 // the centre distances are within 12e |n|_2 |c|_1 + 12e |d| of each other. With
 // |n|_2 >= 1/2 (PlaneSet::lower_scale_l2 is 0 otherwise),
 // X = (min h sqrt(g) (1 - 2^-40) - 2^-21 sum |u_i| h_i)(1 - 2^-20) - 2^-17 |c|_1
@@ -214,7 +219,7 @@ double obb_lower(const Obb& b) {
   double gram[3][3];
   for (int i = 0; i < 3; ++i) {
     const double h = b.half_extents[i];
-    if (!(h >= 0.0) || !std::isfinite(h)) return 0.0;
+    if (!(h >= 0x1p-126) || !std::isfinite(h)) return 0.0;  // (DAZ would read a subnormal h as 0, losing all of |a_i| h)
     smallest = std::min(smallest, h);
     sum += h;
     for (int j = 0; j < 3; ++j)
@@ -231,17 +236,23 @@ double obb_lower(const Obb& b) {
 
 /// `bound` (a float bound from the functions here) with its lowest 8 bits replaced by
 /// q = floor(256 lower / bound') (0 to 255), bound' the bound rounded up to a multiple of 2^8
-/// float steps: still a bound (it only grew, by at most 2^-15 of itself), and the kernels read
+/// float steps: still a bound (it only grew, by less than 2^-14 of itself), and the kernels read
 /// q bound / 256 <= lower (1 + 2^-15) back. NaN, infinite and zero bounds are kept as they are
-/// (each settles nothing either way).
+/// (each settles nothing either way); past 2^119, q = 0, so that the kernels' q bound stays
+/// finite (below 2^127: an infinite L would settle every lane).
 float pack_lower(float bound, double lower) {
   if (!(bound > 0.0f) || !std::isfinite(bound)) return bound;
   std::uint32_t bits = (std::bit_cast<std::uint32_t>(bound) + 255u) & ~255u;  // (a carry into the exponent is still larger)
   const float rounded = std::bit_cast<float>(bits);
   if (!std::isfinite(rounded)) return rounded;
-  const double q = lower > 0.0 ? std::floor(std::min(255.0, 256.0 * (lower / double(rounded)) * (1.0 - 0x1p-40))) : 0.0;
+  const bool small = rounded <= 0x1p119f;
+  const double q = small && lower > 0.0 ? std::floor(std::min(255.0, 256.0 * (lower / double(rounded)) * (1.0 - 0x1p-40))) : 0.0;
   return std::bit_cast<float>(bits | static_cast<std::uint32_t>(q));
 }
+
+}  // namespace detail
+
+namespace {
 
 /// AabbArrays::bound of `b`, and its centre (min + max) / 2 rounded to a float. With a margin
 /// m >= 2^-18 |d| (PlaneSet::max_margin, the largest over the planes) it settles the reference's p/n-vertex test for every plane of
@@ -429,7 +440,7 @@ void CpuCuller::upload(std::span<const Aabb> volumes) {
   static_assert(detail::kAabbRecordFloats == 8);
   upload_columns<4, detail::kAabbRecordFloats>(volumes, [](const Aabb& b, float* const* c, std::size_t i) {
     glm::vec3 centre;
-    c[3][i] = pack_lower(aabb_plane_bound(b, centre), aabb_lower(b));
+    c[3][i] = detail::pack_lower(aabb_plane_bound(b, centre), detail::aabb_lower(b));
     c[0][i] = centre.x, c[1][i] = centre.y, c[2][i] = centre.z;
     float* record = c[4] + i * detail::kAabbRecordFloats;  // as cull_aabb's resolve reads it
     for (int a = 0; a < 3; ++a) {
@@ -444,7 +455,7 @@ void CpuCuller::upload(std::span<const Obb> volumes) {
   static_assert(detail::kObbRecordFloats == 16);
   upload_columns<4, detail::kObbRecordFloats>(volumes, [](const Obb& b, float* const* c, std::size_t i) {
     c[0][i] = b.center.x, c[1][i] = b.center.y, c[2][i] = b.center.z;
-    c[3][i] = pack_lower(obb_plane_bound(b), obb_lower(b));
+    c[3][i] = detail::pack_lower(obb_plane_bound(b), detail::obb_lower(b));
     float* record = c[4] + i * detail::kObbRecordFloats;  // as classify_obb_records reads it
     for (int a = 0; a < 3; ++a) {
       record[a] = b.center[a];
@@ -460,7 +471,7 @@ void CpuCuller::upload(std::span<const Obb> volumes) {
 void CpuCuller::upload(std::span<const Sphere> volumes) {
   upload_columns<5, 0>(volumes, [](const Sphere& s, float* const* c, std::size_t i) {
     c[0][i] = s.center.x, c[1][i] = s.center.y, c[2][i] = s.center.z;
-    c[3][i] = pack_lower(sphere_plane_bound(s), sphere_lower(s));
+    c[3][i] = detail::pack_lower(sphere_plane_bound(s), detail::sphere_lower(s));
     c[4][i] = s.radius;
   });
 }

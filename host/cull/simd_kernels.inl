@@ -348,13 +348,14 @@ inline vf mul_sub(vf a, vf b, vf c) {
 // (lower_scale: the kind's factor, PlaneSet::lower_scale_l1 for boxes and _l2 for OBBs, 2^-8
 // (1 - 2^-12) for spheres): |s| < L for the smallest s means every plane's reference distance
 // is above -threshold (not OUTSIDE) and the nearest plane's below +threshold: INTERSECTING,
-// settled without the full test. The bits cost no bytes (the bound grew by at most 2^-15 of
+// settled without the full test. The bits cost no bytes (the bound grew by less than 2^-14 of
 // itself to hold them) and six vector operations; they settle the straddling objects whose
 // centre is nearer the plane than their smallest extent (spheres: than their radius), which
 // left the open objects of the benchmark's scenes at 4*10^6 and half visible 0.61 -> 0.26%
 // (boxes), 0.72 -> 0.56% (OBBs), 0.43 -> 0.012% (spheres): at 4*10^6 objects 3-9% faster for
 // boxes and spheres, 1-2.5% for OBBs; at 10^6 (in cache) 7-18% faster at half visible, 2-6%
-// slower at 1% (NOTES). A NaN bound, a NaN or infinite product, or L <= 0 settles nothing.
+// slower at 1% (NOTES). A NaN bound (q b NaN), an infinite one (q = 0: 0 x inf is NaN), a
+// scale of 0 (NaN or -m) or L <= 0 settles nothing; q is 0 past 2^119, so q b stays finite.
 struct CentreArrays {
   const float *c_x, *c_y, *c_z, *bound;
 };
