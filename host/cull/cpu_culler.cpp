@@ -238,7 +238,8 @@ double obb_lower(const Obb& b) {
 /// q = floor(256 lower / bound') (0 to 255), bound' the bound rounded up to a multiple of 2^8
 /// float steps: still a bound (it only grew, by less than 2^-14 of itself), and the kernels read
 /// q bound / 256 <= lower (1 + 2^-15) back. NaN, infinite and zero bounds are kept as they are
-/// (each settles nothing either way); past 2^119, q = 0, so that the kernels' q bound stays
+/// and one that rounds up past the float range becomes infinite (each settles nothing either
+/// way); past 2^119, q = 0, so that the kernels' q bound stays
 /// finite (below 2^127: an infinite L would settle every lane).
 float pack_lower(float bound, double lower) {
   if (!(bound > 0.0f) || !std::isfinite(bound)) return bound;

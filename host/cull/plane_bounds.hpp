@@ -31,7 +31,8 @@ double obb_lower(const Obb& b);
 double sphere_lower(const Sphere& s);
 /// `bound` rounded up to a multiple of 2^8 float steps, its lowest 8 bits q = floor(256 lower /
 /// bound), 0 to 255 (0 for lower <= 0 and bounds past 2^119); NaN, infinite and zero bounds
-/// unchanged. What a CpuCuller stores: pack_lower(bound, aabb_lower(box)) and so on.
+/// unchanged, one that rounds up past the float range infinite. What a CpuCuller stores:
+/// pack_lower(bound, aabb_lower(box)) and so on.
 float pack_lower(float bound, double lower);
 
 /// The margin m a view adds to every bound: a centre distance s < -(bound + m) on a plane
