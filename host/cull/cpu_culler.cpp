@@ -436,7 +436,6 @@ void CpuCuller::upload_columns(std::span<const Volume> volumes, Store store) {
   count_ = volumes.size();
 }
 
-
 void CpuCuller::upload(std::span<const Aabb> volumes) {
   static_assert(detail::kAabbRecordFloats == 8);
   upload_columns<4, detail::kAabbRecordFloats>(volumes, [](const Aabb& b, float* const* c, std::size_t i) {

@@ -115,8 +115,8 @@ constexpr CompressTable kCompress;
 /// Appends base + l for every set bit l of `lanes` at `ids`, in lane order; returns the new
 /// end. May write up to W values past the new end (ChunkOutput::ids has that slack).
 /// (AVX-512: the compress merges into its own source, not into zeros. The zeroing form waits
-/// for the last write of its destination register on this Zen 5 (and is reported to on
-/// others), so back-to-back compresses ran one after another: listing ids from bits, 0.078 ->
+/// for the last write of its destination register on this Zen 5, so back-to-back compresses
+/// ran one after another: listing ids from bits, 0.078 ->
 /// 0.040 ns/object on one thread in cache; a pass's listing at 10^6 objects, half visible,
 /// 0.044 -> 0.034. The lanes past the compressed ones are garbage either way.)
 inline std::uint32_t* append_ids(std::uint32_t* ids, std::uint32_t base, std::uint32_t lanes) {
