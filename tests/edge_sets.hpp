@@ -10,6 +10,7 @@
 
 #include <gtest/gtest.h>
 
+#include "cull/simd_kernels.hpp"
 #include "geom/pn_vertex.hpp"
 #include "test_util.hpp"
 
@@ -18,7 +19,7 @@ namespace cullpipe::test {
 template <class Volume>
 struct EdgeSet {
   std::vector<Volume> volumes;
-  std::vector<Frustum> views;  // one plane each
+  std::vector<Frustum> views;  // one plane each, or two (add_mirrored_views)
 };
 
 // Appends views on which no bound may settle anything: the same planes with normals of length
@@ -33,6 +34,31 @@ inline void add_unbounded_views(std::vector<Frustum>& views) {
   for (float d : {0x1p121f, -0x1p121f}) {
     const glm::vec4 plane(views[0].planes[0].normal, d);
     views.push_back(Frustum::from_planes({&plane, 1}));
+  }
+}
+
+// Appends, for each of the first `count` views (one plane n.x + d each), views of two planes,
+// that plane and one mirroring it: normal -n off by kMirrorSlack in every component (the most
+// PlaneSet::mirrored allows; built by hand), offset -d (a slab around the plane: the plane's
+// distance taken as a difference from the mirror's, and the other way round) or 4*10^6 (every
+// volume deep inside the mirror). The bounds allow for the difference (simd_kernels.inl).
+inline void add_mirrored_views(std::vector<Frustum>& views, std::size_t count) {
+  for (std::size_t v = 0; v < count; ++v) {
+    const Plane plane = views[v].planes[0];
+    Plane mirror;
+    mirror.normal = -plane.normal + fast::detail::kMirrorSlack * glm::vec3(1.0f, -1.0f, v % 2 ? 1.0f : -1.0f);
+    for (float offset : {-plane.d, 4e6f}) {
+      mirror.d = offset;
+      Frustum pair;
+      pair.plane_count = 2;
+      pair.planes[0] = mirror;  // the base: `plane` is the one taken as a difference
+      pair.planes[1] = plane;
+      views.push_back(pair);
+      if (offset != 4e6f) {
+        std::swap(pair.planes[0], pair.planes[1]);
+        views.push_back(pair);
+      }
+    }
   }
 }
 
@@ -163,6 +189,7 @@ inline EdgeSet<Obb> obb_edge_set() {
   }
   const std::size_t sharp = obbs.size();
   while (obbs.size() < 9000) obbs.push_back(obbs[rng.next() % sharp]);  // more than two runs
+  add_mirrored_views(views, views.size());
   add_unbounded_views(views);
   return {obbs, views};
 }
@@ -210,6 +237,7 @@ inline EdgeSet<Aabb> aabb_edge_set() {
   }
   const std::size_t sharp = boxes.size();
   while (boxes.size() < 9000) boxes.push_back(boxes[rng.next() % sharp]);  // more than two runs
+  add_mirrored_views(views, views.size());
   add_unbounded_views(views);
   return {boxes, views};
 }
@@ -251,6 +279,7 @@ inline EdgeSet<Sphere> sphere_edge_set() {
   }
   const std::size_t sharp = spheres.size();
   while (spheres.size() < 9000) spheres.push_back(spheres[rng.next() % sharp]);  // more than two runs
+  add_mirrored_views(views, views.size());
   add_unbounded_views(views);
   return {spheres, views};
 }
@@ -316,7 +345,9 @@ EdgeSet<Volume> lower_edge_set(std::uint64_t seed, Make make, std::initializer_l
     for (int i = 0; i < 1200; ++i) volumes.push_back(make(rng, view.planes[0], i));
   volumes.insert(volumes.end(), extra);
   while (volumes.size() < 12000) volumes.push_back(volumes[rng.next() % volumes.size()]);
+  const std::size_t unit = views.size();
   add_lower_edge_views(views);
+  add_mirrored_views(views, unit + 12);  // these and the twelve scaled by 0.75 and 0.4 (the first of add_lower_edge_views)
   return {volumes, views};
 }
 

@@ -102,6 +102,15 @@ PlaneSet plane_set(const Frustum& f) {
   auto scale = [](double c) { return c >= 0.5 && c <= 2.0 ? static_cast<float>(c * (1.0 - 0x1p-30) * 0x1p-8 * (1.0 - 0x1p-12)) : 0.0f; };
   s.lower_scale_l1 = scale(l1);
   s.lower_scale_l2 = scale(l2);
+  // The first pair of planes whose normals are opposite within kMirrorSlack (float sums are
+  // exact in double).
+  auto mirrors = [&](std::uint32_t i, std::uint32_t j) {
+    return std::fabs(double(s.nx[i]) + s.nx[j]) <= kMirrorSlack && std::fabs(double(s.ny[i]) + s.ny[j]) <= kMirrorSlack &&
+           std::fabs(double(s.nz[i]) + s.nz[j]) <= kMirrorSlack;
+  };
+  for (std::uint32_t i = 0; i < s.count && !s.mirrored; ++i)
+    for (std::uint32_t j = i + 1; j < s.count && !s.mirrored; ++j)
+      if (mirrors(i, j)) s.mirrored = true, s.mirror_base = i, s.mirror_plane = j;
   return s;
 }
 
@@ -113,7 +122,8 @@ namespace {
 /// radius r = (|a0| h0 + |a1| h1) + |a2| h2, a_i = (n.x u_i.x + n.y u_i.y) + n.z u_i.z, computed
 /// in float for every normal n with |n| <= 1 + 2^-20, and the centre c; or NaN where no bound
 /// is safe. With a margin m >= 2^-18 |d| (PlaneSet::max_margin) it settles the reference's test
-/// from a centre distance s = n.c + d computed in float in any order, fused or not: s < -(bound
+/// from a centre distance s = n.c + d computed in float in any order, fused or not (or from a
+/// mirrored plane's difference: CentreArrays in simd_kernels.inl has the room): s < -(bound
 /// + m) means s_ref < -|r| (OUTSIDE), s >= bound + m on every plane s_ref >= |r| (INSIDE), s_ref
 /// the reference's own centre distance. Why, with e = 2^-23 (a float rounding in any rounding
 /// mode) and each rounding also off by at most 2^-149 in the subnormal range (flushing to zero
@@ -176,7 +186,8 @@ namespace detail {
 // for boxes, |n_k|_2 for OBBs, 1 for spheres). Then a fused smallest centre distance with
 // |s| < c X - m, c the smallest c_k, means the reference's INTERSECTING: every plane's
 // reference distance is above -(threshold) (not OUTSIDE) and the nearest one's below it. 0
-// where none holds (negative extents or radius, non-orthogonal axes).
+// where none holds (negative extents or radius, non-orthogonal axes). (A mirrored plane's
+// distance rounds more: CentreArrays in simd_kernels.inl shows the shares below cover it.)
 //
 // Spheres: the reference says OUTSIDE on a plane when s_ref < -r and straddles it when
 // s_ref < r; s and s_ref are within 12e (1 + 2^-20)(|c|_1 + |d|) of each other (see
@@ -258,7 +269,8 @@ namespace {
 /// AabbArrays::bound of `b`, and its centre (min + max) / 2 rounded to a float. With a margin
 /// m >= 2^-18 |d| (PlaneSet::max_margin, the largest over the planes) it settles the reference's p/n-vertex test for every plane of
 /// normal |n| <= 1 + 2^-20: s < -(bound + m) means d_p < 0 and s >= bound + m means d_n >= 0
-/// and d_p >= 0, for s = n.centre + d computed in float in any order, fused or not, in any
+/// and d_p >= 0, for s = n.centre + d computed in float in any order, fused or not (or a
+/// mirrored plane's difference: CentreArrays in simd_kernels.inl), in any
 /// rounding mode. Why, with C and E the exact centre and half extent (E < 0 for an inverted
 /// box) and e = 2^-23 (a float rounding in any mode; 2^-24 to nearest, as here at upload):
 /// - the exact vertex distances are D_c +- sum |n_i| E_i, D_c = n.C + d, within |n| |E| of D_c;

@@ -12,6 +12,7 @@
 // get the reference's test, so no answer depends on the bound's own arithmetic.
 #include <cstddef>
 #include <cstdint>
+#include <type_traits>
 
 #include "cull/simd_kernels.hpp"
 
@@ -356,6 +357,23 @@ inline vf mul_sub(vf a, vf b, vf c) {
 // boxes and spheres, 1-2.5% for OBBs; at 10^6 (in cache) 7-18% faster at half visible, 2-6%
 // slower at 1% (NOTES). A NaN bound (q b NaN), an infinite one (q = 0: 0 x inf is NaN), a
 // scale of 0 (NaN or -m) or L <= 0 settles nothing; q is 0 past 2^119, so q b stays finite.
+//
+// A mirrored plane j (PlaneSet::mirrored: n_j = -n_i + delta, |delta| <= kMirrorSlack = 2^-21
+// per component; a frustum's far plane against its near one) gets s_j = (d_i + d_j) - s_i, from
+// its base plane's fused distance s_i: one subtraction for three fused multiply-adds (with
+// the loop below, 10^6 objects in cache: 1-12% faster; NOTES). With e = 2^-23 and |n_i| <=
+// 1 + 2^-20, s_i is within 6e (1 + 2^-20)(|c|_1 + |d_i|) of n_i.c + d_i, the float d_i + d_j
+// within 2e max|d| of the
+// sum, the subtraction within e (|c|_1 + 3 max|d|)(1 + 2^-20), and n_j.c + d_j differs from
+// (d_i + d_j) - (n_i.c + d_i) by delta.c, at most 4e |c|_1: s_j is within 11.01e (|c|_1 +
+// max|d|) of n_j.c + d_j, plus a few 2^-126 under FTZ / DAZ (inside the bounds' 2^-100). The
+// proofs in cpu_culler.cpp take 6e (|n| |c|_1 + |d|) for a kernel's distance and have room for
+// this: with the reference's share, spheres and OBBs need 17.01e of the 2^-18 = 32e their bound
+// and margin add; boxes 4.5e |n| + 11.01e against 32e; the lower bounds' centre shares hold
+// 17.01e |c|_1 (spheres: 2^-18 |c|_1; boxes: 2^-18 |n|_1 (|C|_1 + |E|_1) with |n|_1 >= 1/2 where
+// one settles, against 4.5e |n|_1 + 11.01e <= 26.6e |n|_1; OBBs: 2^-17 |n|_2 |c|_1 with |n|_2 >=
+// 1/2, against 6.01e |n|_2 + 11.01e <= 28.1e |n|_2); every |d| term, at most 17.01e max|d|,
+// is inside m >= 2^-18 max|d| (PlaneSet::max_margin is the largest over the planes).
 struct CentreArrays {
   const float *c_x, *c_y, *c_z, *bound;
 };
@@ -387,19 +405,19 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
   static_assert(kRunObjects % W == 0);
   std::uint32_t run_bits[kRunBlocks], crossing_bits[kRunBlocks];
   std::uint32_t open[kRunBlocks * W];  // objects left open in this run
-  // The planes padded to six with copies of the first (a repeated plane leaves the smallest
-  // distance as it is), so the loop below has a fixed trip count; the offsets as vectors once.
-  float nx[6], ny[6], nz[6];
-  vf d[6];
-  for (std::uint32_t k = 0; k < 6; ++k) {
-    const std::uint32_t from = k < planes.count ? k : 0;
-    nx[k] = planes.nx[from], ny[k] = planes.ny[from], nz[k] = planes.nz[from], d[k] = splat(planes.d[from]);
-  }
+  // The planes in the order the loop reads them, padded to six with copies of the first (a
+  // repeated plane leaves the smallest distance as it is), so it has a fixed trip count. With
+  // a mirrored pair (PlaneSet::mirrored), its base plane first and the mirrored plane left
+  // out: five planes, the sixth distance (d_base + d_mirrored) less the first's.
+  const bool mirrored = planes.mirrored;
+  std::uint32_t order[6] = {};
+  unsigned listed = 0;
+  if (mirrored) order[listed++] = planes.mirror_base;
+  for (std::uint32_t k = 0; k < planes.count; ++k)
+    if (!mirrored || (k != planes.mirror_base && k != planes.mirror_plane)) order[listed++] = k;
+  for (unsigned k = listed; k < 6; ++k) order[k] = order[0];
   const bool settles = planes.unit_normals, no_planes = planes.count == 0;
   const bool bound_settles = settles && !__builtin_isnan(planes.max_margin);  // a NaN margin settles nothing
-  const vf margin = splat(planes.max_margin);
-  const vf lower = splat(lower_scale);
-  const float *const c_x = a.c_x, *const c_y = a.c_y, *const c_z = a.c_z, *const bound = a.bound;  // (not reloaded per vector)
   const bool listed_by_runs = out.ids && out.runs && out.bits;
   ChunkCounts counts;
   for (std::size_t run = begin; run < end; run += kRunBlocks * W) {
@@ -409,7 +427,7 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
     // pass over the run. The settled visible objects are INSIDE or (`across`) INTERSECTING,
     // so the INSIDE count is the visible count less the open objects and the settled
     // INTERSECTING ones, plus those resolved INSIDE.
-    std::uint32_t* const visible_bits = listed_by_runs ? out.bits + (run - begin) / W : run_bits;
+    std::uint32_t* const run_visible_bits = listed_by_runs ? out.bits + (run - begin) / W : run_bits;
     // A run guessed sparse appends its visible lanes' ids as it finds them, its open objects
     // among them until resolved (removed after if OUTSIDE): the appends overlap the loads
     // instead of taking a loop of their own after the run (at 1% and 10% visible, 10^6
@@ -418,62 +436,103 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
     // (Not where no bound can settle an object: every object would be appended, most of them
     // to be removed.)
     const bool appending = out.ids && bound_settles && (!listed_by_runs || !(out.runs[run_index] & (kDenseRun | kListedDense)));
-    std::uint32_t* const run_ids = out.ids;
     unsigned open_count = 0;
     std::uint32_t run_visible = 0, run_across = 0;
+    // The run's vectors, by a loop made once for each of appending or not, classes or not and
+    // a mirrored plane or not (no test of any per vector), reading local copies of the planes
+    // and pointers and counting in locals written back after: no store in the loop can change
+    // them, so none is reloaded per vector.
     // crossing_bits is read only for classes: each vector's settled INTERSECTING lanes, and
     // the open objects found crossing set their bits.
-    // Vector b (objects i..i+W-1, `lanes` of them in range) found OUTSIDE (`beyond`), INSIDE
-    // (`within`) and INTERSECTING (`across`); the rest are open.
-    auto record = [&](std::size_t i, std::size_t b, std::uint32_t lanes, std::uint32_t beyond, std::uint32_t within, std::uint32_t across) {
-      const std::uint32_t visible = ~beyond & lanes;
-      visible_bits[b] = visible;
-      if (appending) append_ids(run_ids + run_visible, static_cast<std::uint32_t>(i), visible);
-      run_visible += static_cast<std::uint32_t>(__builtin_popcount(visible));
-      run_across += static_cast<std::uint32_t>(__builtin_popcount(across & lanes));
-      if (out.classes) crossing_bits[b] = across & lanes;
-      const std::uint32_t opened = ~(beyond | within | across) & lanes;
-      for (std::uint32_t rest = opened; rest != 0; rest &= rest - 1) {
-        const std::uint32_t object = static_cast<std::uint32_t>(i + static_cast<unsigned>(__builtin_ctz(rest)));
-        prefetch(object);
-        open[open_count++] = object;
-      }
-    };
-    auto settle = [&](std::size_t i, std::size_t b, std::uint32_t lanes) {
-      const vf cx = load(c_x + i), cy = load(c_y + i), cz = load(c_z + i);
-      const vf stored = load(bound + i);
-      const vf reach = stored + margin;
-      vf m = mul_add(nz[0], cz, mul_add(ny[0], cy, mul_add(nx[0], cx, d[0])));
-      for (unsigned k = 1; k < 6; ++k) {
-        const vf s = mul_add(nz[k], cz, mul_add(ny[k], cy, mul_add(nx[k], cx, d[k])));
-        m = s < m ? s : m;
-      }
-      const vf q = __builtin_convertvector(reinterpret_cast<vi>(stored) & 255, vf);
-      const vf reach_in = mul_sub(q * stored, lower, margin);
-      record(i, b, lanes, less_bits(m, -reach), at_least_bits(m, reach), less_bits(abs(m), reach_in));
-    };
-    std::size_t first = run, block = 0;  // the next vector's first object and index
-    if (settles && !no_planes) {
-      // A cache line of each stream per step (kLine / W vectors, no lane checks), its line
-      // kAhead floats on prefetched: without the prefetch, 4*10^6 boxes took 0.34-0.37
-      // ns/object counting (the loads alone, 0.21), with it 0.25.
-      constexpr std::size_t kLine = 16, kAhead = 1024;  // floats
-      static_assert(kLine % W == 0);
-      for (; first + kLine <= run_end; first += kLine) {
-        if (first + kAhead < end) {
+    auto scan = [&](auto append_c, auto classes_c, auto mirror_c) {
+      constexpr bool kAppend = decltype(append_c)::value, kClasses = decltype(classes_c)::value;
+      constexpr bool kMirror = decltype(mirror_c)::value;
+      std::uint32_t visible_count = 0, across_count = 0;
+      unsigned opened_count = 0;
+      const float *const c_x = a.c_x, *const c_y = a.c_y, *const c_z = a.c_z, *const bound = a.bound;
+      float nx[6], ny[6], nz[6];
+      vf d[6];
+      for (unsigned k = 0; k < 6; ++k)
+        nx[k] = planes.nx[order[k]], ny[k] = planes.ny[order[k]], nz[k] = planes.nz[order[k]], d[k] = splat(planes.d[order[k]]);
+      const vf margin = splat(planes.max_margin), lower = splat(lower_scale);
+      const vf mirror_d = splat(planes.d[planes.mirror_base] + planes.d[planes.mirror_plane]);
+      std::uint32_t* const visible_bits = run_visible_bits;
+      std::uint32_t* const run_ids = out.ids;
+      // Vector b (objects i..i+W-1, `lanes` of them in range) found OUTSIDE (`beyond`), INSIDE
+      // (`within`) and INTERSECTING (`across`); the rest are open.
+      auto record = [&](std::size_t i, std::size_t b, std::uint32_t lanes, std::uint32_t beyond, std::uint32_t within, std::uint32_t across) __attribute__((always_inline)) {
+        const std::uint32_t visible = ~beyond & lanes;
+        visible_bits[b] = visible;
+        if constexpr (kAppend) append_ids(run_ids + visible_count, static_cast<std::uint32_t>(i), visible);
+        visible_count += static_cast<std::uint32_t>(__builtin_popcount(visible));
+        across &= lanes;
+        across_count += static_cast<std::uint32_t>(__builtin_popcount(across));
+        if constexpr (kClasses) crossing_bits[b] = across;
+        for (std::uint32_t rest = visible & ~(within | across); rest != 0; rest &= rest - 1) {  // the open lanes
+          const std::uint32_t object = static_cast<std::uint32_t>(i + static_cast<unsigned>(__builtin_ctz(rest)));
+          prefetch(object);
+          open[opened_count++] = object;
+        }
+      };
+      auto settle = [&](std::size_t i, std::size_t b, std::uint32_t lanes) __attribute__((always_inline)) {
+        const vf cx = load(c_x + i), cy = load(c_y + i), cz = load(c_z + i);
+        const vf stored = load(bound + i);
+        const vf reach = stored + margin;
+        const vf first_s = mul_add(nz[0], cz, mul_add(ny[0], cy, mul_add(nx[0], cx, d[0])));
+        vf m = first_s;
+        for (unsigned k = 1; k < (kMirror ? 5 : 6); ++k) {
+          const vf s = mul_add(nz[k], cz, mul_add(ny[k], cy, mul_add(nx[k], cx, d[k])));
+          m = s < m ? s : m;
+        }
+        if constexpr (kMirror) {
+          const vf s = mirror_d - first_s;
+          m = s < m ? s : m;
+        }
+        const vf q = __builtin_convertvector(reinterpret_cast<vi>(stored) & 255, vf);
+        const vf reach_in = mul_sub(q * stored, lower, margin);
+        record(i, b, lanes, less_bits(m, -reach), at_least_bits(m, reach), less_bits(abs(m), reach_in));
+      };
+      std::size_t first = run, block = 0;  // the next vector's first object and index
+      if (settles && !no_planes) {
+        // A cache line of each stream per step (kLine / W vectors, no lane checks), its line
+        // kAhead floats on prefetched: without the prefetch, 4*10^6 boxes took 0.34-0.37
+        // ns/object counting (the loads alone, 0.21), with it 0.25. The lines whose prefetch
+        // stays in the chunk come first, in a loop of their own: no test per line (10^6
+        // objects: up to 6% faster than a test per line; NOTES).
+        constexpr std::size_t kLine = 16, kAhead = 1024;  // floats
+        static_assert(kLine % W == 0);
+        const std::size_t lines_end = run_end - (run_end - run) % kLine;
+        const std::size_t prefetched_end = end > kAhead ? smaller(lines_end, end - kAhead > run ? end - kAhead : run) : run;
+        auto line = [&](std::size_t at) __attribute__((always_inline)) {
+#pragma GCC unroll 4
+          for (unsigned v = 0; v < kLine / W; ++v, ++block) settle(at + v * W, block, kAllLanes);
+        };
+        for (; first + kLine <= prefetched_end; first += kLine) {
           __builtin_prefetch(c_x + first + kAhead);
           __builtin_prefetch(c_y + first + kAhead);
           __builtin_prefetch(c_z + first + kAhead);
           __builtin_prefetch(bound + first + kAhead);
+          line(first);
         }
-#pragma GCC unroll 4
-        for (unsigned v = 0; v < kLine / W; ++v, ++block) settle(first + v * W, block, kAllLanes);
+        for (; first < lines_end; first += kLine) line(first);
+        for (; first < run_end; first += W, ++block)  // the last vectors (loads past the end stay in the columns' spare vector)
+          settle(first, block, run_end - first >= W ? kAllLanes : (1u << (run_end - first)) - 1u);
+      } else {
+        for (; first < run_end; first += W, ++block)  // no bound holds (every object open), or no planes (every object INSIDE)
+          record(first, block, run_end - first >= W ? kAllLanes : (1u << (run_end - first)) - 1u, 0, no_planes ? kAllLanes : 0, 0);
       }
-      for (; first < run_end; first += W, ++block)  // the last vectors (loads past the end stay in the columns' spare vector)
-        settle(first, block, run_end - first >= W ? kAllLanes : (1u << (run_end - first)) - 1u);
+      run_visible = visible_count;
+      run_across = across_count;
+      open_count = opened_count;
+    };
+    const std::true_type yes;
+    const std::false_type no;
+    if (mirrored) {
+      if (appending) out.classes ? scan(yes, yes, yes) : scan(yes, no, yes);
+      else out.classes ? scan(no, yes, yes) : scan(no, no, yes);
     } else {
-      for (; first < run_end; first += W, ++block)  // no bound holds (every object open), or no planes (every object INSIDE)
-        record(first, block, run_end - first >= W ? kAllLanes : (1u << (run_end - first)) - 1u, 0, no_planes ? kAllLanes : 0, 0);
+      if (appending) out.classes ? scan(yes, yes, no) : scan(yes, no, no);
+      else out.classes ? scan(no, yes, no) : scan(no, no, no);
     }
     std::uint32_t run_inside = run_visible - open_count - run_across;
     const std::uint32_t appended = run_visible;
@@ -486,7 +545,7 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
         const std::size_t at = open[o + l] - run;
         const std::uint32_t bit = 1u << (at % W);
         if (outside >> l & 1u) {
-          visible_bits[at / W] &= ~bit;
+          run_visible_bits[at / W] &= ~bit;
           --run_visible;
           open[gone++] = open[o + l];  // (read above: gone <= o + l)
         } else if (crossing >> l & 1u) {
@@ -503,7 +562,7 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
       classes_only.classes = out.classes;
       ChunkCounts unused;
       for (std::size_t i = run, b = 0; i < run_end; i += W, ++b)
-        emit(i, begin, static_cast<unsigned>(smaller(W, end - i)), ~visible_bits[b], crossing_bits[b], classes_only, unused);
+        emit(i, begin, static_cast<unsigned>(smaller(W, end - i)), ~run_visible_bits[b], crossing_bits[b], classes_only, unused);
     }
     if (!out.ids) continue;
     const bool dense = run_visible * kDenseShare > run_end - run;
@@ -512,11 +571,11 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
     // 10% visible, one thread: 1.085 -> 0.93 ns/object; NOTES).
     auto list_run = [&] {
       std::uint32_t* ids = out.ids;
-      for (std::size_t i = run, b = 0; i < run_end; i += W, ++b) ids = append_ids(ids, static_cast<std::uint32_t>(i), visible_bits[b]);
+      for (std::size_t i = run, b = 0; i < run_end; i += W, ++b) ids = append_ids(ids, static_cast<std::uint32_t>(i), run_visible_bits[b]);
     };
     if (appending) {
       if (gone > kRemovedAtMost) list_run();  // many gone: listed again from the bits
-      else if (gone) remove_ids(run_ids, appended, open, gone);
+      else if (gone) remove_ids(out.ids, appended, open, gone);
       if (out.runs) out.runs[run_index] = run_visible | (dense ? kListedDense : 0u);
     } else if (dense && listed_by_runs) {  // no ids: its vectors' visible lanes are in `bits`
       out.runs[run_index] = kDenseRun | run_visible;
