@@ -27,8 +27,8 @@
 // times).
 //
 // usage: cullpipe-bench [--methods m,..] [--bv aabb,obb,sphere] [--sizes 1e3,..] [--fractions 0.01,..]
-//                       [--order shuffled,sorted] [--repeats R] [--threads T] [--isa NAME]
-//                       [--device NAME] [--csv FILE] [--json FILE] [--plot PREFIX]
+//                       [--order shuffled,sorted] [--views K] [--repeats R] [--threads T] [--isa NAME]
+//                       [--device NAME] [--validation] [--csv FILE] [--json FILE] [--plot PREFIX]
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -77,6 +77,7 @@ const std::vector<std::string> kMethods = {"reference", "cpu-fast", "cpu-read", 
 struct Cell {
   std::string method, bv, order;
   std::size_t n = 0;
+  std::size_t views = 1;  ///< views per pass (--views); times per object are per object and view
   double target_fraction = 0, visible_fraction = 0;
   int repeats = 0;
   double ns = 0;       ///< median time of one pass (GPU: between timestamps)
@@ -93,9 +94,11 @@ struct Config {
   std::vector<std::size_t> sizes = {1000, 10000, 100000, 1000000, 4000000, 16000000};
   std::vector<double> fractions = {0.01, 0.1, 0.5};
   std::vector<std::string> orders = {"shuffled", "sorted"};
+  std::size_t views = 1;  // views per pass, on a circle around the scene
   int repeats = 0;  // 0: by size
   unsigned threads = 0;
   std::optional<fast::Isa> isa;
+  bool validation = false;  // Vulkan validation layers on; any message makes the exit status 1
   std::string device, csv, json, plot;
 };
 
@@ -177,24 +180,36 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
   fast::CpuCullOptions list_only_cpu;
   list_only_cpu.classes = false;
   std::vector<std::uint32_t> fast_bvh_ids;
+  std::vector<fast::CpuBvhViewResult> fast_bvh_views;
   fast::CpuCullOptions counts_only;
   counts_only.classes = counts_only.visible_ids = false;
   std::vector<fast::CpuViewResult> fast_results;
   for (double fraction : config.fractions) {
     double achieved = 0;
-    const Frustum f = frustum_for_fraction(bounds, n, fraction, [&](const Frustum& v) {
+    Camera camera;
+    frustum_for_fraction(bounds, n, fraction, [&](const Frustum& v) {
       fast_culler.cull({&v, 1}, counts_only, fast_results);
       return fast_results[0].counts.visible;
-    }, achieved);
-    const Frustum views[1] = {f};
-    const int reps = config.repeats > 0 ? config.repeats : int(std::clamp<std::size_t>(20'000'000 / std::max<std::size_t>(n, 1), 3, 51));
+    }, achieved, &camera);
+    // --views K: K cameras with that lens evenly on a circle around the scene (the first is
+    // the one found), culled in one pass; `achieved` becomes their mean visible share.
+    std::vector<Frustum> views;
+    for (const Camera& c : camera_path(camera, bounds, config.views)) views.push_back(Frustum::from_view_proj(c.view_proj()));
+    const std::size_t view_count = views.size();
+    const int reps = config.repeats > 0 ? config.repeats : int(std::clamp<std::size_t>(20'000'000 / std::max<std::size_t>(n * view_count, 1), 3, 51));
 
-    // The reference answer, then every method checked against it once.
-    std::vector<Classification> ref(n);
-    const reference::CullCounts ref_counts = reference::classify_all(vspan, f, ref);
-    std::vector<std::uint32_t> ref_ids;
-    for (std::size_t i = 0; i < n; ++i)
-      if (is_visible(ref[i])) ref_ids.push_back(static_cast<std::uint32_t>(i));
+    // The reference answers, then every method checked against them once.
+    std::vector<std::vector<Classification>> ref(view_count, std::vector<Classification>(n));
+    std::vector<reference::CullCounts> ref_counts(view_count);
+    std::vector<std::vector<std::uint32_t>> ref_ids(view_count);
+    std::size_t visible_sum = 0;
+    for (std::size_t v = 0; v < view_count; ++v) {
+      ref_counts[v] = reference::classify_all(vspan, views[v], ref[v]);
+      for (std::size_t i = 0; i < n; ++i)
+        if (is_visible(ref[v][i])) ref_ids[v].push_back(static_cast<std::uint32_t>(i));
+      visible_sum += ref_counts[v].visible;
+    }
+    if (n > 0) achieved = double(visible_sum) / double(n * view_count);
 
     struct Timed {
       std::string method;
@@ -208,7 +223,7 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
                    std::function<void(std::vector<double>&, std::vector<double>&)> pass) {
       Timed t;
       t.method = method;
-      t.cell = {method, bv, order, n, fraction, achieved, reps, 0, 0, 0, bytes, agree, std::move(note)};
+      t.cell = {method, bv, order, n, view_count, fraction, achieved, reps, 0, 0, 0, bytes, agree, std::move(note)};
       if (const auto u = upload_ns.find(method); u != upload_ns.end() && t.cell.note.empty()) t.cell.upload_ns = u->second;
       if (t.cell.note.empty()) t.pass = std::move(pass);
       timed.push_back(std::move(t));
@@ -217,17 +232,20 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
     if (wants(config, "reference"))
       add("reference", sizeof(Volume), true, "", [&](std::vector<double>& t, std::vector<double>&) {
         const auto t0 = Clock::now();
-        reference::classify_all(vspan, f, scratch);
+        for (const Frustum& f : views) reference::classify_all(vspan, f, scratch);
         t.push_back(since(t0));
       });
     // The timed passes of the fast and GPU methods produce what an engine consumes: the counts
     // and the visible list (no per-object classes); each is checked in that mode and with
     // classes before it is timed.
     if (wants(config, "cpu-fast")) {
+      bool ok = true;
       fast_culler.cull(views, {}, fast_results);
-      bool ok = fast_results[0].classes == ref && fast_results[0].counts == ref_counts && fast_results[0].visible_ids == ref_ids;
+      for (std::size_t v = 0; v < view_count; ++v)
+        ok = ok && fast_results[v].classes == ref[v] && fast_results[v].counts == ref_counts[v] && fast_results[v].visible_ids == ref_ids[v];
       fast_culler.cull(views, list_only_cpu, fast_results);
-      ok = ok && fast_results[0].counts == ref_counts && fast_results[0].visible_ids == ref_ids;
+      for (std::size_t v = 0; v < view_count; ++v)
+        ok = ok && fast_results[v].counts == ref_counts[v] && fast_results[v].visible_ids == ref_ids[v];
       add("cpu-fast", fast_culler.bytes_per_object(), ok, "", [&](std::vector<double>& t, std::vector<double>&) {
         const auto t0 = Clock::now();
         fast_culler.cull(views, list_only_cpu, fast_results);
@@ -248,35 +266,56 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
       });
       timed.back().two_orders = true;
     }
-    bvh::HierarchicalResult h;
+    // The scalar traversal's answers per view (the hierarchical methods' oracle), made once.
+    std::vector<bvh::HierarchicalResult> h;
+    auto traversed = [&] {
+      if (h.empty())
+        for (const Frustum& f : views) h.push_back(bvh::cull_hierarchical(tree, vspan, f));
+    };
     if (wants(config, "cpu-bvh")) {
       // Every class equals flat culling's (for OBBs and spheres thanks to the node margin).
-      h = bvh::cull_hierarchical(tree, vspan, f);
-      const bool ok = h.classes == ref && h.visible == ref_counts.visible && h.inside == ref_counts.inside;
+      traversed();
+      bool ok = true;
+      for (std::size_t v = 0; v < view_count; ++v)
+        ok = ok && h[v].classes == ref[v] && h[v].visible == ref_counts[v].visible && h[v].inside == ref_counts[v].inside;
       add("cpu-bvh", sizeof(Volume), ok, "", [&](std::vector<double>& t, std::vector<double>&) {
         const auto t0 = Clock::now();
-        const bvh::HierarchicalResult r = bvh::cull_hierarchical(tree, vspan, f);
+        for (const Frustum& f : views) {
+          const bvh::HierarchicalResult r = bvh::cull_hierarchical(tree, vspan, f);
+          (void)r;
+        }
         t.push_back(since(t0));
       });
     }
     bvh::HierarchicalResult fast_h;
     if (wants(config, "cpu-fast-bvh")) {
-      if (h.classes.empty()) h = bvh::cull_hierarchical(tree, vspan, f);
-      // Its traversal tests the objects of small straddling nodes as ranges: the scalar
-      // traversal's counts with the same range_objects; the classes do not depend on it.
-      const bvh::HierarchicalResult hf = bvh::cull_hierarchical(tree, vspan, f, {fast::CpuBvhCullOptions::default_range_objects(kind_of<Volume>())});
-      fast_bvh.cull(f, fast_h);
-      bool ok = fast_h.classes == h.classes && hf.classes == h.classes && fast_h.node_tests == hf.node_tests &&
-                fast_h.object_tests == hf.object_tests && fast_h.visible == h.visible && fast_h.inside == h.inside;
-      fast_bvh.cull(f, {false, true}, fast_h, fast_bvh_ids);
-      std::vector<std::uint32_t> in_tree_order;  // the list comes in the tree's object order
-      for (std::uint32_t o : tree.objects)
-        if (is_visible(h.classes[o])) in_tree_order.push_back(o);
-      ok = ok && fast_bvh_ids == in_tree_order && fast_h.visible == ref_counts.visible && fast_h.inside == ref_counts.inside &&
-           fast_h.node_tests == hf.node_tests && fast_h.object_tests == hf.object_tests;
+      traversed();
+      bool ok = true;
+      if (view_count > 1) fast_bvh.cull(views, {false, true}, fast_bvh_views);  // the timed mode of several views
+      for (std::size_t v = 0; v < view_count; ++v) {
+        // Its traversal tests the objects of small straddling nodes as ranges: the scalar
+        // traversal's counts with the same range_objects; the classes do not depend on it.
+        const bvh::HierarchicalResult hf =
+            bvh::cull_hierarchical(tree, vspan, views[v], {fast::CpuBvhCullOptions::default_range_objects(kind_of<Volume>())});
+        fast_bvh.cull(views[v], fast_h);
+        ok = ok && fast_h.classes == h[v].classes && hf.classes == h[v].classes && fast_h.node_tests == hf.node_tests &&
+             fast_h.object_tests == hf.object_tests && fast_h.visible == h[v].visible && fast_h.inside == h[v].inside;
+        fast_bvh.cull(views[v], {false, true}, fast_h, fast_bvh_ids);
+        std::vector<std::uint32_t> in_tree_order;  // the list comes in the tree's object order
+        for (std::uint32_t o : tree.objects)
+          if (is_visible(h[v].classes[o])) in_tree_order.push_back(o);
+        ok = ok && fast_bvh_ids == in_tree_order && fast_h.visible == ref_counts[v].visible && fast_h.inside == ref_counts[v].inside &&
+             fast_h.node_tests == hf.node_tests && fast_h.object_tests == hf.object_tests;
+        if (view_count > 1) {
+          const bvh::HierarchicalResult& r = fast_bvh_views[v].result;
+          ok = ok && fast_bvh_views[v].visible_ids == in_tree_order && r.visible == h[v].visible && r.inside == h[v].inside &&
+               r.node_tests == hf.node_tests && r.object_tests == hf.object_tests;
+        }
+      }
       add("cpu-fast-bvh", sizeof(Volume), ok, "", [&](std::vector<double>& t, std::vector<double>&) {
         const auto t0 = Clock::now();
-        fast_bvh.cull(f, {false, true}, fast_h, fast_bvh_ids);
+        if (view_count == 1) fast_bvh.cull(views[0], {false, true}, fast_h, fast_bvh_ids);
+        else fast_bvh.cull(views, {false, true}, fast_bvh_views);
         t.push_back(since(t0));
       });
     }
@@ -290,9 +329,12 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
         // skips the class writes) are checked: classes exactly, the list as a set.
         const gpu::CullResult g = gpu.flat->cull(views);  // also the warm-up (pipeline compile)
         gpu::CullResult listed = gpu.flat->cull(views, list_only);
-        std::vector<std::uint32_t> ids = listed.views[0].visible_ids;
-        std::sort(ids.begin(), ids.end());
-        ok = g.views[0].classes == ref && g.views[0].counts == ref_counts && listed.views[0].counts == ref_counts && ids == ref_ids;
+        ok = true;
+        for (std::size_t v = 0; v < view_count; ++v) {
+          std::vector<std::uint32_t> ids = listed.views[v].visible_ids;
+          std::sort(ids.begin(), ids.end());
+          ok = *ok && g.views[v].classes == ref[v] && g.views[v].counts == ref_counts[v] && listed.views[v].counts == ref_counts[v] && ids == ref_ids[v];
+        }
       }
       add("gpu-flat", gpu_bytes_per_object<Volume>(true), ok, note, [&](std::vector<double>& t, std::vector<double>& w) {
         const gpu::CullResult g = gpu.flat->cull(views, list_only);
@@ -304,15 +346,18 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
       std::string note = !gpu.bvh ? "no GPU: " + gpu.error : gpu_bvh_note;
       std::optional<bool> ok;
       if (note.empty()) {
-        if (h.classes.empty()) h = bvh::cull_hierarchical(tree, vspan, f);
+        traversed();
         const gpu::CullResult g = gpu.bvh->cull(views);
-        ok = g.views[0].classes == h.classes && g.views[0].counts.visible == h.visible && g.views[0].counts.inside == h.inside &&
-             g.views[0].node_tests == h.node_tests && g.views[0].object_tests == h.object_tests;
         gpu::CullResult listed = gpu.bvh->cull(views, list_only);  // the timed mode
-        std::vector<std::uint32_t> ids = listed.views[0].visible_ids;
-        std::sort(ids.begin(), ids.end());
-        ok = *ok && ids == ref_ids && listed.views[0].counts == ref_counts && listed.views[0].node_tests == h.node_tests &&
-             listed.views[0].object_tests == h.object_tests;
+        ok = true;
+        for (std::size_t v = 0; v < view_count; ++v) {
+          std::vector<std::uint32_t> ids = listed.views[v].visible_ids;
+          std::sort(ids.begin(), ids.end());
+          ok = *ok && g.views[v].classes == h[v].classes && g.views[v].counts.visible == h[v].visible && g.views[v].counts.inside == h[v].inside &&
+               g.views[v].node_tests == h[v].node_tests && g.views[v].object_tests == h[v].object_tests && ids == ref_ids[v] &&
+               listed.views[v].counts == ref_counts[v] && listed.views[v].node_tests == h[v].node_tests &&
+               listed.views[v].object_tests == h[v].object_tests;
+        }
       }
       add("gpu-bvh", gpu_bytes_per_object<Volume>(false), ok, note, [&](std::vector<double>& t, std::vector<double>& w) {
         const gpu::CullResult g = gpu.bvh->cull(views, list_only);
@@ -349,15 +394,15 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
       if (t.method == "reference") ref_ns = t.cell.ns;
     for (const Timed& t : timed) {
       const Cell& c = t.cell;
-      const double dn = double(std::max<std::size_t>(n, 1));
+      const double dn = double(std::max<std::size_t>(n, 1)), dnv = dn * double(view_count);  // objects; objects x views
       if (!c.note.empty()) {
         std::printf("%-12s %-7s %-9s %9zu %6.1f%%   (%s)\n", c.method.c_str(), bv.c_str(), order.c_str(), n, 100 * achieved, c.note.c_str());
         continue;
       }
       const double gbps = c.ns > 0 ? double(c.bytes_per_object) * dn / c.ns : 0.0;
       std::printf("%-12s %-7s %-9s %9zu %6.1f%% %5d %10.3f %10.1f %8.2f %8.2f %10s %11s %6s\n", c.method.c_str(), bv.c_str(), order.c_str(), n,
-                  100 * achieved, c.repeats, c.ns / dn, c.ns > 0 ? dn / c.ns * 1e3 : 0.0, gbps,
-                  ref_ns > 0 && c.ns > 0 ? ref_ns / c.ns : 0.0, c.wall_ns > 0 ? std::to_string(c.wall_ns / dn).substr(0, 8).c_str() : "-",
+                  100 * achieved, c.repeats, c.ns / dnv, c.ns > 0 ? dnv / c.ns * 1e3 : 0.0, gbps,
+                  ref_ns > 0 && c.ns > 0 ? ref_ns / c.ns : 0.0, c.wall_ns > 0 ? std::to_string(c.wall_ns / dnv).substr(0, 8).c_str() : "-",
                   c.upload_ns > 0 ? std::to_string(c.upload_ns / dn).substr(0, 8).c_str() : "-", !c.agree ? "-" : *c.agree ? "yes" : "NO");
     }
     std::fflush(stdout);
@@ -394,7 +439,7 @@ void write_plots(const Config& config, const std::vector<Cell>& cells) {
         if (c.method == method && c.bv == bv && c.order == order && c.target_fraction == fraction && c.note.empty() && c.ns > 0) {
           if (!any) out << "\"" << method << "\"\n";
           any = true;
-          out << c.n << " " << c.ns / double(std::max<std::size_t>(c.n, 1)) << "\n";
+          out << c.n << " " << c.ns / double(std::max<std::size_t>(c.n * c.views, 1)) << "\n";
         }
       if (any) {
         out << "\n\n";
@@ -423,8 +468,8 @@ void write_plots(const Config& config, const std::vector<Cell>& cells) {
 void usage(FILE* to) {
   std::fprintf(to,
                "usage: cullpipe-bench [--methods m,..] [--bv aabb,obb,sphere] [--sizes 1e3,..] [--fractions 0.01,..]\n"
-               "                      [--order shuffled,sorted] [--repeats R] [--threads T] [--isa portable|avx2|avx512]\n"
-               "                      [--device NAME] [--csv FILE] [--json FILE] [--plot PREFIX]\n"
+               "                      [--order shuffled,sorted] [--views K] [--repeats R] [--threads T] [--isa portable|avx2|avx512]\n"
+               "                      [--device NAME] [--validation] [--csv FILE] [--json FILE] [--plot PREFIX]\n"
                "methods: reference, cpu-fast, cpu-read, cpu-bvh, cpu-fast-bvh, gpu-flat, gpu-bvh (default: all)\n");
 }
 
@@ -460,6 +505,14 @@ int main(int argc, char** argv) {
     else if (a == "--fractions") config.fractions = parse_fractions(value(), kProgram, "--fractions");
     else if (a == "--order") config.orders = list_of({"shuffled", "sorted"});
     else if (a == "--repeats") config.repeats = std::atoi(value().c_str());
+    else if (a == "--views") {
+      const std::vector<std::size_t> k = parse_counts(value(), kProgram, "--views");
+      if (k.size() != 1 || k[0] < 1 || k[0] > 64) {
+        std::fprintf(stderr, "%s: --views: one count from 1 to 64\n", kProgram);
+        return 2;
+      }
+      config.views = k[0];
+    }
     else if (a == "--threads") config.threads = unsigned(std::atoi(value().c_str()));
     else if (a == "--isa") {
       const std::string name = value();
@@ -469,6 +522,7 @@ int main(int argc, char** argv) {
         return 2;
       }
     } else if (a == "--device") config.device = value();
+    else if (a == "--validation") config.validation = true;
     else if (a == "--csv") config.csv = value();
     else if (a == "--json") config.json = value();
     else if (a == "--plot") config.plot = value();
@@ -486,11 +540,17 @@ int main(int argc, char** argv) {
   fast_config.isa = config.isa;
   fast::CpuCuller fast_culler(fast_config);
   fast::CpuBvhCuller fast_bvh(config.threads, config.isa);
+  std::size_t validation_messages = 0;  // (before gpu: the context reports until it is destroyed)
   Gpu gpu;
   if (wants(config, "gpu-flat") || wants(config, "gpu-bvh")) {
     try {
       vk::ContextOptions options;
       options.device_filter = config.device;
+      options.validation = config.validation;
+      options.on_message = [&](std::string_view message) {
+        ++validation_messages;
+        std::fprintf(stderr, "%s: validation: %.*s\n", kProgram, int(message.size()), message.data());
+      };
       gpu.ctx = std::make_unique<vk::Context>(options);
       gpu::GpuCullerConfig flat_config;
       flat_config.upload_threads = config.threads;  // the same threads as the CPU paths
@@ -549,22 +609,22 @@ int main(int argc, char** argv) {
   }
 
   auto record = [&](const Cell& c) {
-    const double dn = double(std::max<std::size_t>(c.n, 1));
+    const double dn = double(std::max<std::size_t>(c.n, 1)), dnv = dn * double(c.views);  // objects; objects x views
     double ref_ns = 0;
     for (const Cell& r : cells)
       if (r.method == "reference" && r.bv == c.bv && r.order == c.order && r.n == c.n && r.target_fraction == c.target_fraction) ref_ns = r.ns;
     const double gbps = c.ns > 0 ? double(c.bytes_per_object) * dn / c.ns : 0.0;
-    return nlohmann::json{{"method", c.method}, {"bv", c.bv}, {"n", c.n}, {"order", c.order}, {"target_fraction", c.target_fraction},
-                          {"visible_fraction", c.visible_fraction}, {"repeats", c.repeats}, {"ns_per_object", c.ns / dn},
-                          {"objects_per_s", c.ns > 0 ? dn / c.ns * 1e9 : 0.0}, {"bytes_per_object", c.bytes_per_object},
+    return nlohmann::json{{"method", c.method}, {"bv", c.bv}, {"n", c.n}, {"views", c.views}, {"order", c.order}, {"target_fraction", c.target_fraction},
+                          {"visible_fraction", c.visible_fraction}, {"repeats", c.repeats}, {"ns_per_object", c.ns / dnv},
+                          {"objects_per_s", c.ns > 0 ? dnv / c.ns * 1e9 : 0.0}, {"bytes_per_object", c.bytes_per_object},
                           {"gb_per_s", gbps}, {"bandwidth_fraction", gbps / read_gbps}, {"read_bandwidth_gbps", read_gbps},
                           {"speedup_vs_reference", ref_ns > 0 && c.ns > 0 ? ref_ns / c.ns : 0.0},
-                          {"gpu_wall_ns_per_object", c.wall_ns / dn}, {"upload_ns_per_object", c.upload_ns / dn}, {"agree", c.agree ? nlohmann::json(*c.agree) : nlohmann::json()},
+                          {"gpu_wall_ns_per_object", c.wall_ns / dnv}, {"upload_ns_per_object", c.upload_ns / dn}, {"agree", c.agree ? nlohmann::json(*c.agree) : nlohmann::json()},
                           {"note", c.note}};
   };
   if (!config.csv.empty()) {
     std::ofstream csv(config.csv);
-    const char* const columns[] = {"method", "bv", "n", "order", "target_fraction", "visible_fraction", "repeats", "ns_per_object",
+    const char* const columns[] = {"method", "bv", "n", "views", "order", "target_fraction", "visible_fraction", "repeats", "ns_per_object",
                                    "objects_per_s", "bytes_per_object", "gb_per_s", "bandwidth_fraction", "read_bandwidth_gbps",
                                    "speedup_vs_reference", "gpu_wall_ns_per_object", "upload_ns_per_object", "agree", "note"};
     for (std::size_t k = 0; k < std::size(columns); ++k) csv << (k ? "," : "") << columns[k];
@@ -592,8 +652,15 @@ int main(int argc, char** argv) {
     std::ofstream(config.json) << j.dump(2) << "\n";
   }
   if (!config.plot.empty()) write_plots(config, cells);
+  gpu.flat.reset();  // the device's objects destroyed, any message about them counted
+  gpu.bvh.reset();
+  gpu.ctx.reset();
   if (!all_agree) {
     std::fprintf(stderr, "%s: at least one method disagreed with the reference (see the agree column)\n", kProgram);
+    return 1;
+  }
+  if (validation_messages > 0) {
+    std::fprintf(stderr, "%s: %zu validation messages\n", kProgram, validation_messages);
     return 1;
   }
   return 0;

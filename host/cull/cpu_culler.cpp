@@ -592,8 +592,9 @@ void CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& optio
 
   const std::vector<const float*>& a = m.arrays;
   auto chunk_end = [&](std::size_t begin) { return std::min(n, begin + m.chunk); };
-  m.pool.parallel_for(views.size() * chunks, [&](std::size_t task) {
-    const std::size_t v = task / chunks, chunk = task % chunks;
+  // View v's chunk `chunk`, task v * chunks + chunk of the counts and offsets.
+  auto cull_chunk = [&](std::size_t v, std::size_t chunk) {
+    const std::size_t task = v * chunks + chunk;
     const std::size_t begin = chunk * m.chunk, end = chunk_end(begin);
     if (begin >= end) return;
     detail::ChunkOutput out;
@@ -615,7 +616,21 @@ void CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& optio
         counts = m.table.sphere(detail::SphereArrays{a[0], a[1], a[2], a[3], a[4]}, begin, end, planes[v], out);
         break;
     }
-  });
+  };
+  // Several views: each chunk read from memory once for all of them. With enough chunks to
+  // keep every thread busy, a task is one chunk and every view in turn, its centres and bounds
+  // (256 KiB) in the thread's L2 after the first; with fewer, a task is one chunk and one view,
+  // tasks of one chunk next to each other, so that every thread works. (4*10^6 boxes, 4 views:
+  // a chunk per task 0.76-0.83x the time of four single-view passes, a chunk and view per task
+  // 0.79-0.84x, and 8% slower than a chunk per task; NOTES.)
+  const std::size_t view_count = views.size();
+  if (view_count > 1 && chunks >= 4 * std::size_t(m.pool.size())) {
+    m.pool.parallel_for(chunks, [&](std::size_t chunk) {
+      for (std::size_t v = 0; v < view_count; ++v) cull_chunk(v, chunk);
+    });
+  } else {
+    m.pool.parallel_for(view_count * chunks, [&](std::size_t t) { cull_chunk(t % view_count, t / view_count); });
+  }
 
   m.offsets.assign(views.size() * chunks, 0);
   for (std::size_t v = 0; v < views.size(); ++v) {
