@@ -228,6 +228,16 @@ void run(Bytes& in, std::uint8_t flags) {
       if (got[0].visible_ids != ref_ids)
         fail("CpuCuller's visible list differs" + at + pass, volumes, f, n, int(ref_ids.size()), int(got[0].visible_ids.size()));
     }
+    // Two views in one call (each chunk read once for both): the first as alone, the second
+    // seeing everything INSIDE.
+    const Frustum two_views[2] = {f, everything};
+    const std::vector<fast::CpuViewResult> two = flat.cull(two_views);
+    for (std::size_t i = 0; i < n; ++i)
+      if (two[0].classes[i] != ref[i]) fail("CpuCuller's class differs with two views" + at, volumes, f, i, int(ref[i]), int(two[0].classes[i]));
+    if (!(two[0].counts == ref_counts) || two[0].visible_ids != ref_ids)
+      fail("CpuCuller's counts or list differ with two views" + at, volumes, f, n, int(ref_counts.visible), int(two[0].counts.visible));
+    if (two[1].counts.visible != n || two[1].counts.inside != n || two[1].visible_ids.size() != n)
+      fail("CpuCuller's second view (no planes) is not all INSIDE" + at, volumes, everything, n, int(n), int(two[1].counts.inside));
 
     // Hierarchical: classes and list, the list alone, two views.
     fast::CpuBvhCuller fast_bvh(threads, isa);
