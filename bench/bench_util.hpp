@@ -83,21 +83,25 @@ inline std::string cpu_model() {
 }
 
 /// A camera looking at the centre of `bounds` from outside (framing_camera), its field of view
-/// chosen by bisection so that about `fraction` of the objects are visible; count_visible(f)
-/// counts them for a frustum. `achieved` gets the fraction reached, `chosen` (if given) the camera.
+/// (orthographic: its height) chosen by bisection so that about `fraction` of the objects are
+/// visible; count_visible(f) counts them for a frustum. `achieved` gets the fraction reached,
+/// `chosen` (if given) the camera.
 template <class CountVisible>
 Frustum frustum_for_fraction(const Aabb& bounds, std::size_t objects, double fraction, CountVisible count_visible, double& achieved,
-                             Camera* chosen = nullptr) {
+                             Camera* chosen = nullptr, bool orthographic = false) {
   Camera cam = framing_camera(bounds);
   cam.aspect = 1.0f;
-  double lo = 0.001, hi = 179.0;  // degrees
+  cam.orthographic = orthographic;
+  // Degrees, or (orthographic) half heights up to the scene's diagonal.
+  double lo = 0.001, hi = orthographic ? double(glm::length(bounds.max - bounds.min)) + 1e-3 : 179.0;
   Frustum best = Frustum::from_view_proj(cam.view_proj());
   if (chosen) *chosen = cam;
   double best_error = 1e300;
   achieved = 0.0;
   for (int step = 0; step < 40 && objects > 0; ++step) {
     const double mid = 0.5 * (lo + hi);
-    cam.fov_y_degrees = float(mid);
+    if (orthographic) cam.ortho_half_height = float(mid);
+    else cam.fov_y_degrees = float(mid);
     const Frustum f = Frustum::from_view_proj(cam.view_proj());
     const double visible = double(count_visible(f)) / double(objects);
     if (std::abs(visible - fraction) < best_error) {

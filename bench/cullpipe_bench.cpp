@@ -27,7 +27,7 @@
 // times).
 //
 // usage: cullpipe-bench [--methods m,..] [--bv aabb,obb,sphere] [--sizes 1e3,..] [--fractions 0.01,..]
-//                       [--order shuffled,sorted] [--views K] [--repeats R] [--threads T] [--isa NAME]
+//                       [--order shuffled,sorted] [--views K] [--ortho] [--repeats R] [--threads T] [--isa NAME]
 //                       [--device NAME] [--validation] [--csv FILE] [--json FILE] [--plot PREFIX]
 #include <algorithm>
 #include <cmath>
@@ -86,6 +86,7 @@ struct Cell {
   std::size_t bytes_per_object = 0;
   std::optional<bool> agree;  ///< nullopt when there is nothing to check (cpu-read)
   std::string note;           ///< why a method did not run
+  bool orthographic = false;  ///< the cameras' projection (--ortho)
 };
 
 struct Config {
@@ -95,6 +96,7 @@ struct Config {
   std::vector<double> fractions = {0.01, 0.1, 0.5};
   std::vector<std::string> orders = {"shuffled", "sorted"};
   std::size_t views = 1;  // views per pass, on a circle around the scene
+  bool orthographic = false;  // orthographic cameras (a shadow map's) instead of perspective ones
   int repeats = 0;  // 0: by size
   unsigned threads = 0;
   std::optional<fast::Isa> isa;
@@ -190,7 +192,7 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
     frustum_for_fraction(bounds, n, fraction, [&](const Frustum& v) {
       fast_culler.cull({&v, 1}, counts_only, fast_results);
       return fast_results[0].counts.visible;
-    }, achieved, &camera);
+    }, achieved, &camera, config.orthographic);
     // --views K: K cameras with that lens evenly on a circle around the scene (the first is
     // the one found), culled in one pass; `achieved` becomes their mean visible share.
     std::vector<Frustum> views;
@@ -223,7 +225,7 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
                    std::function<void(std::vector<double>&, std::vector<double>&)> pass) {
       Timed t;
       t.method = method;
-      t.cell = {method, bv, order, n, view_count, fraction, achieved, reps, 0, 0, 0, bytes, agree, std::move(note)};
+      t.cell = {method, bv, order, n, view_count, fraction, achieved, reps, 0, 0, 0, bytes, agree, std::move(note), config.orthographic};
       if (const auto u = upload_ns.find(method); u != upload_ns.end() && t.cell.note.empty()) t.cell.upload_ns = u->second;
       if (t.cell.note.empty()) t.pass = std::move(pass);
       timed.push_back(std::move(t));
@@ -468,7 +470,7 @@ void write_plots(const Config& config, const std::vector<Cell>& cells) {
 void usage(FILE* to) {
   std::fprintf(to,
                "usage: cullpipe-bench [--methods m,..] [--bv aabb,obb,sphere] [--sizes 1e3,..] [--fractions 0.01,..]\n"
-               "                      [--order shuffled,sorted] [--views K] [--repeats R] [--threads T] [--isa portable|avx2|avx512]\n"
+               "                      [--order shuffled,sorted] [--views K] [--ortho] [--repeats R] [--threads T] [--isa portable|avx2|avx512]\n"
                "                      [--device NAME] [--validation] [--csv FILE] [--json FILE] [--plot PREFIX]\n"
                "methods: reference, cpu-fast, cpu-read, cpu-bvh, cpu-fast-bvh, gpu-flat, gpu-bvh (default: all)\n");
 }
@@ -523,6 +525,7 @@ int main(int argc, char** argv) {
       }
     } else if (a == "--device") config.device = value();
     else if (a == "--validation") config.validation = true;
+    else if (a == "--ortho") config.orthographic = true;
     else if (a == "--csv") config.csv = value();
     else if (a == "--json") config.json = value();
     else if (a == "--plot") config.plot = value();
@@ -568,7 +571,8 @@ int main(int argc, char** argv) {
               std::string(to_string(fast_culler.isa())).c_str(), fast_culler.threads());
   if (gpu.ctx) std::printf("gpu: %s, %s\n", gpu.ctx->info().name.c_str(), gpu.ctx->info().driver.c_str());
   else if (!gpu.error.empty()) std::printf("gpu: none (%s)\n", gpu.error.c_str());
-  std::printf("memory read bandwidth (256 MiB, %u threads): %.1f GB/s\n\n", fast_culler.threads(), read_gbps);
+  std::printf("memory read bandwidth (256 MiB, %u threads): %.1f GB/s\n", fast_culler.threads(), read_gbps);
+  std::printf("views per pass: %zu, %s cameras\n\n", config.views, config.orthographic ? "orthographic" : "perspective");
   std::printf("%-12s %-7s %-9s %9s %7s %5s %10s %10s %8s %8s %10s %11s %6s\n", "method", "bv", "order", "N", "visible", "reps", "ns/obj",
               "Mobj/s", "GB/s", "x ref", "wall ns/o", "upload ns/o", "agree");
 
@@ -614,7 +618,8 @@ int main(int argc, char** argv) {
     for (const Cell& r : cells)
       if (r.method == "reference" && r.bv == c.bv && r.order == c.order && r.n == c.n && r.target_fraction == c.target_fraction) ref_ns = r.ns;
     const double gbps = c.ns > 0 ? double(c.bytes_per_object) * dn / c.ns : 0.0;
-    return nlohmann::json{{"method", c.method}, {"bv", c.bv}, {"n", c.n}, {"views", c.views}, {"order", c.order}, {"target_fraction", c.target_fraction},
+    return nlohmann::json{{"method", c.method}, {"bv", c.bv}, {"n", c.n}, {"views", c.views},
+                          {"projection", c.orthographic ? "orthographic" : "perspective"}, {"order", c.order}, {"target_fraction", c.target_fraction},
                           {"visible_fraction", c.visible_fraction}, {"repeats", c.repeats}, {"ns_per_object", c.ns / dnv},
                           {"objects_per_s", c.ns > 0 ? dnv / c.ns * 1e9 : 0.0}, {"bytes_per_object", c.bytes_per_object},
                           {"gb_per_s", gbps}, {"bandwidth_fraction", gbps / read_gbps}, {"read_bandwidth_gbps", read_gbps},
@@ -624,7 +629,7 @@ int main(int argc, char** argv) {
   };
   if (!config.csv.empty()) {
     std::ofstream csv(config.csv);
-    const char* const columns[] = {"method", "bv", "n", "views", "order", "target_fraction", "visible_fraction", "repeats", "ns_per_object",
+    const char* const columns[] = {"method", "bv", "n", "views", "projection", "order", "target_fraction", "visible_fraction", "repeats", "ns_per_object",
                                    "objects_per_s", "bytes_per_object", "gb_per_s", "bandwidth_fraction", "read_bandwidth_gbps",
                                    "speedup_vs_reference", "gpu_wall_ns_per_object", "upload_ns_per_object", "agree", "note"};
     for (std::size_t k = 0; k < std::size(columns); ++k) csv << (k ? "," : "") << columns[k];

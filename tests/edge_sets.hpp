@@ -19,7 +19,7 @@ namespace cullpipe::test {
 template <class Volume>
 struct EdgeSet {
   std::vector<Volume> volumes;
-  std::vector<Frustum> views;  // one plane each, or two (add_mirrored_views)
+  std::vector<Frustum> views;  // one plane each, or two or six (add_mirrored_views)
 };
 
 // Appends views on which no bound may settle anything: the same planes with normals of length
@@ -42,11 +42,15 @@ inline void add_unbounded_views(std::vector<Frustum>& views) {
 // PlaneSet::mirrored allows; built by hand), offset -d (a slab around the plane: the plane's
 // distance taken as a difference from the mirror's, and the other way round) or 4*10^6 (every
 // volume deep inside the mirror). The bounds allow for the difference (simd_kernels.inl).
+// Then the slab among two more mirrored pairs, across it, at 4*10^6 (an orthographic
+// frustum's shape: three pairs), in both roles and as the first, second and third pair (the
+// kernels take the first pair's mirrored distance as a difference, the others' in full).
 inline void add_mirrored_views(std::vector<Frustum>& views, std::size_t count) {
+  const float slack = fast::detail::kMirrorSlack;
   for (std::size_t v = 0; v < count; ++v) {
     const Plane plane = views[v].planes[0];
     Plane mirror;
-    mirror.normal = -plane.normal + fast::detail::kMirrorSlack * glm::vec3(1.0f, -1.0f, v % 2 ? 1.0f : -1.0f);
+    mirror.normal = -plane.normal + slack * glm::vec3(1.0f, -1.0f, v % 2 ? 1.0f : -1.0f);
     for (float offset : {-plane.d, 4e6f}) {
       mirror.d = offset;
       Frustum pair;
@@ -59,6 +63,28 @@ inline void add_mirrored_views(std::vector<Frustum>& views, std::size_t count) {
         views.push_back(pair);
       }
     }
+    mirror.d = -plane.d;
+    const glm::vec3 n = plane.normal;
+    const glm::vec3 axis = std::abs(n.x) < 0.5f ? glm::vec3(1, 0, 0) : glm::vec3(0, 1, 0);
+    const glm::vec3 u = glm::normalize(glm::cross(n, axis)), w = glm::normalize(glm::cross(n, u));
+    const Plane across[4] = {{u, 4e6f}, {w, 4e6f}, {-u - slack * glm::vec3(1.0f, 1.0f, -1.0f), 4e6f}, {-w + slack * glm::vec3(-1.0f, 1.0f, 1.0f), 4e6f}};
+    for (int role = 0; role < 2; ++role)
+      for (int slot = 0; slot < 3; ++slot) {
+        // The bases in planes 0-2, each mirrored three planes on; the slab's pair in `slot`.
+        Frustum ortho;
+        ortho.plane_count = 6;
+        for (int k = 0, other = 0; k < 3; ++k) {
+          if (k == slot) {
+            ortho.planes[k] = role ? plane : mirror;
+            ortho.planes[k + 3] = role ? mirror : plane;
+          } else {
+            ortho.planes[k] = across[other];
+            ortho.planes[k + 3] = across[other + 2];
+            ++other;
+          }
+        }
+        views.push_back(ortho);
+      }
   }
 }
 

@@ -30,6 +30,7 @@
 #include "cull/plane_bounds.hpp"
 #include "cull/reference.hpp"
 #include "cull/thread_pool.hpp"
+#include "scene/camera.hpp"
 #include "geom/pn_vertex.hpp"
 #include "edge_sets.hpp"
 #include "test_util.hpp"
@@ -159,6 +160,41 @@ TEST(CpuCuller, RandomAabbsObbsAndSpheresOfEverySizeAroundTheVectorWidths) {
     check_everywhere(v.obbs, "obb");
     check_everywhere(v.spheres, "sphere");
   }
+}
+
+TEST(CpuCuller, FindsMirroredPlanesAndCullsOrthographicViews) {
+  // A perspective frustum's near and far planes mirror each other when its depth range is
+  // modest (with near / far = 10^-4 the float matrix tilts the far plane by far more than
+  // kMirrorSlack); an orthographic one's three pairs always do. The kernels take the first
+  // pair's mirrored distance from its base's.
+  Camera camera;
+  camera.eye = {3, 40, 70};
+  camera.target = {5, -2, -10};
+  camera.near_plane = 20.0f;
+  camera.far_plane = 200.0f;
+  std::vector<Frustum> views;
+  views.push_back(Frustum::from_view_proj(camera.view_proj()));
+  const fast::detail::PlaneSet perspective = fast::detail::plane_set(views.back());
+  EXPECT_TRUE(perspective.mirrored && perspective.mirror_base == 4 && perspective.mirror_plane == 5) << describe(views.back());
+  camera.infinite_far = true;  // five planes, none mirrored
+  EXPECT_FALSE(fast::detail::plane_set(Frustum::from_view_proj(camera.view_proj())).mirrored);
+  camera.infinite_far = false;
+  camera.orthographic = true;
+  for (float half_height : {5.0f, 40.0f}) {
+    camera.ortho_half_height = half_height;
+    views.push_back(Frustum::from_view_proj(camera.view_proj()));
+    const fast::detail::PlaneSet set = fast::detail::plane_set(views.back());
+    EXPECT_TRUE(set.mirrored && set.mirror_base == 0 && set.mirror_plane == 1) << describe(views.back());
+  }
+  // Slanted: light from the side, as a shadow cascade's.
+  camera.eye = {60, 50, -20};
+  views.push_back(Frustum::from_view_proj(camera.view_proj()));
+  EXPECT_TRUE(fast::detail::plane_set(views.back()).mirrored);
+  test::Rng rng(31);
+  const test::RandomVolumes v = test::random_volumes(rng, 5003, 30.0f, 4.0f);
+  check_everywhere(v.aabbs, "aabb, orthographic", views);
+  check_everywhere(v.obbs, "obb, orthographic", views);
+  check_everywhere(v.spheres, "sphere, orthographic", views);
 }
 
 TEST(CpuCuller, VisibleListsMixDenseAndSparseRuns) {

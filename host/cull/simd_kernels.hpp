@@ -23,9 +23,9 @@ struct PlaneSet {
   /// (1 - 2^-12); 0 (nothing settled by them) where that smallest norm is outside [1/2, 2].
   float lower_scale_l1 = 0.0f, lower_scale_l2 = 0.0f;
   /// Plane mirror_plane's normal is within kMirrorSlack of minus plane mirror_base's, in every
-  /// component (a frustum's far and near planes): the flat kernels take its centre distance as
-  /// (d[base] + d[plane]) - (the base plane's distance), one subtraction for three fused
-  /// multiply-adds. The bounds allow for it (the proof: CentreArrays in simd_kernels.inl).
+  /// component (a frustum's far and near planes; the first such pair): the flat kernels take
+  /// its centre distance as (d[base] + d[plane]) - (the base plane's distance), one
+  /// subtraction for three fused multiply-adds. The bounds allow for it (the proof: CentreArrays in simd_kernels.inl).
   bool mirrored = false;
   std::uint32_t mirror_base = 0, mirror_plane = 0;
 };

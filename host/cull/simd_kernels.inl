@@ -359,9 +359,12 @@ inline vf mul_sub(vf a, vf b, vf c) {
 // scale of 0 (NaN or -m) or L <= 0 settles nothing; q is 0 past 2^119, so q b stays finite.
 //
 // A mirrored plane j (PlaneSet::mirrored: n_j = -n_i + delta, |delta| <= kMirrorSlack = 2^-21
-// per component; a frustum's far plane against its near one) gets s_j = (d_i + d_j) - s_i, from
-// its base plane's fused distance s_i: one subtraction for three fused multiply-adds (with
-// the loop below, 10^6 objects in cache: 1-12% faster; NOTES). With e = 2^-23 and |n_i| <=
+// per component; a frustum's far plane against its near one, which from a perspective matrix
+// takes a modest depth range: see the README; an orthographic frustum's first pair, its left
+// and right planes: taking its other two pairs so too was 6-13% slower at 1% and 10% visible
+// on a Zen 5, NOTES) gets s_j = (d_i + d_j) - s_i, from its base plane's fused distance s_i:
+// one subtraction for three fused multiply-adds (10^6 boxes in cache: 1-4% faster than the
+// same loop without the pair; NOTES). With e = 2^-23 and |n_i| <=
 // 1 + 2^-20, s_i is within 6e (1 + 2^-20)(|c|_1 + |d_i|) of n_i.c + d_i, the float d_i + d_j
 // within 2e max|d| of the
 // sum, the subtraction within e (|c|_1 + 3 max|d|)(1 + 2^-20), and n_j.c + d_j differs from
@@ -441,10 +444,13 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
     // The run's vectors, by a loop made once for each of appending or not, classes or not and
     // a mirrored plane or not (no test of any per vector), reading local copies of the planes
     // and pointers and counting in locals written back after: no store in the loop can change
-    // them, so none is reloaded per vector.
+    // them, so none is reloaded per vector. Each loop is a function of its own: inlined into
+    // this one, GCC 12 compiled the loop without a mirrored plane, the one most views take
+    // (a perspective frustum from a game's depth range has no pair), 1.5-1.6x slower than
+    // the loop with one (10^6 objects in cache, AVX-512; AVX2 1.1x; NOTES).
     // crossing_bits is read only for classes: each vector's settled INTERSECTING lanes, and
     // the open objects found crossing set their bits.
-    auto scan = [&](auto append_c, auto classes_c, auto mirror_c) {
+    auto scan = [&](auto append_c, auto classes_c, auto mirror_c) __attribute__((noinline)) {
       constexpr bool kAppend = decltype(append_c)::value, kClasses = decltype(classes_c)::value;
       constexpr bool kMirror = decltype(mirror_c)::value;
       std::uint32_t visible_count = 0, across_count = 0;
