@@ -25,7 +25,8 @@ struct PlaneSet {
   /// Plane mirror_plane's normal is within kMirrorSlack of minus plane mirror_base's, in every
   /// component (a frustum's far and near planes; the first such pair): the flat kernels take
   /// its centre distance as (d[base] + d[plane]) - (the base plane's distance), one
-  /// subtraction for three fused multiply-adds. The bounds allow for it (the proof: CentreArrays in simd_kernels.inl).
+  /// subtraction for three fused multiply-adds. The bounds allow for it (the proof:
+  /// CentreArrays in simd_kernels.inl).
   bool mirrored = false;
   std::uint32_t mirror_base = 0, mirror_plane = 0;
 };
