@@ -75,6 +75,9 @@ class CpuCuller {
   void upload(std::span<const Obb> volumes);
   void upload(std::span<const Sphere> volumes);
 
+  /// One result per view, each as a pass of its own would give. Several views (a camera and
+  /// its shadow cascades, two eyes) share the pass: each chunk of objects is read from memory
+  /// once and culled for every view while it is in the cache.
   std::vector<CpuViewResult> cull(std::span<const Frustum> views, const CpuCullOptions& options = {});
   /// The same, into `results` (resized to the view count), reusing its vectors' storage so a
   /// pass per frame allocates nothing once sizes settle.
