@@ -112,7 +112,7 @@ inline EdgeSet<Obb> obb_edge_set() {
   for (const Frustum& view : views) {
     const glm::vec3 n = view.planes[0].normal;
     const glm::vec3 on_plane = -view.planes[0].d * n;
-    for (int shape = 0; shape < 4; ++shape)
+    for (int shape = 0; shape < 6; ++shape)
       for (int side = -1; side <= 1; side += 2)
         for (int step = -64; step <= 64; ++step) {
           Obb o;
@@ -125,9 +125,21 @@ inline EdgeSet<Obb> obb_edge_set() {
           } else if (shape == 2) {  // skewed, scaled axes and a negative extent
             o.basis = glm::mat3(rng.vec3(-3, 3), rng.vec3(-3, 3), 0.001f * rng.vec3(-1, 1));
             o.half_extents = {rng.uniform(0.0f, 2.0f), -rng.uniform(0.0f, 2.0f), 1e3f};
-          } else {  // a scaled axis along the normal
+          } else if (shape == 3) {  // a scaled axis along the normal
             o.basis = glm::mat3(7.0f * n, 0.5f * rng.vec3(-1, 1), glm::vec3(0));
             o.half_extents = {rng.uniform(0.1f, 1.0f), rng.uniform(0.0f, 0.01f), 3};
+          } else if (shape == 4) {  // a rotated box at its widest along the normal: r = |h|_2,
+            // the bound's Gram-matrix term at its edge
+            const glm::mat3 rotation = rng.rotation();
+            const float k = rng.uniform(0.5f, 2.0f);
+            for (int i = 0; i < 3; ++i) {
+              const float c = glm::dot(rotation[i], n);
+              o.basis[i] = c < 0.0f ? -rotation[i] : rotation[i];
+              o.half_extents[i] = k * std::fabs(c);
+            }
+          } else {  // axes bunched around the normal, far from orthogonal: r near sum |u_i| h_i
+            for (int i = 0; i < 3; ++i) o.basis[i] = n + 0.2f * rng.vec3(-1, 1);
+            o.half_extents = rng.vec3(0.2f, 2.0f);
           }
           // r as the reference computes it for this plane; the centre at distance side * r,
           // moved by `step` steps of 2^-26 of r (below a float step of the distance).

@@ -133,6 +133,14 @@ namespace {
 /// - the products with h_i and the two sums add (1 + e)^3 and 5 x 2^-149, so
 ///   |r| <= [sum_i (|u_i| + 2^-140) |h_i|] (1 + 2^-16) (1 - e) + 2^-140, as
 ///   (1 + 2^-20)(1 + e)^6 / (1 - e) < 1 + 2^-16;
+/// - and, tighter for a box (|h|_2 instead of |h|_1 for orthonormal axes): a_i differs from
+///   n.u_i by at most 3.0001e (|n.x u.x| + |n.y u.y| + |n.z u.z|) <= 2^-21 |n| |u_i|, plus
+///   less than 2^-123 where DAZ flushes a subnormal input; sum_i |n.u_i| |h_i| <= |U^T n| |h|_2
+///   <= |n| sqrt(L) |h|_2 (Cauchy-Schwarz), with U the axes as columns and L >= the largest
+///   eigenvalue of the Gram matrix U^T U by Gershgorin: L = max_i (|u_i|^2 + sum_j!=i |u_i.u_j|);
+///   so |r| <= [sqrt(L) |h|_2 + 2^-21 sum_i |u_i| |h_i| + 2^-120 |h|_1] (1 + 2^-16) (1 - e),
+///   the double arithmetic below (L, the square roots) within the factor 1 + 2^-39 it takes;
+///   the bound takes the smaller of the two;
 /// - s and s_ref are each within 6e (|n| |c|_1 + |d|) of n.c + d (three products and three
 ///   sums), so within 12e (1 + 2^-20)(|c|_1 + |d|) < 2^-18 (1 - e)(|c|_1 + |d|) of each other;
 ///   the float sum bound + m is at least (1 - e)(bound + m);
@@ -146,17 +154,31 @@ namespace {
 ///   exact size makes the bound round up to inf). An infinite bound settles nothing (s is
 ///   finite when the bound and the margin are).
 float obb_plane_bound(const Obb& b) {
-  double sum = 0.0, size = 0.0;
+  double sum = 0.0, size = 0.0, h_squares = 0.0, h_sum = 0.0;
   for (int i = 0; i < 3; ++i) {
     const glm::vec3 u = b.basis[i];
     const double x = u.x, y = u.y, z = u.z;
     if (!(std::fabs(x) < 0x1p125 && std::fabs(y) < 0x1p125 && std::fabs(z) < 0x1p125))  // NaN too
       return std::numeric_limits<float>::quiet_NaN();
-    sum += (std::sqrt(x * x + y * y + z * z) + 0x1p-140) * std::fabs(double(b.half_extents[i]));
+    const double h = std::fabs(double(b.half_extents[i]));
+    sum += (std::sqrt(x * x + y * y + z * z) + 0x1p-140) * h;
     size += std::fabs(double(b.center[i]));
+    h_squares += h * h;
+    h_sum += h;
   }
   if (!(size <= 0x1p120)) return std::numeric_limits<float>::quiet_NaN();  // NaN and inf too
-  return round_up(sum * (1.0 + 0x1p-16) + 0x1p-18 * size + 0x1p-100);
+  // Gershgorin on the Gram matrix (products of floats are exact in double).
+  auto dot = [&](int i, int j) {
+    const glm::dvec3 u(b.basis[i]), v(b.basis[j]);
+    return u.x * v.x + u.y * v.y + u.z * v.z;
+  };
+  double gram_bound = 0.0;
+  for (int i = 0; i < 3; ++i)
+    gram_bound = std::max(gram_bound, dot(i, i) + std::fabs(dot(i, (i + 1) % 3)) + std::fabs(dot(i, (i + 2) % 3)));
+  const double tight = std::sqrt(gram_bound) * std::sqrt(h_squares) * (1.0 + 0x1p-39) + 0x1p-21 * sum + 0x1p-120 * h_sum;
+  // (A NaN `tight`, from 0 x inf, leaves `sum`; a NaN `sum` stays NaN.)
+  const double radius = tight < sum ? tight : sum;
+  return round_up(radius * (1.0 + 0x1p-16) + 0x1p-18 * size + 0x1p-100);
 }
 
 /// SphereArrays::bound of `s`: with a margin m >= 2^-18 |d| (PlaneSet::max_margin) it settles
