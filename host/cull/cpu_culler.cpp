@@ -135,9 +135,11 @@ namespace {
 ///   (1 + 2^-20)(1 + e)^6 / (1 - e) < 1 + 2^-16;
 /// - and, tighter for a box (|h|_2 instead of |h|_1 for orthonormal axes): a_i differs from
 ///   n.u_i by at most 3.0001e (|n.x u.x| + |n.y u.y| + |n.z u.z|) <= 2^-21 |n| |u_i|, plus
-///   less than 2^-123 where DAZ flushes a subnormal input; sum_i |n.u_i| |h_i| <= |U^T n| |h|_2
-///   <= |n| sqrt(L) |h|_2 (Cauchy-Schwarz), with U the axes as columns and L >= the largest
-///   eigenvalue of the Gram matrix U^T U by Gershgorin: L = max_i (|u_i|^2 + sum_j!=i |u_i.u_j|);
+///   less than 2^-122 where DAZ flushes a subnormal axis component (2^-125.2) or FTZ one of
+///   a_i's products or partial sums (five, 2^-123.7; flushing here need not shrink a term);
+///   sum_i |n.u_i| |h_i| <= |U^T n| |h|_2 <= |n| sqrt(L) |h|_2 (Cauchy-Schwarz), with U the
+///   axes as columns and L >= the largest eigenvalue of the Gram matrix U^T U by Gershgorin:
+///   L = max_i (|u_i|^2 + sum_j!=i |u_i.u_j|);
 ///   so |r| <= [sqrt(L) |h|_2 + 2^-21 sum_i |u_i| |h_i| + 2^-120 |h|_1] (1 + 2^-16) (1 - e),
 ///   the double arithmetic below (L, the square roots) within the factor 1 + 2^-39 it takes;
 ///   the bound takes the smaller of the two;
