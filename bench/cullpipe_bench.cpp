@@ -193,8 +193,9 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
       fast_culler.cull({&v, 1}, counts_only, fast_results);
       return fast_results[0].counts.visible;
     }, achieved, &camera, config.orthographic);
-    // --views K: K cameras with that lens evenly on a circle around the scene (the first is
-    // the one found), culled in one pass; `achieved` becomes their mean visible share.
+    // --views K: K cameras with that lens evenly on a circle around the scene (the first where
+    // the one found stands: camera_path), culled in one pass; `achieved` becomes their mean
+    // visible share.
     std::vector<Frustum> views;
     for (const Camera& c : camera_path(camera, bounds, config.views)) views.push_back(Frustum::from_view_proj(c.view_proj()));
     const std::size_t view_count = views.size();
@@ -543,17 +544,12 @@ int main(int argc, char** argv) {
   fast_config.isa = config.isa;
   fast::CpuCuller fast_culler(fast_config);
   fast::CpuBvhCuller fast_bvh(config.threads, config.isa);
-  std::size_t validation_messages = 0;  // (before gpu: the context reports until it is destroyed)
   Gpu gpu;
   if (wants(config, "gpu-flat") || wants(config, "gpu-bvh")) {
     try {
       vk::ContextOptions options;
       options.device_filter = config.device;
-      options.validation = config.validation;
-      options.on_message = [&](std::string_view message) {
-        ++validation_messages;
-        std::fprintf(stderr, "%s: validation: %.*s\n", kProgram, int(message.size()), message.data());
-      };
+      options.validation = config.validation;  // (messages go to stderr and are counted)
       gpu.ctx = std::make_unique<vk::Context>(options);
       gpu::GpuCullerConfig flat_config;
       flat_config.upload_threads = config.threads;  // the same threads as the CPU paths
@@ -659,7 +655,7 @@ int main(int argc, char** argv) {
   if (!config.plot.empty()) write_plots(config, cells);
   gpu.flat.reset();  // the device's objects destroyed, any message about them counted
   gpu.bvh.reset();
-  gpu.ctx.reset();
+  const std::size_t validation_messages = gpu.ctx ? gpu.ctx->validation_message_count() : 0;
   if (!all_agree) {
     std::fprintf(stderr, "%s: at least one method disagreed with the reference (see the agree column)\n", kProgram);
     return 1;

@@ -361,7 +361,7 @@ inline vf mul_sub(vf a, vf b, vf c) {
 // A mirrored plane j (PlaneSet::mirrored: n_j = -n_i + delta, |delta| <= kMirrorSlack = 2^-21
 // per component; a frustum's far plane against its near one, which from a perspective matrix
 // takes a modest depth range: see the README; an orthographic frustum's first pair, its left
-// and right planes: taking its other two pairs so too was 6-13% slower at 1% and 10% visible
+// and right planes: taking its other two pairs so too was 5-13% slower at 1% and 10% visible
 // on a Zen 5, NOTES) gets s_j = (d_i + d_j) - s_i, from its base plane's fused distance s_i:
 // one subtraction for three fused multiply-adds (10^6 boxes in cache: 1-4% faster than the
 // same loop without the pair; NOTES). With e = 2^-23 and |n_i| <=
