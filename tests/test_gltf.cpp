@@ -14,6 +14,7 @@
 #include "cull/reference.hpp"
 #include "geom/validate.hpp"
 #include "scene/generators.hpp"
+#include "scene/gltf_points.hpp"
 #include "scene/gltf_scene.hpp"
 
 namespace cullpipe {
@@ -395,6 +396,37 @@ TEST(GltfScene, MalformedFilesNameTheFileAndTheElement) {
   EXPECT_EQ(load_error("nan.gltf", nan), "nan.gltf: meshes[0].primitives[0]: POSITION accessor 0 vertex 1 has a NaN or infinite coordinate");
   EXPECT_EQ(load_error("trunc2.gltf", json::parse(R"({"asset":{"version":"2.0"}})")), "no error");  // empty but valid
   EXPECT_THROW(load_gltf_scene("/nonexistent/scene.gltf"), InputError);
+}
+
+// A .glb file: header, the JSON chunk (padded with spaces) and a BIN chunk.
+std::string glb_bytes(const json& j, const std::string& bin) {
+  std::string text = j.dump();
+  while (text.size() % 4) text += ' ';
+  auto u32 = [](std::uint32_t v) { return std::string(reinterpret_cast<const char*>(&v), 4); };  // little endian (x86, arm64)
+  const std::uint32_t total = std::uint32_t(12 + 8 + text.size() + 8 + bin.size());
+  return "glTF" + u32(2) + u32(total) + u32(std::uint32_t(text.size())) + u32(0x4E4F534Au) + text + u32(std::uint32_t(bin.size())) +
+         u32(0x004E4942u) + bin;
+}
+
+TEST(GltfScene, GlbWhoseBufferIsEmptyIsAnErrorNamingTheFile) {
+  // A buffer of byteLength 0 with a BIN chunk: tinygltf's checks let it through and it then
+  // indexes an empty vector (std::out_of_range); found by fuzz_gltf. Both readers must report
+  // the file as unreadable.
+  const std::string path = write_temp("zerobuf.glb", glb_bytes(json::parse(R"({"asset":{"version":"2.0"},"buffers":[{"byteLength":0}]})"),
+                                                             std::string(4, '\0')));
+  for (int reader = 0; reader < 2; ++reader) {
+    try {
+      if (reader == 0) load_gltf_scene(path);
+      else load_gltf_mesh_points(path);
+      ADD_FAILURE() << "no error from reader " << reader;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(path + ": not a readable glTF file"), std::string::npos) << e.what();
+    }
+  }
+  // The same file with a buffer of the chunk's size loads.
+  const std::string fine = write_temp("fourbuf.glb", glb_bytes(json::parse(R"({"asset":{"version":"2.0"},"buffers":[{"byteLength":4}]})"),
+                                                             std::string(4, '\0')));
+  EXPECT_NO_THROW(load_gltf_scene(fine));
 }
 
 TEST(GltfScene, OrthographicAndPerspectiveCameras) {

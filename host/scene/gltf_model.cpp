@@ -8,6 +8,8 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <exception>
+#include <new>
 
 #include "scene/scene.hpp"
 
@@ -60,8 +62,19 @@ tinygltf::Model load_model(const std::string& path) {
   loader.SetImageLoader(&skip_image, nullptr);
   tinygltf::Model model;
   std::string err, warn;
-  const bool ok = ends_with_ci(path, ".glb") ? loader.LoadBinaryFromFile(&model, &err, &warn, path)
-                                             : loader.LoadASCIIFromFile(&model, &err, &warn, path);
+  bool ok = false;
+  // tinygltf reports bad files through `err`, except where its own checks miss a case and a
+  // standard container throws: a GLB buffer of byteLength 0 with a BIN chunk reaches
+  // data.at(0) of an empty vector (std::out_of_range). Such a file is as unreadable as the
+  // others. (Out of memory is not the file's fault to report: bad_alloc passes on.)
+  try {
+    ok = ends_with_ci(path, ".glb") ? loader.LoadBinaryFromFile(&model, &err, &warn, path)
+                                    : loader.LoadASCIIFromFile(&model, &err, &warn, path);
+  } catch (const std::bad_alloc&) {
+    throw;
+  } catch (const std::exception& e) {
+    throw InputError(path + ": not a readable glTF file: the glTF reader failed on malformed data (" + e.what() + ")");
+  }
   if (!ok) throw InputError(path + ": not a readable glTF file: " + (err.empty() ? std::string("unknown error") : err));
   return model;
 }
