@@ -544,12 +544,19 @@ int main(int argc, char** argv) {
   fast_config.isa = config.isa;
   fast::CpuCuller fast_culler(fast_config);
   fast::CpuBvhCuller fast_bvh(config.threads, config.isa);
+  // Counted here, not read from vk::Context::validation_message_count: vkDestroyDevice, in
+  // the context's destructor, reports what was left undestroyed, after the count could be read.
+  std::size_t validation_messages = 0;  // (declared before gpu, so it outlives the context)
   Gpu gpu;
   if (wants(config, "gpu-flat") || wants(config, "gpu-bvh")) {
     try {
       vk::ContextOptions options;
       options.device_filter = config.device;
-      options.validation = config.validation;  // (messages go to stderr and are counted)
+      options.validation = config.validation;
+      options.on_message = [&](std::string_view message) {
+        ++validation_messages;
+        std::fprintf(stderr, "%s: validation: %.*s\n", kProgram, int(message.size()), message.data());
+      };
       gpu.ctx = std::make_unique<vk::Context>(options);
       gpu::GpuCullerConfig flat_config;
       flat_config.upload_threads = config.threads;  // the same threads as the CPU paths
@@ -655,7 +662,7 @@ int main(int argc, char** argv) {
   if (!config.plot.empty()) write_plots(config, cells);
   gpu.flat.reset();  // the device's objects destroyed, any message about them counted
   gpu.bvh.reset();
-  const std::size_t validation_messages = gpu.ctx ? gpu.ctx->validation_message_count() : 0;
+  gpu.ctx.reset();
   if (!all_agree) {
     std::fprintf(stderr, "%s: at least one method disagreed with the reference (see the agree column)\n", kProgram);
     return 1;
