@@ -27,9 +27,9 @@
 #include "cull/cpu_bvh_culler.hpp"
 #include "cull/cpu_culler.hpp"
 #include "cull/kernel_select.hpp"
-#include "cull/plane_bounds.hpp"
+#include "geom/plane_bounds.hpp"
 #include "cull/reference.hpp"
-#include "cull/thread_pool.hpp"
+#include "core/thread_pool.hpp"
 #include "scene/camera.hpp"
 #include "geom/pn_vertex.hpp"
 #include "edge_sets.hpp"
@@ -288,9 +288,9 @@ TEST(CpuCuller, BothReadOrdersOfTheMemoryFloorReadEveryCentreAndBound) {
         std::vector<Aabb> boxes(n, Aabb{{1e-3f, 5e-10f, -2.5f}, {1e-3f, 5e-10f, -1.5f}});
         boxes.back() = {{3e-3f, 5e-10f, -2.5f}, {3e-3f, 5e-10f, -1.5f}};
         std::vector<glm::vec4> centre_bounds(n);
-        fast::detail::aabb_centre_bounds(boxes, centre_bounds);
+        plane_bounds::aabb_centre_bounds(boxes, centre_bounds);
         for (std::size_t i = 0; i < n; ++i)  // as the culler stores them
-          centre_bounds[i].w = fast::detail::pack_lower(centre_bounds[i].w, fast::detail::aabb_lower(boxes[i]));
+          centre_bounds[i].w = plane_bounds::pack_lower(centre_bounds[i].w, plane_bounds::aabb_lower(boxes[i]));
         std::uint32_t column[4] = {}, x_before_last = 0;
         for (std::size_t i = 0; i < n; ++i)
           for (int k = 0; k < 4; ++k) column[k] |= bits(centre_bounds[i][k]);
@@ -373,7 +373,7 @@ TEST(CpuCuller, ObbsAtTheEdgeOfTheirLowerBound) { check_edge_set(test::obb_lower
 TEST(CpuCuller, SpheresAtTheEdgeOfTheirLowerBound) { check_edge_set(test::sphere_lower_edge_set(), 0, "sphere at the lower bound"); }
 
 TEST(CpuCuller, PackedLowerBoundsStayBoundsAndReadBackBelowTheLowerBound) {
-  using fast::detail::pack_lower;
+  using plane_bounds::pack_lower;
   auto bits = [](float f) { return std::bit_cast<std::uint32_t>(f); };
   const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
   test::Rng rng(5);
@@ -1137,7 +1137,7 @@ TEST(CpuBvhCuller, RefusesLeavesThatDoNotEncloseTheirVolumes) {
 // mode of the call that issued it, even when it changes every call.
 TEST(ThreadPool, EveryTaskRunsInItsCallersFloatMode) {
 #if defined(__SSE__)
-  fast::ThreadPool pool(3);
+  ThreadPool pool(3);
   const unsigned saved = _mm_getcsr();
   constexpr unsigned kControl = 0xFFC0u;  // rounding, FTZ, DAZ and the exception masks (not the flags)
   for (int round = 0; round < 3000; ++round) {
@@ -1157,7 +1157,7 @@ TEST(ThreadPool, EveryTaskRunsInItsCallersFloatMode) {
 // running thread (the same index always the same thread), and a pool destroyed while its
 // workers spin shuts down.
 TEST(ThreadPool, WakesAfterSleepingAndIndexesItsThreads) {
-  fast::ThreadPool pool(3);
+  ThreadPool pool(3);
   std::map<unsigned, std::thread::id> owner;
   std::mutex m;
   for (int round = 0; round < 6; ++round) {
@@ -1177,7 +1177,7 @@ TEST(ThreadPool, WakesAfterSleepingAndIndexesItsThreads) {
   EXPECT_EQ(owner.at(0), std::this_thread::get_id());
   EXPECT_EQ(pool.thread_index(), 0u);
   for (int k = 0; k < 20; ++k) {
-    fast::ThreadPool short_lived(2);
+    ThreadPool short_lived(2);
     std::atomic<int> ran{0};
     short_lived.parallel_for(8, [&](std::size_t) { ++ran; });
     EXPECT_EQ(ran.load(), 8);
@@ -1190,7 +1190,7 @@ TEST(ThreadPool, WakesAfterSleepingAndIndexesItsThreads) {
 // call returned (a worker that read a call late) is a use after scope under AddressSanitizer,
 // and a task of one call run with another's count or lambda shows in the hits.
 TEST(ThreadPool, CallsBackToBackRunEveryTaskOnceInItsOwnCall) {
-  fast::ThreadPool pool(3);
+  ThreadPool pool(3);
   for (int round = 0; round < 20000; ++round) {
     if (round % 2500 == 1249) std::this_thread::sleep_for(std::chrono::microseconds(300));
     const std::size_t tasks = 2 + static_cast<std::size_t>(round * 7919 % 39);
@@ -1206,7 +1206,7 @@ TEST(ThreadPool, CallsBackToBackRunEveryTaskOnceInItsOwnCall) {
 }
 
 TEST(ThreadPool, RunsEveryTaskOnceAndRethrows) {
-  fast::ThreadPool pool(3);
+  ThreadPool pool(3);
   for (int round = 0; round < 200; ++round) {
     std::vector<int> hits(97, 0);
     pool.parallel_for(hits.size(), [&](std::size_t t) { ++hits[t]; });
@@ -1217,7 +1217,7 @@ TEST(ThreadPool, RunsEveryTaskOnceAndRethrows) {
   pool.parallel_for(1, [&](std::size_t) { ++after; });
   EXPECT_EQ(after, 1);
   // On one thread too, the tasks after a throwing one still run.
-  fast::ThreadPool alone(1);
+  ThreadPool alone(1);
   std::vector<int> hits(10, 0);
   EXPECT_THROW(alone.parallel_for(hits.size(), [&](std::size_t t) {
     ++hits[t];

@@ -15,7 +15,7 @@
 #include "geom/frustum.hpp"
 #include "geom/obb.hpp"
 #include "geom/sphere.hpp"
-#include "geom/splitmix.hpp"
+#include "core/splitmix.hpp"
 
 namespace cullpipe::test {
 

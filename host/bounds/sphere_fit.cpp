@@ -10,7 +10,7 @@
 
 #include "bounds/points.hpp"
 #include "geom/rounding.hpp"
-#include "geom/splitmix.hpp"
+#include "core/splitmix.hpp"
 
 namespace cullpipe::bounds {
 

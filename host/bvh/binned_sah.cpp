@@ -42,8 +42,8 @@ void BinnedScratch::reserve(std::size_t n) {
   buffer[0].reset(new Box8[n]);
   buffer[1].reset(new Box8[n]);
   bin_of.reset(new std::uint32_t[n]);
-  advise_huge_pages(buffer[0].get(), n * sizeof(Box8));
-  advise_huge_pages(buffer[1].get(), n * sizeof(Box8));
+  cullpipe::detail::advise_huge_pages(buffer[0].get(), n * sizeof(Box8));
+  cullpipe::detail::advise_huge_pages(buffer[1].get(), n * sizeof(Box8));
   capacity = n;
 }
 

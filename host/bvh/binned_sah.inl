@@ -19,7 +19,7 @@
 #endif
 
 #include "bvh/binned_sah.hpp"
-#include "bvh/huge_pages.hpp"
+#include "core/huge_pages.hpp"
 
 namespace cullpipe::bvh::detail::CULLPIPE_BINNED_NS {
 namespace {
@@ -487,7 +487,7 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
   };
   if (tree.nodes.capacity() < 2 * n) {
     tree.nodes.reserve(2 * n);  // at most 2n - 1; pages never touched cost nothing
-    advise_huge_pages(tree.nodes.data(), tree.nodes.capacity() * sizeof(Node));
+    cullpipe::detail::advise_huge_pages(tree.nodes.data(), tree.nodes.capacity() * sizeof(Node));
   }
   tree.nodes.emplace_back();
   tree.nodes[0].box = root_box.box();

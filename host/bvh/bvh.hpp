@@ -10,7 +10,7 @@
 #include "geom/classification.hpp"
 #include "geom/frustum.hpp"
 #include "geom/obb.hpp"
-#include "geom/prefetch.hpp"
+#include "core/prefetch.hpp"
 #include "geom/sphere.hpp"
 
 /// Bounding volume hierarchies over object AABBs (issue 4, first part): the binned-SAH

@@ -13,7 +13,7 @@
 
 #include "bvh/box_ops.hpp"
 #include "bvh/builders.hpp"
-#include "geom/splitmix.hpp"
+#include "core/splitmix.hpp"
 
 namespace cullpipe::bvh {
 

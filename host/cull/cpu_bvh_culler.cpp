@@ -10,7 +10,7 @@
 #include <string>
 
 #include "cull/kernel_select.hpp"
-#include "cull/thread_pool.hpp"
+#include "core/thread_pool.hpp"
 
 namespace cullpipe::fast {
 

@@ -6,7 +6,7 @@
 #include <vector>
 
 #include "bvh/bvh.hpp"
-#include "cull/aligned_vector.hpp"
+#include "core/aligned_vector.hpp"
 #include "cull/cpu_culler.hpp"
 #include "geom/aabb.hpp"
 #include "geom/bv_kind.hpp"
@@ -14,9 +14,12 @@
 #include "geom/obb.hpp"
 #include "geom/sphere.hpp"
 
+namespace cullpipe {
+class ThreadPool;
+}
+
 namespace cullpipe::fast {
 
-class ThreadPool;
 namespace detail {
 struct KernelTable;
 struct PlaneSet;
@@ -146,10 +149,10 @@ class CpuBvhCuller {
   // The tree as the walk kernels read it (detail::WalkTree): nodes in sibling pairs (64-byte
   // records on cache lines), each flat node's slot there, and the volumes in tree order in
   // blocks of detail::kWalkBlock (a node's range is one run of lines).
-  detail::CacheLineVector<float> walk_nodes_;
+  cullpipe::detail::CacheLineVector<float> walk_nodes_;
   std::vector<std::uint32_t> slot_of_;
-  detail::CacheLineVector<float> walk_blocks_;
-  detail::CacheLineVector<float> spare_blocks_;  // the next upload's blocks (then the last one's)
+  cullpipe::detail::CacheLineVector<float> walk_blocks_;
+  cullpipe::detail::CacheLineVector<float> spare_blocks_;  // the next upload's blocks (then the last one's)
   // Per-pass working storage, kept so passes reuse it.
   std::vector<Task> tasks_;
   std::vector<Task> frontier_;  // the top of the tree, breadth first; then the tasks' sort

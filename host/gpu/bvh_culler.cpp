@@ -9,8 +9,8 @@
 #include <type_traits>
 
 #include "bvh/box_ops.hpp"
-#include "cull/plane_bounds.hpp"
-#include "geom/prefetch.hpp"
+#include "geom/plane_bounds.hpp"
+#include "core/prefetch.hpp"
 #include "geom/validate.hpp"
 #include "gpu/pass_support.hpp"
 #include "vk/check.hpp"
@@ -69,19 +69,18 @@ BvhCuller::BvhCuller(const vk::Context& ctx)
 BvhCuller::~BvhCuller() = default;
 
 const vk::ComputePipeline& BvhCuller::pipeline(bool draws, bool classes) {
-  const auto kind = std::uint32_t(kind_);
-  std::unique_ptr<vk::ComputePipeline>& slot = pipelines_[kind][draws][classes][stack_in_records_];
-  if (slot) return *slot;
-  const std::string name =
-      "hierarchical cull (" + std::string(to_string(kind_)) + (draws ? ", draws" : "") + (classes ? ", classes" : "") +
-      (stack_in_records_ ? ", stacks in records" : "") + ")";
-  // Specialization constants: 1 group size, 2 volume kind, 3 draws, 4 classes, 5 stacks in the records.
-  static_assert(BV_KIND_AABB == 0 && BV_KIND_OBB == 1 && BV_KIND_SPHERE == 2, "BvKind order must match the shader");
-  const std::uint32_t spec[6] = {0u, group_size_, kind, draws ? 1u : 0u, classes ? 1u : 0u, stack_in_records_ ? 1u : 0u};
-  slot = std::make_unique<vk::ComputePipeline>(
-      ctx_, vk::ComputePipelineDesc{std::span<const std::uint32_t>(cullpipe_cull_bvh_spv),
-                                    BVH_BINDING_COUNT, sizeof(BvhCullParams), spec, name.c_str(), kTexelBindings, kRecordBindings});
-  return *slot;
+  const PipelineKey key{.kind = kind_, .draws = draws, .classes = classes, .stack_in_records = stack_in_records_};
+  return pipelines_.get(key, [&] {
+    const std::string name = "hierarchical cull (" + std::string(to_string(key.kind)) + (key.draws ? ", draws" : "") +
+                             (key.classes ? ", classes" : "") + (key.stack_in_records ? ", stacks in records" : "") + ")";
+    // Specialization constants: 1 group size, 2 volume kind, 3 draws, 4 classes, 5 stacks in the records.
+    static_assert(BV_KIND_AABB == 0 && BV_KIND_OBB == 1 && BV_KIND_SPHERE == 2, "BvKind order must match the shader");
+    const std::uint32_t spec[6] = {0u, group_size_, std::uint32_t(key.kind), key.draws ? 1u : 0u, key.classes ? 1u : 0u,
+                                   key.stack_in_records ? 1u : 0u};
+    return std::make_unique<vk::ComputePipeline>(
+        ctx_, vk::ComputePipelineDesc{std::span<const std::uint32_t>(cullpipe_cull_bvh_spv), BVH_BINDING_COUNT,
+                                      sizeof(BvhCullParams), spec, name.c_str(), kTexelBindings, kRecordBindings});
+  });
 }
 
 void BvhCuller::upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes) { upload_impl(tree, boxes); }
@@ -161,7 +160,7 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
       if constexpr (kBoxes) block[i - first] = box;
     }
     if constexpr (kBoxes)
-      fast::detail::aabb_centre_bounds(std::span<const Aabb>(block.data(), end - first),
+      plane_bounds::aabb_centre_bounds(std::span<const Aabb>(block.data(), end - first),
                                        centres_.as<glm::vec4>().subspan(first, end - first));
   }
   if (n) std::memcpy(objects_.data(), tree.objects.data(), n * sizeof(std::uint32_t));
@@ -255,7 +254,7 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   auto gpu_views = views_.as<GpuFrustum>();
   for (std::size_t i = 0; i < v; ++i) {
     gpu_views[i] = pack(views[i]);
-    gpu_views[i].settle_margin = fast::detail::settle_margin(views[i]);
+    gpu_views[i].settle_margin = plane_bounds::settle_margin(views[i]);
   }
   last_capacity_ = capacity;
   last_view_count_ = v;

@@ -98,7 +98,15 @@ class BvhCuller {
  private:
   void prepare(std::span<const Frustum> views, const CullOptions& options);
   void record_passes(VkCommandBuffer cmd, VkQueryPool timestamps);
-  const vk::ComputePipeline& pipeline(bool draws, bool classes);  // (and stack_in_records_)
+  /// One variant of cull_bvh.comp.
+  struct PipelineKey {
+    BvKind kind = BvKind::Aabb;
+    bool draws = false;             // write indirect draws
+    bool classes = false;           // write the per-object classes
+    bool stack_in_records = false;  // the walk's stack in the records image, not shared memory
+    auto operator<=>(const PipelineKey&) const = default;
+  };
+  const vk::ComputePipeline& pipeline(bool draws, bool classes);  // for kind_ and stack_in_records_
   template <class Volume>
   void upload_impl(const bvh::FlatTree& tree, std::span<const Volume> volumes);
   void update_descriptors();
@@ -110,7 +118,7 @@ class BvhCuller {
   // STACK_IN_RECORDS in cull_bvh.comp).
   bool stack_in_records_ = false;
   std::uint32_t max_groups_x_ = 0;
-  std::unique_ptr<vk::ComputePipeline> pipelines_[3][2][2][2];  // [kind][draws][classes][stack in records]
+  detail::PipelineCache<PipelineKey> pipelines_;
   BvKind kind_ = BvKind::Aabb;
   vk::Buffer bounds_, classes_, visible_, counters_, views_, templates_, draws_;
   vk::Buffer nodes_, objects_, cuts_, records_;

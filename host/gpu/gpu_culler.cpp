@@ -7,8 +7,8 @@
 #include <string>
 #include <system_error>
 
-#include "cull/plane_bounds.hpp"
-#include "cull/thread_pool.hpp"
+#include "geom/plane_bounds.hpp"
+#include "core/thread_pool.hpp"
 #include "gpu/layout.hpp"
 #include "gpu/pass_support.hpp"
 #include "vk/check.hpp"
@@ -51,34 +51,35 @@ GpuCuller::GpuCuller(const vk::Context& ctx, const GpuCullerConfig& config) : ct
   // Every pipeline has the same set layout; the flat AABB one of default options (arrival
   // order, classes) is built now, for the descriptor set, the others on first use.
   static_assert(BV_KIND_AABB == 0 && BV_KIND_OBB == 1 && BV_KIND_SPHERE == 2, "BvKind order must match the shader");
-  const vk::ComputePipeline& first = pipeline(0, 0, false, false, true);
+  const vk::ComputePipeline& first = pipeline({.kind = BvKind::Aabb, .classes = true});
   resources_ = std::make_unique<detail::PassResources>(ctx_, first.set_layout(), kBindingCount, kTexelBindings);
 }
 
-const vk::ComputePipeline& GpuCuller::pipeline(int shader, std::uint32_t kind, bool ordered, bool draws, bool classes) {
-  if (shader != 0) kind = 0, ordered = false, classes = false;
-  if (ordered) classes = true;  // the scatter pass reads them
-  std::unique_ptr<vk::ComputePipeline>& slot = pipelines_[shader][kind][ordered][draws][classes];
-  if (slot) return *slot;
-  std::span<const std::uint32_t> spirv;
-  std::string name;
-  static const char* kinds[3] = {"aabb", "obb", "sphere"};
-  if (shader == 0) {
-    spirv = {cullpipe_cull_flat_spv, sizeof(cullpipe_cull_flat_spv) / sizeof(std::uint32_t)};
-    name = std::string("flat cull (") + kinds[kind] + (ordered ? ", ordered" : "") + (draws ? ", draws" : "") + (classes ? ", classes" : "") + ")";
-  } else if (shader == 1) {
-    spirv = {cullpipe_compact_scan_spv, sizeof(cullpipe_compact_scan_spv) / sizeof(std::uint32_t)};
-    name = "ordered compaction scan";
-  } else {
-    spirv = {cullpipe_compact_scatter_spv, sizeof(cullpipe_compact_scatter_spv) / sizeof(std::uint32_t)};
-    name = std::string("ordered compaction scatter") + (draws ? " (draws)" : "");
-  }
-  // Specialization constants: 0 kind, 1 group size, 2 ordered, 3 draws, 4 objects per invocation
-  // (every pass: the ordered passes' unit is a workgroup's run of objects), 5 classes.
-  const std::uint32_t spec[6] = {kind, group_size_, ordered ? 1u : 0u, draws ? 1u : 0u, objects_per_invocation_, classes ? 1u : 0u};
-  slot = std::make_unique<vk::ComputePipeline>(
-      ctx_, vk::ComputePipelineDesc{spirv, kBindingCount, sizeof(FlatCullParams), spec, name.c_str(), kTexelBindings});
-  return *slot;
+const vk::ComputePipeline& GpuCuller::pipeline(PipelineKey key) {
+  using Shader = PipelineKey::Shader;
+  if (key.shader != Shader::Cull) key.kind = BvKind::Aabb, key.ordered = false, key.classes = false;
+  if (key.ordered) key.classes = true;  // the scatter pass reads them
+  return pipelines_.get(key, [&] {
+    std::span<const std::uint32_t> spirv;
+    std::string name;
+    if (key.shader == Shader::Cull) {
+      spirv = cullpipe_cull_flat_spv;
+      name = "flat cull (" + std::string(to_string(key.kind)) + (key.ordered ? ", ordered" : "") + (key.draws ? ", draws" : "") +
+             (key.classes ? ", classes" : "") + ")";
+    } else if (key.shader == Shader::CompactScan) {
+      spirv = cullpipe_compact_scan_spv;
+      name = "ordered compaction scan";
+    } else {
+      spirv = cullpipe_compact_scatter_spv;
+      name = std::string("ordered compaction scatter") + (key.draws ? " (draws)" : "");
+    }
+    // Specialization constants: 0 kind, 1 group size, 2 ordered, 3 draws, 4 objects per
+    // invocation (every pass: the ordered passes' unit is a workgroup's run of objects), 5 classes.
+    const std::uint32_t spec[6] = {kind_index(key.kind), group_size_, key.ordered ? 1u : 0u, key.draws ? 1u : 0u,
+                                   objects_per_invocation_, key.classes ? 1u : 0u};
+    return std::make_unique<vk::ComputePipeline>(
+        ctx_, vk::ComputePipelineDesc{spirv, kBindingCount, sizeof(FlatCullParams), spec, name.c_str(), kTexelBindings});
+  });
 }
 
 GpuCuller::~GpuCuller() = default;
@@ -105,7 +106,7 @@ void GpuCuller::upload_volumes(BvKind kind, std::size_t count, std::size_t bytes
   auto task = [&](std::size_t t) { fill(t * kUploadChunk, std::min(count, (t + 1) * kUploadChunk)); };
   if (tasks > 1 && upload_threads_ != 1 && !upload_pool_) {
     try {
-      upload_pool_ = std::make_unique<fast::ThreadPool>(upload_threads_);
+      upload_pool_ = std::make_unique<ThreadPool>(upload_threads_);
     } catch (const std::system_error&) {  // no threads to be had: this upload runs on the caller
     }
   }
@@ -125,7 +126,7 @@ void GpuCuller::upload(std::span<const Aabb> volumes) {
   upload_volumes(BvKind::Aabb, volumes.size(), sizeof(GpuAabb), true, [&](std::size_t first, std::size_t end) {
     GpuAabb* out = bounds_.as<GpuAabb>().data();
     for (std::size_t i = first; i < end; ++i) out[i] = pack(volumes[i]);
-    fast::detail::aabb_centre_bounds(volumes.subspan(first, end - first), centres_.as<glm::vec4>().subspan(first, end - first));
+    plane_bounds::aabb_centre_bounds(volumes.subspan(first, end - first), centres_.as<glm::vec4>().subspan(first, end - first));
   });
 }
 
@@ -136,7 +137,7 @@ void GpuCuller::upload(std::span<const Obb> volumes) {
     float bounds[kBatch];
     for (std::size_t b = first; b < end; b += kBatch) {
       const std::size_t count = std::min(kBatch, end - b);
-      fast::detail::obb_plane_bounds(volumes.subspan(b, count), std::span<float>(bounds, count));
+      plane_bounds::obb_plane_bounds(volumes.subspan(b, count), std::span<float>(bounds, count));
       for (std::size_t i = b; i < b + count; ++i) {
         GpuObb o = pack(volumes[i]);
         o.center.w = bounds[i - b];  // settles most boxes on the centre texel alone
@@ -269,18 +270,17 @@ void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   auto gpu_views = views_.as<GpuFrustum>();
   for (std::size_t v = 0; v < views.size(); ++v) {
     gpu_views[v] = pack(views[v]);
-    gpu_views[v].settle_margin = fast::detail::settle_margin(views[v]);
+    gpu_views[v].settle_margin = plane_bounds::settle_margin(views[v]);
   }
   last_capacity_ = capacity;
   last_options_ = options;
   // Build every pipeline the pass needs now, not while recording.
-  const std::uint32_t kind = kind_index(kind_);
   if (!options.ordered) {
-    pipeline(0, kind, false, options.draws, options.classes);
+    pipeline(arrival_key(options));
   } else {
-    pipeline(0, kind, true, false, true);
-    pipeline(1, 0, false, false, false);
-    pipeline(2, 0, false, options.draws, false);
+    pipeline(ordered_key());
+    pipeline({.shader = PipelineKey::Shader::CompactScan});
+    pipeline(scatter_key(options));
   }
 }
 
@@ -324,20 +324,19 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
       }
     }
   };
-  const std::uint32_t kind = kind_index(kind_);
   if (!options.ordered) {
-    object_pass(pipeline(0, kind, false, options.draws, options.classes), objects_per_invocation_);
+    object_pass(pipeline(arrival_key(options)), objects_per_invocation_);
   } else if (object_count_ > 0) {
     // Count per workgroup, scan the counts per view, scatter in object order.
-    object_pass(pipeline(0, kind, true, false, true), objects_per_invocation_);
+    object_pass(pipeline(ordered_key()), objects_per_invocation_);
     compute_to_compute();
-    const vk::ComputePipeline& scan = pipeline(1, 0, false, false, false);
+    const vk::ComputePipeline& scan = pipeline({.shader = PipelineKey::Shader::CompactScan});
     vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, scan.pipeline());
     vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, scan.layout(), 0, 1, &set, 0, nullptr);
     vkCmdPushConstants(cmd, scan.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(base_params), &base_params);
     vkCmdDispatch(cmd, 1, std::uint32_t(view_count), 1);
     compute_to_compute();
-    object_pass(pipeline(2, 0, false, options.draws, false), objects_per_invocation_);
+    object_pass(pipeline(scatter_key(options)), objects_per_invocation_);
   }
   if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps, 1);
   detail::record_exit_barrier(ctx_, cmd);

@@ -13,11 +13,12 @@
 #include "geom/obb.hpp"
 #include "geom/sphere.hpp"
 #include "gpu/layout.hpp"
+#include "gpu/pipeline_cache.hpp"
 #include "vk/buffer.hpp"
 #include "vk/compute_pipeline.hpp"
 #include "vk/context.hpp"
 
-namespace cullpipe::fast {
+namespace cullpipe {
 class ThreadPool;
 }
 
@@ -169,7 +170,21 @@ class GpuCuller {
   SegmentPlan plan_segments(std::size_t view_count, bool ordered) const;
   void prepare(std::span<const Frustum> views, const CullOptions& options);
   void record_passes(VkCommandBuffer cmd, VkQueryPool timestamps);
-  const vk::ComputePipeline& pipeline(int shader, std::uint32_t kind, bool ordered, bool draws, bool classes);
+  /// One variant of the flat pass's shaders; fields a shader does not read stay at their defaults.
+  struct PipelineKey {
+    enum class Shader { Cull, CompactScan, CompactScatter };
+    Shader shader = Shader::Cull;
+    BvKind kind = BvKind::Aabb;  // Cull
+    bool ordered = false;        // Cull: count per workgroup for the ordered passes
+    bool draws = false;          // Cull, CompactScatter: write indirect draws
+    bool classes = false;        // Cull: write the per-object classes
+    auto operator<=>(const PipelineKey&) const = default;
+  };
+  const vk::ComputePipeline& pipeline(PipelineKey key);
+  /// The cull pass in arrival order; the ordered passes' counting cull and their scatter.
+  PipelineKey arrival_key(const CullOptions& o) const { return {.kind = kind_, .draws = o.draws, .classes = o.classes}; }
+  PipelineKey ordered_key() const { return {.kind = kind_, .ordered = true, .classes = true}; }
+  static PipelineKey scatter_key(const CullOptions& o) { return {.shader = PipelineKey::Shader::CompactScatter, .draws = o.draws}; }
   void update_descriptors();
 
   const vk::Context& ctx_;
@@ -178,7 +193,7 @@ class GpuCuller {
   std::uint32_t objects_per_invocation_ = 1;
   std::size_t max_segment_objects_ = 0;
   unsigned upload_threads_ = 0;
-  std::unique_ptr<fast::ThreadPool> upload_pool_;  // started by the first upload of several chunks
+  std::unique_ptr<ThreadPool> upload_pool_;  // started by the first upload of several chunks
   std::size_t bytes_per_object_ = sizeof(GpuAabb);
   // Segments of the current pass: objects per segment and their count (1 when all fit).
   std::size_t segment_objects_ = 0;
@@ -187,10 +202,7 @@ class GpuCuller {
   std::size_t written_segment_objects_ = 0, written_view_count_ = 0;
   BvKind kind_ = BvKind::Aabb;
   std::size_t object_count_ = 0;
-  // Built on first use: [shader][kind][ordered][draws][classes]; shader 0 = cull_flat, 1 =
-  // compact_scan, 2 = compact_scatter (kind, ordered and classes 0 for 1 and 2); classes is
-  // always 1 for the ordered pass (the scatter pass reads them).
-  std::unique_ptr<vk::ComputePipeline> pipelines_[3][3][2][2][2];
+  detail::PipelineCache<PipelineKey> pipelines_;
   vk::Buffer bounds_, classes_, visible_, counters_, views_, templates_, draws_, group_counts_;
   vk::Buffer centres_;  // AABBs: centre and bound per object (BINDING_CENTRES)
   std::size_t template_count_ = 0;

@@ -4,7 +4,7 @@
 #include <cmath>
 #include <glm/ext/matrix_transform.hpp>
 
-#include "geom/splitmix.hpp"
+#include "core/splitmix.hpp"
 
 namespace cullpipe {
 namespace {

@@ -1,4 +1,4 @@
-#include "cull/thread_pool.hpp"
+#include "core/thread_pool.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -9,7 +9,7 @@
 #include <xmmintrin.h>
 #endif
 
-namespace cullpipe::fast {
+namespace cullpipe {
 
 namespace {
 // The pool whose worker this thread is, and its index there (workers only).
@@ -188,4 +188,4 @@ void ThreadPool::parallel_for(std::size_t tasks, TaskRef task) {
   if (e) std::rethrow_exception(e);
 }
 
-}  // namespace cullpipe::fast
+}  // namespace cullpipe

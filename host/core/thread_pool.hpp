@@ -7,7 +7,7 @@
 #include <thread>
 #include <vector>
 
-namespace cullpipe::fast {
+namespace cullpipe {
 
 /// A non-owning reference to a callable taking a task index (like C++26 std::function_ref):
 /// no allocation, so a pass per frame stays allocation-free. The callable must outlive it.
@@ -88,4 +88,4 @@ class ThreadPool {
   std::exception_ptr error_;  // under mutex_
 };
 
-}  // namespace cullpipe::fast
+}  // namespace cullpipe
