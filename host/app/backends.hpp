@@ -47,7 +47,7 @@ struct BackendResults {
 };
 
 /// Lazily created Vulkan context + culler, shared by the calls of one command.
-struct GpuSession {
+struct GpuBackend {
   DeviceOptions options;
   std::unique_ptr<vk::Context> context;
   std::unique_ptr<gpu::GpuCuller> culler;
@@ -172,7 +172,7 @@ inline std::uint32_t cpu_range_objects(CpuPath cpu, std::optional<std::uint32_t>
 /// side's are proved against the scalar traversal with its own).
 template <class Volume>
 BackendResults cull_bvh_on_backends(const bvh::FlatTree& tree, std::span<const Volume> boxes, std::span<const Frustum> frusta,
-                                    Backend backend, GpuSession& session, bool warm_up, CpuPath cpu = CpuPath::Reference,
+                                    Backend backend, GpuBackend& gpu_backend, bool warm_up, CpuPath cpu = CpuPath::Reference,
                                     std::optional<std::uint32_t> range_objects = std::nullopt, std::size_t max_reports = 10) {
   BackendResults r;
   const bvh::TraversalOptions traversal{cpu_range_objects(cpu, range_objects, kind_of<Volume>())};
@@ -219,13 +219,13 @@ BackendResults cull_bvh_on_backends(const bvh::FlatTree& tree, std::span<const V
     }
   }
   if (backend != Backend::Cpu) {
-    gpu::BvhCuller& culler = session.bvh();
+    gpu::BvhCuller& culler = gpu_backend.bvh();
     const auto upload_start = std::chrono::steady_clock::now();
     culler.upload(tree, boxes);
     r.gpu_upload_ns = elapsed_ns(upload_start);
     if (warm_up) culler.cull(frusta, {false, false, 0});  // the first dispatch of each pipeline compiles it (lavapipe)
     gpu::CullResult g = culler.cull(frusta);
-    session.check_validation();
+    gpu_backend.check_validation();
     const bool have_cpu_tests = !r.node_tests.empty();
     for (std::size_t v = 0; v < g.views.size(); ++v) {
       const gpu::ViewResult& view = g.views[v];
@@ -260,7 +260,7 @@ BackendResults cull_bvh_on_backends(const bvh::FlatTree& tree, std::span<const V
 
 template <class Volume>
 BackendResults cull_on_backends(std::span<const Volume> volumes, std::span<const Frustum> frusta, Backend backend,
-                                GpuSession& session, bool warm_up, std::span<const std::size_t> object_ids = {},
+                                GpuBackend& gpu_backend, bool warm_up, std::span<const std::size_t> object_ids = {},
                                 std::size_t max_reports = 10, CpuPath cpu = CpuPath::Reference) {
   BackendResults r;
   if (backend != Backend::Gpu && cpu == CpuPath::Fast) {
@@ -300,13 +300,13 @@ BackendResults cull_on_backends(std::span<const Volume> volumes, std::span<const
     r.cpu_path = "reference";
   }
   if (backend != Backend::Cpu) {
-    gpu::GpuCuller& culler = session.get();
+    gpu::GpuCuller& culler = gpu_backend.get();
     const auto upload_start = std::chrono::steady_clock::now();
     culler.upload(volumes);
     r.gpu_upload_ns = elapsed_ns(upload_start);
     if (warm_up) culler.cull(frusta, {false, false, 0});  // the first dispatch compiles the pipeline (lavapipe)
     gpu::CullResult g = culler.cull(frusta);
-    session.check_validation();
+    gpu_backend.check_validation();
     take_gpu_result(r, g);
   }
   if (backend == Backend::Both) compare_backends<Volume>(r, volumes, frusta, object_ids, max_reports);

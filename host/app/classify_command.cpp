@@ -14,7 +14,7 @@ namespace {
 // Classifies the volumes of one kind (positions `where` in the case) and scatters the
 // results into cpu/gpu [view][volume] tables.
 template <class Volume>
-std::size_t classify_kind(const CullCase& c, Backend backend, GpuSession& session,
+std::size_t classify_kind(const CullCase& c, Backend backend, GpuBackend& gpu_backend,
                           std::vector<std::vector<Classification>>& cpu, std::vector<std::vector<Classification>>& gpu,
                           std::vector<std::string>& reports) {
   std::vector<Volume> volumes;
@@ -26,7 +26,7 @@ std::size_t classify_kind(const CullCase& c, Backend backend, GpuSession& sessio
     }
   if (volumes.empty()) return 0;
   // No warm-up: classify reports no timings. Reports name volumes by their index in the file.
-  BackendResults r = cull_on_backends<Volume>(volumes, c.frusta, backend, session, /*warm_up=*/false, where);
+  BackendResults r = cull_on_backends<Volume>(volumes, c.frusta, backend, gpu_backend, /*warm_up=*/false, where);
   for (std::size_t v = 0; v < c.frusta.size(); ++v)
     for (std::size_t k = 0; k < volumes.size(); ++k) {
       if (!r.cpu.empty()) cpu[v][where[k]] = r.cpu[v][k];
@@ -59,12 +59,12 @@ int classify_command(const ClassifyOptions& o, std::ostream& out, std::ostream& 
     std::vector<std::vector<Classification>> cpu, gpu;
     if (o.backend != Backend::Gpu) cpu.assign(views, std::vector<Classification>(n));
     if (o.backend != Backend::Cpu) gpu.assign(views, std::vector<Classification>(n));
-    GpuSession session{o.device, nullptr, nullptr};
+    GpuBackend gpu_backend{o.device, nullptr, nullptr};
     std::vector<std::string> reports;
     std::size_t mismatches = 0;
-    mismatches += classify_kind<Aabb>(c, o.backend, session, cpu, gpu, reports);
-    mismatches += classify_kind<Obb>(c, o.backend, session, cpu, gpu, reports);
-    mismatches += classify_kind<Sphere>(c, o.backend, session, cpu, gpu, reports);
+    mismatches += classify_kind<Aabb>(c, o.backend, gpu_backend, cpu, gpu, reports);
+    mismatches += classify_kind<Obb>(c, o.backend, gpu_backend, cpu, gpu, reports);
+    mismatches += classify_kind<Sphere>(c, o.backend, gpu_backend, cpu, gpu, reports);
 
     auto view_json = [&](std::size_t v) {
       nlohmann::json j = nlohmann::json::object();

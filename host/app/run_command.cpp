@@ -46,19 +46,19 @@ CpuPath cpu_path(const RunOptions& o) { return o.cpu == "fast" ? CpuPath::Fast :
 // boxes (the boxes themselves for AABBs).
 template <class Volume>
 BackendResults cull_kind_bvh(const std::vector<Volume>& volumes, std::span<const Frustum> frusta, const RunOptions& o,
-                             GpuSession& session, std::vector<cullpipe::Volume>& dump_volumes, BuiltBvh& built) {
+                             GpuBackend& gpu_backend, std::vector<cullpipe::Volume>& dump_volumes, BuiltBvh& built) {
   const std::span<const Volume> span(volumes);
   built = build_bvh(o.builder, bvh::enclosing_boxes(span), o.leaf_size);
   if (!o.dump_path.empty()) dump_volumes.assign(volumes.begin(), volumes.end());
-  return cull_bvh_on_backends(built.flat, span, frusta, o.backend, session, /*warm_up=*/true, cpu_path(o), o.range_objects);
+  return cull_bvh_on_backends(built.flat, span, frusta, o.backend, gpu_backend, /*warm_up=*/true, cpu_path(o), o.range_objects);
 }
 
 // Culls one kind of volume; with a dump path, also keeps the volumes for the dump.
 template <class Volume>
 BackendResults cull_kind(const std::vector<Volume>& volumes, std::span<const Frustum> frusta, const RunOptions& o,
-                         GpuSession& session, std::vector<cullpipe::Volume>& dump_volumes) {
+                         GpuBackend& gpu_backend, std::vector<cullpipe::Volume>& dump_volumes) {
   if (!o.dump_path.empty()) dump_volumes.assign(volumes.begin(), volumes.end());
-  return cull_on_backends<Volume>(volumes, frusta, o.backend, session, /*warm_up=*/true, {}, 10, cpu_path(o));
+  return cull_on_backends<Volume>(volumes, frusta, o.backend, gpu_backend, /*warm_up=*/true, {}, 10, cpu_path(o));
 }
 
 }  // namespace
@@ -104,22 +104,22 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
       }
     }
 
-    GpuSession session{o.device, nullptr, nullptr};
+    GpuBackend gpu_backend{o.device, nullptr, nullptr};
     BackendResults r;
     std::vector<cullpipe::Volume> dump_volumes;
     BuiltBvh built;
     switch (*bv) {
       case BvKind::Aabb:
-        r = hierarchical ? cull_kind_bvh(world_aabbs(scene, loaded.aabb_update), frusta, o, session, dump_volumes, built)
-                         : cull_kind(world_aabbs(scene, loaded.aabb_update), frusta, o, session, dump_volumes);
+        r = hierarchical ? cull_kind_bvh(world_aabbs(scene, loaded.aabb_update), frusta, o, gpu_backend, dump_volumes, built)
+                         : cull_kind(world_aabbs(scene, loaded.aabb_update), frusta, o, gpu_backend, dump_volumes);
         break;
       case BvKind::Obb:
-        r = hierarchical ? cull_kind_bvh(world_obbs(scene), frusta, o, session, dump_volumes, built)
-                         : cull_kind(world_obbs(scene), frusta, o, session, dump_volumes);
+        r = hierarchical ? cull_kind_bvh(world_obbs(scene), frusta, o, gpu_backend, dump_volumes, built)
+                         : cull_kind(world_obbs(scene), frusta, o, gpu_backend, dump_volumes);
         break;
       case BvKind::Sphere:
-        r = hierarchical ? cull_kind_bvh(world_spheres(scene), frusta, o, session, dump_volumes, built)
-                         : cull_kind(world_spheres(scene), frusta, o, session, dump_volumes);
+        r = hierarchical ? cull_kind_bvh(world_spheres(scene), frusta, o, gpu_backend, dump_volumes, built)
+                         : cull_kind(world_spheres(scene), frusta, o, gpu_backend, dump_volumes);
         break;
     }
 
@@ -128,7 +128,7 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
     const auto& counts = have_cpu ? r.cpu_counts : r.gpu_counts;
     out << "cullpipe run: " << (scene.name.empty() ? source : scene.name) << " (" << source << "), " << n << " objects, bv "
         << o.bv << ", " << frusta.size() << (frusta.size() == 1 ? " view" : " views");
-    if (session.context) out << ", device " << session.context->info().name;
+    if (gpu_backend.context) out << ", device " << gpu_backend.context->info().name;
     out << "\n";
     if (from_gltf) {
       out << "  volumes from mesh vertices: obb " << o.obb << ", sphere " << o.sphere << ", world aabb " << o.aabb_update;
@@ -186,9 +186,9 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
       }
       j["views"] = frusta.size();
       j["backend"] = o.backend == Backend::Both ? "both" : o.backend == Backend::Gpu ? "gpu" : "cpu";
-      if (session.context) {
-        j["device"] = session.context->info().name;
-        j["driver"] = session.context->info().driver;
+      if (gpu_backend.context) {
+        j["device"] = gpu_backend.context->info().name;
+        j["driver"] = gpu_backend.context->info().driver;
       }
       if (have_cpu) {
         j["cpu_ns"] = r.cpu_ns;
