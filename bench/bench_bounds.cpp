@@ -17,21 +17,18 @@
 #include <string>
 #include <vector>
 
+#include "bench_util.hpp"
 #include "bounds/aabb_update.hpp"
 #include "bounds/obb_fit.hpp"
 #include "bounds/sphere_fit.hpp"
-#include "geom/splitmix.hpp"
+#include "core/splitmix.hpp"
 #include "scene/gltf_points.hpp"
 
 using namespace cullpipe;
+using cullpipe::bench::median;
 using Points = std::vector<glm::vec3>;
 
 namespace {
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0.0 : v[v.size() / 2];
-}
 
 template <class F>
 double time_ms(F&& f) {
@@ -73,16 +70,11 @@ Points random_box_points(std::size_t n, std::uint64_t seed) {
 int main(int argc, char** argv) {
   std::string scenes = std::string(CULLPIPE_SHARED_DIR) + "/scenes", json_path;
   std::size_t max_points = 1000000;
-  for (int i = 1; i + 1 < argc; i += 2) {
-    const std::string a = argv[i];
-    if (a == "--scenes") scenes = argv[i + 1];
-    else if (a == "--max-points") max_points = std::size_t(std::atof(argv[i + 1]));
-    else if (a == "--json") json_path = argv[i + 1];
-    else {
-      std::fprintf(stderr, "usage: bench_bounds [--scenes DIR] [--max-points N] [--json FILE]\n");
-      return 2;
-    }
-  }
+  CLI::App app{"bench_bounds: the bounding-volume builders' speed and tightness on point sets and the shared glTF meshes"};
+  app.add_option("--scenes", scenes, "Folder of glTF scenes")->capture_default_str();
+  app.add_option("--max-points", max_points, "Largest point set of the throughput table")->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("--json", json_path, "Write the results as JSON");
+  bench::parse_command_line(app, argc, argv);
   nlohmann::json report;
 
   std::printf("1. Throughput, million points per second (median of repeats), rotated 4x1x0.5 box of uniform points\n");

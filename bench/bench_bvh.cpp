@@ -204,44 +204,22 @@ int main(int argc, char** argv) {
   std::size_t cull_size = 1000000;
   std::uint32_t leaf_size = bvh::kCullingLeafSize;  // (the cull part's tree)
   int repeats = 0;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "bench_bvh: %s needs a value\n", a.c_str());
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--part") {
-      part = value();
-    } else if (a == "--sizes") {
-      sizes = parse_counts(value(), "bench_bvh", "--sizes");
-    } else if (a == "--builders") {
-      builders = split(value());
-    } else if (a == "--cull-size") {
-      cull_size = parse_counts(value(), "bench_bvh", "--cull-size").front();
-    } else if (a == "--leaf-size") {
-      leaf_size = std::uint32_t(std::max(1, std::atoi(value().c_str())));
-    } else if (a == "--fractions") {
-      fractions = parse_fractions(value(), "bench_bvh", "--fractions");
-    } else if (a == "--repeats") {
-      repeats = std::atoi(value().c_str());
-    } else if (a == "--device") {
-      device = value();
-    } else if (a == "--json") {
-      json_path = value();
-    } else {
-      std::fprintf(stderr,
-                   "usage: bench_bvh [--part build|cull|all] [--sizes N,..] [--builders a,b|all] [--cull-size N] [--leaf-size L] "
-                   "[--fractions f,..] [--repeats R] [--device NAME] [--json FILE]\n");
-      return a == "--help" ? 0 : 2;
-    }
-  }
-  if (part != "build" && part != "cull" && part != "all") {
-    std::fprintf(stderr, "bench_bvh: --part must be build, cull or all\n");
-    return 2;
-  }
+  CLI::App app{"bench_bvh: every BVH builder's time and quality, and hierarchical against flat culling"};
+  app.add_option("--part", part, "build | cull | all")->capture_default_str()->check(CLI::IsMember({"build", "cull", "all"}));
+  add_counts_option(app, "--sizes", sizes, "Object counts of the build table")->default_str("1e3,1e4,1e5,1e6");
+  app.add_option_function<std::string>("--builders", [&](const std::string& v) { builders = split(v); }, "Builder names, or all")
+      ->type_name("NAME,..")
+      ->default_str("all");
+  app.add_option_function<std::string>("--cull-size", [&](const std::string& v) { cull_size = parse_counts(v, "--cull-size").front(); },
+                                       "Objects in the cull table's scene")
+      ->type_name("N")
+      ->default_str("1e6");
+  app.add_option("--leaf-size", leaf_size, "Most objects per leaf of the cull table's tree")->capture_default_str()->check(CLI::Range(1u, 1024u));
+  add_fractions_option(app, "--fractions", fractions, "Visible fractions of the cull table")->default_str("0.01,0.1,0.5");
+  app.add_option("--repeats", repeats, "Repeats per cell (0: chosen by size)")->capture_default_str()->check(CLI::NonNegativeNumber);
+  app.add_option("--device", device, "Vulkan device name substring");
+  app.add_option("--json", json_path, "Write the results as JSON");
+  bench::parse_command_line(app, argc, argv);
   nlohmann::json j;
   bool all_agree = true;
   try {

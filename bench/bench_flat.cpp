@@ -107,32 +107,14 @@ int main(int argc, char** argv) {
   std::vector<std::string> kinds = {"aabb", "obb", "sphere"};
   int repeats = 0;  // 0: chosen per size
   std::string device, csv_path, json_path;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "bench_flat: %s needs a value\n", a.c_str());
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--sizes") {
-      sizes = parse_counts(value(), "bench_flat", "--sizes");
-    } else if (a == "--bv") {
-      kinds = split(value());
-    } else if (a == "--repeats") {
-      repeats = std::atoi(value().c_str());
-    } else if (a == "--device") {
-      device = value();
-    } else if (a == "--csv") {
-      csv_path = value();
-    } else if (a == "--json") {
-      json_path = value();
-    } else {
-      std::fprintf(stderr, "usage: bench_flat [--sizes N,N,..] [--bv aabb,obb,sphere] [--repeats R] [--device NAME] [--csv FILE] [--json FILE]\n");
-      return a == "--help" ? 0 : 2;
-    }
-  }
+  CLI::App app{"bench_flat: the scalar CPU reference against flat GPU culling"};
+  add_counts_option(app, "--sizes", sizes, "Object counts")->default_str("1e3,1e4,1e5,1e6,4e6");
+  add_names_option(app, "--bv", kinds, {"aabb", "obb", "sphere"}, "Bounding volumes")->default_str("aabb,obb,sphere");
+  app.add_option("--repeats", repeats, "Repeats per cell (0: chosen by size)")->capture_default_str()->check(CLI::NonNegativeNumber);
+  app.add_option("--device", device, "Vulkan device name substring");
+  app.add_option("--csv", csv_path, "Write the results as CSV");
+  app.add_option("--json", json_path, "Write the results as JSON");
+  bench::parse_command_line(app, argc, argv);
 
   vk::ContextOptions options;
   options.device_filter = device;

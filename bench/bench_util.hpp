@@ -10,6 +10,8 @@
 #include <string>
 #include <vector>
 
+#include <CLI/CLI.hpp>
+
 #include "geom/frustum.hpp"
 #include "scene/camera.hpp"
 
@@ -36,43 +38,69 @@ inline std::vector<std::string> split(const std::string& s) {
   return out;
 }
 
-/// "1000,1e6,4e6" -> counts; exits with status 2 and a message naming `program` and `option`
-/// on anything else.
-inline std::vector<std::size_t> parse_counts(const std::string& list, const char* program, const char* option) {
+/// "1000,1e6,4e6" -> counts; throws CLI::ValidationError naming `option` on anything else.
+inline std::vector<std::size_t> parse_counts(const std::string& list, const std::string& option) {
   std::vector<std::size_t> counts;
   for (const std::string& s : split(list)) {
     char* end = nullptr;
     const double n = std::strtod(s.c_str(), &end);
-    if (*end != '\0' || !(n >= 0) || n > 1e9) {
-      std::fprintf(stderr, "%s: %s: '%s' is not a count\n", program, option, s.c_str());
-      std::exit(2);
-    }
+    if (*end != '\0' || !(n >= 0) || n > 1e9) throw CLI::ValidationError(option, "'" + s + "' is not a count");
     counts.push_back(std::size_t(n));
   }
-  if (counts.empty()) {
-    std::fprintf(stderr, "%s: %s needs at least one count\n", program, option);
-    std::exit(2);
-  }
+  if (counts.empty()) throw CLI::ValidationError(option, "needs at least one count");
   return counts;
 }
 
-/// "0.01,0.1" -> fractions in (0, 1]; exits with status 2 otherwise.
-inline std::vector<double> parse_fractions(const std::string& list, const char* program, const char* option) {
+/// "0.01,0.1" -> fractions in (0, 1]; throws CLI::ValidationError naming `option` otherwise.
+inline std::vector<double> parse_fractions(const std::string& list, const std::string& option) {
   std::vector<double> out;
   for (const std::string& s : split(list)) {
     char* end = nullptr;
     const double f = std::strtod(s.c_str(), &end);
-    if (*end != '\0' || !(f > 0.0 && f <= 1.0)) {
-      std::fprintf(stderr, "%s: %s: '%s' is not a fraction in (0, 1]\n", program, option, s.c_str());
-      std::exit(2);
-    }
+    if (*end != '\0' || !(f > 0.0 && f <= 1.0)) throw CLI::ValidationError(option, "'" + s + "' is not a fraction in (0, 1]");
     out.push_back(f);
   }
-  if (out.empty()) {
-    std::fprintf(stderr, "%s: %s needs at least one fraction\n", program, option);
-    std::exit(2);
-  }
+  if (out.empty()) throw CLI::ValidationError(option, "needs at least one fraction");
   return out;
+}
+
+/// "a,b" -> items, each one of `known`; throws CLI::ValidationError naming `option` otherwise.
+inline std::vector<std::string> parse_names(const std::string& list, const std::string& option,
+                                            const std::vector<std::string>& known) {
+  std::vector<std::string> items = split(list);
+  for (const std::string& item : items)
+    if (std::find(known.begin(), known.end(), item) == known.end()) throw CLI::ValidationError(option, "unknown '" + item + "'");
+  if (items.empty()) throw CLI::ValidationError(option, "needs at least one value");
+  return items;
+}
+
+/// An option taking a comma-separated list of counts ("1e3,1e6") into `out`.
+inline CLI::Option* add_counts_option(CLI::App& app, const std::string& name, std::vector<std::size_t>& out, const std::string& help) {
+  return app.add_option_function<std::string>(name, [&out, name](const std::string& v) { out = parse_counts(v, name); }, help)
+      ->type_name("N,..");
+}
+/// An option taking a comma-separated list of fractions in (0, 1] into `out`.
+inline CLI::Option* add_fractions_option(CLI::App& app, const std::string& name, std::vector<double>& out, const std::string& help) {
+  return app.add_option_function<std::string>(name, [&out, name](const std::string& v) { out = parse_fractions(v, name); }, help)
+      ->type_name("F,..");
+}
+/// An option taking a comma-separated list of names, each one of `known`, into `out`.
+inline CLI::Option* add_names_option(CLI::App& app, const std::string& name, std::vector<std::string>& out,
+                                     const std::vector<std::string>& known, const std::string& help) {
+  return app.add_option_function<std::string>(name, [&out, name, known](const std::string& v) { out = parse_names(v, name, known); },
+                                              help)
+      ->type_name("NAME,..");
+}
+
+/// Parses the command line as the cullpipe tool does: --help prints the options and exits 0, a
+/// bad argument prints what is wrong and exits 2.
+inline void parse_command_line(CLI::App& app, int argc, char** argv) {
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int code = app.exit(e);
+    std::exit(code == 0 ? 0 : 2);
+  }
 }
 
 inline std::string cpu_model() {

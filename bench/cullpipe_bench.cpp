@@ -51,7 +51,7 @@
 #include "cull/cpu_bvh_culler.hpp"
 #include "cull/cpu_culler.hpp"
 #include "cull/reference.hpp"
-#include "geom/splitmix.hpp"
+#include "core/splitmix.hpp"
 #include "gpu/bvh_culler.hpp"
 #include "gpu/gpu_culler.hpp"
 #include "scene/generators.hpp"
@@ -468,76 +468,38 @@ void write_plots(const Config& config, const std::vector<Cell>& cells) {
   }
 }
 
-void usage(FILE* to) {
-  std::fprintf(to,
-               "usage: cullpipe-bench [--methods m,..] [--bv aabb,obb,sphere] [--sizes 1e3,..] [--fractions 0.01,..]\n"
-               "                      [--order shuffled,sorted] [--views K] [--ortho] [--repeats R] [--threads T] [--isa portable|avx2|avx512]\n"
-               "                      [--device NAME] [--validation] [--csv FILE] [--json FILE] [--plot PREFIX]\n"
-               "methods: reference, cpu-fast, cpu-read, cpu-bvh, cpu-fast-bvh, gpu-flat, gpu-bvh (default: all)\n");
-}
 
 }  // namespace
 
 int main(int argc, char** argv) {
   Config config;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "%s: %s needs a value\n", kProgram, a.c_str());
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    auto list_of = [&](const std::vector<std::string>& known) {
-      std::vector<std::string> items = split(value());
-      for (const std::string& item : items)
-        if (std::find(known.begin(), known.end(), item) == known.end()) {
-          std::fprintf(stderr, "%s: %s: unknown '%s'\n", kProgram, a.c_str(), item.c_str());
-          std::exit(2);
-        }
-      if (items.empty()) {
-        std::fprintf(stderr, "%s: %s needs at least one value\n", kProgram, a.c_str());
-        std::exit(2);
-      }
-      return items;
-    };
-    if (a == "--methods") config.methods = list_of(kMethods);
-    else if (a == "--bv") config.bvs = list_of({"aabb", "obb", "sphere"});
-    else if (a == "--sizes") config.sizes = parse_counts(value(), kProgram, "--sizes");
-    else if (a == "--fractions") config.fractions = parse_fractions(value(), kProgram, "--fractions");
-    else if (a == "--order") config.orders = list_of({"shuffled", "sorted"});
-    else if (a == "--repeats") config.repeats = std::atoi(value().c_str());
-    else if (a == "--views") {
-      const std::vector<std::size_t> k = parse_counts(value(), kProgram, "--views");
-      if (k.size() != 1 || k[0] < 1 || k[0] > 64) {
-        std::fprintf(stderr, "%s: --views: one count from 1 to 64\n", kProgram);
-        return 2;
-      }
-      config.views = k[0];
-    }
-    else if (a == "--threads") config.threads = unsigned(std::atoi(value().c_str()));
-    else if (a == "--isa") {
-      const std::string name = value();
-      config.isa = fast::parse_isa(name);
-      if (!config.isa || !fast::isa_supported(*config.isa)) {
-        std::fprintf(stderr, "%s: --isa %s: not an instruction set this machine runs (portable, avx2, avx512)\n", kProgram, name.c_str());
-        return 2;
-      }
-    } else if (a == "--device") config.device = value();
-    else if (a == "--validation") config.validation = true;
-    else if (a == "--ortho") config.orthographic = true;
-    else if (a == "--csv") config.csv = value();
-    else if (a == "--json") config.json = value();
-    else if (a == "--plot") config.plot = value();
-    else if (a == "--help") {
-      usage(stdout);
-      return 0;
-    } else {
-      usage(stderr);
-      return 2;
-    }
-  }
+  CLI::App app{"cullpipe-bench: every culling method side by side on generated scenes, with the memory read floor"};
+  add_names_option(app, "--methods", config.methods, kMethods,
+                   "Methods: reference, cpu-fast, cpu-read, cpu-bvh, cpu-fast-bvh, gpu-flat, gpu-bvh")
+      ->default_str("all");
+  add_names_option(app, "--bv", config.bvs, {"aabb", "obb", "sphere"}, "Bounding volumes")->default_str("aabb,obb,sphere");
+  add_counts_option(app, "--sizes", config.sizes, "Object counts")->default_str("1e3,1e4,1e5,1e6,4e6,16e6");
+  add_fractions_option(app, "--fractions", config.fractions, "Visible fractions")->default_str("0.01,0.1,0.5");
+  add_names_option(app, "--order", config.orders, {"shuffled", "sorted"}, "Object orders")->default_str("shuffled,sorted");
+  app.add_option("--views", config.views, "Views per pass, on a circle around the scene")->capture_default_str()->check(CLI::Range(1, 64));
+  app.add_flag("--ortho", config.orthographic, "Orthographic cameras (a shadow map's) instead of perspective ones");
+  app.add_option("--repeats", config.repeats, "Repeats per cell (0: chosen by size)")->capture_default_str()->check(CLI::NonNegativeNumber);
+  app.add_option("--threads", config.threads, "Threads of the fast CPU paths and the GPU upload (0: every core)")->capture_default_str();
+  app.add_option_function<std::string>(
+         "--isa",
+         [&](const std::string& name) {
+           config.isa = fast::parse_isa(name);
+           if (!config.isa || !fast::isa_supported(*config.isa))
+             throw CLI::ValidationError("--isa", name + ": not an instruction set this machine runs (portable, avx2, avx512)");
+         },
+         "Instruction set of the fast CPU kernels (default: the best this machine runs)")
+      ->type_name("portable|avx2|avx512");
+  app.add_option("--device", config.device, "Vulkan device name substring");
+  app.add_flag("--validation", config.validation, "Vulkan validation layers on; any message makes the exit status 1");
+  app.add_option("--csv", config.csv, "Write the results as CSV");
+  app.add_option("--json", config.json, "Write the results as JSON");
+  app.add_option("--plot", config.plot, "Write plots PREFIX-{aabb,obb,sphere}.png (needs gnuplot)");
+  bench::parse_command_line(app, argc, argv);
 
   fast::CpuCullerConfig fast_config;
   fast_config.threads = config.threads;
