@@ -36,8 +36,8 @@ void main() {
   bool view_ok = view < params.view_count;
 
   // The rank of each visible object among the workgroup's: the set bits before it. Three
-  // workgroup barriers per run of objects (a scan over the invocations took 17 per group size;
-  // on lavapipe each barrier suspends and resumes every subgroup of the workgroup).
+  // workgroup barriers per run of objects (a scan over the invocations would take 17 per group
+  // size; on lavapipe each barrier suspends and resumes every subgroup of the workgroup).
   uint words = (run + 31u) / 32u;
   for (uint w = t; w < words; w += group_size) flags[w] = 0u;
   barrier();

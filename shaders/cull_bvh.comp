@@ -11,12 +11,12 @@
 //      counted once;
 //   2. the subgroup walks its cut subtrees together: their nodes go on one stack (in shared
 //      memory, or with STACK_IN_RECORDS in the records image), and each round every
-//      invocation takes one (the subgroup's lanes stay busy
-//      however unevenly the work is spread over its subtrees; walking one subtree per
-//      invocation kept 3-4 of 8 lanes idle on average at 10% visible). OUTSIDE drops a node,
-//      INSIDE records its object range, an INTERSECTING inner node pushes its two children
-//      with the planes it straddles, an INTERSECTING leaf lists its objects in chunks of at
-//      most BVH_CHUNK_OBJECTS, one record each;
+//      invocation takes one (the subgroup's lanes stay busy however unevenly the work is
+//      spread over its subtrees, where walking one subtree per invocation would leave the
+//      lanes of the small ones idle). OUTSIDE drops a node, INSIDE records its object range,
+//      an INTERSECTING inner node pushes its two children with the planes it straddles, an
+//      INTERSECTING leaf lists its objects in chunks of at most BVH_CHUNK_OBJECTS, one record
+//      each;
 //   3. each lane takes a listed chunk and tests its objects, one per round, on the planes the
 //      leaf straddles (boxes first by their centre bound, then in full those it leaves open),
 //      and rewrites the chunk's record with a bit per visible and per INSIDE object;
@@ -29,9 +29,7 @@
 // mask and only loops skip work, so a lane's work in a round is the whole round's; every
 // load or store of a storage buffer or shared memory is a loop over the lanes, and a load or a
 // scan builds its result lane by lane through the stack (see exclusive_count), which is why a
-// leaf is listed as chunks, not objects: with leaves of 16, listing each object, testing the
-// listed objects 8 to a round and recording the visible ones took 0.57-0.60 ms of a pass at
-// 10^6 boxes and 10% visible, chunks 0.46-0.52.)
+// leaf is listed as chunks, not objects: a record per chunk, not one per object.)
 // The result equals host/bvh cull_hierarchical bit for bit: same p/n-vertex test, distances as
 // ((n.x*p.x + n.y*p.y) + n.z*p.z) + d marked `precise`, same masks, and the same counts of
 // node and object tests.
@@ -55,13 +53,12 @@ layout(constant_id = 2) const uint BV_KIND = BV_KIND_AABB;  // the node margin a
 layout(constant_id = 3) const uint WRITE_DRAWS = 0;  // also write draw commands
 // 1: write each visible object's class. A specialization constant, since on lavapipe a store
 // behind an `if` that is false on every lane still runs its loop over the lanes: switched off
-// by a push constant, the class store took 40% of the pass's instructions and 48% of its cycles
-// (10^6 boxes, 10% visible).
+// by a push constant, the class store would still cost its loop on every pass.
 layout(constant_id = 4) const uint WRITE_CLASSES = 1;
 // 1 (CPU devices): the walk stacks live in the records image, past the objects' records, a
 // slice per workgroup, instead of in shared memory: lavapipe inserts each lane's shared-memory
-// word through the stack (a stall per lane), where an image load gathers; 10^6 boxes at 10%
-// visible: 0.89 -> 0.86 ms. GPUs keep shared memory.
+// word through the stack (a stall per lane), where an image load gathers. GPUs keep shared
+// memory.
 layout(constant_id = 5) const uint STACK_IN_RECORDS = 0;
 
 // The object volumes (GpuAabb, GpuObb or GpuSphere by BV_KIND, in tree order) and the nodes
@@ -84,7 +81,7 @@ layout(std430, set = 0, binding = BVH_BINDING_CUTS) readonly buffer Cuts { uint 
 layout(set = 0, binding = BVH_BINDING_RECORDS, rg32ui) uniform coherent uimageBuffer records;
 uvec2 record_at(uint at) { return imageLoad(records, int(at)).xy; }
 void set_record(uint at, uvec2 record) { imageStore(records, int(at), uvec4(record, 0u, 0u)); }
-// AABBs: per object in tree order xyz = centre, w = bound (host/cull/plane_bounds.hpp), as the
+// AABBs: per object in tree order xyz = centre, w = bound (host/geom/plane_bounds.hpp), as the
 // flat pass's BINDING_CENTRES.
 layout(set = 0, binding = BVH_BINDING_CENTRES) uniform usamplerBuffer centres;
 
@@ -92,9 +89,7 @@ layout(push_constant, std430) uniform Push { BvhCullParams params; };
 
 // Prefix sums over the subgroup from ballots: lavapipe builds an exclusive scan's result lane by
 // lane through the stack (a vector stored, one lane written, the vector reloaded: a failed
-// store-to-load forwarding per lane), where a ballot and a bit count only read lanes. Replacing
-// the walk's six scans per round (and reading each range record by one lane) took 10^6 boxes at
-// 10% visible from 1.05 to 0.91 ms.
+// store-to-load forwarding per lane), where a ballot and a bit count only read lanes.
 // The number of lower lanes where p holds, and (total) of all lanes.
 uint exclusive_count(bool p, out uint total) {
   uvec4 bits = subgroupBallot(p);
@@ -145,11 +140,9 @@ void load_view(uint view) {
 
 // A box's class on the planes in `mask` from its centre and bound alone where they settle it
 // (the flat pass's settle_object, on a leaf's straddled planes): with reach = bound + the view's
-// margin, a centre distance s < -reach on a tested plane is the reference's OUTSIDE on that
-// plane, s >= reach on every tested plane its INSIDE (no n-vertex behind), for s computed in
-// any order (the proof: aabb_plane_bound in host/cull/cpu_culler.cpp), so the smallest s over
-// the tested planes decides both. Else CLASS_OPEN: the full test. A NaN or infinite bound or
-// margin settles nothing (decided on the bits); finite ones mean finite distances.
+// margin, the smallest centre distance s over the tested planes below -reach is OUTSIDE, at least
+// reach INSIDE on them, else CLASS_OPEN (the full test). Proof: docs/numerics.md, Settling bounds.
+// A NaN or infinite bound or margin settles nothing (decided on the bits).
 const uint CLASS_OPEN = 3u;
 uint settle_box(uint slot, uint mask) {
   vec4 centre_bound = uintBitsToFloat(texelFetch(centres, int(slot)));
@@ -163,7 +156,8 @@ uint settle_box(uint slot, uint mask) {
 
 // The node test of hierarchies over OBBs and spheres (bvh::classify_masked_margin): a plane
 // decides a node only beyond a margin of 2^-16 x (reach + |d|) + 2^-120, reach = the sum over
-// axes of the box's largest |coordinate|; past reach + |d| = 2^120 it decides nothing.
+// axes of the box's largest |coordinate|; past reach + |d| = 2^120 it decides nothing. Evaluated
+// in the host's order. Proof: docs/numerics.md, BVH node margins.
 uint classify_masked_margin(vec3 lo, vec3 hi, uint mask, out uint straddled) {
   bool outside = false;
   straddled = 0u;
@@ -222,7 +216,7 @@ void emit_visible(uint view, uint object, uint slot, uint c) {
 // first cut node) << BVH_STACK_MASK_BITS | planes to test, one word (the host checks that a
 // workgroup's nodes span fewer than 2^26: BvhCuller::upload). One word, not a pair: lavapipe
 // inserts each lane's loaded word into the result through the stack (a stall per lane and word),
-// and the pair's second word cost 4-5% of the pass.
+// so a second word per entry would add a stall per lane.
 const uint BVH_STACK_MASK_BITS = 6u;
 shared uint walk_stack[gl_WorkGroupSize.x * BVH_STACK_PER_INVOCATION];
 uint stack_base;  // STACK_IN_RECORDS: this workgroup's stack in the records image

@@ -5,8 +5,8 @@
 // counts visible / inside / intersecting objects. Then, by specialization:
 // - ORDERED == 0: OBJECTS_PER_INVOCATION objects per invocation; appends visible ids (and, with
 //   WRITE_DRAWS, draw commands) to the view's lists in arrival order, one global atomic per
-//   subgroup (on lavapipe 8 objects per invocation measured 2.6x faster than 1: the planes
-//   are loaded once and the counter's cache line bounces 8x less);
+//   subgroup (several objects per invocation: the planes are loaded once for all of them, and
+//   the counter's cache line bounces once per subgroup's objects, not per object);
 // - ORDERED == 1: the same objects per invocation; writes the classes and each workgroup's
 //   visible and INSIDE counts; compact_scan.comp and compact_scatter.comp then write the lists
 //   in object order.
@@ -35,8 +35,8 @@ layout(constant_id = 4) const uint OBJECTS_PER_INVOCATION = 1;
 // Arrival order: 1 writes each object's class, 0 (classes not asked for) leaves them out of the
 // pipeline. A specialization constant, not a push constant behind an `if`: lavapipe runs both
 // sides of every branch under a lane mask, and its storage-buffer store is a loop over the
-// lanes either way, so a class store switched off at run time still cost 19% of the pass's
-// instructions (10^6 boxes, 10% visible). The ordered passes always write them.
+// lanes either way, so a class store switched off at run time would still cost its loop on
+// every pass. The ordered passes always write them.
 layout(constant_id = 5) const uint WRITE_CLASSES = 1;
 
 // The volumes' vec4 words, fetched as integer texels (exact bits) from a uniform texel buffer.
@@ -45,7 +45,7 @@ layout(std430, set = 0, binding = BINDING_CLASSES) writeonly buffer Classes { ui
 layout(std430, set = 0, binding = BINDING_VISIBLE) writeonly buffer Visible { uint visible_ids[]; };
 layout(std430, set = 0, binding = BINDING_COUNTERS) buffer Counters { ViewCounters counters[]; };
 layout(set = 0, binding = BINDING_VIEWS) uniform usamplerBuffer views;  // GpuFrustum, FRUSTUM_TEXELS texels each
-// AABBs: per object xyz = centre, w = bound (host/cull/plane_bounds.hpp), as integer texels.
+// AABBs: per object xyz = centre, w = bound (host/geom/plane_bounds.hpp), as integer texels.
 layout(set = 0, binding = BINDING_CENTRES) uniform usamplerBuffer centres;
 layout(std430, set = 0, binding = BINDING_DRAW_TEMPLATES) readonly buffer DrawTemplates { DrawCommand templates[]; };
 layout(std430, set = 0, binding = BINDING_DRAWS) writeonly buffer Draws { DrawCommand draws[]; };
@@ -82,19 +82,13 @@ void load_view() {
   [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = uintBitsToFloat(texelFetch(views, first + int(k)));
 }
 
-// An AABB's or OBB's class from its centre and a bound alone where they settle it, as the fast
-// CPU kernels do (cull_settled in host/cull/simd_kernels.inl; the proofs are at
-// aabb_plane_bound and obb_plane_bound in host/cull/cpu_culler.cpp). With reach = bound + the
-// view's margin, a centre distance s < -reach on a plane is the reference's OUTSIDE and
-// s >= reach on every plane its INSIDE, for s computed in any order, fused or not, in any
-// rounding mode: both are decided by the smallest s over the planes (pack() repeats the first
-// plane past the last, which leaves the smallest as it is; no planes: everything INSIDE).
-// Else CLASS_OPEN: the reference's own test. A bound or margin that is NaN or infinite (the
-// host's "no bound is safe") settles nothing; that is decided on the bits, since without
-// SignedZeroInfNanPreserve a comparison with a NaN need not be false on every device, so
-// finite inputs do not depend on it. A finite bound and margin mean a finite centre and planes
-// (|c|_1, |d| <= 2^120, unit normals), so every s is finite and min() is defined.
-// Spheres are tested in full at once (one texel either way).
+// An AABB's or OBB's class from its centre and bound alone where they settle it, as the fast CPU
+// kernels do: with reach = bound + the view's margin, the smallest centre distance s over the
+// planes below -reach is the reference's OUTSIDE, at least reach its INSIDE, else CLASS_OPEN (the
+// reference's own test). Proof: docs/numerics.md, Settling bounds. pack() repeats the first plane
+// past the last (no planes: everything INSIDE). A NaN or infinite bound or margin settles nothing,
+// decided on the bits (docs/numerics.md, GPU and CPU agreement). Spheres are tested in full at
+// once (one texel either way).
 const uint CLASS_OPEN = 3u;
 uint settle_object(uint i) {
   if (BV_KIND == BV_KIND_SPHERE) return classify_object(i);
@@ -124,9 +118,9 @@ void classify_objects(uint block, bool view_ok, uint object_count, out uint outs
     inside_bits |= c == CLASS_INSIDE ? 1u << j : 0u;
     open |= c == CLASS_OPEN ? 1u << j : 0u;
   }
-  // The open boxes (about 1% of a random scene: those near a plane), one per invocation per
-  // round. On lavapipe a loop runs while any lane has work, where both sides of an `if` always
-  // run: 8 one-texel bound tests and one or two full tests cost less than 8 full tests.
+  // The open boxes (few: those near a plane), one per invocation per round. On lavapipe a loop
+  // runs while any lane has work, where both sides of an `if` always run: 8 one-texel bound
+  // tests and one or two full tests cost less than 8 full tests.
   if (BV_KIND != BV_KIND_SPHERE) {
     while (open != 0u) {
       uint j = findLSB(open);
@@ -241,7 +235,7 @@ void main_arrival() {
   // The subgroup's slots in the view's list: one global atomic per subgroup, no workgroup
   // barrier. On lavapipe each barrier suspends and resumes every subgroup of the workgroup (a
   // coroutine each); the three a workgroup-wide reservation needs cost more than the atomics
-  // they save (AABBs at 10^6, 10% visible: 9.0 -> 6.4 ns/object, medians of 4 runs).
+  // they save.
   uint base = 0;
   if (subgroupElect() && vis_total > 0) {
     base = atomicAdd(counters[view].visible_count, vis_total);

@@ -1,6 +1,6 @@
 #pragma once
 // Volume sets at the edge of the plane bounds that let the fast CPU kernels and the GPU flat
-// pass settle most objects without the reference's full test (host/cull/plane_bounds.hpp):
+// pass settle most objects without the reference's full test (host/geom/plane_bounds.hpp):
 // each set comes with views of one plane each, and the answers must still be the reference's.
 #include <cmath>
 #include <cstdlib>
@@ -41,7 +41,8 @@ inline void add_unbounded_views(std::vector<Frustum>& views) {
 // that plane and one mirroring it: normal -n off by kMirrorSlack in every component (the most
 // PlaneSet::mirrored allows; built by hand), offset -d (a slab around the plane: the plane's
 // distance taken as a difference from the mirror's, and the other way round) or 4*10^6 (every
-// volume deep inside the mirror). The bounds allow for the difference (simd_kernels.inl).
+// volume deep inside the mirror). The bounds allow for the difference (docs/numerics.md,
+// Mirrored planes).
 // Then the slab among two more mirrored pairs, across it, at 4*10^6 (an orthographic
 // frustum's shape: three pairs), in both roles and as the first, second and third pair (the
 // kernels take the first pair's mirrored distance as a difference, the others' in full).
@@ -324,7 +325,7 @@ inline EdgeSet<Sphere> sphere_edge_set() {
 
 // The kernels also settle a straddling object without its full test when its fused centre
 // distance is nearer every plane than a lower bound on its reach (the smallest half extent
-// or the radius) less every rounding (pack_lower in cpu_culler.cpp). Objects where that lower
+// or the radius) less every rounding (plane_bounds::pack_lower). Objects where that lower
 // bound is exact or nearly so, within float steps of a straddling threshold (the n-vertex or
 // the p-vertex on the plane, the centre at +-r), along planes through the origin (10 to 10^6
 // away, so the centre's rounding share decides) and near planes farther out:

@@ -336,8 +336,8 @@ TEST(TopDown, SplitPositionsOnALine) {
 }
 
 TEST(TopDown, BinnedSahBeatsMedianOnClusteredScenes) {
-  // Measured: binned SAH is 25-35% cheaper than the longest-axis median on clustered scenes
-  // (e.g. 30.6 against 40.9 at 20,000 objects); require 10%.
+  // Binned SAH is far cheaper than the longest-axis median on clustered scenes; require 10%,
+  // well inside the gap, so that no seed makes the test flaky.
   for (std::uint64_t seed : {1u, 2u, 3u}) {
     const std::vector<Aabb> boxes = world_aabbs(generate_scene(SceneKind::Clustered, 20000, seed));
     const double sah = bvh::metrics(bvh::build("binned-sah", boxes)).sah_cost;

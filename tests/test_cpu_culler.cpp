@@ -437,7 +437,7 @@ TEST(CpuCuller, AgreesUnderFlushToZeroSetAfterThePoolStarted) {
 
 // The bounds are computed at upload; the engine's float mode then (FTZ / DAZ, rounding) must
 // not matter, and culling in any mode must give what the reference gives in that mode.
-// (Under DAZ at upload, a subnormal extent read as 0 once left its part of the radius out of
+// (Under DAZ at upload, a subnormal extent read as 0 would leave its part of the radius out of
 // the OBB bound.)
 template <class Volume>
 void expect_mode_independent(const EdgeSet<Volume>& set, const std::string& what) {

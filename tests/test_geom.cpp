@@ -206,10 +206,10 @@ TEST(Rounding, FloatStepsAreNextafterBitForBit) {
   }
 #if defined(__SSE__)
   // The same floats, bit for bit, in every rounding direction with FTZ, DAZ, both or neither
-  // (under FTZ a conversion to float flushed a subnormal result to zero, so round_up of 3e-40
-  // was 2^-149; under DAZ a comparison read a subnormal as zero, so round_down could come out
-  // above v). The barriers keep the compiler from moving the float work across the mode
-  // changes (it does not know the mode is state).
+  // (under FTZ a plain conversion to float would flush a subnormal result to zero, and round_up
+  // of 3e-40 would come out as 2^-149; under DAZ a comparison would read a subnormal as zero, so
+  // round_down could come out above v). The barriers keep the compiler from moving the float
+  // work across the mode changes (it does not know the mode is state).
   for (unsigned rounding : {0x0000u, 0x2000u, 0x4000u, 0x6000u})
     for (unsigned flush : {0x0000u, 0x8000u, 0x0040u, 0x8040u}) {
       const unsigned mode = rounding | flush;

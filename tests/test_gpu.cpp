@@ -255,8 +255,8 @@ TEST_F(Gpu, VolumesWithinFloatStepsOfThePlanes) {
   }
 }
 
-// The box passes settle most boxes by their centre distance against a bound (the fast CPU
-// kernels' proofs); boxes at the edge of those bounds, huge and non-finite ones, and planes
+// The box passes settle most boxes by their centre distance against a bound (docs/numerics.md,
+// Settling bounds); boxes at the edge of those bounds, huge and non-finite ones, and planes
 // whose normals are too long for them (nothing may be settled) must still get the reference's
 // answers, in one pass of every view and in the object-order pass (which tests every box in
 // full). `mixed` is a view where all three answers occur.

@@ -89,13 +89,12 @@ AabbTracker::AabbTracker(std::span<const glm::vec3> local_points)
   initial_extreme_ = extreme_;
   // A walk finds the maximum only where the surface is convex: a hull that passed validation
   // may still fold inward by up to its tolerance at an edge, and along a direction nearly
-  // tangent to a long face such a fold can hold a walk far below the maximum (the bounds
-  // fuzzer found one 0.6 short of 4.9*10^5 among points at 7*10^9, 1.7*10^6 and 1). Walk
-  // only a hull with no edge certainly concave: for each edge, the far vertex of the face
-  // across it is not above this face's plane beyond the rounding of the orientation
-  // determinant (8 DBL_EPSILON times its permanent, above Shewchuk's orient3d bound);
-  // otherwise hill climbing transforms the hull vertices instead. (That fuzzer case passes
-  // this test: folds at the rounding level remain, see aabb_update.hpp.)
+  // tangent to a long face such a fold can hold a walk far below the maximum. Walk only a
+  // hull with no edge certainly concave: for each edge, the far vertex of the face across it
+  // is not above this face's plane beyond the rounding of the orientation determinant
+  // (8 DBL_EPSILON times its permanent, above Shewchuk's orient3d bound); otherwise hill
+  // climbing transforms the hull vertices instead. (Folds at the rounding level pass this
+  // test and remain: see aabb_update.hpp.)
   if (hull_.dimension == ConvexHull::Dimension::Polyhedron && hull_.valid) {
     const std::vector<glm::vec3>& hv = hull_.vertices;
     for (std::size_t f = 0; f < hull_.faces.size() && climb_safe_; ++f) {
@@ -131,8 +130,7 @@ Aabb AabbTracker::update(const glm::mat4& world, AabbUpdate method, Extremes& ex
     case AabbUpdate::HullRecompute: {
       // A flat or linear hull's vertices lie up to the tolerance off its plane or line, and a
       // point up to the tolerance off it on the other side: twice the tolerance from the
-      // vertices' polygon (found by the bounds fuzzer: a point 5 beyond a vertex whose
-      // tolerance was 3.5). A polyhedron's points lie within the tolerance of its faces.
+      // vertices' polygon. A polyhedron's points lie within the tolerance of its faces.
       const bool flat = hull_.dimension == ConvexHull::Dimension::Segment || hull_.dimension == ConvexHull::Dimension::Polygon;
       return transform_points(hull_.vertices, world, flat ? 2.0 * hull_.tolerance : hull_.tolerance);
     }

@@ -34,18 +34,16 @@ std::optional<AabbUpdate> parse_aabb_update(std::string_view name);
 /// twice that for a flat or linear hull, whose vertices also lie within it of its plane or
 /// line), and encloses every point as far as the hull contains them within that tolerance:
 /// Quickhull's rounding bound, which holds for the test scenes' meshes and random sets but
-/// not for sets whose coordinates span about ten orders of magnitude (the bounds fuzzer found
-/// points at 3*10^10 and at 1 outside the hull by 0.05, 60 times the tolerance). When the hull
-/// failed validation (ConvexHull::valid), the hull-based methods recompute from every point
-/// instead; when an edge of the hull is certainly folded inward, HillClimb transforms the hull
-/// vertices instead of walking. HillClimb's walk also relies on the hull being convex:
-/// Quickhull's surface may still fold inward at edges by the rounding of its orientation
-/// tests, and where such a fold meets a direction almost tangent to a long face a walk can
-/// stop short of the maximum by far more than the padding, again only among coordinates of
-/// very different magnitudes (found: a walk 0.6 short of 4.9*10^5 among points at 7*10^9,
-/// 1.7*10^6 and 1). On the real meshes of the test scenes the walk's boxes match
-/// HullRecompute's to 1e-6 of their size (tested over many rotations), and no hull there has
-/// an edge certainly folded inward.
+/// not for sets whose coordinates span about ten orders of magnitude. When the hull failed
+/// validation (ConvexHull::valid), the hull-based methods recompute from every point instead;
+/// when an edge of the hull is certainly folded inward, HillClimb transforms the hull vertices
+/// instead of walking. HillClimb's walk also relies on the hull being convex: Quickhull's
+/// surface may still fold inward at edges by the rounding of its orientation tests, and where
+/// such a fold meets a direction almost tangent to a long face a walk can stop short of the
+/// maximum by far more than the padding, again only among coordinates of very different
+/// magnitudes. On the real meshes of the test scenes the walk's boxes match HullRecompute's to
+/// 1e-6 of their size (tested over many rotations), and no hull there has an edge certainly
+/// folded inward. Examples of both limits: docs/numerics.md, World-space volumes.
 class AabbTracker {
  public:
   /// Throws BadPoints on an empty set or a non-finite coordinate.

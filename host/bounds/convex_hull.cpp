@@ -269,7 +269,7 @@ ConvexHull convex_hull(std::span<const glm::vec3> points) {
   // (16 x Lloyd's tolerance). The margin covers what the measure does not: a point the
   // in-line or in-plane hull dropped by rounding (its ends and ring are chosen on double
   // projections) may lie outside by a few ulps of the magnitude, which matters beside tiny
-  // coordinates (the bounds fuzzer found subnormal points missed by the hull's AABB).
+  // coordinates (subnormal points beside unit ones, say).
   const double rounding_margin = 16.0 * hull_tol;
   if (glm::length(p[b] - p[a]) <= tol) {
     hull.dimension = ConvexHull::Dimension::Point;

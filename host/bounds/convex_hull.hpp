@@ -40,8 +40,8 @@ struct ConvexHull {
   /// float) plus a rounding margin of 16 x Lloyd's
   /// tolerance (for points the in-line or in-plane hull dropped by rounding); for a
   /// Polyhedron, that margin alone, a bound on Quickhull's rounding, which holds when `valid`
-  /// and the coordinates' magnitudes are not too far apart (points at 3*10^10 and at 1 were
-  /// found outside by 60 times it; see bounds/aabb_update.hpp).
+  /// and the coordinates' magnitudes are not too far apart (docs/numerics.md, World-space
+  /// volumes).
   double tolerance = 0.0;
   /// Polyhedron only: false when the built surface failed validation (a lost or
   /// non-reciprocal adjacency, a zero-area face, or an edge not convex to within `tolerance`), which

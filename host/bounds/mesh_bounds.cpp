@@ -15,8 +15,8 @@ namespace {
 // The largest eigenvalue of a symmetric positive semidefinite 3x3 matrix (Smith 1961, the
 // trigonometric closed form), in double. Where the two largest eigenvalues nearly coincide
 // the acos is ill-conditioned: a rounding error e in det(b) moves the result by about
-// sqrt(e), i.e. up to ~1e-8 relative (measured: 6e-9 on 20,000 such matrices). Callers add
-// a margin well above that.
+// sqrt(e), i.e. up to about 1e-8 relative. Callers add a margin well above that
+// (docs/numerics.md, World-space volumes).
 double largest_eigenvalue(const glm::dmat3& a) {
   const double p1 = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
   const double q = (a[0][0] + a[1][1] + a[2][2]) / 3.0;

@@ -34,7 +34,8 @@ struct MeshBoundsOptions {
 /// largest singular value of the linear part (the ellipsoid's longest semi-axis, so the result
 /// is the smallest sphere about the new centre enclosing the transformed sphere, here widened
 /// by 1e-6 relative as a margin for the eigenvalue computation). Computed in double and
-/// rounded outward, including the rounding of the centre to float.
+/// rounded outward, including the rounding of the centre to float (docs/numerics.md,
+/// World-space volumes).
 Sphere transform_sphere(const Sphere& s, const glm::mat4& m);
 
 class MeshBounds {

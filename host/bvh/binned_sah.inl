@@ -354,8 +354,8 @@ struct PointBox {
 // same operands in the same order as grow_point's min(c, lo) and max(c, hi) (-max(c, hi) is
 // min(-c, -hi), ties keeping the accumulated value, and -c is c with its sign bit flipped), so
 // the boxes are the same, bit for bit (checked against grow_point with zeros of both signs,
-// NaN, infinities and subnormals). A box held in memory behind a pointer chosen per record made
-// each record wait for the last one's store.
+// NaN, infinities and subnormals). Registers, not a box in memory behind a pointer chosen per
+// record, which would make each record wait for the last one's store.
 #if defined(__SSE2__)
 class SideCentroids {
  public:
@@ -545,9 +545,9 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
     std::uint32_t* const count1 = count0 + stride;
     std::uint32_t* const count2 = count1 + stride;
     // Each record's bin indices are computed three records ahead of its bin updates: their
-    // long chain of dependent operations (about 20 cycles) then never holds up the updates,
-    // and more records are in flight at once (10^6 objects: 203 -> 184 ms; two ahead, 188;
-    // four, the same as three). Past the last record, the last one is computed again.
+    // long chain of dependent operations then never holds up the updates, and more records
+    // are in flight at once (fewer ahead hide less of the chain; more gain nothing). Past the
+    // last record, the last one is computed again.
     const std::uint32_t final_i = task.count - 1;
     const auto indices_of = [&](std::uint32_t i) { return bin_indices(centroid(objs[std::min(i, final_i)]), lo, scale, last); };
     auto ahead1 = indices_of(0), ahead2 = indices_of(1), ahead3 = indices_of(2);
@@ -604,10 +604,9 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
       for (std::uint32_t i = 0; i < task.count; ++i) {
         const Box8& ref = objs[i];
         const std::uint32_t go_left = split_bin[sizeof(std::uint32_t) * std::size_t(i)] <= best_split;  // size_t: nodes past 2^30 objects
-        // l or r. GCC 12 makes this a conditional move in both variants (read off the
-        // disassembly); in an earlier form of this loop it made a branch, which mispredicted
-        // (bench/NOTES.md). `r + (l - r) * go_left` and `r ^ ((l ^ r) & -go_left)` are
-        // branch-free whatever the compiler does, and 1-4% slower at 10^6.
+        // l or r, as a select: GCC makes it a conditional move in both variants (a branch on
+        // go_left would mispredict wherever the sides follow no pattern). `r + (l - r) * go_left` and
+        // `r ^ ((l ^ r) & -go_left)` are branch-free whatever the compiler does, but cost more.
         const std::uint32_t at = go_left ? l : r;
         copy(out[at], ref);
         sides.add(ref, go_left);

@@ -8,7 +8,7 @@
 
 #include "bvh/bvh.hpp"
 
-/// Every BVH builder of issue 4, each taking per-object AABBs (centres are the box centres)
+/// Every BVH builder, each taking per-object AABBs (centres are the box centres)
 /// and returning a plain Tree value that check_tree accepts; plus refit, leaf collapsing,
 /// extended metrics and the registry that picks a builder by name.
 namespace cullpipe::bvh {
@@ -61,11 +61,10 @@ enum class InsertionOrder {
 };
 
 /// Leaves of at most this many objects for trees built to be culled (`cullpipe run --cull bvh`,
-/// the benchmarks): on lavapipe the GPU hierarchy culled 10^6 boxes 8-15% faster than with
-/// leaves of 4 (10% visible: 0.64 -> 0.57-0.59 ms; 1%: 0.19 -> 0.16), as fast with 32, slower
-/// with 64; with the leaves' objects tested in chunks of 16 (cull_bvh.comp) 8 was slower and
-/// 32 as fast. The fast CPU hierarchy, which tests small nodes' objects as ranges, and the
-/// scalar traversal did not change. BuildOptions keeps 4, the builders' usual quality setting.
+/// the benchmarks): the GPU hierarchy tests a leaf's objects in chunks of 16 (cull_bvh.comp),
+/// so smaller leaves only add node tests and much larger ones add object tests. The fast CPU
+/// hierarchy, which tests small nodes' objects as ranges, and the scalar traversal hardly
+/// depend on it. BuildOptions keeps 4, the builders' usual quality setting.
 inline constexpr std::uint32_t kCullingLeafSize = 16;
 
 /// Options of every builder; each builder reads the fields that concern it.
@@ -111,23 +110,23 @@ Tree build_agglomerative_pq(std::span<const Aabb> boxes, const BuildOptions& opt
 /// merges mutual nearest neighbours (the new cluster takes the lower position) and compacts,
 /// until one cluster is left. When a pass merges fewer than 1/64 of the clusters (long chains
 /// of preference, e.g. nested boxes), unmerged clusters are also merged with their unmerged
-/// nearest neighbour, so passes stay geometric. Single-threaded: 10^6 objects in about 1 s.
-/// SAH cost at max_leaf_size 4 measured 0.95-0.98 x build_binned_sah's on random and
-/// clustered sets of 10^4-10^6 objects with 16 neighbours, 1.02-1.05 x on the generated city;
-/// the default of 4 gave lower costs on all three (0.93-0.96 at 10^5).
+/// nearest neighbour, so passes stay geometric. Single-threaded. Its SAH cost is close to
+/// build_binned_sah's; the default of 4 neighbours gives lower costs than 16.
 Tree build_agglomerative_local(std::span<const Aabb> boxes, const BuildOptions& options = {});
 
 // -------------------------------------------------------------- insertion (insertion.cpp)
 
 /// Insertion builders (Bittner et al. 2015 / Goldsmith & Salmon 1987): objects inserted one by
-/// one in options.insertion_order (default: a fixed shuffle), each as a new leaf whose sibling S is the node whose choice adds least SAH
-/// cost: area(S u box) + the area each ancestor of S gains. S's place goes to a new inner node
+/// one in options.insertion_order (default: a fixed shuffle), each as a new leaf whose sibling
+/// S is the node whose choice adds least SAH cost: area(S u box) + the area each ancestor of S
+/// gains. S's place goes to a new inner node
 /// (S, leaf) and the ancestors' boxes grow; with options.rotations each node on the way up then
 /// takes the best of its four child/grandchild swaps that lowers its child's area (Kopta et al.
 /// 2012). The tree is then collapsed to max_leaf_size by collapse_leaves.
 /// Order matters: inserted in id order, objects given in spatial order (e.g. the generated
-/// city's grid rows) build trees 6-8x binned SAH's cost; the default shuffle avoids that. Time is O(n x depth); sets whose best tree is
-/// a chain (boxes nested inside each other, inserted largest first) take quadratic time.
+/// city's grid rows) build trees several times binned SAH's cost; the default shuffle avoids
+/// that. Time is O(n x depth); sets whose best tree is a chain (boxes nested inside each
+/// other, inserted largest first) take quadratic time.
 /// Greedy: one path from the root (as Box2D v3): nodes on the path and their leaf children are
 /// scored by the full cost and the best kept; the path goes into the inner child with the
 /// smaller lower bound on the cost below it, and ends when no bound beats the best.

@@ -33,7 +33,8 @@ Classification classify_masked(const Aabb& box, const Frustum& frustum, std::uin
 
 Classification classify_masked_margin(const Aabb& box, const Frustum& frustum, std::uint32_t mask, std::uint32_t& straddled) {
   straddled = 0;
-  // Evaluated in this order, as in shaders/cull_bvh.comp (the margin is part of the contract).
+  // Evaluated in this order, as in shaders/cull_bvh.comp (the margin is part of the contract:
+  // docs/numerics.md, BVH node margins).
   const float reach = std::max(std::abs(box.min.x), std::abs(box.max.x)) + std::max(std::abs(box.min.y), std::abs(box.max.y)) +
                       std::max(std::abs(box.min.z), std::abs(box.max.z));
   const auto planes = frustum.active();

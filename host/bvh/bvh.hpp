@@ -13,9 +13,9 @@
 #include "core/prefetch.hpp"
 #include "geom/sphere.hpp"
 
-/// Bounding volume hierarchies over object AABBs (issue 4, first part): the binned-SAH
-/// top-down builder, quality metrics, validation, the depth-first flattening with skip
-/// indices, and the scalar hierarchical traversal that is the reference for GPU traversal.
+/// Bounding volume hierarchies over object AABBs: the binned-SAH top-down builder, quality
+/// metrics, validation, the depth-first flattening with skip indices, and the scalar
+/// hierarchical traversal that is the reference for GPU traversal.
 namespace cullpipe::bvh {
 
 inline constexpr std::uint32_t kNone = 0xffffffffu;
@@ -57,8 +57,8 @@ struct BinnedScratch;
 /// build_binned_sah for an engine that rebuilds every frame: the same tree, but the builder
 /// keeps its per-object working memory (68 bytes per object) and `tree` keeps its storage
 /// between builds, so a rebuild of no more objects than before faults in no fresh pages (a
-/// first build of 10^6 objects spends about 10% of its time doing that). Uses AVX2 where the
-/// CPU has it, like build_binned_sah. Not thread-safe: one builder per thread.
+/// noticeable share of a first build's time). Uses AVX2 where the CPU has it, like
+/// build_binned_sah. Not thread-safe: one builder per thread.
 class BinnedSahBuilder {
  public:
   BinnedSahBuilder();
@@ -133,8 +133,8 @@ bool leaf_encloses(const Aabb& leaf, const Sphere& volume);
 /// visit(slot, volume) for each that passes volume_in_leaf, gathered from `volumes` by the
 /// tree's ids with prefetches ahead; false at the first that does not. Runs of nodes split a
 /// tree's volumes among threads, each gathered and checked once. kKnownValid: every volume
-/// has passed is_valid already, so only leaf_encloses is checked (an OBB's validity costs
-/// about 7 ns).
+/// has passed is_valid already, so only leaf_encloses is checked (no volume's validity is
+/// checked twice).
 template <bool kKnownValid = false, class Volume, class Visit>
 bool visit_leaf_volumes(const FlatTree& tree, std::span<const Volume> volumes, std::size_t first_node, std::size_t end_node,
                         Visit&& visit) {
@@ -160,18 +160,12 @@ Classification classify_masked(const Aabb& box, const Frustum& frustum, std::uin
 
 /// Hierarchies over OBBs or spheres: the tree is built over each volume's enclosing box and
 /// its nodes are tested with a margin, so that a node is OUTSIDE (or INSIDE a plane) only when
-/// every volume in it is, as the volume's own float test computes it.
-///
-/// Why a margin: for boxes, float sums and products are monotone, so a node's p/n-vertex test
-/// and its boxes' tests can never disagree. An OBB's or a sphere's test rounds differently
-/// from its enclosing box's, so without a margin an object touching a plane could be found
-/// visible by flat culling and dropped with its node (or the other way round). The margin is
-/// kBvhMarginScale x (sum over axes of the node's largest |coordinate| + |d|), far above the
-/// rounding error of both tests (about 12 units in the last place of that sum, for unit
-/// normals: |n_j| <= 1 bounds every product, and an object's centre and extents lie within
-/// the node's coordinates); nodes within it of a plane are INTERSECTING and their objects get
-/// their own test. Then every object's class equals flat culling's exactly
-/// (tests/test_bvh_volumes.cpp finds objects that a margin-free node test misjudges).
+/// every volume in it is, as the volume's own float test computes it (boxes need no margin:
+/// float sums and products are monotone). The margin is kBvhMarginScale x (sum over axes of the
+/// node's largest |coordinate| + |d|) + kBvhMarginFloor, far above the rounding of both tests
+/// for unit normals; nodes within it of a plane are INTERSECTING and their objects get their
+/// own test, so every object's class equals flat culling's. Proof: docs/numerics.md, BVH node
+/// margins.
 inline constexpr float kBvhMarginScale = 0x1p-16f;
 /// Added to every margin so that rounding of subnormal numbers is covered too.
 inline constexpr float kBvhMarginFloor = 0x1p-120f;
@@ -187,7 +181,7 @@ void require_unit_normals(const Frustum& frustum, const char* who);
 
 /// The box a hierarchy stores for a volume: its axis-aligned bounds computed in double and
 /// rounded outward (one float step beyond, after the double sums are rounded up), so it
-/// contains the volume.
+/// contains the volume (docs/numerics.md, BVH node margins).
 Aabb enclosing_box(const Obb& box);
 Aabb enclosing_box(const Sphere& sphere);
 inline Aabb enclosing_box(const Aabb& box) { return box; }

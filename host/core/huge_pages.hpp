@@ -13,7 +13,7 @@ inline constexpr std::size_t kHugePageSize = std::size_t{2} << 20;
 
 /// Asks the kernel to back the kHugePageSize-aligned part of [p, p + bytes) with transparent
 /// huge pages: a million-object build or cull touches ~100 MB of fresh memory, and with 4 KiB
-/// pages the page faults and page-table walks cost several percent. A hint only: nothing
+/// pages the page faults and page-table walks take a noticeable share of it. A hint only: nothing
 /// changes where THP is off or on other systems.
 inline void advise_huge_pages(void* p, std::size_t bytes) {
 #if defined(__linux__) && defined(MADV_HUGEPAGE)

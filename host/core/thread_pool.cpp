@@ -87,13 +87,10 @@ bool spin_until(Done done) {
 
 }  // namespace
 
-// The hand-over takes no lock while the threads are awake. It used to: the caller published a
-// call under the mutex, each worker took the mutex to read it and again to leave it, and the
-// caller took it to collect them, so a call moved the mutex's cache line between the cores
-// four times or more. A call's time past its tasks' (2 threads, tasks of 2 microseconds,
-// medians of 5,000 pairs of calls): 2 tasks 363 -> 183 ns, 8 tasks 438 -> 297; the fast CPU
-// hierarchy at 10^6 boxes, passes in turn, 1-2% faster at 1% visible, 0.2-1.4% at 10% (NOTES).
-// The mutex is left to sleeping, waking and errors.
+// The hand-over takes no lock while the threads are awake: under a mutex (the caller publishing
+// a call, each worker reading it and leaving it, the caller collecting them) a call would move
+// the mutex's cache line between the cores four times or more. The mutex is left to sleeping,
+// waking and errors.
 void ThreadPool::worker_loop() {
   std::uint64_t seen = 0;  // the last generation this worker ran
   auto published = [&](std::uint64_t g) { return g != seen && (g & 1u) == 0; };

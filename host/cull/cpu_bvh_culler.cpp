@@ -80,11 +80,9 @@ void CpuBvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume
   // blocks, which replaces the first only when every volume has passed (the two sets take
   // turns, so the memory is twice the blocks'). The arrays are rewritten in place: an
   // engine that refits and uploads every frame reuses their memory instead of faulting in
-  // ~90 bytes per object of fresh pages per upload (10^6 boxes: 109 -> 61 ns/object). The
-  // node pairs and the volumes' blocks start on a cache line (CacheLineVector): with
-  // malloc's 16-byte alignment, node records (and the volume records the columns replaced)
-  // could straddle two lines, and the passes ran 0.29 -> 0.32 ns/object depending on where
-  // an allocation happened to land.
+  // fresh pages on every upload. The node pairs and the volumes' blocks start on a cache line
+  // (CacheLineVector): with malloc's 16-byte alignment a node record could straddle two
+  // lines, and a pass's speed would depend on where an allocation happened to land.
   const std::size_t nodes = tree.nodes.size(), n = tree.objects.size();
   if (nodes >= detail::kWalkLeaf)  // (a pair index at or past the leaf bit would read as a leaf)
     throw std::length_error("CpuBvhCuller::upload: " + std::to_string(nodes) + " nodes (at most 2^31 - 1)");
@@ -207,10 +205,7 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
   // objects (a small tree is one task on the calling thread: a task costs more than walking a
   // few hundred nodes). Fewer, larger subtrees start fewer walks, whose first steps test a node
   // or two each; much larger ones list more object ranges than the caches keep until they are
-  // tested. Against 16 per thread, 2 threads, 10^6 boxes (passes in turn): 49.3-50.0 -> 43.0-44.0
-  // microseconds at 10%, 25.0-25.6 -> 18.9-19.8 at 1%, 87.7-87.9 -> 81.8-83.7 at 50%; 10^5
-  // 4-18% faster; 4*10^6 (32 -> 30 subtrees) the same at 10% and 50%, 2-3% slower at 1%;
-  // 16*10^6 (32 either way) the same. Measured on a Zen 5 only (NOTES).
+  // tested.
   const std::size_t threads = pool_->size();
   const std::size_t wanted = std::clamp<std::size_t>(std::max(n / kLargeTaskObjects, std::min(n / kTaskObjects, threads * 4)), 1, threads * 16);
   std::vector<Task>& tasks = tasks_;
@@ -249,8 +244,7 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
   // Each task covers its own contiguous part of its view's tree object order (a subtree's
   // range or part of one): in that order, a view's task lists concatenate into tree order.
   // The sorts below (of the tasks' indices, by key_of(index)) compare keys computed once per
-  // task, not the nodes (scattered over the tree's memory) at every comparison: the pass's
-  // setup 1.2 -> 1.04 microseconds (10^6 boxes).
+  // task, not the nodes (scattered over the tree's memory) at every comparison.
   std::vector<std::uint64_t>& keys = sort_keys_;
   std::vector<std::uint32_t>& order = order_;
   auto sort_order = [&](auto key_of, auto before) {
@@ -294,8 +288,7 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
   }
   if (ids) {
     // The marks are all zero between passes: the listing clears every word it finds set, so
-    // a walk starts on clear words without clearing its subtree's (10^6 boxes, passes in turn:
-    // 7-8% faster at 1% visible, 2-2.5% at 10%, 0.5% at 50%; NOTES). A pass stopped between
+    // a walk starts on clear words without clearing its subtree's. A pass stopped between
     // its walk and its listing (by an exception from a list's resize) leaves marks set;
     // marks_clean_ says so, and the next pass clears them all first.
     if (!marks_clean_) std::fill(marks_.begin(), marks_.end(), std::uint64_t{0});
@@ -359,7 +352,7 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
     offsets_[t] = tasks[t].view == tasks[t - 1].view ? offsets_[t - 1] + tallies[t - 1].visible : 0;
   // The threads take the longest lists first, as they took the largest walks: claimed in
   // tree order, a subtree's list of thousands of ids could start last and leave the other
-  // thread waiting (10^6 boxes, 2 threads, passes in turn: 2-3.5% faster at 1-50%; NOTES).
+  // thread waiting.
   sort_order([&](std::size_t i) -> std::uint64_t { return tallies[i].visible; }, std::greater<std::uint64_t>());
   pool_->parallel_for(tasks.size(), [&](std::size_t claimed) {
     const std::size_t index = order_[claimed];

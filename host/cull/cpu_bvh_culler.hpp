@@ -30,9 +30,9 @@ struct CpuBvhCullOptions {
   bool classes = true;       ///< bvh::HierarchicalResult::classes, one per object id
   bool visible_ids = false;  ///< the ids of the visible objects, in the tree's object order
   /// bvh::TraversalOptions::range_objects: straddling nodes of at most this many objects test
-  /// their objects as one range instead of descending (see the class comment for why and what
-  /// was measured); 0 is the classic traversal, bvh::cull_hierarchical's default and the GPU
-  /// culler's. The classes do not depend on it; the node and object test counts do. Unset:
+  /// their objects as one range instead of descending (see the class comment for why); 0 is
+  /// the classic traversal, bvh::cull_hierarchical's default and the GPU culler's. The
+  /// classes do not depend on it; the node and object test counts do. Unset:
   /// default_range_objects of the kind of volumes uploaded.
   std::optional<std::uint32_t> range_objects;
   /// The default ranges: 160 objects for boxes and spheres, 96 for OBBs (whose objects cost
@@ -69,22 +69,16 @@ struct CpuBvhViewResult {
 /// so one large accepted subtree still uses every core. Objects are written by id, and a
 /// subtree's objects are its own, so no two threads write the same class.
 ///
-/// Why object ranges: a node test costs about 13 cycles (records gathered into lanes, work
-/// lists kept, prefetches), an object of a range under 2 (contiguous loads); near the leaves a node's
-/// test saves fewer object tests than it costs. Ranges are tested in groups of up to 64
-/// objects, plane by plane, a bit per object: on 10^6 boxes and spheres (one thread), ranges
-/// of 96 objects took 0.140-0.151 ms at 10% visible against 0.171-0.179 for 32 (64 and 128 in
-/// between or equal; at 4*10^6, 0.106-0.112 ns/object against 0.133-0.144). With the volumes
-/// in blocks of 16 (since), boxes and spheres are 3-5% faster with ranges of 160 than of 96 at
-/// 10^6 objects and 10% or 50% visible (2 threads; at 10^5 2-3%, at 4*10^6 1-3% at 10% and
-/// 2-4% slower at 50%), and OBBs 2-5% slower, so the default is 160 for boxes and spheres and
-/// 96 for OBBs (CpuBvhCullOptions::default_range_objects).
-/// (Before the groups, ranges of 24 to 128 measured within a few percent of each other and
-/// 1.3-1.7x faster than none.)
+/// Why object ranges: a node test costs several times what an object of a range does (records
+/// gathered into lanes, work lists kept and prefetches, against contiguous loads), so near the
+/// leaves a node's test saves fewer object tests than it costs. Ranges are tested in groups of
+/// up to 64 objects, plane by plane, a bit per object. OBBs read more columns per object than
+/// boxes and spheres, so their best range is shorter: the defaults are 160 objects for boxes
+/// and spheres and 96 for OBBs (CpuBvhCullOptions::default_range_objects).
 ///
 /// The objects may be AABBs, OBBs or spheres (bvh::cull_hierarchical's three forms: a tree
 /// over OBBs or spheres is built over bvh::enclosing_boxes and its nodes are tested with a
-/// margin, so every class still equals flat culling's).
+/// margin, so every class still equals flat culling's: docs/numerics.md, BVH node margins).
 class CpuBvhCuller {
  public:
   /// threads = 0: every core. isa: the kernels (default best_isa()); one the machine cannot

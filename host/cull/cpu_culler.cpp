@@ -62,8 +62,9 @@ PlaneSet plane_set(const Frustum& f) {
     const float margin = plane_bounds::plane_margin(f.planes[k].d);
     s.max_margin = std::isnan(s.max_margin) || std::isnan(margin) ? std::numeric_limits<float>::quiet_NaN() : std::max(s.max_margin, margin);
   }
-  // The lower bounds' factors: the smallest |n|_1 and |n|_2, rounded down, times 2^-8 (q's
-  // step) and 1 - 2^-12, which covers the packing's 2^-15 and the kernel's three roundings.
+  // The lower bounds' factors: the smallest |n|_1 and |n|_2, rounded down, times 2^-8 (q's step) and
+  // 1 - 2^-12 (the packing's 2^-15 and the kernel's roundings); 0 outside [1/2, 2].
+  // Proof: docs/numerics.md, Packed lower bounds.
   double l1 = std::numeric_limits<double>::infinity(), l2 = l1;
   for (std::uint32_t k = 0; k < s.count; ++k) {
     const double x = s.nx[k], y = s.ny[k], z = s.nz[k];
@@ -74,7 +75,7 @@ PlaneSet plane_set(const Frustum& f) {
   s.lower_scale_l1 = scale(l1);
   s.lower_scale_l2 = scale(l2);
   // The first pair of planes whose normals are opposite within kMirrorSlack (float sums are
-  // exact in double).
+  // exact in double). The bounds cover its distance: docs/numerics.md, Mirrored planes.
   auto mirrors = [&](std::uint32_t i, std::uint32_t j) {
     return std::fabs(double(s.nx[i]) + s.nx[j]) <= kMirrorSlack && std::fabs(double(s.ny[i]) + s.ny[j]) <= kMirrorSlack &&
            std::fabs(double(s.nz[i]) + s.nz[j]) <= kMirrorSlack;
@@ -331,8 +332,7 @@ void CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& optio
   // the kernels' slack), then they are gathered in chunk order.
   // Dense runs (more than a quarter visible) leave their ids out of the scratch: they are
   // listed from the runs' bits straight into the result, each id written once instead of
-  // twice (4*10^6 boxes, half of them visible, medians of 5 interleaved runs: 0.407 -> 0.364
-  // ns/object against 0.22 to read; unchanged at 1% and 10%, whose runs are sparse).
+  // twice (sparse runs write too few ids for it to matter).
   const std::size_t slot = m.chunk + kPad;
   const std::size_t bits_slot = m.chunk / m.table.lanes, runs_slot = (m.chunk + detail::kRunObjects - 1) / detail::kRunObjects;
   if (options.visible_ids) {
@@ -385,9 +385,7 @@ void CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& optio
   // Several views: each chunk read from memory once for all of them. With enough chunks to
   // keep every thread busy, a task is one chunk and every view in turn, its centres and bounds
   // (256 KiB) in the thread's L2 after the first; with fewer, a task is one chunk and one view,
-  // tasks of one chunk next to each other, so that every thread works. (4*10^6 boxes, 4 views:
-  // a chunk per task 0.76-0.83x the time of four single-view passes, a chunk and view per task
-  // 0.79-0.84x, and 8% slower than a chunk per task; NOTES.)
+  // tasks of one chunk next to each other, so that every thread works.
   const std::size_t view_count = views.size();
   if (view_count > 1 && chunks >= 4 * std::size_t(m.pool.size())) {
     m.pool.parallel_for(chunks, [&](std::size_t chunk) {

@@ -17,8 +17,9 @@
 
 /// The fast CPU path: structure-of-arrays bounds, SIMD kernels chosen at run time (AVX-512,
 /// AVX2, or a portable 4-lane build of the same source), and every core through a thread pool.
-/// Results equal cullpipe::reference bit for bit: same float operations, same order, no
-/// contraction.
+/// Results equal cullpipe::reference bit for bit: most objects are settled by bounds proved to
+/// give its answer (docs/numerics.md, Settling bounds), the rest get its float operations in its
+/// order, without contraction.
 namespace cullpipe::fast {
 
 /// Instruction set of the kernels (Avx2: AVX2 with FMA).
@@ -89,9 +90,9 @@ class CpuCuller {
   /// bounds, 16 bytes per object); else every byte the upload stored.
   std::uint32_t touch_bounds(bool streamed_only = false);
   /// Reads the centres and bounds in a pass's own order: chunk by chunk, the four arrays side
-  /// by side, a vector of each per step (without the pass's software prefetch, which makes
-  /// this plain read slower). With touch_bounds(true), the memory floor of a pass, whichever
-  /// of the two orders the machine reads faster (on a Zen 5, this one, by 3-23%).
+  /// by side, a vector of each per step (without the pass's software prefetch, which a plain
+  /// read does not gain from). With touch_bounds(true), the memory floor of a pass: whichever
+  /// of the two orders the machine reads faster.
   std::uint32_t touch_streamed_side_by_side();
   /// What a pass reads of every object (touch_bounds(true)): centre x y z and bound.
   static constexpr std::size_t kStreamedBytesPerObject = 4 * sizeof(float);

@@ -18,7 +18,7 @@ struct PlaneSet {
   /// The share of the settling margin that depends on the plane, 2^-18 |d| rounded up,
   /// at its largest over the planes (NaN past |d| = 2^120: nothing is settled).
   float max_margin = 0.0f;
-  /// The factors of the lower bounds packed in the bounds (CentreArrays in simd_kernels.inl):
+  /// The factors of the lower bounds packed in the bounds (CentreArrays in simd_settle.inl):
   /// the smallest |n|_1 (boxes) and |n|_2 (OBBs) over the planes, rounded down, times 2^-8
   /// (1 - 2^-12); 0 (nothing settled by them) where that smallest norm is outside [1/2, 2].
   float lower_scale_l1 = 0.0f, lower_scale_l2 = 0.0f;
@@ -26,7 +26,7 @@ struct PlaneSet {
   /// component (a frustum's far and near planes; the first such pair): the flat kernels take
   /// its centre distance as (d[base] + d[plane]) - (the base plane's distance), one
   /// subtraction for three fused multiply-adds. The bounds allow for it (the proof:
-  /// CentreArrays in simd_kernels.inl).
+  /// CentreArrays in simd_settle.inl).
   bool mirrored = false;
   std::uint32_t mirror_base = 0, mirror_plane = 0;
 };

@@ -1,7 +1,7 @@
 #pragma once
 // Settling bounds: per-object bounds that decide most plane tests from one centre distance,
 // with the same answer as the reference's full test. The fast CPU kernels and the GPU flat
-// pass both store them. The proofs are in docs/numerics.md ("Settling bounds"). Internal.
+// pass both store them. Proofs: docs/numerics.md, Settling bounds and Packed lower bounds. Internal.
 #include <span>
 
 #include <glm/vec3.hpp>
@@ -21,9 +21,8 @@ namespace cullpipe::plane_bounds {
 inline constexpr double kUnitNormalLimit = 1.0 + 0x1p-20;
 
 /// Round to nearest without flushing subnormals, for the scope: the bounds are computed in that
-/// mode whatever the caller's, as the proofs assume it (under DAZ a subnormal extent would read
-/// as 0 and drop out of the radius). Thread pools run tasks in the caller's mode, so each
-/// upload task sets its own.
+/// mode whatever the caller's, as the proofs assume it (docs/numerics.md, Rounding model). Thread
+/// pools run tasks in the caller's mode, so each upload task sets its own.
 struct NearestNoFlush {
 #if defined(__SSE__)
   unsigned saved = _mm_getcsr();

@@ -32,9 +32,7 @@ inline bool below_normal_float(double v) {
 
 /// round_down / round_up for |v| below the smallest normal float, on the bits: a conversion
 /// to float would flush such a result to zero under FTZ, and under DAZ a comparison reads a
-/// subnormal as zero. v * 2^149 is exact (a power of two, and for |v| >= 2^-1000 a normal
-/// double), so its floor or ceiling is the float's integer significand: at most 2^23, which is
-/// the smallest normal float's bit pattern, as it should be.
+/// subnormal as zero. Proof: docs/numerics.md, Rounding model.
 inline float tiny_to_float(double v, bool up) {
   const std::uint64_t bits = std::bit_cast<std::uint64_t>(v), magnitude = bits & 0x7fffffffffffffffu;
   const bool negative = bits >> 63;
@@ -50,8 +48,8 @@ inline float tiny_to_float(double v, bool up) {
 }  // namespace detail
 
 /// The largest float <= v (v finite or infinite, never NaN), whatever the floating-point mode
-/// (rounding direction, FTZ, DAZ) it runs in. (A caller's own arithmetic before it is another
-/// matter: under DAZ a subnormal float input converts to a double 0.)
+/// (rounding direction, FTZ, DAZ) it runs in (docs/numerics.md, Rounding model). A caller's own
+/// arithmetic before it is another matter: under DAZ a subnormal float input converts to a double 0.
 inline float round_down(double v) {
   if (detail::below_normal_float(v)) return detail::tiny_to_float(v, false);
   float f = static_cast<float>(v);

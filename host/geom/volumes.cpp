@@ -11,14 +11,9 @@
 namespace cullpipe {
 
 Aabb Aabb::transformed(const glm::mat4& m) const {
-  // Arvo in its direct form: along world axis i, the least (greatest) value is
-  // t_i + sum_j min (max) of M_ij * min_j and M_ij * max_j. Each product of two floats is exact
-  // in double, and the four terms are added as glm adds them in M * (p, 1), ((x + y) + (z + t)):
-  // rounding is monotone, so the result is at least (at most) every point of the box transformed
-  // in double the same way, and rounded outward to float it encloses them. (The centre/extent
-  // form, c' +- |M| h, computed c' and |M| h separately; where they nearly cancel, their double
-  // rounding could lose a box's small far side: found by the bounds fuzzer with a box 10^32
-  // long and 4.5 wide.)
+  // Arvo in its direct form, per world axis t_i + sum_j min (max) of M_ij * min_j and M_ij * max_j,
+  // added in double as glm adds M * (p, 1) and rounded outward: it encloses every point of the box
+  // transformed in double. Proof, and why not c' +- |M| h: docs/numerics.md, World-space volumes.
   const glm::dmat4 dm(m);
   glm::dvec3 lo, hi;
   for (int i = 0; i < 3; ++i) {

@@ -51,12 +51,11 @@ class BvhCuller {
   void upload(const bvh::FlatTree& tree, std::span<const Obb> obbs);
   void upload(const bvh::FlatTree& tree, std::span<const Sphere> spheres);
   /// The cut's size: the traversal's invocations take subtrees of at most this many objects
-  /// (and BVH_CUT_MAX_HEIGHT levels below their root), or single leaves. Fewer, larger subtrees mean fewer
-  /// redundant tests of the nodes above them and fewer workgroups to share the walks. Default:
-  /// kCpuSubtreeObjects on a CPU device (lavapipe: 4096 ran 6% faster than 1024 at 10^6 boxes and
-  /// 10 or 50% visible, interleaved A/B, leaves of 4; 2048 and 8192 within noise of 4096), else
-  /// kGpuSubtreeObjects (more invocations for a wide GPU; not measured on one). Takes effect
-  /// at the next upload; throws std::invalid_argument for 0.
+  /// (and BVH_CUT_MAX_HEIGHT levels below their root), or single leaves. Fewer, larger subtrees
+  /// mean fewer redundant tests of the nodes above them and fewer workgroups to share the walks.
+  /// Default: kCpuSubtreeObjects on a CPU device (lavapipe runs few invocations at a time, so
+  /// fewer, larger subtrees serve it best), else kGpuSubtreeObjects (more invocations for a wide
+  /// GPU; not tuned on one). Takes effect at the next upload; throws std::invalid_argument for 0.
   static constexpr std::uint32_t kCpuSubtreeObjects = 4096, kGpuSubtreeObjects = 128;
   void set_subtree_objects(std::uint32_t objects);
   std::uint32_t subtree_objects() const { return subtree_objects_; }

@@ -24,7 +24,7 @@ namespace {
 constexpr std::uint32_t kBindingCount = CULL_BINDING_COUNT;  // one descriptor set for every shader
 // The volumes are read through a uniform texel buffer: on lavapipe a texel fetch loads a whole
 // 16-byte texel per lane, where a storage-buffer load is a bounds-checked branch per lane and
-// per component (AABBs: 8.0 -> 5.5 ns/object); on GPUs both are ordinary typed loads.
+// per component; on GPUs both are ordinary typed loads.
 // The views and the AABBs' centre bounds too (see GpuFrustum, BINDING_CENTRES).
 constexpr std::uint32_t kTexelBindings = 1u << BINDING_BOUNDS | 1u << BINDING_VIEWS | 1u << BINDING_CENTRES;
 constexpr VkBufferUsageFlags kBoundsUsage = VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT;
@@ -85,8 +85,8 @@ const vk::ComputePipeline& GpuCuller::pipeline(PipelineKey key) {
 GpuCuller::~GpuCuller() = default;
 
 // Every upload writes straight into the mapped buffers, in chunks on the upload pool: no
-// staging copy, and no fresh allocation whose pages fault in on every upload (which made a
-// million-box upload 3x slower than a pass). `fill(first, end)` writes objects [first, end);
+// staging copy, and no fresh allocation whose pages fault in on every upload (faulting in a
+// large buffer costs more than culling it). `fill(first, end)` writes objects [first, end);
 // with `centres` (AABBs) the centre-bound buffer is sized for them too.
 template <class Fill>
 void GpuCuller::upload_volumes(BvKind kind, std::size_t count, std::size_t bytes_per_object, bool centres, Fill&& fill) {
@@ -120,9 +120,9 @@ void GpuCuller::upload_volumes(BvKind kind, std::size_t count, std::size_t bytes
 }
 
 void GpuCuller::upload(std::span<const Aabb> volumes) {
-  // The culling passes first test each box's centre against its bound (one texel), the CPU
-  // kernels' proof and numbers (host/cull/plane_bounds.hpp); only the boxes it leaves open
-  // are read in full.
+  // The culling passes first test each box's centre against its bound (one texel; the bounds
+  // of geom/plane_bounds.hpp, as the CPU kernels use them; proof: docs/numerics.md, Settling
+  // bounds); only the boxes it leaves open are read in full.
   upload_volumes(BvKind::Aabb, volumes.size(), sizeof(GpuAabb), true, [&](std::size_t first, std::size_t end) {
     GpuAabb* out = bounds_.as<GpuAabb>().data();
     for (std::size_t i = first; i < end; ++i) out[i] = pack(volumes[i]);

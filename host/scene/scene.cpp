@@ -60,7 +60,8 @@ std::vector<Sphere> world_spheres(const Scene& scene) {
       continue;
     }
     // In double: centre = transformed box centre; radius = farthest transformed corner,
-    // measured from the stored float centre and rounded up, so the sphere encloses the box.
+    // measured from the stored float centre and rounded up, so the sphere encloses the box
+    // (docs/numerics.md, World-space volumes).
     const glm::dmat4 m(o.world);
     const glm::dvec3 local_c = (glm::dvec3(o.local_bounds.min) + glm::dvec3(o.local_bounds.max)) * 0.5;
     Sphere s;

@@ -4,7 +4,8 @@
 //
 // Bit-exact contract with host/cull/reference.cpp and host/bvh (classify_masked,
 // classify_object): every distance is ((n.x*p.x + n.y*p.y) + n.z*p.z) + d, written out (not
-// dot()) and marked `precise`, so no reassociation or fused multiply-add can change a result.
+// dot()) and marked `precise`, so no reassociation or fused multiply-add can change a result
+// (docs/numerics.md, GPU and CPU agreement).
 // Each test is branch-free over a fixed trip count (SIMD-friendly); the answer is the
 // reference's: OUTSIDE if the volume is wholly behind any tested plane, else INTERSECTING if it
 // is partly behind any, else INSIDE.

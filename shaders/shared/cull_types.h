@@ -49,7 +49,7 @@ struct GpuAabb {
 
 // Oriented box, basis matrix + radius form: centre, three unit axes, half extent per axis.
 struct GpuObb {
-  vec4 center;  // xyz = centre; w = flat pass: a bound on the projected radius (host/cull/plane_bounds.hpp)
+  vec4 center;  // xyz = centre; w = flat pass: a bound on the projected radius (host/geom/plane_bounds.hpp)
   vec4 axis_x;  // xyz = unit axis, w = half extent along it
   vec4 axis_y;
   vec4 axis_z;
@@ -64,7 +64,7 @@ struct GpuSphere {
 // The culling shaders read the views as integer texels of a uniform texel buffer, FRUSTUM_TEXELS
 // per view: on lavapipe a storage-buffer load at an index it cannot prove uniform (the view
 // index comes from the workgroup id) is a loop over the lanes, each inserting one component
-// through the stack; 25 such loads per invocation made most of the flat pass's time on Zen 3.
+// through the stack, and the 25 such loads per invocation would dominate the flat pass.
 struct GpuFrustum {
   vec4 planes[MAX_FRUSTUM_PLANES];  // xyz = unit inward normal, w = d; inside when dot(n,p)+d >= 0
   uint plane_count;                 // planes actually used (5 when the far plane is at infinity)
@@ -101,7 +101,7 @@ CP_CONST BINDING_VIEWS = 4u;           // GpuFrustum per view
 CP_CONST BINDING_DRAW_TEMPLATES = 5u;  // DrawCommand per object (object_id ignored)
 CP_CONST BINDING_DRAWS = 6u;           // DrawCommand out: [view * visible_capacity + k]
 CP_CONST BINDING_GROUP_COUNTS = 7u;    // ordered mode: [view][group] visible counts (then offsets), then [view][group] INSIDE counts
-CP_CONST BINDING_CENTRES = 8u;         // AABBs: vec4 per object, xyz = centre, w = bound (host/cull/plane_bounds.hpp)
+CP_CONST BINDING_CENTRES = 8u;         // AABBs: vec4 per object, xyz = centre, w = bound (host/geom/plane_bounds.hpp)
 CP_CONST CULL_BINDING_COUNT = 9u;
 
 // One indirect draw of a visible object: the first five fields are exactly
@@ -151,6 +151,7 @@ CP_CONST BVH_CUT_MAX_HEIGHT = 19u;
 
 // The node-test margin of hierarchies over OBBs and spheres, as float bits: 2^-16 and 2^-120
 // (bvh::kBvhMarginScale, kBvhMarginFloor, kBvhMarginLimit; checked in host/gpu/layout_checks.cpp).
+// Why they suffice: docs/numerics.md, BVH node margins.
 CP_CONST BVH_MARGIN_SCALE_BITS = 0x37800000u;
 CP_CONST BVH_MARGIN_FLOOR_BITS = 0x03800000u;
 CP_CONST BVH_MARGIN_LIMIT_BITS = 0x7b800000u;  // 2^120 (bvh::kBvhMarginLimit)

@@ -5,9 +5,9 @@
 // the transform-box AABB update must enclose the exact recompute. The hull-based updates
 // (hull, hill-climb) run too, but only for crashes and sanitizer reports: their bounds rest on
 // Quickhull containing every point within its tolerance, which fails for sets whose
-// coordinates span about ten orders of magnitude (this fuzzer found points at 3*10^10 and at
-// 1 missed by 0.05, and a hill-climbing walk stopped 0.6 short among points at 7*10^9 and 1;
-// documented in bounds/aabb_update.hpp). The first byte's low bit also runs the exact OBB
+// coordinates span about ten orders of magnitude (points at 3*10^10 and at 1 missed by 0.05,
+// a hill-climbing walk stopped 0.6 short among points at 7*10^9 and 1: docs/numerics.md,
+// World-space volumes). The first byte's low bit also runs the exact OBB
 // (slow on large hulls, so only for sets of at most 64 points).
 #include <glm/ext/matrix_transform.hpp>
 #include <glm/geometric.hpp>
