@@ -45,7 +45,12 @@ struct Builder {
 
 const std::vector<Builder>& builders() {
   static const std::vector<Builder> list = {
-      {"aabb", [](const Points& p) { const Aabb b = bounds::aabb_of_points(p); return double(b.extent().x) * b.extent().y * b.extent().z; }, false},
+      {"aabb",
+       [](const Points& p) {
+         const Aabb b = bounds::aabb_of_points(p);
+         return double(b.extent().x) * b.extent().y * b.extent().z;
+       },
+       false},
       {"obb-pca", [](const Points& p) { return bounds::volume(bounds::pca_obb(p)); }, false},
       {"obb-dito", [](const Points& p) { return bounds::volume(bounds::dito_obb(p)); }, false},
       {"obb-hull-face", [](const Points& p) { return bounds::volume(bounds::hull_face_obb(p)); }, false},
@@ -70,9 +75,12 @@ Points random_box_points(std::size_t n, std::uint64_t seed) {
 int main(int argc, char** argv) {
   std::string scenes = std::string(CULLPIPE_SHARED_DIR) + "/scenes", json_path;
   std::size_t max_points = 1000000;
-  CLI::App app{"bench_bounds: the bounding-volume builders' speed and tightness on point sets and the shared glTF meshes"};
+  CLI::App app{
+      "bench_bounds: the bounding-volume builders' speed and tightness on point sets and the shared glTF meshes"};
   app.add_option("--scenes", scenes, "Folder of glTF scenes")->capture_default_str();
-  app.add_option("--max-points", max_points, "Largest point set of the throughput table")->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("--max-points", max_points, "Largest point set of the throughput table")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
   app.add_option("--json", json_path, "Write the results as JSON");
   bench::parse_command_line(app, argc, argv);
   nlohmann::json report;
@@ -137,8 +145,10 @@ int main(int argc, char** argv) {
   };
   std::size_t solid_count = 0;
   for (const GltfMeshPoints& m : meshes) solid_count += solid(m.positions);
-  std::printf("2. Tightness on %zu real meshes (%zu solid ones for boxes): sphere radius relative to the exact sphere's,\n"
-              "   box volume relative to the exact OBB's\n", meshes.size(), solid_count);
+  std::printf(
+      "2. Tightness on %zu real meshes (%zu solid ones for boxes): sphere radius relative to the exact sphere's,\n"
+      "   box volume relative to the exact OBB's\n",
+      meshes.size(), solid_count);
   std::vector<double> sum(builders().size()), worst(builders().size());
   for (const GltfMeshPoints& m : meshes) {
     const bool is_solid = solid(m.positions);
@@ -159,11 +169,15 @@ int main(int argc, char** argv) {
     std::printf("%-16s %10.4f %10.4g\n", builders()[b].name, sum[b] / count, worst[b]);
     report["tightness"].push_back({{"builder", builders()[b].name}, {"mean", sum[b] / count}, {"worst", worst[b]}});
   }
-  std::printf("refined sphere vs exact, mean: %.2f%% larger (target <= 2%%)\n", 100.0 * (sum[6] / double(meshes.size()) - 1.0));
-  std::printf("fast OBB (DiTO) vs exact, mean: %.2f%% larger (target <= 15%%)\n\n", 100.0 * (sum[2] / double(solid_count) - 1.0));
+  std::printf("refined sphere vs exact, mean: %.2f%% larger (target <= 2%%)\n",
+              100.0 * (sum[6] / double(meshes.size()) - 1.0));
+  std::printf("fast OBB (DiTO) vs exact, mean: %.2f%% larger (target <= 15%%)\n\n",
+              100.0 * (sum[2] / double(solid_count) - 1.0));
 
-  std::printf("3. AABB updates on %zu rotating real meshes (72 steps of a full turn): volume relative to the full\n"
-              "   recompute (frames where the recompute is flat are left out)\n", meshes.size());
+  std::printf(
+      "3. AABB updates on %zu rotating real meshes (72 steps of a full turn): volume relative to the full\n"
+      "   recompute (frames where the recompute is flat are left out)\n",
+      meshes.size());
   const bounds::AabbUpdate methods[] = {bounds::AabbUpdate::Recompute, bounds::AabbUpdate::HullRecompute,
                                         bounds::AabbUpdate::TransformBox, bounds::AabbUpdate::HillClimb};
   double ratio_sum[4] = {}, ratio_worst[4] = {}, time_sum[4] = {};
@@ -171,7 +185,8 @@ int main(int argc, char** argv) {
   for (const GltfMeshPoints& m : meshes) {
     bounds::AabbTracker tracker(m.positions);
     for (int step = 0; step < 72; ++step) {
-      const glm::mat4 world = glm::rotate(glm::mat4(1.0f), 6.2831853f * float(step) / 72.0f, glm::normalize(glm::vec3(1, 3, 2)));
+      const glm::mat4 world =
+          glm::rotate(glm::mat4(1.0f), 6.2831853f * float(step) / 72.0f, glm::normalize(glm::vec3(1, 3, 2)));
       Aabb boxes[4];
       for (int k = 0; k < 4; ++k) time_sum[k] += time_ms([&] { boxes[k] = tracker.update(world, methods[k]); });
       auto vol = [](const Aabb& b) { return double(b.extent().x) * b.extent().y * b.extent().z; };
@@ -188,10 +203,12 @@ int main(int argc, char** argv) {
   std::printf("%-16s %10s %10s %14s\n", "method", "mean", "worst", "us per update");
   for (int k = 0; k < 4; ++k) {
     const double us = time_sum[k] * 1e3 / double(meshes.size() * 72);
-    std::printf("%-16s %10.4f %10.4f %14.2f\n", std::string(to_string(methods[k])).c_str(), ratio_sum[k] / double(samples),
-                ratio_worst[k], us);
-    report["aabb_update"].push_back({{"method", to_string(methods[k])}, {"mean", ratio_sum[k] / double(samples)},
-                                     {"worst", ratio_worst[k]}, {"us_per_update", us}});
+    std::printf("%-16s %10.4f %10.4f %14.2f\n", std::string(to_string(methods[k])).c_str(),
+                ratio_sum[k] / double(samples), ratio_worst[k], us);
+    report["aabb_update"].push_back({{"method", to_string(methods[k])},
+                                     {"mean", ratio_sum[k] / double(samples)},
+                                     {"worst", ratio_worst[k]},
+                                     {"us_per_update", us}});
   }
   if (!json_path.empty()) std::ofstream(json_path) << report.dump(2) << "\n";
   return 0;

@@ -25,6 +25,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_util.hpp"
 #include "bvh/builders.hpp"
 #include "bvh/bvh.hpp"
 #include "cull/cpu_bvh_culler.hpp"
@@ -34,7 +35,6 @@
 #include "gpu/gpu_culler.hpp"
 #include "scene/generators.hpp"
 #include "vk/context.hpp"
-#include "bench_util.hpp"
 
 using namespace cullpipe;
 using namespace cullpipe::bench;
@@ -51,7 +51,8 @@ std::size_t size_limit(const std::string& builder) {
   return SIZE_MAX;
 }
 
-nlohmann::json bench_builders(const std::vector<std::size_t>& sizes, std::vector<std::string> builders, int repeats_override) {
+nlohmann::json bench_builders(const std::vector<std::size_t>& sizes, std::vector<std::string> builders,
+                              int repeats_override) {
   if (builders.empty() || (builders.size() == 1 && builders[0] == "all")) {
     builders.clear();
     for (const bvh::BuilderInfo& b : bvh::builders()) builders.emplace_back(b.name);
@@ -61,14 +62,17 @@ nlohmann::json bench_builders(const std::vector<std::size_t>& sizes, std::vector
       it != builders.end() && std::find(builders.begin(), builders.end(), kReusedBuilder) == builders.end())
     builders.insert(it + 1, kReusedBuilder);
   std::printf("BVH builders: uniform random scene, leaves of <= 4, one thread, median build time\n\n");
-  std::printf("%-26s %9s %8s %11s %9s %10s %11s\n", "builder", "N", "repeats", "build ms", "Mobj/s", "SAH cost", "SAH/binned");
+  std::printf("%-26s %9s %8s %11s %9s %10s %11s\n", "builder", "N", "repeats", "build ms", "Mobj/s", "SAH cost",
+              "SAH/binned");
   nlohmann::json cells = nlohmann::json::array();
   for (std::size_t n : sizes) {
     const std::vector<Aabb> boxes = world_aabbs(generate_scene(SceneKind::Uniform, n, 7));
     double binned_cost = 0.0;
     for (const std::string& name : builders) {
       if (n > size_limit(name)) continue;
-      const int reps = repeats_override > 0 ? repeats_override : int(std::clamp<std::size_t>(2'000'000 / std::max<std::size_t>(n, 1), 3, 25));
+      const int reps = repeats_override > 0
+                           ? repeats_override
+                           : int(std::clamp<std::size_t>(2'000'000 / std::max<std::size_t>(n, 1), 3, 25));
       std::vector<double> times;
       bvh::Tree tree;
       if (name == kReusedBuilder) {
@@ -98,9 +102,14 @@ nlohmann::json bench_builders(const std::vector<std::size_t>& sizes, std::vector
       const double t = median(times), cost = bvh::metrics(tree).sah_cost;
       if (name == "binned-sah") binned_cost = cost;
       const double ratio = binned_cost > 0 ? cost / binned_cost : 0.0;
-      std::printf("%-26s %9zu %8d %11.2f %9.2f %10.2f %11.3f\n", name.c_str(), n, reps, t / 1e6, double(n) / t * 1e3, cost, ratio);
+      std::printf("%-26s %9zu %8d %11.2f %9.2f %10.2f %11.3f\n", name.c_str(), n, reps, t / 1e6, double(n) / t * 1e3,
+                  cost, ratio);
       std::fflush(stdout);
-      cells.push_back({{"builder", name}, {"n", n}, {"build_ns", t}, {"objects_per_s", double(n) / t * 1e9}, {"sah_cost", cost},
+      cells.push_back({{"builder", name},
+                       {"n", n},
+                       {"build_ns", t},
+                       {"objects_per_s", double(n) / t * 1e9},
+                       {"sah_cost", cost},
                        {"sah_over_binned", ratio}});
     }
     std::printf("\n");
@@ -108,8 +117,8 @@ nlohmann::json bench_builders(const std::vector<std::size_t>& sizes, std::vector
   return cells;
 }
 
-nlohmann::json bench_cull(std::size_t n, std::uint32_t leaf_size, const std::vector<double>& fractions, int repeats_override,
-                          const std::string& device, bool& all_agree) {
+nlohmann::json bench_cull(std::size_t n, std::uint32_t leaf_size, const std::vector<double>& fractions,
+                          int repeats_override, const std::string& device, bool& all_agree) {
   vk::ContextOptions options;
   options.device_filter = device;
   vk::Context ctx(options);
@@ -131,19 +140,22 @@ nlohmann::json bench_cull(std::size_t n, std::uint32_t leaf_size, const std::vec
   std::vector<fast::CpuViewResult> fast_results;
   bvh::HierarchicalResult fast_h;
   std::vector<std::uint32_t> fast_ids;
-  std::printf("Hierarchical vs flat culling: %zu uniform random AABBs, binned-SAH tree, leaves of <= %u (%zu nodes, built in %.0f ms)\n", n,
-              leaf_size, flat.nodes.size(), build_ns / 1e6);
+  std::printf(
+      "Hierarchical vs flat culling: %zu uniform random AABBs, binned-SAH tree, leaves of <= %u (%zu nodes, built in "
+      "%.0f ms)\n",
+      n, leaf_size, flat.nodes.size(), build_ns / 1e6);
   std::printf("gpu: %s, %s; fast CPU: %s kernels, %u threads\n\n", ctx.info().name.c_str(), ctx.info().driver.c_str(),
               std::string(fast::to_string(fast_flat.isa())).c_str(), fast_flat.threads());
-  std::printf("%8s %8s %12s %12s %7s %12s %12s %7s %12s %12s %7s %11s %11s %11s %11s %6s\n", "target", "visible", "cpu flat ms",
-              "cpu bvh ms", "cpu x", "fast flat ms", "fast bvh ms", "fast x", "gpu flat ms", "gpu bvh ms", "gpu x", "node tests", "obj tests",
-              "fast nodes", "fast objs", "agree");
+  std::printf("%8s %8s %12s %12s %7s %12s %12s %7s %12s %12s %7s %11s %11s %11s %11s %6s\n", "target", "visible",
+              "cpu flat ms", "cpu bvh ms", "cpu x", "fast flat ms", "fast bvh ms", "fast x", "gpu flat ms",
+              "gpu bvh ms", "gpu x", "node tests", "obj tests", "fast nodes", "fast objs", "agree");
   nlohmann::json cells = nlohmann::json::array();
   const int reps = repeats_override > 0 ? repeats_override : 7;
   for (double fraction : fractions) {
     double achieved = 0.0;
-    const Frustum f = frustum_for_fraction(scene.bounds(), boxes.size(), fraction,
-                                           [&](const Frustum& v) { return bvh::cull_hierarchical(flat, boxes, v).visible; }, achieved);
+    const Frustum f = frustum_for_fraction(
+        scene.bounds(), boxes.size(), fraction,
+        [&](const Frustum& v) { return bvh::cull_hierarchical(flat, boxes, v).visible; }, achieved);
     const Frustum views[1] = {f};
     std::vector<Classification> ref(boxes.size());
     std::vector<double> cpu_flat, cpu_bvh, fast_flat_ns, fast_bvh_ns, gpu_flat, gpu_bvh;
@@ -170,26 +182,38 @@ nlohmann::json bench_cull(std::size_t n, std::uint32_t leaf_size, const std::vec
     }
     const gpu::CullResult g = bvh_culler.cull(views);
     // The fast hierarchy's traversal (object ranges of small nodes): the scalar one's counts with its range_objects.
-    const bvh::HierarchicalResult hf = bvh::cull_hierarchical(flat, boxes, f, {fast::CpuBvhCullOptions::default_range_objects(BvKind::Aabb)});
+    const bvh::HierarchicalResult hf =
+        bvh::cull_hierarchical(flat, boxes, f, {fast::CpuBvhCullOptions::default_range_objects(BvKind::Aabb)});
     std::vector<std::uint32_t> tree_order;  // the fast hierarchy's list: the visible ids in the tree's object order
     for (std::uint32_t o : flat.objects)
       if (is_visible(h.classes[o])) tree_order.push_back(o);
     const bool agree = h.classes == ref && g.views[0].classes == h.classes && g.views[0].node_tests == h.node_tests &&
                        g.views[0].object_tests == h.object_tests && g.views[0].counts == counts &&
-                       fast_results[0].counts == counts && hf.classes == h.classes && fast_h.node_tests == hf.node_tests &&
-                       fast_h.object_tests == hf.object_tests && fast_ids == tree_order;
+                       fast_results[0].counts == counts && hf.classes == h.classes &&
+                       fast_h.node_tests == hf.node_tests && fast_h.object_tests == hf.object_tests &&
+                       fast_ids == tree_order;
     all_agree &= agree;
     const double cf = median(cpu_flat), cb = median(cpu_bvh), gf = median(gpu_flat), gb = median(gpu_bvh);
     const double ff = median(fast_flat_ns), fb = median(fast_bvh_ns);
-    std::printf("%7.1f%% %7.1f%% %12.3f %12.3f %7.2f %12.3f %12.3f %7.2f %12.3f %12.3f %7.2f %11zu %11zu %11zu %11zu %6s\n",
-                100 * fraction, 100 * achieved, cf / 1e6, cb / 1e6, cf / cb, ff / 1e6, fb / 1e6, ff / fb, gf / 1e6, gb / 1e6,
-                gf / std::max(gb, 1.0), h.node_tests, h.object_tests, hf.node_tests, hf.object_tests, agree ? "yes" : "NO");
+    std::printf(
+        "%7.1f%% %7.1f%% %12.3f %12.3f %7.2f %12.3f %12.3f %7.2f %12.3f %12.3f %7.2f %11zu %11zu %11zu %11zu %6s\n",
+        100 * fraction, 100 * achieved, cf / 1e6, cb / 1e6, cf / cb, ff / 1e6, fb / 1e6, ff / fb, gf / 1e6, gb / 1e6,
+        gf / std::max(gb, 1.0), h.node_tests, h.object_tests, hf.node_tests, hf.object_tests, agree ? "yes" : "NO");
     std::fflush(stdout);
-    cells.push_back({{"target_fraction", fraction}, {"visible_fraction", achieved}, {"cpu_flat_ns", cf}, {"cpu_bvh_ns", cb},
-                     {"fast_flat_ns", ff}, {"fast_bvh_ns", fb},
-                     {"gpu_flat_ns", gf}, {"gpu_bvh_ns", gb}, {"node_tests", h.node_tests}, {"object_tests", h.object_tests},
-                     {"fast_node_tests", hf.node_tests}, {"fast_object_tests", hf.object_tests},
-                     {"fast_range_objects", fast::CpuBvhCullOptions::default_range_objects(BvKind::Aabb)}, {"agree", agree}});
+    cells.push_back({{"target_fraction", fraction},
+                     {"visible_fraction", achieved},
+                     {"cpu_flat_ns", cf},
+                     {"cpu_bvh_ns", cb},
+                     {"fast_flat_ns", ff},
+                     {"fast_bvh_ns", fb},
+                     {"gpu_flat_ns", gf},
+                     {"gpu_bvh_ns", gb},
+                     {"node_tests", h.node_tests},
+                     {"object_tests", h.object_tests},
+                     {"fast_node_tests", hf.node_tests},
+                     {"fast_object_tests", hf.object_tests},
+                     {"fast_range_objects", fast::CpuBvhCullOptions::default_range_objects(BvKind::Aabb)},
+                     {"agree", agree}});
   }
   return cells;
 }
@@ -205,18 +229,27 @@ int main(int argc, char** argv) {
   std::uint32_t leaf_size = bvh::kCullingLeafSize;  // (the cull part's tree)
   int repeats = 0;
   CLI::App app{"bench_bvh: every BVH builder's time and quality, and hierarchical against flat culling"};
-  app.add_option("--part", part, "build | cull | all")->capture_default_str()->check(CLI::IsMember({"build", "cull", "all"}));
+  app.add_option("--part", part, "build | cull | all")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"build", "cull", "all"}));
   add_counts_option(app, "--sizes", sizes, "Object counts of the build table")->default_str("1e3,1e4,1e5,1e6");
-  app.add_option_function<std::string>("--builders", [&](const std::string& v) { builders = split(v); }, "Builder names, or all")
+  app.add_option_function<std::string>(
+         "--builders", [&](const std::string& v) { builders = split(v); }, "Builder names, or all")
       ->type_name("NAME,..")
       ->default_str("all");
-  app.add_option_function<std::string>("--cull-size", [&](const std::string& v) { cull_size = parse_counts(v, "--cull-size").front(); },
-                                       "Objects in the cull table's scene")
+  app.add_option_function<std::string>(
+         "--cull-size", [&](const std::string& v) { cull_size = parse_counts(v, "--cull-size").front(); },
+         "Objects in the cull table's scene")
       ->type_name("N")
       ->default_str("1e6");
-  app.add_option("--leaf-size", leaf_size, "Most objects per leaf of the cull table's tree")->capture_default_str()->check(CLI::Range(1u, 1024u));
-  add_fractions_option(app, "--fractions", fractions, "Visible fractions of the cull table")->default_str("0.01,0.1,0.5");
-  app.add_option("--repeats", repeats, "Repeats per cell (0: chosen by size)")->capture_default_str()->check(CLI::NonNegativeNumber);
+  app.add_option("--leaf-size", leaf_size, "Most objects per leaf of the cull table's tree")
+      ->capture_default_str()
+      ->check(CLI::Range(1u, 1024u));
+  add_fractions_option(app, "--fractions", fractions, "Visible fractions of the cull table")
+      ->default_str("0.01,0.1,0.5");
+  app.add_option("--repeats", repeats, "Repeats per cell (0: chosen by size)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
   app.add_option("--device", device, "Vulkan device name substring");
   app.add_option("--json", json_path, "Write the results as JSON");
   bench::parse_command_line(app, argc, argv);

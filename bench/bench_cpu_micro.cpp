@@ -27,16 +27,20 @@ struct Data {
 const Data& data() {
   static const Data d = [] {
     const Scene scene = generate_scene(SceneKind::Uniform, 1'000'000, 3);
-    return Data{world_aabbs(scene), world_obbs(scene), world_spheres(scene), Frustum::from_view_proj(scene.camera.view_proj())};
+    return Data{world_aabbs(scene), world_obbs(scene), world_spheres(scene),
+                Frustum::from_view_proj(scene.camera.view_proj())};
   }();
   return d;
 }
 
 template <class Volume>
 const std::vector<Volume>& volumes() {
-  if constexpr (std::is_same_v<Volume, Aabb>) return data().boxes;
-  else if constexpr (std::is_same_v<Volume, Obb>) return data().obbs;
-  else return data().spheres;
+  if constexpr (std::is_same_v<Volume, Aabb>)
+    return data().boxes;
+  else if constexpr (std::is_same_v<Volume, Obb>)
+    return data().obbs;
+  else
+    return data().spheres;
 }
 
 template <class Volume>
@@ -78,7 +82,8 @@ void fast_read_floor(benchmark::State& state) {
 void fast_args(benchmark::internal::Benchmark* b) {
   for (std::int64_t n : {10'000, 1'000'000})
     for (std::int64_t threads : {1, 2})
-      for (fast::Isa isa : {fast::Isa::Portable, fast::Isa::Avx2, fast::Isa::Avx512}) b->Args({n, threads, std::int64_t(isa)});
+      for (fast::Isa isa : {fast::Isa::Portable, fast::Isa::Avx2, fast::Isa::Avx512})
+        b->Args({n, threads, std::int64_t(isa)});
   b->ArgNames({"n", "threads", "isa"})->UseRealTime();
 }
 

@@ -17,11 +17,11 @@
 #include <thread>
 #include <vector>
 
+#include "bench_util.hpp"
 #include "cull/reference.hpp"
 #include "gpu/gpu_culler.hpp"
 #include "scene/generators.hpp"
 #include "vk/context.hpp"
-#include "bench_util.hpp"
 
 using namespace cullpipe;
 using namespace cullpipe::bench;
@@ -48,7 +48,8 @@ Cell measure(gpu::GpuCuller& culler, const std::vector<Volume>& volumes, const F
   for (int r = 0; r < repeats; ++r) {
     const auto t0 = std::chrono::steady_clock::now();
     counts = reference::classify_all(std::span<const Volume>(volumes), frustum, cpu);
-    cpu_times.push_back(double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count()));
+    cpu_times.push_back(
+        double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - t0).count()));
   }
   cell.visible_fraction = volumes.empty() ? 0.0 : double(counts.visible) / double(volumes.size());
 
@@ -110,7 +111,9 @@ int main(int argc, char** argv) {
   CLI::App app{"bench_flat: the scalar CPU reference against flat GPU culling"};
   add_counts_option(app, "--sizes", sizes, "Object counts")->default_str("1e3,1e4,1e5,1e6,4e6");
   add_names_option(app, "--bv", kinds, {"aabb", "obb", "sphere"}, "Bounding volumes")->default_str("aabb,obb,sphere");
-  app.add_option("--repeats", repeats, "Repeats per cell (0: chosen by size)")->capture_default_str()->check(CLI::NonNegativeNumber);
+  app.add_option("--repeats", repeats, "Repeats per cell (0: chosen by size)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
   app.add_option("--device", device, "Vulkan device name substring");
   app.add_option("--csv", csv_path, "Write the results as CSV");
   app.add_option("--json", json_path, "Write the results as JSON");
@@ -124,8 +127,8 @@ int main(int argc, char** argv) {
   std::printf("cpu: %s, %u hardware threads (reference is single-threaded)\n", cpu_model().c_str(),
               std::thread::hardware_concurrency());
   std::printf("gpu: %s, %s\n\n", ctx.info().name.c_str(), ctx.info().driver.c_str());
-  std::printf("%-7s %9s %8s %8s %12s %12s %12s %10s %12s %12s %6s\n", "bv", "N", "visible", "repeats", "cpu ns/obj", "gpu ns/obj",
-              "wall ns/obj", "cpu/gpu", "ordered/gpu", "+draws/gpu", "agree");
+  std::printf("%-7s %9s %8s %8s %12s %12s %12s %10s %12s %12s %6s\n", "bv", "N", "visible", "repeats", "cpu ns/obj",
+              "gpu ns/obj", "wall ns/obj", "cpu/gpu", "ordered/gpu", "+draws/gpu", "agree");
 
   std::vector<Cell> cells;
   bool all_agree = true;
@@ -143,7 +146,8 @@ int main(int argc, char** argv) {
       part.objects.assign(scene.objects.begin(), scene.objects.begin() + std::ptrdiff_t(n));
       part.camera = scene.camera;
       const Frustum frustum = Frustum::from_view_proj(part.camera.view_proj());
-      const int reps = repeats > 0 ? repeats : int(std::clamp<std::size_t>(20'000'000 / std::max<std::size_t>(n, 1), 5, 101));
+      const int reps =
+          repeats > 0 ? repeats : int(std::clamp<std::size_t>(20'000'000 / std::max<std::size_t>(n, 1), 5, 101));
       Cell cell;
       if (*bv == BvKind::Aabb) cell = measure(culler, world_aabbs(part), frustum, reps);
       if (*bv == BvKind::Obb) cell = measure(culler, world_obbs(part), frustum, reps);
@@ -151,14 +155,14 @@ int main(int argc, char** argv) {
       cell.bv = kind;
       const double dn = double(std::max<std::size_t>(n, 1));
       if (cell.gpu_ns == 0 && !cell.note.empty()) {
-        std::printf("%-7s %9zu %7.1f%% %8d %12.2f   (%s)\n", kind.c_str(), n, 100 * cell.visible_fraction, reps, cell.cpu_ns / dn,
-                    cell.note.c_str());
+        std::printf("%-7s %9zu %7.1f%% %8d %12.2f   (%s)\n", kind.c_str(), n, 100 * cell.visible_fraction, reps,
+                    cell.cpu_ns / dn, cell.note.c_str());
       } else {
         all_agree &= cell.agree;
-        std::printf("%-7s %9zu %7.1f%% %8d %12.2f %12.2f %12.2f %10.2f %12.2f %12.2f %6s\n", kind.c_str(), n, 100 * cell.visible_fraction,
-                    reps, cell.cpu_ns / dn, cell.gpu_ns / dn, cell.gpu_wall_ns / dn, cell.cpu_ns / std::max(cell.gpu_ns, 1.0),
-                    cell.gpu_ordered_ns / std::max(cell.gpu_ns, 1.0), cell.gpu_draws_ns / std::max(cell.gpu_ns, 1.0),
-                    cell.agree ? "yes" : "NO");
+        std::printf("%-7s %9zu %7.1f%% %8d %12.2f %12.2f %12.2f %10.2f %12.2f %12.2f %6s\n", kind.c_str(), n,
+                    100 * cell.visible_fraction, reps, cell.cpu_ns / dn, cell.gpu_ns / dn, cell.gpu_wall_ns / dn,
+                    cell.cpu_ns / std::max(cell.gpu_ns, 1.0), cell.gpu_ordered_ns / std::max(cell.gpu_ns, 1.0),
+                    cell.gpu_draws_ns / std::max(cell.gpu_ns, 1.0), cell.agree ? "yes" : "NO");
         if (!cell.note.empty()) std::printf("        (%s)\n", cell.note.c_str());
       }
       std::fflush(stdout);
@@ -173,8 +177,8 @@ int main(int argc, char** argv) {
     for (const Cell& c : cells) {
       const double dn = double(std::max<std::size_t>(c.n, 1));
       csv << c.bv << "," << c.n << "," << c.visible_fraction << "," << c.cpu_ns / dn << "," << c.gpu_ns / dn << ","
-          << c.gpu_wall_ns / dn << "," << (c.gpu_ns > 0 ? c.cpu_ns / c.gpu_ns : 0.0) << "," << c.gpu_ordered_ns / dn << ","
-          << c.gpu_draws_ns / dn << "," << c.agree << "," << c.note << "\n";
+          << c.gpu_wall_ns / dn << "," << (c.gpu_ns > 0 ? c.cpu_ns / c.gpu_ns : 0.0) << "," << c.gpu_ordered_ns / dn
+          << "," << c.gpu_draws_ns / dn << "," << c.agree << "," << c.note << "\n";
     }
   }
   if (!json_path.empty()) {
@@ -186,10 +190,17 @@ int main(int argc, char** argv) {
     j["cells"] = nlohmann::json::array();
     for (const Cell& c : cells) {
       const double dn = double(std::max<std::size_t>(c.n, 1));
-      j["cells"].push_back({{"method", "reference_vs_gpu_flat"}, {"bv", c.bv}, {"n", c.n}, {"visible_fraction", c.visible_fraction},
-                            {"cpu_ns_per_object", c.cpu_ns / dn}, {"gpu_ns_per_object", c.gpu_ns / dn},
-                            {"gpu_ordered_ns_per_object", c.gpu_ordered_ns / dn}, {"gpu_ordered_draws_ns_per_object", c.gpu_draws_ns / dn},
-                            {"gpu_wall_ns_per_object", c.gpu_wall_ns / dn}, {"agree", c.agree}, {"note", c.note}});
+      j["cells"].push_back({{"method", "reference_vs_gpu_flat"},
+                            {"bv", c.bv},
+                            {"n", c.n},
+                            {"visible_fraction", c.visible_fraction},
+                            {"cpu_ns_per_object", c.cpu_ns / dn},
+                            {"gpu_ns_per_object", c.gpu_ns / dn},
+                            {"gpu_ordered_ns_per_object", c.gpu_ordered_ns / dn},
+                            {"gpu_ordered_draws_ns_per_object", c.gpu_draws_ns / dn},
+                            {"gpu_wall_ns_per_object", c.gpu_wall_ns / dn},
+                            {"agree", c.agree},
+                            {"note", c.note}});
     }
     std::ofstream(json_path) << j.dump(2) << "\n";
   }

@@ -1,5 +1,6 @@
 #pragma once
 // Helpers shared by the benchmark programs: timing, medians, argument lists, the machine banner.
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -9,8 +10,6 @@
 #include <sstream>
 #include <string>
 #include <vector>
-
-#include <CLI/CLI.hpp>
 
 #include "geom/frustum.hpp"
 #include "scene/camera.hpp"
@@ -57,7 +56,8 @@ inline std::vector<double> parse_fractions(const std::string& list, const std::s
   for (const std::string& s : split(list)) {
     char* end = nullptr;
     const double f = std::strtod(s.c_str(), &end);
-    if (*end != '\0' || !(f > 0.0 && f <= 1.0)) throw CLI::ValidationError(option, "'" + s + "' is not a fraction in (0, 1]");
+    if (*end != '\0' || !(f > 0.0 && f <= 1.0))
+      throw CLI::ValidationError(option, "'" + s + "' is not a fraction in (0, 1]");
     out.push_back(f);
   }
   if (out.empty()) throw CLI::ValidationError(option, "needs at least one fraction");
@@ -69,26 +69,34 @@ inline std::vector<std::string> parse_names(const std::string& list, const std::
                                             const std::vector<std::string>& known) {
   std::vector<std::string> items = split(list);
   for (const std::string& item : items)
-    if (std::find(known.begin(), known.end(), item) == known.end()) throw CLI::ValidationError(option, "unknown '" + item + "'");
+    if (std::find(known.begin(), known.end(), item) == known.end())
+      throw CLI::ValidationError(option, "unknown '" + item + "'");
   if (items.empty()) throw CLI::ValidationError(option, "needs at least one value");
   return items;
 }
 
 /// An option taking a comma-separated list of counts ("1e3,1e6") into `out`.
-inline CLI::Option* add_counts_option(CLI::App& app, const std::string& name, std::vector<std::size_t>& out, const std::string& help) {
-  return app.add_option_function<std::string>(name, [&out, name](const std::string& v) { out = parse_counts(v, name); }, help)
+inline CLI::Option* add_counts_option(CLI::App& app, const std::string& name, std::vector<std::size_t>& out,
+                                      const std::string& help) {
+  return app
+      .add_option_function<std::string>(
+          name, [&out, name](const std::string& v) { out = parse_counts(v, name); }, help)
       ->type_name("N,..");
 }
 /// An option taking a comma-separated list of fractions in (0, 1] into `out`.
-inline CLI::Option* add_fractions_option(CLI::App& app, const std::string& name, std::vector<double>& out, const std::string& help) {
-  return app.add_option_function<std::string>(name, [&out, name](const std::string& v) { out = parse_fractions(v, name); }, help)
+inline CLI::Option* add_fractions_option(CLI::App& app, const std::string& name, std::vector<double>& out,
+                                         const std::string& help) {
+  return app
+      .add_option_function<std::string>(
+          name, [&out, name](const std::string& v) { out = parse_fractions(v, name); }, help)
       ->type_name("F,..");
 }
 /// An option taking a comma-separated list of names, each one of `known`, into `out`.
 inline CLI::Option* add_names_option(CLI::App& app, const std::string& name, std::vector<std::string>& out,
                                      const std::vector<std::string>& known, const std::string& help) {
-  return app.add_option_function<std::string>(name, [&out, name, known](const std::string& v) { out = parse_names(v, name, known); },
-                                              help)
+  return app
+      .add_option_function<std::string>(
+          name, [&out, name, known](const std::string& v) { out = parse_names(v, name, known); }, help)
       ->type_name("NAME,..");
 }
 
@@ -115,8 +123,8 @@ inline std::string cpu_model() {
 /// visible; count_visible(f) counts them for a frustum. `achieved` gets the fraction reached,
 /// `chosen` (if given) the camera.
 template <class CountVisible>
-Frustum frustum_for_fraction(const Aabb& bounds, std::size_t objects, double fraction, CountVisible count_visible, double& achieved,
-                             Camera* chosen = nullptr, bool orthographic = false) {
+Frustum frustum_for_fraction(const Aabb& bounds, std::size_t objects, double fraction, CountVisible count_visible,
+                             double& achieved, Camera* chosen = nullptr, bool orthographic = false) {
   Camera cam = framing_camera(bounds);
   cam.aspect = 1.0f;
   cam.orthographic = orthographic;
@@ -128,16 +136,20 @@ Frustum frustum_for_fraction(const Aabb& bounds, std::size_t objects, double fra
   achieved = 0.0;
   for (int step = 0; step < 40 && objects > 0; ++step) {
     const double mid = 0.5 * (lo + hi);
-    if (orthographic) cam.ortho_half_height = float(mid);
-    else cam.fov_y_degrees = float(mid);
+    if (orthographic)
+      cam.ortho_half_height = float(mid);
+    else
+      cam.fov_y_degrees = float(mid);
     const Frustum f = Frustum::from_view_proj(cam.view_proj());
     const double visible = double(count_visible(f)) / double(objects);
     if (std::abs(visible - fraction) < best_error) {
       best_error = std::abs(visible - fraction), best = f, achieved = visible;
       if (chosen) *chosen = cam;
     }
-    if (visible < fraction) lo = mid;
-    else hi = mid;
+    if (visible < fraction)
+      lo = mid;
+    else
+      hi = mid;
     if (best_error < fraction * 0.02) break;
   }
   return best;

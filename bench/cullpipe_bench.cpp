@@ -32,11 +32,11 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <glm/common.hpp>
-#include <glm/vec4.hpp>
 #include <cstring>
 #include <fstream>
 #include <functional>
+#include <glm/common.hpp>
+#include <glm/vec4.hpp>
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -48,10 +48,10 @@
 #include "bench_util.hpp"
 #include "bvh/builders.hpp"
 #include "bvh/bvh.hpp"
+#include "core/splitmix.hpp"
 #include "cull/cpu_bvh_culler.hpp"
 #include "cull/cpu_culler.hpp"
 #include "cull/reference.hpp"
-#include "core/splitmix.hpp"
 #include "gpu/bvh_culler.hpp"
 #include "gpu/gpu_culler.hpp"
 #include "scene/generators.hpp"
@@ -70,9 +70,9 @@ std::string csv_field(const std::string& text) {
   return quoted + "\"";
 }
 
-
 const char* const kProgram = "cullpipe-bench";
-const std::vector<std::string> kMethods = {"reference", "cpu-fast", "cpu-read", "cpu-bvh", "cpu-fast-bvh", "gpu-flat", "gpu-bvh"};
+const std::vector<std::string> kMethods = {"reference",    "cpu-fast", "cpu-read", "cpu-bvh",
+                                           "cpu-fast-bvh", "gpu-flat", "gpu-bvh"};
 
 struct Cell {
   std::string method, bv, order;
@@ -80,8 +80,8 @@ struct Cell {
   std::size_t views = 1;  ///< views per pass (--views); times per object are per object and view
   double target_fraction = 0, visible_fraction = 0;
   int repeats = 0;
-  double ns = 0;       ///< median time of one pass (GPU: between timestamps)
-  double wall_ns = 0;  ///< GPU: median wall time of a pass (record, submit, wait, read back)
+  double ns = 0;         ///< median time of one pass (GPU: between timestamps)
+  double wall_ns = 0;    ///< GPU: median wall time of a pass (record, submit, wait, read back)
   double upload_ns = 0;  ///< median time of the method's upload of the scene (0: the method has no upload of its own)
   std::size_t bytes_per_object = 0;
   std::optional<bool> agree;  ///< nullopt when there is nothing to check (cpu-read)
@@ -95,9 +95,9 @@ struct Config {
   std::vector<std::size_t> sizes = {1000, 10000, 100000, 1000000, 4000000, 16000000};
   std::vector<double> fractions = {0.01, 0.1, 0.5};
   std::vector<std::string> orders = {"shuffled", "sorted"};
-  std::size_t views = 1;  // views per pass, on a circle around the scene
+  std::size_t views = 1;      // views per pass, on a circle around the scene
   bool orthographic = false;  // orthographic cameras (a shadow map's) instead of perspective ones
-  int repeats = 0;  // 0: by size
+  int repeats = 0;            // 0: by size
   unsigned threads = 0;
   std::optional<fast::Isa> isa;
   bool validation = false;  // Vulkan validation layers on; any message makes the exit status 1
@@ -121,11 +121,17 @@ struct Gpu {
 template <class Volume>
 std::size_t gpu_bytes_per_object(bool flat);
 template <>
-std::size_t gpu_bytes_per_object<Aabb>(bool flat) { return sizeof(gpu::GpuAabb) + (flat ? sizeof(glm::vec4) : 0); }
+std::size_t gpu_bytes_per_object<Aabb>(bool flat) {
+  return sizeof(gpu::GpuAabb) + (flat ? sizeof(glm::vec4) : 0);
+}
 template <>
-std::size_t gpu_bytes_per_object<Obb>(bool) { return sizeof(gpu::GpuObb); }
+std::size_t gpu_bytes_per_object<Obb>(bool) {
+  return sizeof(gpu::GpuObb);
+}
 template <>
-std::size_t gpu_bytes_per_object<Sphere>(bool) { return sizeof(gpu::GpuSphere); }
+std::size_t gpu_bytes_per_object<Sphere>(bool) {
+  return sizeof(gpu::GpuSphere);
+}
 
 /// Median time of repeated calls of `upload` after an untimed first one (which allocates): the
 /// steady state of an engine that uploads every frame.
@@ -144,15 +150,18 @@ double time_upload(F&& upload, std::size_t n) {
 
 /// Measures one (volume kind, N, order) for every fraction; appends the cells.
 template <class Volume>
-void run_scene(const Config& config, const std::string& bv, const std::string& order, const std::vector<Volume>& volumes,
-               const std::vector<Aabb>& boxes, const Aabb& bounds, fast::CpuCuller& fast_culler, fast::CpuBvhCuller& fast_bvh,
-               Gpu& gpu, std::vector<Cell>& cells, bool& all_agree) {
+void run_scene(const Config& config, const std::string& bv, const std::string& order,
+               const std::vector<Volume>& volumes, const std::vector<Aabb>& boxes, const Aabb& bounds,
+               fast::CpuCuller& fast_culler, fast::CpuBvhCuller& fast_bvh, Gpu& gpu, std::vector<Cell>& cells,
+               bool& all_agree) {
   const std::size_t n = volumes.size();
   const std::span<const Volume> vspan(volumes);
   const bool is_aabb = std::is_same_v<Volume, Aabb>;
   std::map<std::string, double> upload_ns;  // by method
-  if (wants(config, "cpu-fast")) upload_ns["cpu-fast"] = time_upload([&] { fast_culler.upload(vspan); }, n);
-  else fast_culler.upload(vspan);  // (it also finds each fraction's field of view)
+  if (wants(config, "cpu-fast"))
+    upload_ns["cpu-fast"] = time_upload([&] { fast_culler.upload(vspan); }, n);
+  else
+    fast_culler.upload(vspan);  // (it also finds each fraction's field of view)
 
   // The BVH (binned SAH, leaves of bvh::kCullingLeafSize) over the volumes' enclosing boxes,
   // built once per scene; not part of the timed passes.
@@ -161,7 +170,8 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
   bvh::BuildOptions leaves;
   leaves.max_leaf_size = bvh::kCullingLeafSize;
   if (bvh_methods) tree = bvh::flatten(bvh::build("binned-sah", is_aabb ? boxes : bvh::enclosing_boxes(vspan), leaves));
-  if (bvh_methods && wants(config, "cpu-fast-bvh")) upload_ns["cpu-fast-bvh"] = time_upload([&] { fast_bvh.upload(tree, vspan); }, n);
+  if (bvh_methods && wants(config, "cpu-fast-bvh"))
+    upload_ns["cpu-fast-bvh"] = time_upload([&] { fast_bvh.upload(tree, vspan); }, n);
 
   std::string gpu_flat_note, gpu_bvh_note;
   if (gpu.flat && wants(config, "gpu-flat")) {
@@ -189,17 +199,23 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
   for (double fraction : config.fractions) {
     double achieved = 0;
     Camera camera;
-    frustum_for_fraction(bounds, n, fraction, [&](const Frustum& v) {
-      fast_culler.cull({&v, 1}, counts_only, fast_results);
-      return fast_results[0].counts.visible;
-    }, achieved, &camera, config.orthographic);
+    frustum_for_fraction(
+        bounds, n, fraction,
+        [&](const Frustum& v) {
+          fast_culler.cull({&v, 1}, counts_only, fast_results);
+          return fast_results[0].counts.visible;
+        },
+        achieved, &camera, config.orthographic);
     // --views K: K cameras with that lens evenly on a circle around the scene (the first where
     // the one found stands: camera_path), culled in one pass; `achieved` becomes their mean
     // visible share.
     std::vector<Frustum> views;
-    for (const Camera& c : camera_path(camera, bounds, config.views)) views.push_back(Frustum::from_view_proj(c.view_proj()));
+    for (const Camera& c : camera_path(camera, bounds, config.views))
+      views.push_back(Frustum::from_view_proj(c.view_proj()));
     const std::size_t view_count = views.size();
-    const int reps = config.repeats > 0 ? config.repeats : int(std::clamp<std::size_t>(20'000'000 / std::max<std::size_t>(n * view_count, 1), 3, 51));
+    const int reps = config.repeats > 0
+                         ? config.repeats
+                         : int(std::clamp<std::size_t>(20'000'000 / std::max<std::size_t>(n * view_count, 1), 3, 51));
 
     // The reference answers, then every method checked against them once.
     std::vector<std::vector<Classification>> ref(view_count, std::vector<Classification>(n));
@@ -226,8 +242,10 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
                    std::function<void(std::vector<double>&, std::vector<double>&)> pass) {
       Timed t;
       t.method = method;
-      t.cell = {method, bv, order, n, view_count, fraction, achieved, reps, 0, 0, 0, bytes, agree, std::move(note), config.orthographic};
-      if (const auto u = upload_ns.find(method); u != upload_ns.end() && t.cell.note.empty()) t.cell.upload_ns = u->second;
+      t.cell = {method, bv, order, n,     view_count, fraction,        achieved,           reps,
+                0,      0,  0,     bytes, agree,      std::move(note), config.orthographic};
+      if (const auto u = upload_ns.find(method); u != upload_ns.end() && t.cell.note.empty())
+        t.cell.upload_ns = u->second;
       if (t.cell.note.empty()) t.pass = std::move(pass);
       timed.push_back(std::move(t));
     };
@@ -245,7 +263,8 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
       bool ok = true;
       fast_culler.cull(views, {}, fast_results);
       for (std::size_t v = 0; v < view_count; ++v)
-        ok = ok && fast_results[v].classes == ref[v] && fast_results[v].counts == ref_counts[v] && fast_results[v].visible_ids == ref_ids[v];
+        ok = ok && fast_results[v].classes == ref[v] && fast_results[v].counts == ref_counts[v] &&
+             fast_results[v].visible_ids == ref_ids[v];
       fast_culler.cull(views, list_only_cpu, fast_results);
       for (std::size_t v = 0; v < view_count; ++v)
         ok = ok && fast_results[v].counts == ref_counts[v] && fast_results[v].visible_ids == ref_ids[v];
@@ -258,15 +277,16 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
     if (wants(config, "cpu-read")) {
       // Both orders of reading the arrays, in turn: the pass's own (side by side) and one
       // array after another; the faster median is the floor.
-      add("cpu-read", fast::CpuCuller::kStreamedBytesPerObject, std::nullopt, "", [&](std::vector<double>& t, std::vector<double>& w) {
-        auto t0 = Clock::now();
-        volatile std::uint32_t sink = fast_culler.touch_streamed_side_by_side();
-        t.push_back(since(t0));
-        t0 = Clock::now();
-        sink = fast_culler.touch_bounds(true);
-        w.push_back(since(t0));
-        (void)sink;
-      });
+      add("cpu-read", fast::CpuCuller::kStreamedBytesPerObject, std::nullopt, "",
+          [&](std::vector<double>& t, std::vector<double>& w) {
+            auto t0 = Clock::now();
+            volatile std::uint32_t sink = fast_culler.touch_streamed_side_by_side();
+            t.push_back(since(t0));
+            t0 = Clock::now();
+            sink = fast_culler.touch_bounds(true);
+            w.push_back(since(t0));
+            (void)sink;
+          });
       timed.back().two_orders = true;
     }
     // The scalar traversal's answers per view (the hierarchical methods' oracle), made once.
@@ -280,7 +300,8 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
       traversed();
       bool ok = true;
       for (std::size_t v = 0; v < view_count; ++v)
-        ok = ok && h[v].classes == ref[v] && h[v].visible == ref_counts[v].visible && h[v].inside == ref_counts[v].inside;
+        ok = ok && h[v].classes == ref[v] && h[v].visible == ref_counts[v].visible &&
+             h[v].inside == ref_counts[v].inside;
       add("cpu-bvh", sizeof(Volume), ok, "", [&](std::vector<double>& t, std::vector<double>&) {
         const auto t0 = Clock::now();
         for (const Frustum& f : views) {
@@ -298,8 +319,8 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
       for (std::size_t v = 0; v < view_count; ++v) {
         // Its traversal tests the objects of small straddling nodes as ranges: the scalar
         // traversal's counts with the same range_objects; the classes do not depend on it.
-        const bvh::HierarchicalResult hf =
-            bvh::cull_hierarchical(tree, vspan, views[v], {fast::CpuBvhCullOptions::default_range_objects(kind_of<Volume>())});
+        const bvh::HierarchicalResult hf = bvh::cull_hierarchical(
+            tree, vspan, views[v], {fast::CpuBvhCullOptions::default_range_objects(kind_of<Volume>())});
         fast_bvh.cull(views[v], fast_h);
         ok = ok && fast_h.classes == h[v].classes && hf.classes == h[v].classes && fast_h.node_tests == hf.node_tests &&
              fast_h.object_tests == hf.object_tests && fast_h.visible == h[v].visible && fast_h.inside == h[v].inside;
@@ -307,18 +328,21 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
         std::vector<std::uint32_t> in_tree_order;  // the list comes in the tree's object order
         for (std::uint32_t o : tree.objects)
           if (is_visible(h[v].classes[o])) in_tree_order.push_back(o);
-        ok = ok && fast_bvh_ids == in_tree_order && fast_h.visible == ref_counts[v].visible && fast_h.inside == ref_counts[v].inside &&
-             fast_h.node_tests == hf.node_tests && fast_h.object_tests == hf.object_tests;
+        ok = ok && fast_bvh_ids == in_tree_order && fast_h.visible == ref_counts[v].visible &&
+             fast_h.inside == ref_counts[v].inside && fast_h.node_tests == hf.node_tests &&
+             fast_h.object_tests == hf.object_tests;
         if (view_count > 1) {
           const bvh::HierarchicalResult& r = fast_bvh_views[v].result;
-          ok = ok && fast_bvh_views[v].visible_ids == in_tree_order && r.visible == h[v].visible && r.inside == h[v].inside &&
-               r.node_tests == hf.node_tests && r.object_tests == hf.object_tests;
+          ok = ok && fast_bvh_views[v].visible_ids == in_tree_order && r.visible == h[v].visible &&
+               r.inside == h[v].inside && r.node_tests == hf.node_tests && r.object_tests == hf.object_tests;
         }
       }
       add("cpu-fast-bvh", sizeof(Volume), ok, "", [&](std::vector<double>& t, std::vector<double>&) {
         const auto t0 = Clock::now();
-        if (view_count == 1) fast_bvh.cull(views[0], {false, true}, fast_h, fast_bvh_ids);
-        else fast_bvh.cull(views, {false, true}, fast_bvh_views);
+        if (view_count == 1)
+          fast_bvh.cull(views[0], {false, true}, fast_h, fast_bvh_ids);
+        else
+          fast_bvh.cull(views, {false, true}, fast_bvh_views);
         t.push_back(since(t0));
       });
     }
@@ -336,14 +360,16 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
         for (std::size_t v = 0; v < view_count; ++v) {
           std::vector<std::uint32_t> ids = listed.views[v].visible_ids;
           std::sort(ids.begin(), ids.end());
-          ok = *ok && g.views[v].classes == ref[v] && g.views[v].counts == ref_counts[v] && listed.views[v].counts == ref_counts[v] && ids == ref_ids[v];
+          ok = *ok && g.views[v].classes == ref[v] && g.views[v].counts == ref_counts[v] &&
+               listed.views[v].counts == ref_counts[v] && ids == ref_ids[v];
         }
       }
-      add("gpu-flat", gpu_bytes_per_object<Volume>(true), ok, note, [&](std::vector<double>& t, std::vector<double>& w) {
-        const gpu::CullResult g = gpu.flat->cull(views, list_only);
-        t.push_back(g.timings.gpu_ns);
-        w.push_back(g.timings.wall_ns);
-      });
+      add("gpu-flat", gpu_bytes_per_object<Volume>(true), ok, note,
+          [&](std::vector<double>& t, std::vector<double>& w) {
+            const gpu::CullResult g = gpu.flat->cull(views, list_only);
+            t.push_back(g.timings.gpu_ns);
+            w.push_back(g.timings.wall_ns);
+          });
     }
     if (wants(config, "gpu-bvh")) {
       std::string note = !gpu.bvh ? "no GPU: " + gpu.error : gpu_bvh_note;
@@ -356,17 +382,19 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
         for (std::size_t v = 0; v < view_count; ++v) {
           std::vector<std::uint32_t> ids = listed.views[v].visible_ids;
           std::sort(ids.begin(), ids.end());
-          ok = *ok && g.views[v].classes == h[v].classes && g.views[v].counts.visible == h[v].visible && g.views[v].counts.inside == h[v].inside &&
-               g.views[v].node_tests == h[v].node_tests && g.views[v].object_tests == h[v].object_tests && ids == ref_ids[v] &&
+          ok = *ok && g.views[v].classes == h[v].classes && g.views[v].counts.visible == h[v].visible &&
+               g.views[v].counts.inside == h[v].inside && g.views[v].node_tests == h[v].node_tests &&
+               g.views[v].object_tests == h[v].object_tests && ids == ref_ids[v] &&
                listed.views[v].counts == ref_counts[v] && listed.views[v].node_tests == h[v].node_tests &&
                listed.views[v].object_tests == h[v].object_tests;
         }
       }
-      add("gpu-bvh", gpu_bytes_per_object<Volume>(false), ok, note, [&](std::vector<double>& t, std::vector<double>& w) {
-        const gpu::CullResult g = gpu.bvh->cull(views, list_only);
-        t.push_back(g.timings.gpu_ns);
-        w.push_back(g.timings.wall_ns);
-      });
+      add("gpu-bvh", gpu_bytes_per_object<Volume>(false), ok, note,
+          [&](std::vector<double>& t, std::vector<double>& w) {
+            const gpu::CullResult g = gpu.bvh->cull(views, list_only);
+            t.push_back(g.timings.gpu_ns);
+            w.push_back(g.timings.wall_ns);
+          });
     }
 
     // Each method's repeats back to back after one untimed pass, so every method runs with the
@@ -381,7 +409,8 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
       std::vector<double> warm_times, warm_walls;
       t.pass(warm_times, warm_walls);
       const auto start = Clock::now();
-      for (int r = 0; r < reps || (config.repeats == 0 && r < kMaxRepeats && since(start) < kMinCellNs); ++r) t.pass(t.times, t.walls);
+      for (int r = 0; r < reps || (config.repeats == 0 && r < kMaxRepeats && since(start) < kMinCellNs); ++r)
+        t.pass(t.times, t.walls);
       t.cell.repeats = static_cast<int>(t.times.size());
     }
     for (Timed& t : timed) {
@@ -399,14 +428,19 @@ void run_scene(const Config& config, const std::string& bv, const std::string& o
       const Cell& c = t.cell;
       const double dn = double(std::max<std::size_t>(n, 1)), dnv = dn * double(view_count);  // objects; objects x views
       if (!c.note.empty()) {
-        std::printf("%-12s %-7s %-9s %9zu %6.1f%%   (%s)\n", c.method.c_str(), bv.c_str(), order.c_str(), n, 100 * achieved, c.note.c_str());
+        std::printf("%-12s %-7s %-9s %9zu %6.1f%%   (%s)\n", c.method.c_str(), bv.c_str(), order.c_str(), n,
+                    100 * achieved, c.note.c_str());
         continue;
       }
       const double gbps = c.ns > 0 ? double(c.bytes_per_object) * dn / c.ns : 0.0;
-      std::printf("%-12s %-7s %-9s %9zu %6.1f%% %5d %10.3f %10.1f %8.2f %8.2f %10s %11s %6s\n", c.method.c_str(), bv.c_str(), order.c_str(), n,
-                  100 * achieved, c.repeats, c.ns / dnv, c.ns > 0 ? dnv / c.ns * 1e3 : 0.0, gbps,
-                  ref_ns > 0 && c.ns > 0 ? ref_ns / c.ns : 0.0, c.wall_ns > 0 ? std::to_string(c.wall_ns / dnv).substr(0, 8).c_str() : "-",
-                  c.upload_ns > 0 ? std::to_string(c.upload_ns / dn).substr(0, 8).c_str() : "-", !c.agree ? "-" : *c.agree ? "yes" : "NO");
+      std::printf("%-12s %-7s %-9s %9zu %6.1f%% %5d %10.3f %10.1f %8.2f %8.2f %10s %11s %6s\n", c.method.c_str(),
+                  bv.c_str(), order.c_str(), n, 100 * achieved, c.repeats, c.ns / dnv,
+                  c.ns > 0 ? dnv / c.ns * 1e3 : 0.0, gbps, ref_ns > 0 && c.ns > 0 ? ref_ns / c.ns : 0.0,
+                  c.wall_ns > 0 ? std::to_string(c.wall_ns / dnv).substr(0, 8).c_str() : "-",
+                  c.upload_ns > 0 ? std::to_string(c.upload_ns / dn).substr(0, 8).c_str() : "-",
+                  !c.agree   ? "-"
+                  : *c.agree ? "yes"
+                             : "NO");
     }
     std::fflush(stdout);
   }
@@ -431,15 +465,18 @@ void write_plots(const Config& config, const std::vector<Cell>& cells) {
   // order at the middle fraction asked for.
   const double fraction = config.fractions[config.fractions.size() / 2];
   const std::string order = std::find(config.orders.begin(), config.orders.end(), "shuffled") != config.orders.end()
-                                ? "shuffled" : config.orders.front();
+                                ? "shuffled"
+                                : config.orders.front();
   for (const std::string& bv : config.bvs) {
-    const std::string data = config.plot + "-" + bv + ".dat", script = config.plot + "-" + bv + ".gp", png = config.plot + "-" + bv + ".png";
+    const std::string data = config.plot + "-" + bv + ".dat", script = config.plot + "-" + bv + ".gp",
+                      png = config.plot + "-" + bv + ".png";
     std::ofstream out(data);
     std::vector<std::string> plotted;
     for (const std::string& method : config.methods) {
       bool any = false;
       for (const Cell& c : cells)
-        if (c.method == method && c.bv == bv && c.order == order && c.target_fraction == fraction && c.note.empty() && c.ns > 0) {
+        if (c.method == method && c.bv == bv && c.order == order && c.target_fraction == fraction && c.note.empty() &&
+            c.ns > 0) {
           if (!any) out << "\"" << method << "\"\n";
           any = true;
           out << c.n << " " << c.ns / double(std::max<std::size_t>(c.n * c.views, 1)) << "\n";
@@ -453,9 +490,11 @@ void write_plots(const Config& config, const std::vector<Cell>& cells) {
     if (plotted.empty()) continue;
     std::ofstream gp(script);
     gp << "set terminal pngcairo size 900,560 noenhanced\nset output '" << png << "'\n"
-       << "set title '" << bv << ", " << order << ", ~" << fraction * 100 << "% visible: time per object (lower is better)'\n"
+       << "set title '" << bv << ", " << order << ", ~" << fraction * 100
+       << "% visible: time per object (lower is better)'\n"
        << "set logscale xy\nset xlabel 'objects N'\nset ylabel 'ns per object'\nset key outside right\nset grid\n"
-       << "plot for [i=0:" << plotted.size() - 1 << "] '" << data << "' index i using 1:2 with linespoints title columnheader(1)\n";
+       << "plot for [i=0:" << plotted.size() - 1 << "] '" << data
+       << "' index i using 1:2 with linespoints title columnheader(1)\n";
     gp.close();
     const std::string command = "gnuplot '" + script + "'";
     if (std::system(command.c_str()) != 0) {
@@ -468,7 +507,6 @@ void write_plots(const Config& config, const std::vector<Cell>& cells) {
   }
 }
 
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -477,20 +515,28 @@ int main(int argc, char** argv) {
   add_names_option(app, "--methods", config.methods, kMethods,
                    "Methods: reference, cpu-fast, cpu-read, cpu-bvh, cpu-fast-bvh, gpu-flat, gpu-bvh")
       ->default_str("all");
-  add_names_option(app, "--bv", config.bvs, {"aabb", "obb", "sphere"}, "Bounding volumes")->default_str("aabb,obb,sphere");
+  add_names_option(app, "--bv", config.bvs, {"aabb", "obb", "sphere"}, "Bounding volumes")
+      ->default_str("aabb,obb,sphere");
   add_counts_option(app, "--sizes", config.sizes, "Object counts")->default_str("1e3,1e4,1e5,1e6,4e6,16e6");
   add_fractions_option(app, "--fractions", config.fractions, "Visible fractions")->default_str("0.01,0.1,0.5");
-  add_names_option(app, "--order", config.orders, {"shuffled", "sorted"}, "Object orders")->default_str("shuffled,sorted");
-  app.add_option("--views", config.views, "Views per pass, on a circle around the scene")->capture_default_str()->check(CLI::Range(1, 64));
+  add_names_option(app, "--order", config.orders, {"shuffled", "sorted"}, "Object orders")
+      ->default_str("shuffled,sorted");
+  app.add_option("--views", config.views, "Views per pass, on a circle around the scene")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 64));
   app.add_flag("--ortho", config.orthographic, "Orthographic cameras (a shadow map's) instead of perspective ones");
-  app.add_option("--repeats", config.repeats, "Repeats per cell (0: chosen by size)")->capture_default_str()->check(CLI::NonNegativeNumber);
-  app.add_option("--threads", config.threads, "Threads of the fast CPU paths and the GPU upload (0: every core)")->capture_default_str();
+  app.add_option("--repeats", config.repeats, "Repeats per cell (0: chosen by size)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--threads", config.threads, "Threads of the fast CPU paths and the GPU upload (0: every core)")
+      ->capture_default_str();
   app.add_option_function<std::string>(
          "--isa",
          [&](const std::string& name) {
            config.isa = fast::parse_isa(name);
            if (!config.isa || !fast::isa_supported(*config.isa))
-             throw CLI::ValidationError("--isa", name + ": not an instruction set this machine runs (portable, avx2, avx512)");
+             throw CLI::ValidationError("--isa",
+                                        name + ": not an instruction set this machine runs (portable, avx2, avx512)");
          },
          "Instruction set of the fast CPU kernels (default: the best this machine runs)")
       ->type_name("portable|avx2|avx512");
@@ -532,14 +578,18 @@ int main(int argc, char** argv) {
   }
   const double read_gbps = measure_read_bandwidth(fast_culler);
   std::printf("cullpipe-bench: culling methods side by side, medians of repeats\n");
-  std::printf("cpu: %s, %u hardware threads; fast path: %s kernels, %u threads\n", cpu_model().c_str(), std::thread::hardware_concurrency(),
-              std::string(to_string(fast_culler.isa())).c_str(), fast_culler.threads());
-  if (gpu.ctx) std::printf("gpu: %s, %s\n", gpu.ctx->info().name.c_str(), gpu.ctx->info().driver.c_str());
-  else if (!gpu.error.empty()) std::printf("gpu: none (%s)\n", gpu.error.c_str());
+  std::printf("cpu: %s, %u hardware threads; fast path: %s kernels, %u threads\n", cpu_model().c_str(),
+              std::thread::hardware_concurrency(), std::string(to_string(fast_culler.isa())).c_str(),
+              fast_culler.threads());
+  if (gpu.ctx)
+    std::printf("gpu: %s, %s\n", gpu.ctx->info().name.c_str(), gpu.ctx->info().driver.c_str());
+  else if (!gpu.error.empty())
+    std::printf("gpu: none (%s)\n", gpu.error.c_str());
   std::printf("memory read bandwidth (256 MiB, %u threads): %.1f GB/s\n", fast_culler.threads(), read_gbps);
-  std::printf("views per pass: %zu, %s cameras\n\n", config.views, config.orthographic ? "orthographic" : "perspective");
-  std::printf("%-12s %-7s %-9s %9s %7s %5s %10s %10s %8s %8s %10s %11s %6s\n", "method", "bv", "order", "N", "visible", "reps", "ns/obj",
-              "Mobj/s", "GB/s", "x ref", "wall ns/o", "upload ns/o", "agree");
+  std::printf("views per pass: %zu, %s cameras\n\n", config.views,
+              config.orthographic ? "orthographic" : "perspective");
+  std::printf("%-12s %-7s %-9s %9s %7s %5s %10s %10s %8s %8s %10s %11s %6s\n", "method", "bv", "order", "N", "visible",
+              "reps", "ns/obj", "Mobj/s", "GB/s", "x ref", "wall ns/o", "upload ns/o", "agree");
 
   std::vector<Cell> cells;
   bool all_agree = true;
@@ -559,7 +609,8 @@ int main(int argc, char** argv) {
       SplitMix64 rng{n};
       for (std::size_t i = n; i > 1; --i) std::swap(shuffled[i - 1], shuffled[rng.next() % i]);
       Aabb bounds{glm::vec3(INFINITY), glm::vec3(-INFINITY)};
-      for (std::size_t i = 0; i < n; ++i) bounds = {glm::min(bounds.min, all_boxes[i].min), glm::max(bounds.max, all_boxes[i].max)};
+      for (std::size_t i = 0; i < n; ++i)
+        bounds = {glm::min(bounds.min, all_boxes[i].min), glm::max(bounds.max, all_boxes[i].max)};
       for (const std::string& order : config.orders) {
         std::vector<std::uint32_t> pick = shuffled;
         if (order == "sorted") pick = bvh::morton_order(std::span<const Aabb>(all_boxes.data(), n));
@@ -570,9 +621,13 @@ int main(int argc, char** argv) {
           for (std::size_t i = 0; i < n; ++i) out[i] = all[pick[i]];
           return out;
         };
-        if (bv == "aabb") run_scene(config, bv, order, boxes, boxes, bounds, fast_culler, fast_bvh, gpu, cells, all_agree);
-        if (bv == "obb") run_scene(config, bv, order, gather(all_obbs), boxes, bounds, fast_culler, fast_bvh, gpu, cells, all_agree);
-        if (bv == "sphere") run_scene(config, bv, order, gather(all_spheres), boxes, bounds, fast_culler, fast_bvh, gpu, cells, all_agree);
+        if (bv == "aabb")
+          run_scene(config, bv, order, boxes, boxes, bounds, fast_culler, fast_bvh, gpu, cells, all_agree);
+        if (bv == "obb")
+          run_scene(config, bv, order, gather(all_obbs), boxes, bounds, fast_culler, fast_bvh, gpu, cells, all_agree);
+        if (bv == "sphere")
+          run_scene(config, bv, order, gather(all_spheres), boxes, bounds, fast_culler, fast_bvh, gpu, cells,
+                    all_agree);
       }
     }
   }
@@ -581,22 +636,53 @@ int main(int argc, char** argv) {
     const double dn = double(std::max<std::size_t>(c.n, 1)), dnv = dn * double(c.views);  // objects; objects x views
     double ref_ns = 0;
     for (const Cell& r : cells)
-      if (r.method == "reference" && r.bv == c.bv && r.order == c.order && r.n == c.n && r.target_fraction == c.target_fraction) ref_ns = r.ns;
+      if (r.method == "reference" && r.bv == c.bv && r.order == c.order && r.n == c.n &&
+          r.target_fraction == c.target_fraction)
+        ref_ns = r.ns;
     const double gbps = c.ns > 0 ? double(c.bytes_per_object) * dn / c.ns : 0.0;
-    return nlohmann::json{{"method", c.method}, {"bv", c.bv}, {"n", c.n}, {"views", c.views},
-                          {"projection", c.orthographic ? "orthographic" : "perspective"}, {"order", c.order}, {"target_fraction", c.target_fraction},
-                          {"visible_fraction", c.visible_fraction}, {"repeats", c.repeats}, {"ns_per_object", c.ns / dnv},
-                          {"objects_per_s", c.ns > 0 ? dnv / c.ns * 1e9 : 0.0}, {"bytes_per_object", c.bytes_per_object},
-                          {"gb_per_s", gbps}, {"bandwidth_fraction", gbps / read_gbps}, {"read_bandwidth_gbps", read_gbps},
+    return nlohmann::json{{"method", c.method},
+                          {"bv", c.bv},
+                          {"n", c.n},
+                          {"views", c.views},
+                          {"projection", c.orthographic ? "orthographic" : "perspective"},
+                          {"order", c.order},
+                          {"target_fraction", c.target_fraction},
+                          {"visible_fraction", c.visible_fraction},
+                          {"repeats", c.repeats},
+                          {"ns_per_object", c.ns / dnv},
+                          {"objects_per_s", c.ns > 0 ? dnv / c.ns * 1e9 : 0.0},
+                          {"bytes_per_object", c.bytes_per_object},
+                          {"gb_per_s", gbps},
+                          {"bandwidth_fraction", gbps / read_gbps},
+                          {"read_bandwidth_gbps", read_gbps},
                           {"speedup_vs_reference", ref_ns > 0 && c.ns > 0 ? ref_ns / c.ns : 0.0},
-                          {"gpu_wall_ns_per_object", c.wall_ns / dnv}, {"upload_ns_per_object", c.upload_ns / dn}, {"agree", c.agree ? nlohmann::json(*c.agree) : nlohmann::json()},
+                          {"gpu_wall_ns_per_object", c.wall_ns / dnv},
+                          {"upload_ns_per_object", c.upload_ns / dn},
+                          {"agree", c.agree ? nlohmann::json(*c.agree) : nlohmann::json()},
                           {"note", c.note}};
   };
   if (!config.csv.empty()) {
     std::ofstream csv(config.csv);
-    const char* const columns[] = {"method", "bv", "n", "views", "projection", "order", "target_fraction", "visible_fraction", "repeats", "ns_per_object",
-                                   "objects_per_s", "bytes_per_object", "gb_per_s", "bandwidth_fraction", "read_bandwidth_gbps",
-                                   "speedup_vs_reference", "gpu_wall_ns_per_object", "upload_ns_per_object", "agree", "note"};
+    const char* const columns[] = {"method",
+                                   "bv",
+                                   "n",
+                                   "views",
+                                   "projection",
+                                   "order",
+                                   "target_fraction",
+                                   "visible_fraction",
+                                   "repeats",
+                                   "ns_per_object",
+                                   "objects_per_s",
+                                   "bytes_per_object",
+                                   "gb_per_s",
+                                   "bandwidth_fraction",
+                                   "read_bandwidth_gbps",
+                                   "speedup_vs_reference",
+                                   "gpu_wall_ns_per_object",
+                                   "upload_ns_per_object",
+                                   "agree",
+                                   "note"};
     for (std::size_t k = 0; k < std::size(columns); ++k) csv << (k ? "," : "") << columns[k];
     csv << "\n";
     for (const Cell& c : cells) {

@@ -4,10 +4,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <glm/gtc/matrix_transform.hpp>
 #include <span>
 #include <vector>
-
-#include <glm/gtc/matrix_transform.hpp>
 
 #include "bvh/bvh.hpp"
 #include "cull/reference.hpp"
@@ -20,22 +19,24 @@ namespace cullpipe::test {
 /// objects. Volume: Aabb, Obb or Sphere (for the last two the tree is over their enclosing
 /// boxes).
 template <class Volume>
-void expect_hierarchy_equals_flat(const bvh::FlatTree& flat, std::span<const Volume> volumes, const std::vector<Frustum>& frusta) {
+void expect_hierarchy_equals_flat(const bvh::FlatTree& flat, std::span<const Volume> volumes,
+                                  const std::vector<Frustum>& frusta) {
   for (std::size_t v = 0; v < frusta.size(); ++v) {
     std::vector<Classification> cpu(volumes.size());
     const reference::CullCounts counts = reference::classify_all(volumes, frusta[v], cpu);
     const bvh::HierarchicalResult h = bvh::cull_hierarchical(flat, volumes, frusta[v]);
     ASSERT_EQ(h.classes.size(), cpu.size()) << "view " << v;
     for (std::size_t i = 0; i < cpu.size(); ++i)
-      ASSERT_EQ(h.classes[i], cpu[i]) << "view " << v << ", object " << i << ": hierarchical " << to_string(h.classes[i]) << ", flat "
-                                      << to_string(cpu[i]);
+      ASSERT_EQ(h.classes[i], cpu[i]) << "view " << v << ", object " << i << ": hierarchical "
+                                      << to_string(h.classes[i]) << ", flat " << to_string(cpu[i]);
     EXPECT_EQ(h.visible, counts.visible);
     EXPECT_EQ(h.inside, counts.inside);
     EXPECT_LE(h.object_tests, volumes.size());
   }
 }
 template <class Volume>
-void expect_hierarchy_equals_flat(const bvh::FlatTree& flat, const std::vector<Volume>& volumes, const std::vector<Frustum>& frusta) {
+void expect_hierarchy_equals_flat(const bvh::FlatTree& flat, const std::vector<Volume>& volumes,
+                                  const std::vector<Frustum>& frusta) {
   expect_hierarchy_equals_flat(flat, std::span<const Volume>(volumes), frusta);
 }
 
@@ -81,12 +82,14 @@ inline TouchingVolumes touching_volumes(const Frustum& f, const glm::vec3& eye, 
     const glm::vec3& n = plane.normal;
     for (int i = 0; i < candidates; ++i) {
       const float depth = rng.uniform(2.0f, 60.0f);
-      const glm::vec3 q = eye + kTouchingView * depth + glm::vec3(rng.uniform(-0.4f, 0.4f), rng.uniform(-0.3f, 0.3f), 0.0f) * depth;
+      const glm::vec3 q =
+          eye + kTouchingView * depth + glm::vec3(rng.uniform(-0.4f, 0.4f), rng.uniform(-0.3f, 0.3f), 0.0f) * depth;
       const glm::vec3 on_plane = q - n * plane.distance(q);
       const float size = std::pow(10.0f, rng.uniform(-3.0f, 0.0f));
       const float side = (i & 1) ? 1.0f : -1.0f;
       Sphere s{on_plane + n * (side * size), size};
-      for (int step = i / 2 % 4; step > 0; --step) s.center[i % 3] = std::nextafter(s.center[i % 3], (i & 4) ? 1e30f : -1e30f);
+      for (int step = i / 2 % 4; step > 0; --step)
+        s.center[i % 3] = std::nextafter(s.center[i % 3], (i & 4) ? 1e30f : -1e30f);
       Obb b;
       b.basis = rng.rotation();
       b.half_extents = glm::vec3(size, size * 0.5f, size * 0.25f);

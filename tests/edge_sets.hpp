@@ -2,13 +2,13 @@
 // Volume sets at the edge of the plane bounds that let the fast CPU kernels and the GPU flat
 // pass settle most objects without the reference's full test (host/geom/plane_bounds.hpp):
 // each set comes with views of one plane each, and the answers must still be the reference's.
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <cstdlib>
 #include <initializer_list>
 #include <limits>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "cull/simd_kernels.hpp"
 #include "geom/pn_vertex.hpp"
@@ -68,7 +68,10 @@ inline void add_mirrored_views(std::vector<Frustum>& views, std::size_t count) {
     const glm::vec3 n = plane.normal;
     const glm::vec3 axis = std::abs(n.x) < 0.5f ? glm::vec3(1, 0, 0) : glm::vec3(0, 1, 0);
     const glm::vec3 u = glm::normalize(glm::cross(n, axis)), w = glm::normalize(glm::cross(n, u));
-    const Plane across[4] = {{u, 4e6f}, {w, 4e6f}, {-u - slack * glm::vec3(1.0f, 1.0f, -1.0f), 4e6f}, {-w + slack * glm::vec3(-1.0f, 1.0f, 1.0f), 4e6f}};
+    const Plane across[4] = {{u, 4e6f},
+                             {w, 4e6f},
+                             {-u - slack * glm::vec3(1.0f, 1.0f, -1.0f), 4e6f},
+                             {-w + slack * glm::vec3(-1.0f, 1.0f, 1.0f), 4e6f}};
     for (int role = 0; role < 2; ++role)
       for (int slot = 0; slot < 3; ++slot) {
         // The bases in planes 0-2, each mirrored three planes on; the slab's pair in `slot`.
@@ -181,7 +184,8 @@ inline EdgeSet<Obb> obb_edge_set() {
       o.center = (along - glm::dot(along, n) * n) + (i % 2 ? r : -r) * n;
       const int step = i % 9 - 4;
       for (int k = 0; k < 3; ++k)
-        for (int t = 0; t < std::abs(step); ++t) o.center[k] = std::nextafter(o.center[k], (step > 0) == (n[k] > 0) ? 1e30f : -1e30f);
+        for (int t = 0; t < std::abs(step); ++t)
+          o.center[k] = std::nextafter(o.center[k], (step > 0) == (n[k] > 0) ? 1e30f : -1e30f);
       obbs.push_back(o);
     }
   }
@@ -306,7 +310,8 @@ inline EdgeSet<Sphere> sphere_edge_set() {
       // Then move the centre along the normal until the reference's distance is within a few
       // float steps of +-r.
       for (int k = 0; k < 3; ++k)
-        for (int s = 0; s < std::abs(step); ++s) sp.center[k] = std::nextafter(sp.center[k], (step > 0) == (n[k] > 0) ? 1e30f : -1e30f);
+        for (int s = 0; s < std::abs(step); ++s)
+          sp.center[k] = std::nextafter(sp.center[k], (step > 0) == (n[k] > 0) ? 1e30f : -1e30f);
       spheres.push_back(sp);
     }
   }
@@ -339,7 +344,9 @@ inline EdgeSet<Sphere> sphere_edge_set() {
 // and the same planes with normals of length 0.75 and 0.4 (the lower bounds scale with the
 // shortest; below 1/2 the OBBs' settle nothing by them), and volumes past 2^119 whose packed
 // lower bound would overflow the kernels' product if it were kept.
-inline std::vector<Frustum> lower_edge_views(Rng& rng) { return slanted_views(rng, {0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 900.0f, -3000.0f}); }
+inline std::vector<Frustum> lower_edge_views(Rng& rng) {
+  return slanted_views(rng, {0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 900.0f, -3000.0f});
+}
 
 // The views above plus: each of the first six with its plane scaled by 0.75 and by 0.4 (built
 // by hand: from_planes would normalise them), planes x = 0 and x = -+2^120 (for the huge
@@ -386,62 +393,75 @@ EdgeSet<Volume> lower_edge_set(std::uint64_t seed, Make make, std::initializer_l
   while (volumes.size() < 12000) volumes.push_back(volumes[rng.next() % volumes.size()]);
   const std::size_t unit = views.size();
   add_lower_edge_views(views);
-  add_mirrored_views(views, unit + 12);  // these and the twelve scaled by 0.75 and 0.4 (the first of add_lower_edge_views)
+  add_mirrored_views(views,
+                     unit + 12);  // these and the twelve scaled by 0.75 and 0.4 (the first of add_lower_edge_views)
   return {volumes, views};
 }
 
 inline EdgeSet<Aabb> aabb_lower_edge_set() {
-  return lower_edge_set<Aabb>(41, [](Rng& rng, const Plane& plane, int i) {
-    const glm::vec3 e(rng.uniform(0.05f, 3.0f));
-    const glm::vec3 c = far_along(rng, plane, i);
-    Aabb b{c - e, c + e};
-    const PnVertices v = pn_vertices(plane.normal, b);
-    const glm::vec3 shift = -plane.distance(i % 2 ? v.p : v.n) * plane.normal;
-    b.min += shift;
-    b.max += shift;
-    const int steps = i % 17 - 8;
-    nudge(b.min, plane.normal, steps);
-    nudge(b.max, plane.normal, steps);
-    return b;
-  }, {Aabb{{0x1p120f, -1, -1}, {0x1p121f, 1, 1}}, Aabb{{-0x1p119f, -0x1p119f, -0x1p119f}, {0x1p119f, 0x1p119f, 0x1p119f}}});
+  return lower_edge_set<Aabb>(41,
+                              [](Rng& rng, const Plane& plane, int i) {
+                                const glm::vec3 e(rng.uniform(0.05f, 3.0f));
+                                const glm::vec3 c = far_along(rng, plane, i);
+                                Aabb b{c - e, c + e};
+                                const PnVertices v = pn_vertices(plane.normal, b);
+                                const glm::vec3 shift = -plane.distance(i % 2 ? v.p : v.n) * plane.normal;
+                                b.min += shift;
+                                b.max += shift;
+                                const int steps = i % 17 - 8;
+                                nudge(b.min, plane.normal, steps);
+                                nudge(b.max, plane.normal, steps);
+                                return b;
+                              },
+                              {Aabb{{0x1p120f, -1, -1}, {0x1p121f, 1, 1}},
+                               Aabb{{-0x1p119f, -0x1p119f, -0x1p119f}, {0x1p119f, 0x1p119f, 0x1p119f}}});
 }
 
 inline EdgeSet<Obb> obb_lower_edge_set() {
-  return lower_edge_set<Obb>(43, [](Rng& rng, const Plane& plane, int i) {
-    const glm::vec3 n = plane.normal;
-    const glm::vec3 a = glm::normalize(glm::cross(n, glm::normalize(rng.vec3(-1, 1) + glm::vec3(0.01f)))), w = glm::cross(n, a);
-    Obb o;
-    o.half_extents = glm::vec3(rng.uniform(0.05f, 3.0f));
-    if (i % 3 == 0) {
-      const float phi = 10.0f * 3.14159265f / 180.0f;  // u0 and u1 20 degrees apart, n between their normals
-      o.basis = glm::mat3(std::cos(phi) * a - std::sin(phi) * n, std::cos(phi) * a + std::sin(phi) * n, w);
-    } else {
-      o.basis = glm::mat3(n, a, w);
-    }
-    float r = 0;  // the reference's projected radius, its operations in its order
-    for (int k = 0; k < 3; ++k) {
-      const glm::vec3 u = o.basis[k];
-      const float term = std::fabs((n.x * u.x + n.y * u.y) + n.z * u.z) * o.half_extents[k];
-      r = k == 0 ? term : r + term;
-    }
-    o.center = far_along(rng, plane, i) + (i % 2 ? r : -r) * n;
-    nudge(o.center, n, i % 17 - 8);
-    return o;
-  }, {// Past 2^119: bound about 2^122.6, q would be 85 and q bound overflow (INSIDE at x = 2^120).
-      Obb{{0x1p120f, 0, 0}, glm::mat3(0x1p100f), glm::vec3(0x1p21f)}, Obb{{-0x1p120f, 0, 0}, glm::mat3(0x1p100f), glm::vec3(0x1p21f)},
-      // Subnormal extents on long axes: DAZ reads them as 0 (INSIDE at x = 0), so no lower bound.
-      Obb{{0, 0, 0}, glm::mat3(0x1p40f), glm::vec3(0x1p-127f)}, Obb{{0x1p-100f, 0, 0}, glm::mat3(0x1p60f), glm::vec3(0x1p-130f)}});
+  return lower_edge_set<Obb>(
+      43,
+      [](Rng& rng, const Plane& plane, int i) {
+        const glm::vec3 n = plane.normal;
+        const glm::vec3 a = glm::normalize(glm::cross(n, glm::normalize(rng.vec3(-1, 1) + glm::vec3(0.01f)))),
+                        w = glm::cross(n, a);
+        Obb o;
+        o.half_extents = glm::vec3(rng.uniform(0.05f, 3.0f));
+        if (i % 3 == 0) {
+          const float phi = 10.0f * 3.14159265f / 180.0f;  // u0 and u1 20 degrees apart, n between their normals
+          o.basis = glm::mat3(std::cos(phi) * a - std::sin(phi) * n, std::cos(phi) * a + std::sin(phi) * n, w);
+        } else {
+          o.basis = glm::mat3(n, a, w);
+        }
+        float r = 0;  // the reference's projected radius, its operations in its order
+        for (int k = 0; k < 3; ++k) {
+          const glm::vec3 u = o.basis[k];
+          const float term = std::fabs((n.x * u.x + n.y * u.y) + n.z * u.z) * o.half_extents[k];
+          r = k == 0 ? term : r + term;
+        }
+        o.center = far_along(rng, plane, i) + (i % 2 ? r : -r) * n;
+        nudge(o.center, n, i % 17 - 8);
+        return o;
+      },
+      {// Past 2^119: bound about 2^122.6, q would be 85 and q bound overflow (INSIDE at x = 2^120).
+       Obb{{0x1p120f, 0, 0}, glm::mat3(0x1p100f), glm::vec3(0x1p21f)},
+       Obb{{-0x1p120f, 0, 0}, glm::mat3(0x1p100f), glm::vec3(0x1p21f)},
+       // Subnormal extents on long axes: DAZ reads them as 0 (INSIDE at x = 0), so no lower bound.
+       Obb{{0, 0, 0}, glm::mat3(0x1p40f), glm::vec3(0x1p-127f)},
+       Obb{{0x1p-100f, 0, 0}, glm::mat3(0x1p60f), glm::vec3(0x1p-130f)}});
 }
 
 inline EdgeSet<Sphere> sphere_lower_edge_set() {
-  return lower_edge_set<Sphere>(47, [](Rng& rng, const Plane& plane, int i) {
-    const float r = rng.uniform(0.05f, 3.0f);
-    Sphere sp{far_along(rng, plane, i) + (i % 2 ? r : -r) * plane.normal, r};
-    nudge(sp.center, plane.normal, i % 17 - 8);
-    return sp;
-  }, {// Past 2^119 (q bound would overflow): OUTSIDE, INSIDE and OUTSIDE of x = 0, x = -2^120, x = 2^120.
-      Sphere{{-1.01f * 0x1p120f - 0x1p100f, 0, 0}, 1.01f * 0x1p120f}, Sphere{{0x1p120f, 0, 0}, 1.01f * 0x1p120f},
-      Sphere{{-0x1p120f, 0, 0}, 1.01f * 0x1p120f}, Sphere{{0, 0, 0}, 0x1p-127f}});
+  return lower_edge_set<Sphere>(
+      47,
+      [](Rng& rng, const Plane& plane, int i) {
+        const float r = rng.uniform(0.05f, 3.0f);
+        Sphere sp{far_along(rng, plane, i) + (i % 2 ? r : -r) * plane.normal, r};
+        nudge(sp.center, plane.normal, i % 17 - 8);
+        return sp;
+      },
+      {// Past 2^119 (q bound would overflow): OUTSIDE, INSIDE and OUTSIDE of x = 0, x = -2^120, x = 2^120.
+       Sphere{{-1.01f * 0x1p120f - 0x1p100f, 0, 0}, 1.01f * 0x1p120f}, Sphere{{0x1p120f, 0, 0}, 1.01f * 0x1p120f},
+       Sphere{{-0x1p120f, 0, 0}, 1.01f * 0x1p120f}, Sphere{{0, 0, 0}, 0x1p-127f}});
 }
 
 }  // namespace cullpipe::test

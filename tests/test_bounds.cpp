@@ -207,7 +207,8 @@ TEST(Spheres, MiniballReferenceSets) {
     const Sphere exact = exact_sphere(p);
     expect_encloses(exact, p, "exact");
     EXPECT_LE(exact.radius, refined_sphere(p).radius * (1 + 1e-6f));
-    if (std::string(name).find("cospherical") != std::string::npos || std::string(name).find("longitude") != std::string::npos) {
+    if (std::string(name).find("cospherical") != std::string::npos ||
+        std::string(name).find("longitude") != std::string::npos) {
       EXPECT_NEAR(exact.radius, 1.0f, 1e-4f);  // points on or very near the unit sphere
     }
   }
@@ -296,7 +297,8 @@ TEST(ConvexHull, DegenerateSetsGiveLowerDimensionalHulls) {
   ASSERT_EQ(sq.dimension, ConvexHull::Dimension::Polygon);
   EXPECT_EQ(sq.vertices.size(), 4u);
   for (std::size_t i = 0; i < 4; ++i) {
-    const glm::vec3 e1 = sq.vertices[(i + 1) % 4] - sq.vertices[i], e2 = sq.vertices[(i + 2) % 4] - sq.vertices[(i + 1) % 4];
+    const glm::vec3 e1 = sq.vertices[(i + 1) % 4] - sq.vertices[i],
+                    e2 = sq.vertices[(i + 2) % 4] - sq.vertices[(i + 1) % 4];
     EXPECT_GT(glm::dot(glm::cross(e1, e2), sq.normal), 0.0f) << "counter-clockwise about the normal";
   }
   // Every other awkward set still gives a valid hull.
@@ -423,10 +425,12 @@ std::vector<Points> near_degenerate_sets() {
     if (kind == 0) {  // jittered cube corners
       for (int i = 0; i < 10; ++i) {
         const int c = int(rng.next() % 8);
-        p.push_back(glm::vec3(c & 1 ? 0.5f : -0.5f, c & 2 ? 0.5f : -0.5f, c & 4 ? 0.5f : -0.5f) + rng.vec3(-1e-7f, 1e-7f));
+        p.push_back(glm::vec3(c & 1 ? 0.5f : -0.5f, c & 2 ? 0.5f : -0.5f, c & 4 ? 0.5f : -0.5f) +
+                    rng.vec3(-1e-7f, 1e-7f));
       }
     } else if (kind == 1) {  // near-collinear with exact duplicates
-      for (int i = 0; i < 10; ++i) p.push_back(glm::vec3(float(i % 5), 2.0f * float(i % 5), 0.0f) + rng.vec3(-1e-6f, 1e-6f));
+      for (int i = 0; i < 10; ++i)
+        p.push_back(glm::vec3(float(i % 5), 2.0f * float(i % 5), 0.0f) + rng.vec3(-1e-6f, 1e-6f));
       p.push_back(p[3]);
       p.push_back(p[7]);
     } else {  // points on a circle, slightly off its plane
@@ -439,7 +443,8 @@ std::vector<Points> near_degenerate_sets() {
     sets.push_back(std::move(p));
   }
   Points circle;  // 100,000 points exactly in a plane: the ring must keep (1, 0, 0)'s extent
-  for (int i = 0; i < 100000; ++i) circle.push_back({std::cos(6.2831853f * float(i) / 100000.0f), std::sin(6.2831853f * float(i) / 100000.0f), 0.0f});
+  for (int i = 0; i < 100000; ++i)
+    circle.push_back({std::cos(6.2831853f * float(i) / 100000.0f), std::sin(6.2831853f * float(i) / 100000.0f), 0.0f});
   sets.push_back(std::move(circle));
   return sets;
 }
@@ -465,14 +470,65 @@ TEST(AabbUpdate, NearDegenerateSetsStillEnclose) {
 // recompute.
 TEST(AabbUpdate, FuzzFoundFlatAndTinySetsEnclose) {
   const std::vector<Points> sets = {
-      {{0x1.0000000000000p-149f, 0x1.8000000000000p-126f, 0x1.0100000000000p-127f}, {-0x1.0000800000000p+1f, 0x1.0000000000000p-127f, 0x1.8000000000000p-126f}},  // 38434195
-      {{-0x1.0000000000000p+0f, -0x1.0000000000000p+0f, -0x1.0000000000000p+0f}, {-0x1.0000000000000p+0f, -0x1.0000000000000p+0f, 0x1.0000000000000p+0f}, {-0x1.0000000000000p-127f, -0x1.7e00000000000p-142f, -0x1.f800000000000p-144f}, {-0x1.7e00000000000p-142f, -0x1.7e00000000000p-142f, 0x1.ecfc000000000p-135f}, {0x1.fc00000000000p-136f, 0x1.fc00000000000p-136f, 0x1.7f00000000000p-134f}, {0x1.7f00000000000p-134f, 0x1.fc00000000000p-136f, 0x1.7f00000000000p-134f}, {0x1.fc00000000000p-136f, 0x1.fc00000000000p-136f, 0x1.fc00000000000p-136f}, {0x1.7f00000000000p-134f, 0x1.fc00000000000p-136f, 0x1.fc00000000000p-136f}},  // b8996f3d
-      {{-0x1.0000000000000p-149f, 0x1.c080000000000p+1f, 0x1.0000000000000p+1f}, {0x1.4c00000000000p+1f, -0x1.7600000000000p+1f, 0x1.0000800000000p+1f}, {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f}, {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f}, {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f}, {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f}, {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f}, {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f}, {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f}, {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f}, {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f}, {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f}, {-0x1.d1d1d00000000p+82f, 0x1.0281d00000000p-125f, 0x1.0300000000000p-135f}, {0x1.8220000000000p+1f, 0x1.0000000000000p-95f, -0x1.3c00820000000p-95f}, {0x1.0000800000000p-95f, 0x1.0000820000000p+49f, 0x1.0000000000000p-149f}},  // 464ec138
-      {{-0x1.0000000000000p+0f, -0x1.0000000000000p+0f, -0x1.0000000000000p+0f}, {-0x1.0000000000000p+0f, -0x1.0000000000000p+0f, -0x1.4000000000000p-128f}, {-0x1.4fc0000000000p-139f, -0x1.7e00000000000p-142f, -0x1.f800000000000p-144f}, {-0x1.5e00000000000p-142f, -0x1.7e00000000000p-142f, -0x1.f800000000000p-144f}, {-0x1.f800000000000p-144f, -0x1.f800000000000p-144f, -0x1.7e00000000000p-142f}, {-0x1.7e00000000000p-142f, -0x1.f800000000000p-144f, -0x1.7e00000000000p-142f}, {-0x1.f800000000000p-144f, -0x1.f800000000000p-144f, -0x1.f800000000000p-144f}, {-0x1.7e00000000000p-142f, -0x1.f800000000000p-144f, -0x1.f800000000000p-144f}},  // 874dc54c
-      {{-0x1.0000000000000p+0f, -0x1.0000000000000p+0f, -0x1.0000000000000p+0f}, {-0x1.0000000000000p+0f, -0x1.aa00000000000p-126f, -0x1.7e00000000000p-142f}, {-0x1.f800000000000p-144f, -0x1.7e00000000000p-142f, -0x1.f800000000000p-144f}, {-0x1.5e00000000000p-142f, 0x1.7f00800000000p-126f, 0x1.fc00000000000p-128f}, {0x1.fc00000000000p-128f, 0x1.fc00000000000p-128f, 0x1.7f00000000000p-126f}},  // 50d9e2cc
-      {{-0x1.0000000000000p+0f, -0x1.0000000000000p+0f, 0x1.7e00000000000p-126f}, {0x1.fc00000000000p-128f, 0x1.7f00000000000p-126f, 0x1.7f00000000000p-126f}, {0x1.fc00000000000p-128f, 0x1.fc00000000000p-128f, 0x1.8000000000000p-140f}, {0.0f, 0x1.7f00000000000p-126f, 0x1.fc00000000000p-128f}, {0x1.7f00000000000p-126f, 0x1.fc00000000000p-128f, 0x1.fc00000000000p-128f}, {0x1.fc00000000000p-128f, 0x1.7f00000000000p-126f, 0x1.1900000000000p+0f}},  // f601e373
-      {{-0x1.a1a1a00000000p+34f, -0x1.a1a1a00000000p+34f, -0x1.a1a1a00000000p+34f}, {-0x1.a1a1a00000000p+34f, -0x1.a1a1a00000000p+34f, -0x1.a1a1a00000000p+34f}, {-0x1.a1a1a00000000p+34f, -0x1.a1a1a00000000p+34f, 0x1.0100000000000p-141f}, {-0x1.0000000000000p+1f, 0x1.8000000000000p+1f, -0.0f}, {0x1.8000000000000p+1f, -0x1.0000000000000p+1f, -0.0f}},  // 8278c06e
-      {{-0x1.1d8654p+7, -0x1.157358p+8, -0x1.47fa94p-14}, {0x1.3c01ecp+9, 0x1.0b92dp+8, -0x1.7d003ap-14}, {0x1.2ef698p+9, -0x1.c0b05ap+7, 0x1.4a2d28p-15}, {-0x1.4bd084p+6, 0x1.0a361ep+9, 0x1.8b7e2ep-15}, {-0x1.3b178p+8, 0x1.99a31p+9, 0x1.221f0ap-14}, {-0x1.3b15ep+8, 0x1.99a3e4p+9, -0x1.221f0ap-14}, {0x1.2ef6eap+9, -0x1.c0b55cp+7, -0x1.4a2d28p-15}, {-0x1.4bcbb2p+6, 0x1.0a350ap+9, -0x1.8b7e2ep-15}, {-0x1.3b19f8p+8, 0x1.99a386p+9, -0x1.221f0ap-14}},  // a flat set: ring vertices and points near them off the plane on opposite sides
+      {{0x1.0000000000000p-149f, 0x1.8000000000000p-126f, 0x1.0100000000000p-127f},
+       {-0x1.0000800000000p+1f, 0x1.0000000000000p-127f, 0x1.8000000000000p-126f}},  // 38434195
+      {{-0x1.0000000000000p+0f, -0x1.0000000000000p+0f, -0x1.0000000000000p+0f},
+       {-0x1.0000000000000p+0f, -0x1.0000000000000p+0f, 0x1.0000000000000p+0f},
+       {-0x1.0000000000000p-127f, -0x1.7e00000000000p-142f, -0x1.f800000000000p-144f},
+       {-0x1.7e00000000000p-142f, -0x1.7e00000000000p-142f, 0x1.ecfc000000000p-135f},
+       {0x1.fc00000000000p-136f, 0x1.fc00000000000p-136f, 0x1.7f00000000000p-134f},
+       {0x1.7f00000000000p-134f, 0x1.fc00000000000p-136f, 0x1.7f00000000000p-134f},
+       {0x1.fc00000000000p-136f, 0x1.fc00000000000p-136f, 0x1.fc00000000000p-136f},
+       {0x1.7f00000000000p-134f, 0x1.fc00000000000p-136f, 0x1.fc00000000000p-136f}},  // b8996f3d
+      {{-0x1.0000000000000p-149f, 0x1.c080000000000p+1f, 0x1.0000000000000p+1f},
+       {0x1.4c00000000000p+1f, -0x1.7600000000000p+1f, 0x1.0000800000000p+1f},
+       {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f},
+       {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f},
+       {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f},
+       {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f},
+       {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f},
+       {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f},
+       {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f},
+       {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f},
+       {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f},
+       {-0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f, -0x1.d1d1d00000000p+82f},
+       {-0x1.d1d1d00000000p+82f, 0x1.0281d00000000p-125f, 0x1.0300000000000p-135f},
+       {0x1.8220000000000p+1f, 0x1.0000000000000p-95f, -0x1.3c00820000000p-95f},
+       {0x1.0000800000000p-95f, 0x1.0000820000000p+49f, 0x1.0000000000000p-149f}},  // 464ec138
+      {{-0x1.0000000000000p+0f, -0x1.0000000000000p+0f, -0x1.0000000000000p+0f},
+       {-0x1.0000000000000p+0f, -0x1.0000000000000p+0f, -0x1.4000000000000p-128f},
+       {-0x1.4fc0000000000p-139f, -0x1.7e00000000000p-142f, -0x1.f800000000000p-144f},
+       {-0x1.5e00000000000p-142f, -0x1.7e00000000000p-142f, -0x1.f800000000000p-144f},
+       {-0x1.f800000000000p-144f, -0x1.f800000000000p-144f, -0x1.7e00000000000p-142f},
+       {-0x1.7e00000000000p-142f, -0x1.f800000000000p-144f, -0x1.7e00000000000p-142f},
+       {-0x1.f800000000000p-144f, -0x1.f800000000000p-144f, -0x1.f800000000000p-144f},
+       {-0x1.7e00000000000p-142f, -0x1.f800000000000p-144f, -0x1.f800000000000p-144f}},  // 874dc54c
+      {{-0x1.0000000000000p+0f, -0x1.0000000000000p+0f, -0x1.0000000000000p+0f},
+       {-0x1.0000000000000p+0f, -0x1.aa00000000000p-126f, -0x1.7e00000000000p-142f},
+       {-0x1.f800000000000p-144f, -0x1.7e00000000000p-142f, -0x1.f800000000000p-144f},
+       {-0x1.5e00000000000p-142f, 0x1.7f00800000000p-126f, 0x1.fc00000000000p-128f},
+       {0x1.fc00000000000p-128f, 0x1.fc00000000000p-128f, 0x1.7f00000000000p-126f}},  // 50d9e2cc
+      {{-0x1.0000000000000p+0f, -0x1.0000000000000p+0f, 0x1.7e00000000000p-126f},
+       {0x1.fc00000000000p-128f, 0x1.7f00000000000p-126f, 0x1.7f00000000000p-126f},
+       {0x1.fc00000000000p-128f, 0x1.fc00000000000p-128f, 0x1.8000000000000p-140f},
+       {0.0f, 0x1.7f00000000000p-126f, 0x1.fc00000000000p-128f},
+       {0x1.7f00000000000p-126f, 0x1.fc00000000000p-128f, 0x1.fc00000000000p-128f},
+       {0x1.fc00000000000p-128f, 0x1.7f00000000000p-126f, 0x1.1900000000000p+0f}},  // f601e373
+      {{-0x1.a1a1a00000000p+34f, -0x1.a1a1a00000000p+34f, -0x1.a1a1a00000000p+34f},
+       {-0x1.a1a1a00000000p+34f, -0x1.a1a1a00000000p+34f, -0x1.a1a1a00000000p+34f},
+       {-0x1.a1a1a00000000p+34f, -0x1.a1a1a00000000p+34f, 0x1.0100000000000p-141f},
+       {-0x1.0000000000000p+1f, 0x1.8000000000000p+1f, -0.0f},
+       {0x1.8000000000000p+1f, -0x1.0000000000000p+1f, -0.0f}},  // 8278c06e
+      {{-0x1.1d8654p+7, -0x1.157358p+8, -0x1.47fa94p-14},
+       {0x1.3c01ecp+9, 0x1.0b92dp+8, -0x1.7d003ap-14},
+       {0x1.2ef698p+9, -0x1.c0b05ap+7, 0x1.4a2d28p-15},
+       {-0x1.4bd084p+6, 0x1.0a361ep+9, 0x1.8b7e2ep-15},
+       {-0x1.3b178p+8, 0x1.99a31p+9, 0x1.221f0ap-14},
+       {-0x1.3b15ep+8, 0x1.99a3e4p+9, -0x1.221f0ap-14},
+       {0x1.2ef6eap+9, -0x1.c0b55cp+7, -0x1.4a2d28p-15},
+       {-0x1.4bcbb2p+6, 0x1.0a350ap+9, -0x1.8b7e2ep-15},
+       {-0x1.3b19f8p+8, 0x1.99a386p+9,
+        -0x1.221f0ap-14}},  // a flat set: ring vertices and points near them off the plane on opposite sides
   };
   for (std::size_t s = 0; s < sets.size(); ++s) {
     AabbTracker tracker(sets[s]);
@@ -506,7 +562,8 @@ TEST(AabbUpdate, DegenerateObjects) {
     const glm::mat4 m = glm::rotate(glm::mat4(1.0f), 0.7f, glm::vec3(0, 1, 0));
     Points world;
     for (const auto& q : pts) world.push_back(glm::vec3(m * glm::vec4(q, 1.0f)));
-    for (AabbUpdate method : {AabbUpdate::Recompute, AabbUpdate::HullRecompute, AabbUpdate::TransformBox, AabbUpdate::HillClimb}) {
+    for (AabbUpdate method :
+         {AabbUpdate::Recompute, AabbUpdate::HullRecompute, AabbUpdate::TransformBox, AabbUpdate::HillClimb}) {
       const Aabb b = tracker.update(m, method);
       for (const auto& q : pts) {
         const glm::dvec3 w = glm::dvec3(glm::dmat4(m) * glm::dvec4(glm::dvec3(q), 1.0));
@@ -603,7 +660,8 @@ TEST(ConvexHull, LostAdjacencyIsFlaggedAndEveryNeighbourIsAFace) {
   EXPECT_GT(lost, 0) << "the set no longer loses an adjacency: find another one for this test";
   for (const auto& [builder, fn] : kObbBuilders) expect_encloses(fn(p), p, builder);
   AabbTracker tracker(p);
-  EXPECT_TRUE(updates_enclose_recompute(tracker, glm::rotate(glm::mat4(1.0f), 0.7f, glm::normalize(glm::vec3(1, 2, 3)))));
+  EXPECT_TRUE(
+      updates_enclose_recompute(tracker, glm::rotate(glm::mat4(1.0f), 0.7f, glm::normalize(glm::vec3(1, 2, 3)))));
   expect_encloses(ritter_sphere(p), p, "ritter");
   expect_encloses(exact_sphere(p), p, "exact");
 }
@@ -611,7 +669,8 @@ TEST(ConvexHull, LostAdjacencyIsFlaggedAndEveryNeighbourIsAFace) {
 TEST(Obbs, RotatedCubeIsFoundExactlyByTheHullFaceMethod) {
   const glm::mat3 rot = glm::mat3(glm::rotate(glm::mat4(1.0f), 0.5235988f, glm::normalize(glm::vec3(1, 1, 0))));
   Points cube;
-  for (int i = 0; i < 8; ++i) cube.push_back(rot * glm::vec3(i & 1 ? 1.f : -1.f, i & 2 ? 2.f : -2.f, i & 4 ? 3.f : -3.f));
+  for (int i = 0; i < 8; ++i)
+    cube.push_back(rot * glm::vec3(i & 1 ? 1.f : -1.f, i & 2 ? 2.f : -2.f, i & 4 ? 3.f : -3.f));
   Points with_inside = cube;
   for (const auto& p : random_cube(200, 34, 0.9f)) with_inside.push_back(rot * (p * glm::vec3(1, 2, 3)));
   const Obb b = hull_face_obb(with_inside);

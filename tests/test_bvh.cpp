@@ -13,10 +13,10 @@
 
 #include "bvh/binned_sah.hpp"
 #include "bvh/bvh.hpp"
+#include "bvh_test_util.hpp"
 #include "cull/reference.hpp"
 #include "scene/generators.hpp"
 #include "scene/gltf_scene.hpp"
-#include "bvh_test_util.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe {
@@ -42,7 +42,8 @@ void expect_flat_tree_valid(const bvh::FlatTree& f, std::span<const Aabb> boxes)
       ASSERT_EQ(n.skip, i + 1) << i;
       for (std::uint32_t k = n.first; k < n.first + n.count; ++k) {
         const Aabb& b = boxes[f.objects[k]];
-        ASSERT_TRUE(glm::all(glm::lessThanEqual(n.box.min, b.min)) && glm::all(glm::lessThanEqual(b.max, n.box.max))) << i;
+        ASSERT_TRUE(glm::all(glm::lessThanEqual(n.box.min, b.min)) && glm::all(glm::lessThanEqual(b.max, n.box.max)))
+            << i;
       }
       continue;
     }
@@ -54,7 +55,9 @@ void expect_flat_tree_valid(const bvh::FlatTree& f, std::span<const Aabb> boxes)
     ASSERT_EQ(b.first, a.first + a.count);
     ASSERT_EQ(n.count, a.count + b.count);
     for (const bvh::FlatNode* c : {&a, &b})
-      ASSERT_TRUE(glm::all(glm::lessThanEqual(n.box.min, c->box.min)) && glm::all(glm::lessThanEqual(c->box.max, n.box.max))) << i;
+      ASSERT_TRUE(glm::all(glm::lessThanEqual(n.box.min, c->box.min)) &&
+                  glm::all(glm::lessThanEqual(c->box.max, n.box.max)))
+          << i;
   }
 }
 
@@ -74,7 +77,8 @@ TEST(Bvh, RandomSetsOfEverySize) {
     SCOPED_TRACE("n = " + std::to_string(n));
     std::vector<Aabb> boxes(n);
     for (Aabb& b : boxes) b = test::random_aabb(rng, 40.0f, 3.0f);
-    for (std::size_t leaf : {1u, 4u, 16u}) expect_same_as_flat(boxes, {Frustum::from_view_proj(test::test_view_proj())}, leaf);
+    for (std::size_t leaf : {1u, 4u, 16u})
+      expect_same_as_flat(boxes, {Frustum::from_view_proj(test::test_view_proj())}, leaf);
   }
 }
 
@@ -83,15 +87,16 @@ TEST(Bvh, GeneratedScenesAlongCameraPaths) {
     SCOPED_TRACE(std::string(to_string(kind)));
     const Scene scene = generate_scene(kind, 30000, 3);
     std::vector<Frustum> frusta;
-    for (const Camera& c : camera_path(scene.camera, scene.bounds(), 6)) frusta.push_back(Frustum::from_view_proj(c.view_proj()));
+    for (const Camera& c : camera_path(scene.camera, scene.bounds(), 6))
+      frusta.push_back(Frustum::from_view_proj(c.view_proj()));
     const std::vector<Aabb> boxes = world_aabbs(scene);
     expect_same_as_flat(boxes, frusta);
     // The hierarchy pays: INSIDE subtrees are accepted whole and OUTSIDE ones dropped, so far
     // fewer tests than objects (flat culling makes one per object).
     const bvh::FlatTree flat = bvh::flatten(bvh::build_binned_sah(boxes));
     const bvh::HierarchicalResult h = bvh::cull_hierarchical(flat, boxes, frusta[0]);
-    std::printf("  %s: %zu of %zu visible, %zu node + %zu object tests\n", std::string(to_string(kind)).c_str(), h.visible,
-                boxes.size(), h.node_tests, h.object_tests);
+    std::printf("  %s: %zu of %zu visible, %zu node + %zu object tests\n", std::string(to_string(kind)).c_str(),
+                h.visible, boxes.size(), h.node_tests, h.object_tests);
     EXPECT_LT(h.node_tests + h.object_tests, boxes.size() / 2) << h.visible;
   }
 }
@@ -157,7 +162,8 @@ std::vector<std::vector<Aabb>> builder_edge_sets() {
   }
   for (std::size_t i = 0; i < 400; ++i) points[i] = points[i + 800];
   for (int i = 0; i < 300; ++i) line.push_back({glm::vec3(float(i % 37), 0, 0), glm::vec3(float(i % 37) + 0.5f, 0, 0)});
-  for (int i = 0; i < 300; ++i) sheet.push_back({glm::vec3(float(i % 17), float(i / 17), 0), glm::vec3(float(i % 17), float(i / 17), 0)});
+  for (int i = 0; i < 300; ++i)
+    sheet.push_back({glm::vec3(float(i % 17), float(i / 17), 0), glm::vec3(float(i % 17), float(i / 17), 0)});
   for (int i = 0; i < 60; ++i) tiny.push_back({glm::vec3(float(i) * 1e-44f), glm::vec3(float(i) * 1e-44f)});
   for (int i = 0; i < 200; ++i) {
     const glm::vec3 c = rng.vec3(-1.0f, 1.0f) * 1e37f;
@@ -168,8 +174,16 @@ std::vector<std::vector<Aabb>> builder_edge_sets() {
   for (std::size_t i = 0; i < 5; ++i) infinite[i * 11 + 3].min.y = -INFINITY;
   infinite[100] = {glm::vec3(INFINITY), glm::vec3(INFINITY)};
   infinite[101] = {glm::vec3(-INFINITY, 0, 0), glm::vec3(INFINITY, 0, 0)};
-  sets = {boxes, points, line, sheet, infinite, std::vector<Aabb>(700, Aabb{glm::vec3(-1), glm::vec3(2)}), tiny, huge,
-          std::vector<Aabb>(1, boxes[0]), {boxes[1], boxes[2]}};
+  sets = {boxes,
+          points,
+          line,
+          sheet,
+          infinite,
+          std::vector<Aabb>(700, Aabb{glm::vec3(-1), glm::vec3(2)}),
+          tiny,
+          huge,
+          std::vector<Aabb>(1, boxes[0]),
+          {boxes[1], boxes[2]}};
   return sets;
 }
 
@@ -177,9 +191,11 @@ std::vector<std::vector<Aabb>> builder_edge_sets() {
 // padding), then the object order.
 ::testing::AssertionResult same_bits(const bvh::Tree& a, const bvh::Tree& b) {
   static_assert(sizeof(bvh::Node) == 40, "Node must have no padding to compare as bytes");
-  if (a.nodes.size() != b.nodes.size()) return ::testing::AssertionFailure() << a.nodes.size() << " against " << b.nodes.size() << " nodes";
+  if (a.nodes.size() != b.nodes.size())
+    return ::testing::AssertionFailure() << a.nodes.size() << " against " << b.nodes.size() << " nodes";
   for (std::size_t i = 0; i < a.nodes.size(); ++i)
-    if (std::memcmp(&a.nodes[i], &b.nodes[i], sizeof(bvh::Node)) != 0) return ::testing::AssertionFailure() << "node " << i << " differs";
+    if (std::memcmp(&a.nodes[i], &b.nodes[i], sizeof(bvh::Node)) != 0)
+      return ::testing::AssertionFailure() << "node " << i << " differs";
   if (a.objects != b.objects) return ::testing::AssertionFailure() << "object orders differ";
   return ::testing::AssertionSuccess();
 }
@@ -212,7 +228,8 @@ TEST(Bvh, BinnedBuildIsUnchangedWhenTheCpuFlushesDenormals) {
   for (const std::vector<Aabb>& set : builder_edge_sets()) {
     bool subnormal = false;
     for (const Aabb& b : set)
-      for (int k = 0; k < 3; ++k) subnormal |= std::fpclassify(b.min[k]) == FP_SUBNORMAL || std::fpclassify(b.max[k]) == FP_SUBNORMAL;
+      for (int k = 0; k < 3; ++k)
+        subnormal |= std::fpclassify(b.min[k]) == FP_SUBNORMAL || std::fpclassify(b.max[k]) == FP_SUBNORMAL;
     bvh::detail::BinnedScratch scratch;
     bvh::Tree base, wide, base_flushed, wide_flushed;
     bvh::detail::baseline::build(set, {}, scratch, base);
@@ -237,7 +254,8 @@ TEST(Bvh, BinnedBuildIsUnchangedWhenTheCpuFlushesDenormals) {
 // The AVX2 variant (vectorised sweep, 8-lane box updates) and the baseline build the same tree,
 // bit for bit, for every bin count and leaf size.
 TEST(Bvh, BinnedBuilderVariantsBuildTheSameTree) {
-  if (!bvh::detail::binned_sah_avx2_available()) GTEST_SKIP() << "this CPU has no AVX2 (only the baseline variant runs)";
+  if (!bvh::detail::binned_sah_avx2_available())
+    GTEST_SKIP() << "this CPU has no AVX2 (only the baseline variant runs)";
   for (const std::vector<Aabb>& set : builder_edge_sets())
     for (std::uint32_t leaf : {1u, 4u, 7u})
       for (std::uint32_t bins : {2u, 5u, 16u, 33u, 256u}) {
@@ -321,11 +339,13 @@ TEST(Bvh, MetricsAndDeterminism) {
 TEST(Bvh, RealGltfScenes) {
   const std::filesystem::path dir = std::filesystem::path(CULLPIPE_SHARED_DIR) / "scenes";
   if (!std::filesystem::exists(dir)) GTEST_SKIP() << dir << " not present";
-  for (const char* name : {"VC/VC.gltf", "ReciprocatingSaw/ReciprocatingSaw.gltf", "2CylinderEngine/2CylinderEngine.gltf"}) {
+  for (const char* name :
+       {"VC/VC.gltf", "ReciprocatingSaw/ReciprocatingSaw.gltf", "2CylinderEngine/2CylinderEngine.gltf"}) {
     SCOPED_TRACE(name);
     const Scene scene = replicate_scene(load_gltf_scene((dir / name).string()).scene, 50, InstanceLayout::Random, 2);
     std::vector<Frustum> frusta;
-    for (const Camera& c : camera_path(scene.camera, scene.bounds(), 4)) frusta.push_back(Frustum::from_view_proj(c.view_proj()));
+    for (const Camera& c : camera_path(scene.camera, scene.bounds(), 4))
+      frusta.push_back(Frustum::from_view_proj(c.view_proj()));
     expect_same_as_flat(world_aabbs(scene), frusta);
   }
 }

@@ -6,9 +6,9 @@
 #include <string>
 
 #include "bvh/builders.hpp"
+#include "bvh_test_util.hpp"
 #include "cull/reference.hpp"
 #include "scene/generators.hpp"
-#include "bvh_test_util.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe {
@@ -50,7 +50,9 @@ std::vector<Aabb> random_boxes(std::size_t n, std::uint64_t seed, float spread =
   return boxes;
 }
 
-std::vector<Aabb> scene_boxes(SceneKind kind, std::size_t n, std::uint64_t seed) { return world_aabbs(generate_scene(kind, n, seed)); }
+std::vector<Aabb> scene_boxes(SceneKind kind, std::size_t n, std::uint64_t seed) {
+  return world_aabbs(generate_scene(kind, n, seed));
+}
 
 // Degenerate sets of about n objects, by name.
 std::vector<std::pair<std::string, std::vector<Aabb>>> degenerate_sets(std::size_t n) {
@@ -68,7 +70,8 @@ std::vector<std::pair<std::string, std::vector<Aabb>>> degenerate_sets(std::size
     points.push_back({p, p});
     const glm::vec3 q = rng.vec3(-20, 20);
     flat.push_back({glm::vec3(q.x, q.y, -12), glm::vec3(q.x + 1, q.y + 0.5f, -12)});  // coplanar, zero thickness
-    nested.push_back({glm::vec3(-0.01f * float(i + 1)) + glm::vec3(0, 0, -10), glm::vec3(0.01f * float(i + 1)) + glm::vec3(0, 0, -10)});
+    nested.push_back({glm::vec3(-0.01f * float(i + 1)) + glm::vec3(0, 0, -10),
+                      glm::vec3(0.01f * float(i + 1)) + glm::vec3(0, 0, -10)});
   }
   const std::vector<Aabb> some = random_boxes(n / 3 + 1, 5, 30.0f, 2.0f);
   for (std::size_t i = 0; i < n; ++i) duplicates.push_back(some[i % some.size()]);
@@ -101,7 +104,8 @@ TEST(BvhDynamic, EveryBuilderOnRandomClusteredAndDegenerateSets) {
   const std::vector<Frustum> frusta = test_frusta();
   for (const Builder& b : kBuilders) {
     SCOPED_TRACE(b.name);
-    std::vector<std::pair<std::string, std::vector<Aabb>>> sets = degenerate_sets(std::min<std::size_t>(b.max_objects, 300));
+    std::vector<std::pair<std::string, std::vector<Aabb>>> sets =
+        degenerate_sets(std::min<std::size_t>(b.max_objects, 300));
     sets.push_back({"random", random_boxes(b.max_objects, 11)});
     sets.push_back({"clustered", scene_boxes(SceneKind::Clustered, b.max_objects, 3)});
     sets.push_back({"city", scene_boxes(SceneKind::City, b.max_objects, 4)});
@@ -128,7 +132,8 @@ TEST(BvhDynamic, GeneratedScenesAlongCameraPaths) {
     SCOPED_TRACE(std::string(to_string(kind)));
     const Scene scene = generate_scene(kind, 20000, 9);
     std::vector<Frustum> frusta;
-    for (const Camera& c : camera_path(scene.camera, scene.bounds(), 4)) frusta.push_back(Frustum::from_view_proj(c.view_proj()));
+    for (const Camera& c : camera_path(scene.camera, scene.bounds(), 4))
+      frusta.push_back(Frustum::from_view_proj(c.view_proj()));
     const std::vector<Aabb> boxes = world_aabbs(scene);
     for (const Builder& b : kBuilders) {
       if (b.max_objects < boxes.size() / 10) continue;  // the exact agglomerative builders
@@ -154,7 +159,8 @@ TEST(BvhDynamic, PriorityQueueMakesTheBruteForceMerges) {
     }
   for (const auto& [name, boxes] : degenerate_sets(150)) {
     SCOPED_TRACE(name);
-    EXPECT_EQ(bvh::build_agglomerative_brute(boxes, {.max_leaf_size = 1}), bvh::build_agglomerative_pq(boxes, {.max_leaf_size = 1}));
+    EXPECT_EQ(bvh::build_agglomerative_brute(boxes, {.max_leaf_size = 1}),
+              bvh::build_agglomerative_pq(boxes, {.max_leaf_size = 1}));
   }
 }
 
@@ -173,7 +179,8 @@ TEST(BvhDynamic, BruteForceMergesTheCheapestPairFirst) {
       const bvh::Node& pair = t.nodes[c];
       ASSERT_FALSE(pair.leaf());
       const std::uint32_t a = t.objects[t.nodes[pair.left].first], b = t.objects[t.nodes[pair.right].first];
-      EXPECT_TRUE((std::min(a, b) == 0 && std::max(a, b) == 2) || (std::min(a, b) == 1 && std::max(a, b) == 3)) << a << " " << b;
+      EXPECT_TRUE((std::min(a, b) == 0 && std::max(a, b) == 2) || (std::min(a, b) == 1 && std::max(a, b) == 3))
+          << a << " " << b;
     }
   }
 }
@@ -200,7 +207,8 @@ TEST(BvhDynamic, QualityAgainstBinnedSah) {
     const char* name;
     std::vector<Aabb> boxes;
   };
-  const Case cases[] = {{"random", random_boxes(10000, 31, 100.0f, 2.0f)}, {"clustered", scene_boxes(SceneKind::Clustered, 10000, 32)}};
+  const Case cases[] = {{"random", random_boxes(10000, 31, 100.0f, 2.0f)},
+                        {"clustered", scene_boxes(SceneKind::Clustered, 10000, 32)}};
   for (const Case& c : cases) {
     SCOPED_TRACE(c.name);
     const double binned = sah(bvh::build_binned_sah(c.boxes, {4, 16}));
@@ -211,7 +219,8 @@ TEST(BvhDynamic, QualityAgainstBinnedSah) {
       const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
       ASSERT_EQ(bvh::check_tree(t, c.boxes), "");
       ratio[k] = sah(t) / binned;
-      std::printf("  %s 10^4: %-27s SAH %.2f = %.3f x binned SAH's (%.2f), %.1f ms\n", c.name, kBuilders[k].name, sah(t), ratio[k], binned, ms);
+      std::printf("  %s 10^4: %-27s SAH %.2f = %.3f x binned SAH's (%.2f), %.1f ms\n", c.name, kBuilders[k].name,
+                  sah(t), ratio[k], binned, ms);
     }
     EXPECT_LT(ratio[2], 1.0) << "agglomerative-local beats binned SAH";
     EXPECT_LT(ratio[3], 1.6) << "insertion-greedy";
@@ -239,7 +248,9 @@ double total_area(const bvh::Tree& t) {
 // The least cost of adding `box` to a one-object-per-leaf tree as a sibling of some node S:
 // area(S u box) + the area every ancestor of S gains. Found by trying every node.
 double best_insertion_cost(const bvh::Tree& t, const Aabb& box) {
-  const auto grown = [&](std::uint32_t i) { return Aabb{glm::min(t.nodes[i].box.min, box.min), glm::max(t.nodes[i].box.max, box.max)}; };
+  const auto grown = [&](std::uint32_t i) {
+    return Aabb{glm::min(t.nodes[i].box.min, box.min), glm::max(t.nodes[i].box.max, box.max)};
+  };
   double best = INFINITY;
   std::vector<std::pair<std::uint32_t, double>> stack{{0u, 0.0}};  // (node, inherited)
   while (!stack.empty()) {
@@ -296,7 +307,9 @@ TEST(BvhDynamic, InsertionBranchAndBoundFindsTheBestSibling) {
     }
   EXPECT_GT(greedy_worse, 0);  // the test can tell the two apart
   // Three objects: the third pairs with the near first one, not the root.
-  const std::vector<Aabb> boxes = {{glm::vec3(0), glm::vec3(1)}, {glm::vec3(20, 0, 0), glm::vec3(21, 1, 1)}, {glm::vec3(1.2f, 0, 0), glm::vec3(2, 1, 1)}};
+  const std::vector<Aabb> boxes = {{glm::vec3(0), glm::vec3(1)},
+                                   {glm::vec3(20, 0, 0), glm::vec3(21, 1, 1)},
+                                   {glm::vec3(1.2f, 0, 0), glm::vec3(2, 1, 1)}};
   for (BuildFn f : {bvh::build_insertion_greedy, bvh::build_insertion_bnb}) {
     const bvh::Tree t = f(boxes, {.max_leaf_size = 1});
     ASSERT_EQ(bvh::check_tree(t, boxes), "");
@@ -314,7 +327,8 @@ void expect_flat_boxes_exact(const bvh::FlatTree& f, std::span<const Aabb> boxes
   for (std::size_t i = 0; i < f.nodes.size(); ++i) {
     const bvh::FlatNode& n = f.nodes[i];
     Aabb u{glm::vec3(INFINITY), glm::vec3(-INFINITY)};
-    for (std::uint32_t k = n.first; k < n.first + n.count; ++k) u = {glm::min(u.min, boxes[f.objects[k]].min), glm::max(u.max, boxes[f.objects[k]].max)};
+    for (std::uint32_t k = n.first; k < n.first + n.count; ++k)
+      u = {glm::min(u.min, boxes[f.objects[k]].min), glm::max(u.max, boxes[f.objects[k]].max)};
     ASSERT_EQ(n.box, u) << "node " << i;
   }
 }
@@ -405,7 +419,8 @@ TEST(BvhDynamic, CollapseLeaves) {
   const bvh::Tree binned4 = bvh::build_binned_sah(boxes, {4, 16});
   EXPECT_EQ(bvh::collapse_leaves(binned4, 4), binned4);
   EXPECT_TRUE(bvh::collapse_leaves(bvh::Tree{}, 4).nodes.empty());
-  for (const bvh::Tree& fine : {binned1, bvh::build_agglomerative_local(boxes, {.max_leaf_size = 1}), bvh::build_insertion_greedy(boxes, {.max_leaf_size = 1})}) {
+  for (const bvh::Tree& fine : {binned1, bvh::build_agglomerative_local(boxes, {.max_leaf_size = 1}),
+                                bvh::build_insertion_greedy(boxes, {.max_leaf_size = 1})}) {
     const double before = sah(fine);
     double previous = before;
     for (std::uint32_t leaf : {1u, 2u, 4u, 8u, 16u}) {
@@ -432,8 +447,10 @@ TEST(BvhDynamic, CollapseLeaves) {
   EXPECT_EQ(bvh::check_tree(t, same), "");
   // Two far apart pairs of nearly equal boxes: each pair becomes a leaf (area 3.63 x 2 objects
   // against 3.63 + 3 + 3 split), the root stays split.
-  const std::vector<Aabb> pairs = {{glm::vec3(0), glm::vec3(1)}, {glm::vec3(0.1f), glm::vec3(1.1f)},
-                                   {glm::vec3(100), glm::vec3(101)}, {glm::vec3(100.1f), glm::vec3(101.1f)}};
+  const std::vector<Aabb> pairs = {{glm::vec3(0), glm::vec3(1)},
+                                   {glm::vec3(0.1f), glm::vec3(1.1f)},
+                                   {glm::vec3(100), glm::vec3(101)},
+                                   {glm::vec3(100.1f), glm::vec3(101.1f)}};
   const bvh::Tree p = bvh::collapse_leaves(bvh::build_agglomerative_brute(pairs, {.max_leaf_size = 1}), 4);
   EXPECT_EQ(bvh::metrics(p).leaves, 2u);
   EXPECT_EQ(bvh::metrics(p).max_leaf_size, 2u);
@@ -443,7 +460,8 @@ TEST(BvhDynamic, LargeAndPathologicalSetsFinish) {
   // Deep preference chains (nested boxes merge one pair per pass under the exact rule) and
   // large sets: builds finish quickly, without recursion.
   std::vector<Aabb> nested;
-  for (int i = 0; i < 50000; ++i) nested.push_back({glm::vec3(-0.001f * float(i + 1)), glm::vec3(0.001f * float(i + 1))});
+  for (int i = 0; i < 50000; ++i)
+    nested.push_back({glm::vec3(-0.001f * float(i + 1)), glm::vec3(0.001f * float(i + 1))});
   const auto t0 = std::chrono::steady_clock::now();
   const bvh::Tree t = bvh::build_agglomerative_local(nested, {});
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

@@ -10,9 +10,9 @@
 
 #include "bvh/binned_sah.hpp"
 #include "bvh/builders.hpp"
+#include "bvh_test_util.hpp"
 #include "cull/reference.hpp"
 #include "scene/generators.hpp"
-#include "bvh_test_util.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe {

@@ -4,24 +4,23 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <glm/gtc/matrix_transform.hpp>
 #include <limits>
 #include <string>
 #include <vector>
 
-#include <glm/gtc/matrix_transform.hpp>
-
 #include "bvh/builders.hpp"
 #include "bvh/bvh.hpp"
-#include "cull/reference.hpp"
 #include "bvh_test_util.hpp"
+#include "cull/reference.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe {
 namespace {
 
 template <class Volume>
-void expect_matches_flat(const std::vector<Volume>& volumes, const std::vector<Frustum>& frusta, const std::string& builder = "binned-sah",
-                         std::uint32_t leaf = 4) {
+void expect_matches_flat(const std::vector<Volume>& volumes, const std::vector<Frustum>& frusta,
+                         const std::string& builder = "binned-sah", std::uint32_t leaf = 4) {
   bvh::BuildOptions options;
   options.max_leaf_size = leaf;
   const std::vector<Aabb> boxes = bvh::enclosing_boxes(std::span<const Volume>(volumes));
@@ -41,7 +40,8 @@ TEST(BvhVolumes, EnclosingBoxesContainTheVolumes) {
     for (int c = 0; c < 8; ++c) {  // every corner, in double
       for (int j = 0; j < 3; ++j) {
         double p = b.center[j];
-        for (int k = 0; k < 3; ++k) p += double(b.basis[k][j]) * ((c >> k & 1) ? double(b.half_extents[k]) : -double(b.half_extents[k]));
+        for (int k = 0; k < 3; ++k)
+          p += double(b.basis[k][j]) * ((c >> k & 1) ? double(b.half_extents[k]) : -double(b.half_extents[k]));
         ASSERT_LE(double(box.min[j]), p) << i;
         ASSERT_GE(double(box.max[j]), p) << i;
       }
@@ -76,7 +76,7 @@ TEST(BvhVolumes, NonUnitPlaneNormalsAreRefused) {
   // The margin's error bound takes unit normals: a half-length normal would let a node be
   // dropped while a sphere in it is visible. Boxes do not need the margin.
   const glm::vec4 planes[1] = {{0.5f, 0.0f, 0.0f, 1.0f}};
-  Frustum f = Frustum::from_planes(planes);  // normalises
+  Frustum f = Frustum::from_planes(planes);                // normalises
   f.planes[0] = Plane{glm::vec3(0.5f, 0.0f, 0.0f), 1.0f};  // hand-built, not normalised
   const std::vector<Sphere> spheres = {{glm::vec3(0), 1.0f}};
   const std::vector<Aabb> boxes = bvh::enclosing_boxes(std::span<const Sphere>(spheres));
@@ -113,7 +113,8 @@ TEST(BvhVolumes, TheStructureCheckIsTheTreeCheckWithoutVolumes) {
   EXPECT_EQ(bvh::check_flat_structure(tree, moved.size()), "");
   EXPECT_NE(bvh::check_flat_tree(tree, std::span<const Obb>(moved)), "");
   std::size_t leaf = 0;
-  while (!(tree.nodes[leaf].leaf && tree.nodes[leaf].first <= 7 && 7 < tree.nodes[leaf].first + tree.nodes[leaf].count)) ++leaf;
+  while (!(tree.nodes[leaf].leaf && tree.nodes[leaf].first <= 7 && 7 < tree.nodes[leaf].first + tree.nodes[leaf].count))
+    ++leaf;
   EXPECT_TRUE(bvh::volume_in_leaf(tree.nodes[leaf].box, v.obbs[id]));
   EXPECT_FALSE(bvh::volume_in_leaf(tree.nodes[leaf].box, moved[id]));
   Sphere nan_sphere = v.spheres[0];
@@ -143,7 +144,8 @@ TEST(BvhVolumes, RandomObbsAndSpheresMatchFlat) {
 // some that a margin-free node test would misjudge, or the test would not be sharp.
 TEST(BvhVolumes, VolumesTouchingThePlanesMatchFlat) {
   test::Rng rng{23};
-  for (const glm::vec3 eye : {glm::vec3(0, 0, 10), glm::vec3(1.0e5f, -3.0e4f, 2.0e5f), glm::vec3(-4.0e4f, 7.0e4f, -9.0e4f)}) {
+  for (const glm::vec3 eye :
+       {glm::vec3(0, 0, 10), glm::vec3(1.0e5f, -3.0e4f, 2.0e5f), glm::vec3(-4.0e4f, 7.0e4f, -9.0e4f)}) {
     const Frustum f = test::frustum_at(eye);
     const test::TouchingVolumes set = test::touching_volumes(f, eye, rng, 40000);
     SCOPED_TRACE("eye " + std::to_string(eye.x) + ", " + std::to_string(eye.y) + ", " + std::to_string(eye.z) + ": " +
@@ -163,7 +165,8 @@ TEST(BvhVolumes, TheMarginKeepsTheHierarchyUseful) {
   test::Rng rng{31};
   const test::RandomVolumes v = test::random_volumes(rng, 20000, 100.0f, 1.0f);
   const Frustum f = Frustum::from_view_proj(test::test_view_proj(10.0f, 1.0f));
-  const bvh::FlatTree spheres = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Sphere>(v.spheres))));
+  const bvh::FlatTree spheres =
+      bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Sphere>(v.spheres))));
   const bvh::FlatTree boxes = bvh::flatten(bvh::build("binned-sah", v.aabbs));
   const bvh::HierarchicalResult hs = bvh::cull_hierarchical(spheres, std::span<const Sphere>(v.spheres), f);
   const bvh::HierarchicalResult hb = bvh::cull_hierarchical(boxes, std::span<const Aabb>(v.aabbs), f);

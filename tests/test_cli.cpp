@@ -2,13 +2,13 @@
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
-#include <set>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <sstream>
-#include <cmath>
 #include <string>
 
 namespace {
@@ -54,7 +54,8 @@ const std::string kNoVulkan = "VK_ICD_FILENAMES=/nonexistent/icd.json VK_DRIVER_
 TEST(Cli, HelpListsSubcommands) {
   const Result r = cullpipe("--help");
   EXPECT_EQ(r.code, 0);
-  for (const char* word : {"run", "classify", "generate", "devices", "render", "bounds", "bvh"}) EXPECT_NE(r.out.find(word), std::string::npos) << word;
+  for (const char* word : {"run", "classify", "generate", "devices", "render", "bounds", "bvh"})
+    EXPECT_NE(r.out.find(word), std::string::npos) << word;
 }
 
 TEST(Cli, RunWithNoArgumentsCullsTheDefaultSceneAndAgrees) {
@@ -89,7 +90,7 @@ TEST(Cli, ClassifyGivesTheDerivedAnswers) {
   const Result r = cullpipe("classify '" + kData + "/classify_cube.json' --validate");
   ASSERT_EQ(r.code, 0) << r.err;
   const auto j = nlohmann::json::parse(r.out);
-  const std::vector<std::string> expected = {"inside",       "outside", "intersecting", "inside",      "outside",
+  const std::vector<std::string> expected = {"inside",       "outside", "intersecting", "inside", "outside",
                                              "intersecting", "inside",  "intersecting", "outside"};
   EXPECT_EQ(j["cpu"].get<std::vector<std::string>>(), expected);
   EXPECT_EQ(j["gpu"].get<std::vector<std::string>>(), expected);
@@ -135,8 +136,9 @@ TEST(Cli, MultiViewDumpRoundTrips) {
 // equal flat culling's (the dump reads back into `classify`), and test counts are recorded.
 TEST(Cli, RunWithTheBvhAgreesAndDumpsTestCounts) {
   const fs::path json = temp_dir() / "bvh_summary.json", dump = temp_dir() / "bvh_dump.json";
-  const Result r = cullpipe("run --generate city:4000 --views 3 --validate --cull bvh --builder median --leaf-size 2 --json '" +
-                            json.string() + "' --dump '" + dump.string() + "'");
+  const Result r =
+      cullpipe("run --generate city:4000 --views 3 --validate --cull bvh --builder median --leaf-size 2 --json '" +
+               json.string() + "' --dump '" + dump.string() + "'");
   ASSERT_EQ(r.code, 0) << r.out << r.err;
   EXPECT_EQ(r.err, "");
   EXPECT_NE(r.out.find("bvh: median"), std::string::npos) << r.out;
@@ -163,8 +165,9 @@ TEST(Cli, RunWithTheBvhAgreesAndDumpsTestCounts) {
   // same classes; the GPU (to the leaves) still agrees, its counts proved against the scalar
   // traversal's with no ranges.
   for (const char* cpu : {"reference", "fast"}) {
-    const Result g = cullpipe("run --generate city:4000 --views 3 --validate --cull bvh --builder median --leaf-size 2 --cpu " +
-                              std::string(cpu) + " --range-objects 64 --json '" + json.string() + "'");
+    const Result g =
+        cullpipe("run --generate city:4000 --views 3 --validate --cull bvh --builder median --leaf-size 2 --cpu " +
+                 std::string(cpu) + " --range-objects 64 --json '" + json.string() + "'");
     ASSERT_EQ(g.code, 0) << g.out << g.err;
     EXPECT_NE(g.out.find("ranges of <= 64 objects"), std::string::npos) << g.out;
     const auto gj = nlohmann::json::parse(slurp(json));
@@ -180,10 +183,11 @@ TEST(Cli, RunWithTheBvhAgreesAndDumpsTestCounts) {
   // Unasked, the fast path's ranges depend on the volumes: 160 objects for AABBs and spheres,
   // 96 for OBBs (CpuBvhCullOptions::default_range_objects).
   for (const auto& [bv, range] : {std::pair{"aabb", 160}, std::pair{"sphere", 160}, std::pair{"obb", 96}}) {
-    const Result g = cullpipe("run --generate city:2000 --cull bvh --backend cpu --cpu fast --bv " + std::string(bv) + " --json '" +
-                              json.string() + "' --dump '" + dump.string() + "'");
+    const Result g = cullpipe("run --generate city:2000 --cull bvh --backend cpu --cpu fast --bv " + std::string(bv) +
+                              " --json '" + json.string() + "' --dump '" + dump.string() + "'");
     ASSERT_EQ(g.code, 0) << g.out << g.err;
-    EXPECT_NE(g.out.find("ranges of <= " + std::to_string(range) + " objects"), std::string::npos) << bv << "\n" << g.out;
+    EXPECT_NE(g.out.find("ranges of <= " + std::to_string(range) + " objects"), std::string::npos) << bv << "\n"
+                                                                                                   << g.out;
     EXPECT_EQ(nlohmann::json::parse(slurp(json))["range_objects"], range) << bv;
     EXPECT_EQ(nlohmann::json::parse(slurp(dump))["tests"][0]["range_objects"], range) << bv;
   }
@@ -203,14 +207,16 @@ TEST(Cli, EveryKindFlatAndHierarchicalOnEitherCpuPath) {
   for (const char* bv : {"aabb", "obb", "sphere"})
     for (const char* cull : {"flat", "bvh"})
       for (const char* cpu : {"reference", "fast"}) {
-        const std::string args = std::string("run --generate clustered:3000 --views 2 --validate --bv ") + bv + " --cull " + cull + " --cpu " + cpu;
+        const std::string args = std::string("run --generate clustered:3000 --views 2 --validate --bv ") + bv +
+                                 " --cull " + cull + " --cpu " + cpu;
         const Result r = cullpipe(args + " --json '" + json.string() + "'");
         ASSERT_EQ(r.code, 0) << args << "\n" << r.out << r.err;
         const auto j = nlohmann::json::parse(slurp(json));
         EXPECT_EQ(j["agree"], true) << args;
         EXPECT_EQ(j["bv"], bv);
         const std::string path = j["cpu_path"];
-        EXPECT_EQ(path.find(std::string(cpu) == "fast" ? "fast" : "reference") != std::string::npos, true) << args << ": " << path;
+        EXPECT_EQ(path.find(std::string(cpu) == "fast" ? "fast" : "reference") != std::string::npos, true)
+            << args << ": " << path;
         EXPECT_NE(r.out.find("cpu " + path), std::string::npos) << r.out;
         // The fast path is itself checked against the reference.
         if (std::string(cpu) == "fast") {
@@ -227,7 +233,8 @@ TEST(Cli, EveryKindFlatAndHierarchicalOnEitherCpuPath) {
   EXPECT_NE(r.out.find("cpu fast hierarchical"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("; upload "), std::string::npos) << r.out;  // the fast culler's copy of the scene
   const fs::path upload_json = temp_dir() / "fast_upload.json";
-  const Result flat = cullpipe("run --generate uniform:5000 --cpu fast --backend cpu --json '" + upload_json.string() + "'", kNoVulkan);
+  const Result flat =
+      cullpipe("run --generate uniform:5000 --cpu fast --backend cpu --json '" + upload_json.string() + "'", kNoVulkan);
   ASSERT_EQ(flat.code, 0) << flat.err;
   const auto uploads = nlohmann::json::parse(slurp(upload_json));
   EXPECT_GT(uploads["cpu_upload_ns"].get<double>(), 0.0);
@@ -254,7 +261,8 @@ TEST(Cli, BvhCommandReportsEveryBuilder) {
   }
   EXPECT_GE(names.size(), 15u);
   EXPECT_TRUE(names.count("agglomerative-brute"));  // 1500 objects: within its limit
-  const Result one = cullpipe("bvh --generate uniform:3000 --builder top-down:axis=pca,split=median,cost=sah insertion-greedy+rotations");
+  const Result one = cullpipe(
+      "bvh --generate uniform:3000 --builder top-down:axis=pca,split=median,cost=sah insertion-greedy+rotations");
   ASSERT_EQ(one.code, 0) << one.err;
   EXPECT_NE(one.out.find("insertion-greedy+rotations"), std::string::npos) << one.out;
 }
@@ -335,14 +343,16 @@ TEST(Cli, OutOfDeviceMemoryIsClearWritesNothingAndTheCpuBackendStillWorks) {
   // A 16 MiB device-memory budget cannot hold a million AABBs (32 MB of bounds).
   const fs::path json = temp_dir() / "oom.json";
   fs::remove(json);
-  const Result gpu = cullpipe("run --generate uniform:1000000 --backend gpu --gpu-memory 16 --json '" + json.string() + "'");
+  const Result gpu =
+      cullpipe("run --generate uniform:1000000 --backend gpu --gpu-memory 16 --json '" + json.string() + "'");
   EXPECT_EQ(gpu.code, 3);
   EXPECT_NE(gpu.err.find("VK_ERROR_OUT_OF_DEVICE_MEMORY"), std::string::npos) << gpu.err;
   EXPECT_NE(gpu.err.find("memory budget of 16777216 bytes"), std::string::npos) << gpu.err;
   EXPECT_NE(gpu.err.find("--backend cpu"), std::string::npos) << gpu.err;
   EXPECT_FALSE(fs::exists(json)) << "no output file after a failed run";
   EXPECT_FALSE(fs::exists(json.string() + ".tmp"));
-  const Result cpu = cullpipe("run --generate uniform:1000000 --backend cpu --gpu-memory 16 --json '" + json.string() + "'");
+  const Result cpu =
+      cullpipe("run --generate uniform:1000000 --backend cpu --gpu-memory 16 --json '" + json.string() + "'");
   EXPECT_EQ(cpu.code, 0) << cpu.err;
   EXPECT_TRUE(fs::exists(json));
   // Enough budget: the same scene on the GPU agrees with the CPU.
@@ -360,7 +370,8 @@ TEST(Cli, GenerateWritesALoadableScene) {
 
 TEST(Cli, BoundsReportsEveryBuilder) {
   const fs::path pts = temp_dir() / "pts.txt", json = temp_dir() / "bounds.json";
-  std::ofstream(pts) << "# cube corners and the centre\n-1 -1 -1\n1 -1 -1\n-1 1 -1\n1 1 -1\n-1 -1 1\n1 -1 1\n-1 1 1\n1 1 1\n0 0 0\n";
+  std::ofstream(pts)
+      << "# cube corners and the centre\n-1 -1 -1\n1 -1 -1\n-1 1 -1\n1 1 -1\n-1 -1 1\n1 -1 1\n-1 1 1\n1 1 1\n0 0 0\n";
   const Result r = cullpipe("bounds --points '" + pts.string() + "' --json '" + json.string() + "'");
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_NE(r.out.find("9 points"), std::string::npos) << r.out;
@@ -387,7 +398,8 @@ TEST(Cli, GltfSceneRunsAgreesAndDumpsWhereEachObjectCameFrom) {
   if (!fs::exists(scene)) GTEST_SKIP() << scene << " not present";
   const fs::path dump = temp_dir() / "truck.json";
   for (const char* bv : {"aabb", "obb", "sphere"}) {
-    const Result r = cullpipe("run --validate --views 4 --bv " + std::string(bv) + " --scene '" + scene.string() + "' --dump '" + dump.string() + "'");
+    const Result r = cullpipe("run --validate --views 4 --bv " + std::string(bv) + " --scene '" + scene.string() +
+                              "' --dump '" + dump.string() + "'");
     ASSERT_EQ(r.code, 0) << r.err;
     EXPECT_NE(r.out.find("5 objects"), std::string::npos) << r.out;
     EXPECT_NE(r.out.find("identical (gpu == cpu)"), std::string::npos) << r.out;
@@ -408,7 +420,9 @@ TEST(Cli, GltfSceneRunsAgreesAndDumpsWhereEachObjectCameFrom) {
     ASSERT_EQ(c.code, 0) << c.err;
   }
   // Every builder and update method can be chosen; repeated into a larger scene.
-  const Result big = cullpipe("run --scene '" + scene.string() + "' --obb exact --sphere refined --aabb-update hill-climb --instances 300 --layout random");
+  const Result big =
+      cullpipe("run --scene '" + scene.string() +
+               "' --obb exact --sphere refined --aabb-update hill-climb --instances 300 --layout random");
   ASSERT_EQ(big.code, 0) << big.err;
   EXPECT_NE(big.out.find("1500 objects"), std::string::npos) << big.out;
   EXPECT_NE(big.out.find("identical (gpu == cpu)"), std::string::npos) << big.out;
@@ -428,8 +442,8 @@ TEST(Cli, GltfSceneRunsAgreesAndDumpsWhereEachObjectCameFrom) {
 
 TEST(Cli, RenderWritesImagesAndChecksCulledEqualsUnculled) {
   const fs::path png = temp_dir() / "city.png", top = temp_dir() / "city_top.png";
-  const Result r = cullpipe("render --generate city:800 --width 200 --height 120 --check --validate --out '" + png.string() +
-                            "' --top-down '" + top.string() + "'");
+  const Result r = cullpipe("render --generate city:800 --width 200 --height 120 --check --validate --out '" +
+                            png.string() + "' --top-down '" + top.string() + "'");
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_NE(r.out.find("is identical, pixel for pixel"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("of 800 objects drawn"), std::string::npos) << r.out;
@@ -437,7 +451,8 @@ TEST(Cli, RenderWritesImagesAndChecksCulledEqualsUnculled) {
     ASSERT_TRUE(fs::exists(p)) << p;
     EXPECT_EQ(slurp(p).substr(1, 3), "PNG");
   }
-  const Result all = cullpipe("render --generate city:50 --no-cull --width 64 --height 64 --out '" + png.string() + "'");
+  const Result all =
+      cullpipe("render --generate city:50 --no-cull --width 64 --height 64 --out '" + png.string() + "'");
   ASSERT_EQ(all.code, 0) << all.err;
   EXPECT_NE(all.out.find("no culling: 50 draws"), std::string::npos) << all.out;
   EXPECT_EQ(cullpipe("render --generate city:50").code, 2);  // --out is required

@@ -8,12 +8,12 @@
 #include <bit>
 #include <cfenv>
 #include <chrono>
-#include <cstdlib>
-#include <new>
 #include <cmath>
+#include <cstdlib>
 #include <limits>
 #include <map>
 #include <mutex>
+#include <new>
 #include <string>
 #include <thread>
 #include <vector>
@@ -23,16 +23,16 @@
 
 #include "bvh/builders.hpp"
 #include "bvh/bvh.hpp"
+#include "core/thread_pool.hpp"
 #include "cull/compare.hpp"
 #include "cull/cpu_bvh_culler.hpp"
 #include "cull/cpu_culler.hpp"
 #include "cull/kernel_select.hpp"
-#include "geom/plane_bounds.hpp"
 #include "cull/reference.hpp"
-#include "core/thread_pool.hpp"
-#include "scene/camera.hpp"
-#include "geom/pn_vertex.hpp"
 #include "edge_sets.hpp"
+#include "geom/plane_bounds.hpp"
+#include "geom/pn_vertex.hpp"
+#include "scene/camera.hpp"
 #include "test_util.hpp"
 
 // Counts operator new calls, so a test can check that a steady pass allocates nothing; and
@@ -40,7 +40,7 @@
 namespace {
 std::atomic<long> g_allocations{0};
 std::atomic<bool> g_fail_next_allocation{false};  // the next operator new throws std::bad_alloc
-}
+}  // namespace
 // The replacement new allocates with malloc, so its deletes free; GCC cannot see that
 // pairing through inlined allocators and warns.
 #pragma GCC diagnostic push
@@ -59,15 +59,15 @@ void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 namespace cullpipe {
 namespace {
 
-using test::aabb_edge_set;
-using test::obb_edge_set;
-using test::sphere_edge_set;
-using test::EdgeSet;
 using fast::CpuCuller;
 using fast::CpuCullerConfig;
 using fast::CpuCullOptions;
 using fast::CpuViewResult;
 using fast::Isa;
+using test::aabb_edge_set;
+using test::EdgeSet;
+using test::obb_edge_set;
+using test::sphere_edge_set;
 
 /// A node of a hand-made flat tree.
 bvh::FlatNode flat_node(const Aabb& box, std::uint32_t skip, std::uint32_t first, std::uint32_t count, bool leaf) {
@@ -108,15 +108,16 @@ std::vector<Frustum> test_views(bool scaled_normals = true) {
 /// counts and that the visible list is exactly the visible objects in object order (what
 /// `options` asked for; the outputs not asked for are empty).
 template <class Volume>
-void expect_equal_to_reference(std::span<const Volume> volumes, const Frustum& f, const CpuViewResult& r, const std::string& what,
-                               const CpuCullOptions& options = {}) {
+void expect_equal_to_reference(std::span<const Volume> volumes, const Frustum& f, const CpuViewResult& r,
+                               const std::string& what, const CpuCullOptions& options = {}) {
   std::vector<Classification> expected(volumes.size());
   const reference::CullCounts counts = reference::classify_all(volumes, f, expected);
   if (options.classes) {
     ASSERT_EQ(r.classes.size(), volumes.size()) << what;
     const std::size_t i = first_mismatch(expected, r.classes);
     ASSERT_EQ(i, npos) << what << ": object " << i << ": " << describe(volumes[i]) << "; frustum " << describe(f)
-                       << "; reference says " << to_string(expected[i]) << ", fast CPU says " << to_string(r.classes[i]);
+                       << "; reference says " << to_string(expected[i]) << ", fast CPU says "
+                       << to_string(r.classes[i]);
   } else {
     EXPECT_TRUE(r.classes.empty()) << what;
   }
@@ -129,8 +130,9 @@ void expect_equal_to_reference(std::span<const Volume> volumes, const Frustum& f
 }
 
 template <class Volume>
-void check_everywhere(const std::vector<Volume>& volumes, const std::string& what, std::vector<Frustum> views = test_views(),
-                      std::vector<unsigned> thread_counts = {1u, 2u, 3u}, std::vector<std::size_t> chunks = {16u, 48u, 16384u}) {
+void check_everywhere(const std::vector<Volume>& volumes, const std::string& what,
+                      std::vector<Frustum> views = test_views(), std::vector<unsigned> thread_counts = {1u, 2u, 3u},
+                      std::vector<std::size_t> chunks = {16u, 48u, 16384u}) {
   for (Isa isa : fast::supported_isas())
     for (unsigned threads : thread_counts)
       for (std::size_t chunk : chunks) {
@@ -138,15 +140,17 @@ void check_everywhere(const std::vector<Volume>& volumes, const std::string& wha
         culler.upload(std::span<const Volume>(volumes));
         // Both outputs, the list alone (the benchmarks' pass: no class writes, no crossing
         // bits) and the classes alone.
-        for (const CpuCullOptions options : {CpuCullOptions{true, true}, CpuCullOptions{false, true}, CpuCullOptions{true, false}}) {
+        for (const CpuCullOptions options :
+             {CpuCullOptions{true, true}, CpuCullOptions{false, true}, CpuCullOptions{true, false}}) {
           const std::vector<CpuViewResult> results = culler.cull(views, options);
           ASSERT_EQ(results.size(), views.size());
           for (std::size_t v = 0; v < views.size(); ++v)
             expect_equal_to_reference(std::span<const Volume>(volumes), views[v], results[v],
-                                      what + " n=" + std::to_string(volumes.size()) + " isa=" + std::string(to_string(isa)) +
+                                      what + " n=" + std::to_string(volumes.size()) +
+                                          " isa=" + std::string(to_string(isa)) +
                                           " threads=" + std::to_string(threads) + " chunk=" + std::to_string(chunk) +
-                                          " classes=" + std::to_string(options.classes) + " ids=" + std::to_string(options.visible_ids) +
-                                          " view " + std::to_string(v),
+                                          " classes=" + std::to_string(options.classes) +
+                                          " ids=" + std::to_string(options.visible_ids) + " view " + std::to_string(v),
                                       options);
         }
       }
@@ -175,7 +179,8 @@ TEST(CpuCuller, FindsMirroredPlanesAndCullsOrthographicViews) {
   std::vector<Frustum> views;
   views.push_back(Frustum::from_view_proj(camera.view_proj()));
   const fast::detail::PlaneSet perspective = fast::detail::plane_set(views.back());
-  EXPECT_TRUE(perspective.mirrored && perspective.mirror_base == 4 && perspective.mirror_plane == 5) << describe(views.back());
+  EXPECT_TRUE(perspective.mirrored && perspective.mirror_base == 4 && perspective.mirror_plane == 5)
+      << describe(views.back());
   camera.infinite_far = true;  // five planes, none mirrored
   EXPECT_FALSE(fast::detail::plane_set(Frustum::from_view_proj(camera.view_proj())).mirrored);
   camera.infinite_far = false;
@@ -268,7 +273,8 @@ TEST(CpuCuller, VisibleListsStayExactWhenRunsChangeBetweenPasses) {
             for (int v = 0; v < 2; ++v)
               expect_equal_to_reference(std::span<const Aabb>(boxes), views[v], results[static_cast<std::size_t>(v)],
                                         "isa=" + std::string(to_string(isa)) + " threads=" + std::to_string(threads) +
-                                            " chunk=" + std::to_string(chunk) + " pass " + std::to_string(pass) + " view " + std::to_string(v),
+                                            " chunk=" + std::to_string(chunk) + " pass " + std::to_string(pass) +
+                                            " view " + std::to_string(v),
                                         options);
             ++pass;
           }
@@ -297,8 +303,10 @@ TEST(CpuCuller, BothReadOrdersOfTheMemoryFloorReadEveryCentreAndBound) {
         for (std::size_t i = 0; i + 1 < n; ++i) x_before_last |= bits(centre_bounds[i].x);
         const std::uint32_t expected = column[0] | column[1] | column[2] | column[3];
         for (int k = 0; k < 4; ++k)
-          ASSERT_NE(column[k] & ~(column[(k + 1) % 4] | column[(k + 2) % 4] | column[(k + 3) % 4]), 0u) << "array " << k << " has no bit of its own";
-        ASSERT_NE(bits(centre_bounds.back().x) & ~(x_before_last | column[1] | column[2] | column[3]), 0u) << "the last x has no bit of its own";
+          ASSERT_NE(column[k] & ~(column[(k + 1) % 4] | column[(k + 2) % 4] | column[(k + 3) % 4]), 0u)
+              << "array " << k << " has no bit of its own";
+        ASSERT_NE(bits(centre_bounds.back().x) & ~(x_before_last | column[1] | column[2] | column[3]), 0u)
+            << "the last x has no bit of its own";
         CpuCuller culler({2, isa, chunk});
         culler.upload(std::span<const Aabb>(boxes));
         EXPECT_EQ(culler.touch_bounds(true), expected) << to_string(isa) << " n=" << n << " chunk=" << chunk;
@@ -366,11 +374,17 @@ TEST(CpuCuller, AabbsAtTheEdgeOfTheirPlaneBound) { check_edge_set(aabb_edge_set(
 
 TEST(CpuCuller, SpheresAtTheEdgeOfTheirPlaneBound) { check_edge_set(sphere_edge_set(), 1, "sphere at the bound"); }
 
-TEST(CpuCuller, AabbsAtTheEdgeOfTheirLowerBound) { check_edge_set(test::aabb_lower_edge_set(), 0, "aabb at the lower bound"); }
+TEST(CpuCuller, AabbsAtTheEdgeOfTheirLowerBound) {
+  check_edge_set(test::aabb_lower_edge_set(), 0, "aabb at the lower bound");
+}
 
-TEST(CpuCuller, ObbsAtTheEdgeOfTheirLowerBound) { check_edge_set(test::obb_lower_edge_set(), 0, "obb at the lower bound"); }
+TEST(CpuCuller, ObbsAtTheEdgeOfTheirLowerBound) {
+  check_edge_set(test::obb_lower_edge_set(), 0, "obb at the lower bound");
+}
 
-TEST(CpuCuller, SpheresAtTheEdgeOfTheirLowerBound) { check_edge_set(test::sphere_lower_edge_set(), 0, "sphere at the lower bound"); }
+TEST(CpuCuller, SpheresAtTheEdgeOfTheirLowerBound) {
+  check_edge_set(test::sphere_lower_edge_set(), 0, "sphere at the lower bound");
+}
 
 TEST(CpuCuller, PackedLowerBoundsStayBoundsAndReadBackBelowTheLowerBound) {
   using plane_bounds::pack_lower;
@@ -397,7 +411,8 @@ TEST(CpuCuller, PackedLowerBoundsStayBoundsAndReadBackBelowTheLowerBound) {
   EXPECT_EQ(pack_lower(inf, 1.0), inf);
   EXPECT_EQ(bits(pack_lower(0.0f, 1.0)), 0u);
   EXPECT_EQ(pack_lower(std::numeric_limits<float>::max(), 1e38), inf);  // rounding up carries into the exponent
-  EXPECT_EQ(bits(pack_lower(std::nextafter(2.0f, 0.0f), 1.9)), bits(2.0f) | 243u);  // 1.999... carries to 2, q = floor(256 * 0.95 = 243.2)
+  EXPECT_EQ(bits(pack_lower(std::nextafter(2.0f, 0.0f), 1.9)),
+            bits(2.0f) | 243u);  // 1.999... carries to 2, q = floor(256 * 0.95 = 243.2)
 }
 
 #if defined(__SSE__)
@@ -429,8 +444,9 @@ TEST(CpuCuller, AgreesUnderFlushToZeroSetAfterThePoolStarted) {
     _mm_setcsr(saved);
     ASSERT_NE(with_daz, without_daz) << "the case must be sharp: DAZ changes the reference's answer";
     const std::size_t i = first_mismatch(with_daz, r[0].classes);
-    EXPECT_EQ(i, npos) << "threads=" << threads << ": object " << i << " " << describe(boxes[i]) << ": reference under DAZ says "
-                       << to_string(with_daz[i]) << ", fast CPU says " << to_string(r[0].classes[i]);
+    EXPECT_EQ(i, npos) << "threads=" << threads << ": object " << i << " " << describe(boxes[i])
+                       << ": reference under DAZ says " << to_string(with_daz[i]) << ", fast CPU says "
+                       << to_string(r[0].classes[i]);
     EXPECT_EQ(r[0].counts, counts);
   }
 }
@@ -455,16 +471,17 @@ void expect_mode_independent(const EdgeSet<Volume>& set, const std::string& what
       for (unsigned f : flush) {
         _mm_setcsr((saved & ~0xE040u) | r | f);
         const std::vector<CpuViewResult> results = culler.cull(set.views);
-        std::vector<std::vector<Classification>> expected(set.views.size(), std::vector<Classification>(set.volumes.size()));
+        std::vector<std::vector<Classification>> expected(set.views.size(),
+                                                          std::vector<Classification>(set.volumes.size()));
         for (std::size_t v = 0; v < set.views.size(); ++v)
           reference::classify_all(std::span<const Volume>(set.volumes), set.views[v], expected[v]);
         _mm_setcsr(saved);
         for (std::size_t v = 0; v < set.views.size(); ++v) {
           const std::size_t i = first_mismatch(expected[v], results[v].classes);
-          ASSERT_EQ(i, npos) << what << ": upload mode " << std::hex << upload_mode << ", cull mode " << (r | f) << std::dec
-                             << ", view " << v << ", object " << i << " " << describe(set.volumes[i]) << "; frustum "
-                             << describe(set.views[v]) << ": reference says " << to_string(expected[v][i]) << ", fast CPU says "
-                             << to_string(results[v].classes[i]);
+          ASSERT_EQ(i, npos) << what << ": upload mode " << std::hex << upload_mode << ", cull mode " << (r | f)
+                             << std::dec << ", view " << v << ", object " << i << " " << describe(set.volumes[i])
+                             << "; frustum " << describe(set.views[v]) << ": reference says "
+                             << to_string(expected[v][i]) << ", fast CPU says " << to_string(results[v].classes[i]);
         }
       }
   }
@@ -508,7 +525,8 @@ TEST(CpuCuller, OptionsLeaveOutputsEmptyAndResultsAreReused) {
   culler.upload(std::span<const Aabb>(boxes));
   EXPECT_EQ(culler.kind(), BvKind::Aabb);
   culler.cull(views, {}, results);
-  for (std::size_t v = 0; v < views.size(); ++v) expect_equal_to_reference(std::span<const Aabb>(boxes), views[v], results[v], "reuse");
+  for (std::size_t v = 0; v < views.size(); ++v)
+    expect_equal_to_reference(std::span<const Aabb>(boxes), views[v], results[v], "reuse");
 }
 
 TEST(CpuCuller, ASteadyPassAllocatesNothing) {
@@ -525,7 +543,8 @@ TEST(CpuCuller, ASteadyPassAllocatesNothing) {
   const long before = g_allocations.load();
   for (int frame = 0; frame < 10; ++frame) culler.cull(views, {}, results);
   EXPECT_EQ(g_allocations.load() - before, 0) << "allocations in ten steady passes";
-  for (std::size_t v = 0; v < views.size(); ++v) expect_equal_to_reference(std::span<const Aabb>(boxes), views[v], results[v], "steady");
+  for (std::size_t v = 0; v < views.size(); ++v)
+    expect_equal_to_reference(std::span<const Aabb>(boxes), views[v], results[v], "steady");
 }
 
 TEST(CpuCuller, ReportsItsKernelsAndRejectsOnesTheCpuLacks) {
@@ -551,11 +570,12 @@ static_assert(fast::CpuBvhCullOptions::default_range_objects(BvKind::Aabb) == 16
               fast::CpuBvhCullOptions::default_range_objects(BvKind::Obb) == 96);
 bvh::TraversalOptions fast_traversal(BvKind kind) { return {fast::CpuBvhCullOptions::default_range_objects(kind)}; }
 
-void expect_same_traversal(const bvh::HierarchicalResult& expected, const bvh::HierarchicalResult& got, const std::string& what) {
+void expect_same_traversal(const bvh::HierarchicalResult& expected, const bvh::HierarchicalResult& got,
+                           const std::string& what) {
   ASSERT_EQ(got.classes.size(), expected.classes.size()) << what;
   const std::size_t i = first_mismatch(expected.classes, got.classes);
-  ASSERT_EQ(i, npos) << what << ": object " << i << ": scalar traversal says " << to_string(expected.classes[i]) << ", fast says "
-                     << to_string(got.classes[i]);
+  ASSERT_EQ(i, npos) << what << ": object " << i << ": scalar traversal says " << to_string(expected.classes[i])
+                     << ", fast says " << to_string(got.classes[i]);
   EXPECT_EQ(got.node_tests, expected.node_tests) << what;
   EXPECT_EQ(got.object_tests, expected.object_tests) << what;
   EXPECT_EQ(got.visible, expected.visible) << what;
@@ -564,8 +584,8 @@ void expect_same_traversal(const bvh::HierarchicalResult& expected, const bvh::H
 
 // The visible list of a CpuBvhCuller pass: the tree's object order, filtered by the expected
 // classes.
-void expect_visible_list(const bvh::HierarchicalResult& expected, const bvh::FlatTree& tree, const std::vector<std::uint32_t>& ids,
-                         const std::string& what) {
+void expect_visible_list(const bvh::HierarchicalResult& expected, const bvh::FlatTree& tree,
+                         const std::vector<std::uint32_t>& ids, const std::string& what) {
   std::vector<std::uint32_t> want;
   for (std::uint32_t o : tree.objects)
     if (expected.classes[o] != Classification::Outside) want.push_back(o);
@@ -594,10 +614,12 @@ TEST(CpuBvhCuller, EqualsTheScalarTraversalExactly) {
           culler.upload(tree, boxes);
           bvh::HierarchicalResult reused;
           for (std::size_t v = 0; v < views.size(); ++v) {
-            const std::string what = std::string(builder) + " n=" + std::to_string(n) + " isa=" + std::string(to_string(isa)) +
-                                     " threads=" + std::to_string(threads) + " view " + std::to_string(v);
+            const std::string what = std::string(builder) + " n=" + std::to_string(n) +
+                                     " isa=" + std::string(to_string(isa)) + " threads=" + std::to_string(threads) +
+                                     " view " + std::to_string(v);
             culler.cull(views[v], reused);  // the default options
-            expect_same_traversal(bvh::cull_hierarchical(tree, boxes, views[v], fast_traversal(BvKind::Aabb)), reused, what);
+            expect_same_traversal(bvh::cull_hierarchical(tree, boxes, views[v], fast_traversal(BvKind::Aabb)), reused,
+                                  what);
             if (HasFatalFailure()) return;
           }
           // Object ranges from leaves only, from nodes of up to 5 objects, and from nodes larger
@@ -605,8 +627,9 @@ TEST(CpuBvhCuller, EqualsTheScalarTraversalExactly) {
           // without the classes.
           for (std::uint32_t range : {0u, 5u, 20000u})
             for (std::size_t v = 0; v < views.size(); ++v) {
-              const std::string what = std::string(builder) + " n=" + std::to_string(n) + " isa=" + std::string(to_string(isa)) +
-                                       " threads=" + std::to_string(threads) + " ranges " + std::to_string(range) + " view " + std::to_string(v);
+              const std::string what = std::string(builder) + " n=" + std::to_string(n) +
+                                       " isa=" + std::string(to_string(isa)) + " threads=" + std::to_string(threads) +
+                                       " ranges " + std::to_string(range) + " view " + std::to_string(v);
               const bvh::HierarchicalResult expected = bvh::cull_hierarchical(tree, boxes, views[v], {range});
               std::vector<std::uint32_t> ids{7, 7, 7};
               for (bool classes : {true, false}) {
@@ -645,7 +668,8 @@ TEST(CpuBvhCuller, TouchingBoxesAndLargeLeavesEqualTheScalarTraversal) {
     }
   }
   std::vector<Frustum> views = test_views();
-  const std::vector<glm::vec4> slab = {{1, 0, 0, 4}, {-1, 0, 0, 3}, {0, 1, 0, 0}, {0, -1, 0, 6}, {0, 0, 1, 2}, {0, 0, -1, 2}};
+  const std::vector<glm::vec4> slab = {{1, 0, 0, 4},  {-1, 0, 0, 3}, {0, 1, 0, 0},
+                                       {0, -1, 0, 6}, {0, 0, 1, 2},  {0, 0, -1, 2}};
   views.push_back(Frustum::from_planes(slab));
   const std::vector<glm::vec4> corner = {{1, 0, 0, -0.0f}, {0, -1, 0, 0}, {0, 0, -1, 1}};
   views.push_back(Frustum::from_planes(corner));
@@ -683,9 +707,9 @@ TEST(CpuBvhCuller, MarginEdgesAndHugeCoordinatesEqualTheScalarTraversal) {
   for (int i = 0; i < 40000; ++i) {
     glm::vec3 c = glm::floor(rng.vec3(-20.0f, 20.0f));
     const float r = std::floor(rng.uniform(0.0f, 4.0f));
-    if (i % 3 == 0) c.x = r;  // touching x = 0 from inside
-    if (i % 5 == 0) c.y = -r;  // touching y = 0 from inside
-    if (i % 7 == 0) c.x = std::nextafter(r, 0.0f);  // a float step across
+    if (i % 3 == 0) c.x = r;                                                           // touching x = 0 from inside
+    if (i % 5 == 0) c.y = -r;                                                          // touching y = 0 from inside
+    if (i % 7 == 0) c.x = std::nextafter(r, 0.0f);                                     // a float step across
     if (i % 97 == 0) c = glm::vec3(0x1p121f * float(1 + i % 3), -0x1p122f, 0x1p121f);  // past 2^120
     spheres.push_back({c, r});
     Obb b;
@@ -699,23 +723,30 @@ TEST(CpuBvhCuller, MarginEdgesAndHugeCoordinatesEqualTheScalarTraversal) {
   views.push_back(Frustum::from_planes(axis_planes));
   const std::vector<glm::vec4> far_planes = {{1, 0, 0, -0x1p121f}, {0, -1, 0, 0}};
   views.push_back(Frustum::from_planes(far_planes));
-  const bvh::FlatTree sphere_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Sphere>(spheres))));
-  const bvh::FlatTree obb_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(obbs))));
+  const bvh::FlatTree sphere_tree =
+      bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Sphere>(spheres))));
+  const bvh::FlatTree obb_tree =
+      bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(obbs))));
   for (Isa isa : fast::supported_isas()) {
     fast::CpuBvhCuller culler(2, isa);
-    for (std::uint32_t range : {0u, fast::CpuBvhCullOptions::default_range_objects(BvKind::Obb), fast::CpuBvhCullOptions::default_range_objects(BvKind::Aabb), 100000u})  // (the last: the whole tree one range)
+    for (std::uint32_t range : {0u, fast::CpuBvhCullOptions::default_range_objects(BvKind::Obb),
+                                fast::CpuBvhCullOptions::default_range_objects(BvKind::Aabb),
+                                100000u})  // (the last: the whole tree one range)
       for (std::size_t v = 0; v < views.size(); ++v) {
-        const std::string what = "isa=" + std::string(to_string(isa)) + " ranges " + std::to_string(range) + " view " + std::to_string(v);
+        const std::string what =
+            "isa=" + std::string(to_string(isa)) + " ranges " + std::to_string(range) + " view " + std::to_string(v);
         std::vector<std::uint32_t> ids;
         bvh::HierarchicalResult got;
         const fast::CpuBvhCullOptions options{true, true, range};
         culler.upload(sphere_tree, std::span<const Sphere>(spheres));
-        const bvh::HierarchicalResult s = bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(spheres), views[v], {range});
+        const bvh::HierarchicalResult s =
+            bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(spheres), views[v], {range});
         culler.cull(views[v], options, got, ids);
         expect_same_traversal(s, got, "spheres " + what);
         expect_visible_list(s, sphere_tree, ids, "spheres " + what);
         culler.upload(obb_tree, std::span<const Obb>(obbs));
-        const bvh::HierarchicalResult o = bvh::cull_hierarchical(obb_tree, std::span<const Obb>(obbs), views[v], {range});
+        const bvh::HierarchicalResult o =
+            bvh::cull_hierarchical(obb_tree, std::span<const Obb>(obbs), views[v], {range});
         culler.cull(views[v], options, got, ids);
         expect_same_traversal(o, got, "obbs " + what);
         expect_visible_list(o, obb_tree, ids, "obbs " + what);
@@ -737,8 +768,10 @@ TEST(CpuBvhCuller, SeveralViewsInOnePassEqualOnePassEach) {
   views.push_back(Frustum::from_planes(nothing));
   views.push_back(Frustum::from_view_proj(test::test_view_proj(5.0f, 1.0f)));
   const bvh::FlatTree box_tree = bvh::flatten(bvh::build("binned-sah", v.aabbs));
-  const bvh::FlatTree obb_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(v.obbs))));
-  const bvh::FlatTree sphere_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Sphere>(v.spheres))));
+  const bvh::FlatTree obb_tree =
+      bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(v.obbs))));
+  const bvh::FlatTree sphere_tree =
+      bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Sphere>(v.spheres))));
   std::vector<fast::CpuBvhViewResult> results(2);  // resized by the pass
   for (unsigned threads : {1u, 3u}) {
     fast::CpuBvhCuller culler(threads);
@@ -747,17 +780,22 @@ TEST(CpuBvhCuller, SeveralViewsInOnePassEqualOnePassEach) {
       if (kind == 0) culler.upload(tree, std::span<const Aabb>(v.aabbs));
       if (kind == 1) culler.upload(tree, std::span<const Obb>(v.obbs));
       if (kind == 2) culler.upload(tree, std::span<const Sphere>(v.spheres));
-      for (const fast::CpuBvhCullOptions options : {fast::CpuBvhCullOptions{true, true}, fast::CpuBvhCullOptions{false, true},
-                                                    fast::CpuBvhCullOptions{true, false}}) {
+      for (const fast::CpuBvhCullOptions options :
+           {fast::CpuBvhCullOptions{true, true}, fast::CpuBvhCullOptions{false, true},
+            fast::CpuBvhCullOptions{true, false}}) {
         culler.cull(views, options, results);
         ASSERT_EQ(results.size(), views.size());
         for (std::size_t view = 0; view < views.size(); ++view) {
-          const std::string what = "kind " + std::to_string(kind) + " threads=" + std::to_string(threads) + " view " + std::to_string(view) +
-                                   (options.classes ? " classes" : "") + (options.visible_ids ? " list" : "");
+          const std::string what = "kind " + std::to_string(kind) + " threads=" + std::to_string(threads) + " view " +
+                                   std::to_string(view) + (options.classes ? " classes" : "") +
+                                   (options.visible_ids ? " list" : "");
           const bvh::HierarchicalResult expected =
-              kind == 0   ? bvh::cull_hierarchical(tree, std::span<const Aabb>(v.aabbs), views[view], fast_traversal(BvKind::Aabb))
-              : kind == 1 ? bvh::cull_hierarchical(tree, std::span<const Obb>(v.obbs), views[view], fast_traversal(BvKind::Obb))
-                          : bvh::cull_hierarchical(tree, std::span<const Sphere>(v.spheres), views[view], fast_traversal(BvKind::Sphere));
+              kind == 0 ? bvh::cull_hierarchical(tree, std::span<const Aabb>(v.aabbs), views[view],
+                                                 fast_traversal(BvKind::Aabb))
+              : kind == 1
+                  ? bvh::cull_hierarchical(tree, std::span<const Obb>(v.obbs), views[view], fast_traversal(BvKind::Obb))
+                  : bvh::cull_hierarchical(tree, std::span<const Sphere>(v.spheres), views[view],
+                                           fast_traversal(BvKind::Sphere));
           const bvh::HierarchicalResult& got = results[view].result;
           if (options.classes) {
             expect_same_traversal(expected, got, what);
@@ -788,14 +826,18 @@ TEST(CpuBvhCuller, EmptyNodesDescendOnlyWithoutRanges) {
     return flat_node({{-10, -10, -10}, {10, 10, 10}}, skip, first, count, leaf);
   };
   bvh::FlatTree tree;
-  tree.nodes = {node(5, 0, 2, false), node(4, 0, 0, false), node(3, 0, 0, true), node(4, 0, 0, true), node(5, 0, 2, true)};
+  tree.nodes = {node(5, 0, 2, false), node(4, 0, 0, false), node(3, 0, 0, true), node(4, 0, 0, true),
+                node(5, 0, 2, true)};
   tree.objects = {0, 1};
   ASSERT_EQ(bvh::check_flat_tree(tree, std::span<const Aabb>(boxes)), "");
   const glm::vec4 plane[1] = {{1, 0, 0, 0}};  // x >= 0: every node straddles it
   const Frustum f = Frustum::from_planes(plane);
   for (std::uint32_t range : {0u, 1u, 32u}) {
     const bvh::HierarchicalResult expected = bvh::cull_hierarchical(tree, std::span<const Aabb>(boxes), f, {range});
-    EXPECT_EQ(expected.node_tests, range == 0 ? 5u : range == 1 ? 3u : 1u) << "ranges " << range;  // (32: the root is a range)
+    EXPECT_EQ(expected.node_tests, range == 0   ? 5u
+                                   : range == 1 ? 3u
+                                                : 1u)
+        << "ranges " << range;  // (32: the root is a range)
     for (Isa isa : fast::supported_isas()) {
       fast::CpuBvhCuller culler(1, isa);
       culler.upload(tree, std::span<const Aabb>(boxes));
@@ -874,7 +916,9 @@ TEST(CpuBvhCuller, ListKernelListsTheMarkedIds) {
           }
           std::uint64_t bits = 0;
           for (unsigned b = 0; b < 64; ++b)
-            if (kind == 1 || (kind == 2 && rng.uniform(0.0f, 1.0f) < 0.1f) || (kind == 3 && rng.uniform(0.0f, 1.0f) < 0.7f)) bits |= 1ull << b;
+            if (kind == 1 || (kind == 2 && rng.uniform(0.0f, 1.0f) < 0.1f) ||
+                (kind == 3 && rng.uniform(0.0f, 1.0f) < 0.7f))
+              bits |= 1ull << b;
           marks[w] = bits;
         }
         if (objects % 64) marks.back() &= (1ull << (objects % 64)) - 1;  // no bit past the objects
@@ -886,14 +930,15 @@ TEST(CpuBvhCuller, ListKernelListsTheMarkedIds) {
         for (const std::size_t room : {want.size(), want.size() + 16, want.size() / 2}) {
           const std::size_t listed = std::min(room, want.size());
           std::vector<std::uint32_t> out(room + 1, 0xdeadbeefu);  // one guard past the room
-          std::vector<std::uint64_t> cleared = marks;  // (the kernel clears the words it lists)
+          std::vector<std::uint64_t> cleared = marks;             // (the kernel clears the words it lists)
           std::uint32_t* end = table.list(cleared.data(), words, from.data(), out.data(), out.data() + room);
           const std::string what = std::string(to_string(isa)) + " objects " + std::to_string(objects) + " pattern " +
                                    std::to_string(pattern) + " room " + std::to_string(room);
           EXPECT_EQ(cleared, std::vector<std::uint64_t>(words, 0)) << what << ": marks left set";
           ASSERT_EQ(end - out.data(), static_cast<std::ptrdiff_t>(listed)) << what;
           EXPECT_EQ(std::vector<std::uint32_t>(out.begin(), out.begin() + std::ptrdiff_t(listed)),
-                    std::vector<std::uint32_t>(want.begin(), want.begin() + std::ptrdiff_t(listed))) << what;
+                    std::vector<std::uint32_t>(want.begin(), want.begin() + std::ptrdiff_t(listed)))
+              << what;
           EXPECT_EQ(out[room], 0xdeadbeefu) << what << ": wrote past out_end";
         }
       }
@@ -924,7 +969,8 @@ TEST(CpuBvhCuller, ASteadyPassAllocatesNothing) {
   const long before = g_allocations.load();
   for (int i = 0; i < 10; ++i) frame();
   EXPECT_EQ(g_allocations.load() - before, 0) << "allocations in ten steady frames";
-  const bvh::HierarchicalResult expected = bvh::cull_hierarchical(tree, std::span<const Aabb>(v.aabbs), views[0], fast_traversal(BvKind::Aabb));
+  const bvh::HierarchicalResult expected =
+      bvh::cull_hierarchical(tree, std::span<const Aabb>(v.aabbs), views[0], fast_traversal(BvKind::Aabb));
   expect_same_traversal(expected, single, "steady");
 }
 
@@ -1006,8 +1052,10 @@ TEST(CpuBvhCuller, RefusesABadVolumeWhereverItIsAndKeepsTheLastUpload) {
   const test::RandomVolumes v = test::random_volumes(rng, n, 30.0f, 2.0f);
   const std::vector<Frustum> views = test_views(false);
   const bvh::FlatTree box_tree = bvh::flatten(bvh::build("binned-sah", v.aabbs));
-  const bvh::FlatTree obb_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(v.obbs))));
-  const bvh::FlatTree sphere_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Sphere>(v.spheres))));
+  const bvh::FlatTree obb_tree =
+      bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(v.obbs))));
+  const bvh::FlatTree sphere_tree =
+      bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Sphere>(v.spheres))));
   fast::CpuBvhCuller culler(3);
   culler.upload(box_tree, std::span<const Aabb>(v.aabbs));
   const bvh::HierarchicalResult before = culler.cull(views[0]);
@@ -1041,8 +1089,9 @@ TEST(CpuBvhCuller, RefusesABadVolumeWhereverItIsAndKeepsTheLastUpload) {
   }
   // A good upload of another kind after the refusals, then boxes again: as fresh.
   culler.upload(sphere_tree, std::span<const Sphere>(v.spheres));
-  expect_same_traversal(bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(v.spheres), views[1], fast_traversal(BvKind::Sphere)),
-                        culler.cull(views[1]), "spheres after the refusals");
+  expect_same_traversal(
+      bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(v.spheres), views[1], fast_traversal(BvKind::Sphere)),
+      culler.cull(views[1]), "spheres after the refusals");
   culler.upload(box_tree, std::span<const Aabb>(v.aabbs));
   expect_same_traversal(before, culler.cull(views[0]), "boxes again");
 }
@@ -1058,21 +1107,27 @@ TEST(CpuBvhCuller, UploadsOneAfterAnotherCullAsAFreshCuller) {
     bvh::BuildOptions options;
     options.max_leaf_size = n % 2 ? 1 : 8;
     const bvh::FlatTree box_tree = bvh::flatten(bvh::build("binned-sah", v.aabbs, options));
-    const bvh::FlatTree obb_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(v.obbs)), options));
+    const bvh::FlatTree obb_tree =
+        bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(v.obbs)), options));
     const bvh::FlatTree sphere_tree =
         bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Sphere>(v.spheres)), options));
     bvh::HierarchicalResult got;
     for (const Frustum& view : views) {
       culler.upload(box_tree, std::span<const Aabb>(v.aabbs));
       culler.cull(view, got);
-      expect_same_traversal(bvh::cull_hierarchical(box_tree, std::span<const Aabb>(v.aabbs), view, fast_traversal(BvKind::Aabb)), got, "boxes n=" + std::to_string(n));
+      expect_same_traversal(
+          bvh::cull_hierarchical(box_tree, std::span<const Aabb>(v.aabbs), view, fast_traversal(BvKind::Aabb)), got,
+          "boxes n=" + std::to_string(n));
       culler.upload(obb_tree, std::span<const Obb>(v.obbs));
       culler.cull(view, got);
-      expect_same_traversal(bvh::cull_hierarchical(obb_tree, std::span<const Obb>(v.obbs), view, fast_traversal(BvKind::Obb)), got, "obbs n=" + std::to_string(n));
+      expect_same_traversal(
+          bvh::cull_hierarchical(obb_tree, std::span<const Obb>(v.obbs), view, fast_traversal(BvKind::Obb)), got,
+          "obbs n=" + std::to_string(n));
       culler.upload(sphere_tree, std::span<const Sphere>(v.spheres));
       culler.cull(view, got);
-      expect_same_traversal(bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(v.spheres), view, fast_traversal(BvKind::Sphere)), got,
-                            "spheres n=" + std::to_string(n));
+      expect_same_traversal(
+          bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(v.spheres), view, fast_traversal(BvKind::Sphere)),
+          got, "spheres n=" + std::to_string(n));
       if (HasFatalFailure()) return;
     }
   }
@@ -1083,19 +1138,23 @@ TEST(CpuBvhCuller, ObbsAndSpheresEqualTheScalarTraversalAndFlatCulling) {
   const std::vector<Frustum> views = test_views(false);
   for (std::size_t n : {0u, 1u, 7u, 3000u, 40000u}) {
     const test::RandomVolumes v = test::random_volumes(rng, n, 30.0f, 2.0f);
-    const bvh::FlatTree obb_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(v.obbs))));
-    const bvh::FlatTree sphere_tree = bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Sphere>(v.spheres))));
+    const bvh::FlatTree obb_tree =
+        bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Obb>(v.obbs))));
+    const bvh::FlatTree sphere_tree =
+        bvh::flatten(bvh::build("binned-sah", bvh::enclosing_boxes(std::span<const Sphere>(v.spheres))));
     for (Isa isa : fast::supported_isas())
       for (unsigned threads : {1u, 2u, 3u}) {
         fast::CpuBvhCuller culler(threads, isa);
         bvh::HierarchicalResult got;
         for (std::size_t view = 0; view < views.size(); ++view) {
-          const std::string what = "n=" + std::to_string(n) + " isa=" + std::string(to_string(isa)) + " threads=" + std::to_string(threads) +
-                                   " view " + std::to_string(view);
+          const std::string what = "n=" + std::to_string(n) + " isa=" + std::string(to_string(isa)) +
+                                   " threads=" + std::to_string(threads) + " view " + std::to_string(view);
           culler.upload(obb_tree, std::span<const Obb>(v.obbs));
           EXPECT_EQ(culler.kind(), BvKind::Obb);
           culler.cull(views[view], got);
-          expect_same_traversal(bvh::cull_hierarchical(obb_tree, std::span<const Obb>(v.obbs), views[view], fast_traversal(BvKind::Obb)), got, "obb " + what);
+          expect_same_traversal(
+              bvh::cull_hierarchical(obb_tree, std::span<const Obb>(v.obbs), views[view], fast_traversal(BvKind::Obb)),
+              got, "obb " + what);
           std::vector<Classification> flat(n);
           reference::classify_all(std::span<const Obb>(v.obbs), views[view], flat);
           EXPECT_EQ(got.classes, flat) << "obb " << what;
@@ -1107,7 +1166,9 @@ TEST(CpuBvhCuller, ObbsAndSpheresEqualTheScalarTraversalAndFlatCulling) {
           culler.cull(views[view], got);
           culler.cull(views[view], {false, true}, listed, ids);
           expect_visible_list(got, sphere_tree, ids, "sphere list " + what);
-          expect_same_traversal(bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(v.spheres), views[view], fast_traversal(BvKind::Sphere)), got, "sphere " + what);
+          expect_same_traversal(bvh::cull_hierarchical(sphere_tree, std::span<const Sphere>(v.spheres), views[view],
+                                                       fast_traversal(BvKind::Sphere)),
+                                got, "sphere " + what);
           reference::classify_all(std::span<const Sphere>(v.spheres), views[view], flat);
           EXPECT_EQ(got.classes, flat) << "sphere " << what;
           if (HasFatalFailure()) return;
@@ -1197,8 +1258,10 @@ TEST(ThreadPool, CallsBackToBackRunEveryTaskOnceInItsOwnCall) {
     std::vector<int> hits(tasks, 0);
     std::atomic<int> wrong_call{0};
     pool.parallel_for(tasks, [&](std::size_t t) {
-      if (t >= hits.size()) wrong_call.fetch_add(1);
-      else ++hits[t];
+      if (t >= hits.size())
+        wrong_call.fetch_add(1);
+      else
+        ++hits[t];
     });
     ASSERT_EQ(wrong_call.load(), 0) << "round " << round;
     for (std::size_t t = 0; t < tasks; ++t) ASSERT_EQ(hits[t], 1) << "round " << round << " task " << t;
@@ -1212,17 +1275,23 @@ TEST(ThreadPool, RunsEveryTaskOnceAndRethrows) {
     pool.parallel_for(hits.size(), [&](std::size_t t) { ++hits[t]; });
     for (int h : hits) ASSERT_EQ(h, 1);
   }
-  EXPECT_THROW(pool.parallel_for(10, [](std::size_t t) { if (t == 7) throw std::runtime_error("task 7"); }), std::runtime_error);
+  EXPECT_THROW(pool.parallel_for(10,
+                                 [](std::size_t t) {
+                                   if (t == 7) throw std::runtime_error("task 7");
+                                 }),
+               std::runtime_error);
   int after = 0;
   pool.parallel_for(1, [&](std::size_t) { ++after; });
   EXPECT_EQ(after, 1);
   // On one thread too, the tasks after a throwing one still run.
   ThreadPool alone(1);
   std::vector<int> hits(10, 0);
-  EXPECT_THROW(alone.parallel_for(hits.size(), [&](std::size_t t) {
-    ++hits[t];
-    if (t == 3) throw std::runtime_error("task 3");
-  }), std::runtime_error);
+  EXPECT_THROW(alone.parallel_for(hits.size(),
+                                  [&](std::size_t t) {
+                                    ++hits[t];
+                                    if (t == 3) throw std::runtime_error("task 3");
+                                  }),
+               std::runtime_error);
   EXPECT_EQ(hits, std::vector<int>(10, 1));
 }
 

@@ -146,9 +146,18 @@ TEST(Validate, NamesWhatIsWrong) {
 // them bracket doubles tightly.
 TEST(Rounding, FloatStepsAreNextafterBitForBit) {
   const float inf = std::numeric_limits<float>::infinity();
-  std::vector<float> values = {0.0f, -0.0f, std::numeric_limits<float>::denorm_min(), -std::numeric_limits<float>::denorm_min(),
-                               std::numeric_limits<float>::min(), -std::numeric_limits<float>::min(),
-                               std::numeric_limits<float>::max(), -std::numeric_limits<float>::max(), 1.0f, -1.0f, inf, -inf,
+  std::vector<float> values = {0.0f,
+                               -0.0f,
+                               std::numeric_limits<float>::denorm_min(),
+                               -std::numeric_limits<float>::denorm_min(),
+                               std::numeric_limits<float>::min(),
+                               -std::numeric_limits<float>::min(),
+                               std::numeric_limits<float>::max(),
+                               -std::numeric_limits<float>::max(),
+                               1.0f,
+                               -1.0f,
+                               inf,
+                               -inf,
                                std::numeric_limits<float>::quiet_NaN()};
   test::Rng rng{7};
   for (int i = 0; i < 100000; ++i) values.push_back(std::bit_cast<float>(std::uint32_t(rng.next())));
@@ -177,13 +186,16 @@ TEST(Rounding, FloatStepsAreNextafterBitForBit) {
           _mm_setcsr(saved);
         }
       } mode;
-      for (std::size_t i = 0; i < values.size(); ++i) below[i] = float_below(values[i]), above[i] = float_above(values[i]);
+      for (std::size_t i = 0; i < values.size(); ++i)
+        below[i] = float_below(values[i]), above[i] = float_above(values[i]);
     }
     for (std::size_t i = 0; i < values.size(); ++i) {
       const float f = values[i];
       if (std::isnan(f)) continue;
-      EXPECT_EQ(std::bit_cast<std::uint32_t>(below[i]), std::bit_cast<std::uint32_t>(std::nextafter(f, -inf))) << std::hex << std::bit_cast<std::uint32_t>(f);
-      EXPECT_EQ(std::bit_cast<std::uint32_t>(above[i]), std::bit_cast<std::uint32_t>(std::nextafter(f, inf))) << std::hex << std::bit_cast<std::uint32_t>(f);
+      EXPECT_EQ(std::bit_cast<std::uint32_t>(below[i]), std::bit_cast<std::uint32_t>(std::nextafter(f, -inf)))
+          << std::hex << std::bit_cast<std::uint32_t>(f);
+      EXPECT_EQ(std::bit_cast<std::uint32_t>(above[i]), std::bit_cast<std::uint32_t>(std::nextafter(f, inf)))
+          << std::hex << std::bit_cast<std::uint32_t>(f);
     }
   }
 #endif
@@ -194,7 +206,8 @@ TEST(Rounding, FloatStepsAreNextafterBitForBit) {
   for (int i = 0; i < 100000; ++i)
     doubles.push_back((double(rng.next() >> 11) * 0x1p-53 - 0.5) * std::ldexp(1.0, int(rng.next() % 300) - 150));
   for (double b : {0x1p-126, 0x1p-149, 0x1p-150, 0x1.8p-150, 0x1p-1000, 0x1p-1074, 0x1p-1022, 0.0, 3e-40, 1e-45,
-                   double(std::numeric_limits<float>::max()), 0x1.fffffffp127, 0x1p128, 1e300, std::numeric_limits<double>::infinity()})
+                   double(std::numeric_limits<float>::max()), 0x1.fffffffp127, 0x1p128, 1e300,
+                   std::numeric_limits<double>::infinity()})
     for (double v : {b, std::nextafter(b, 0.0), std::nextafter(b, 1.0)}) doubles.push_back(v), doubles.push_back(-v);
   std::vector<float> lows, highs;
   for (double v : doubles) {
@@ -226,7 +239,8 @@ TEST(Rounding, FloatStepsAreNextafterBitForBit) {
             _mm_setcsr(saved);
           }
         } set(mode);
-        for (std::size_t i = 0; i < doubles.size(); ++i) mode_lows[i] = round_down(doubles[i]), mode_highs[i] = round_up(doubles[i]);
+        for (std::size_t i = 0; i < doubles.size(); ++i)
+          mode_lows[i] = round_down(doubles[i]), mode_highs[i] = round_up(doubles[i]);
       }
       int wrong = 0;
       for (std::size_t i = 0; i < doubles.size() && wrong < 5; ++i)
@@ -242,8 +256,15 @@ TEST(Rounding, FloatStepsAreNextafterBitForBit) {
 
 // is_valid is invalid_reason(v).empty(), on volumes broken one value at a time.
 TEST(Validate, IsValidAgreesWithInvalidReason) {
-  const float specials[] = {std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity(),
-                            -std::numeric_limits<float>::infinity(), -1.0f, 0.0f, 2.0f, 0.999f, 1.0005f, -0.0f};
+  const float specials[] = {std::numeric_limits<float>::quiet_NaN(),
+                            std::numeric_limits<float>::infinity(),
+                            -std::numeric_limits<float>::infinity(),
+                            -1.0f,
+                            0.0f,
+                            2.0f,
+                            0.999f,
+                            1.0005f,
+                            -0.0f};
   test::Rng rng{5};
   int invalid = 0;
   for (int i = 0; i < 2000; ++i) {
@@ -253,13 +274,20 @@ TEST(Validate, IsValidAgreesWithInvalidReason) {
     const float v = specials[rng.next() % std::size(specials)];
     const int at = int(rng.next() % 16);
     if (i % 4) {  // one value replaced (a quarter stay as generated)
-      if (at < 3) a.min[at] = v;
-      else if (at < 6) a.max[at - 3] = v;
-      if (at < 3) o.center[at] = v;
-      else if (at < 6) o.half_extents[at - 3] = v;
-      else if (at < 15) o.basis[(at - 6) / 3][(at - 6) % 3] = v;
-      if (at < 3) s.center[at] = v;
-      else if (at == 3) s.radius = v;
+      if (at < 3)
+        a.min[at] = v;
+      else if (at < 6)
+        a.max[at - 3] = v;
+      if (at < 3)
+        o.center[at] = v;
+      else if (at < 6)
+        o.half_extents[at - 3] = v;
+      else if (at < 15)
+        o.basis[(at - 6) / 3][(at - 6) % 3] = v;
+      if (at < 3)
+        s.center[at] = v;
+      else if (at == 3)
+        s.radius = v;
     }
     EXPECT_EQ(is_valid(a), invalid_reason(a).empty()) << i;
     EXPECT_EQ(is_valid(o), invalid_reason(o).empty()) << i;
@@ -301,17 +329,17 @@ glm::mat4 view() { return glm::lookAtRH(glm::vec3(0, 0, 10), glm::vec3(0), glm::
 // Camera at z = 10 looking down -z; near 1, far 100, 90 degree vertical fov, aspect 2.
 void expect_perspective_classification(const Frustum& f, bool finite_far) {
   expect_normalised(f);
-  EXPECT_TRUE(inside(f, {0, 0, 0}));            // straight ahead
-  EXPECT_TRUE(inside(f, {0, 0, 8.5f}));         // just past the near plane (z = 9)
-  EXPECT_FALSE(inside(f, {0, 0, 9.5f}));        // between camera and near plane
-  EXPECT_FALSE(inside(f, {0, 0, 20}));          // behind the camera
-  EXPECT_TRUE(inside(f, {0, 9.5f, 0}));         // tan(45) * 10 = 10: just inside top
-  EXPECT_FALSE(inside(f, {0, 10.5f, 0}));       // just outside top
-  EXPECT_FALSE(inside(f, {0, -10.5f, 0}));      // outside bottom
-  EXPECT_TRUE(inside(f, {19.5f, 0, 0}));        // aspect 2: half width 20 at distance 10
-  EXPECT_FALSE(inside(f, {20.5f, 0, 0}));       // outside right
-  EXPECT_FALSE(inside(f, {-20.5f, 0, 0}));      // outside left
-  EXPECT_TRUE(inside(f, {0, 0, -89}));          // before far (distance 99)
+  EXPECT_TRUE(inside(f, {0, 0, 0}));               // straight ahead
+  EXPECT_TRUE(inside(f, {0, 0, 8.5f}));            // just past the near plane (z = 9)
+  EXPECT_FALSE(inside(f, {0, 0, 9.5f}));           // between camera and near plane
+  EXPECT_FALSE(inside(f, {0, 0, 20}));             // behind the camera
+  EXPECT_TRUE(inside(f, {0, 9.5f, 0}));            // tan(45) * 10 = 10: just inside top
+  EXPECT_FALSE(inside(f, {0, 10.5f, 0}));          // just outside top
+  EXPECT_FALSE(inside(f, {0, -10.5f, 0}));         // outside bottom
+  EXPECT_TRUE(inside(f, {19.5f, 0, 0}));           // aspect 2: half width 20 at distance 10
+  EXPECT_FALSE(inside(f, {20.5f, 0, 0}));          // outside right
+  EXPECT_FALSE(inside(f, {-20.5f, 0, 0}));         // outside left
+  EXPECT_TRUE(inside(f, {0, 0, -89}));             // before far (distance 99)
   EXPECT_EQ(inside(f, {0, 0, -91}), !finite_far);  // beyond far (distance 101)
   EXPECT_EQ(inside(f, {0, 0, -1e6f}), !finite_far);
 }

@@ -1,15 +1,15 @@
 // glTF scenes: node hierarchies, instancing, cameras and malformed files (host/scene/gltf_scene).
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <cstring>
-#include <functional>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <glm/geometric.hpp>
 #include <glm/gtc/quaternion.hpp>
 #include <nlohmann/json.hpp>
-#include <unistd.h>
 
 #include "cull/reference.hpp"
 #include "geom/validate.hpp"
@@ -48,7 +48,8 @@ glm::dmat4 node_matrix(const json& node) {
     for (int k = 0; k < 3; ++k) t[3][k] = node["translation"][std::size_t(k)].get<double>();
   if (node.contains("rotation")) {
     const json& q = node["rotation"];
-    r = glm::dmat4(glm::mat3_cast(glm::normalize(glm::dquat(q[3].get<double>(), q[0].get<double>(), q[1].get<double>(), q[2].get<double>()))));
+    r = glm::dmat4(glm::mat3_cast(
+        glm::normalize(glm::dquat(q[3].get<double>(), q[0].get<double>(), q[1].get<double>(), q[2].get<double>()))));
   }
   if (node.contains("scale"))
     for (int k = 0; k < 3; ++k) s[k][k] = node["scale"][std::size_t(k)].get<double>();
@@ -65,7 +66,8 @@ void collect(const json& doc, int n, const glm::dmat4& parent, std::vector<Insta
   const glm::dmat4 world = parent * node_matrix(node);
   if (node.contains("mesh")) {
     const int m = node["mesh"].get<int>();
-    for (std::size_t p = 0; p < doc["meshes"][std::size_t(m)]["primitives"].size(); ++p) out.push_back({n, m, int(p), world});
+    for (std::size_t p = 0; p < doc["meshes"][std::size_t(m)]["primitives"].size(); ++p)
+      out.push_back({n, m, int(p), world});
   }
   if (node.contains("children"))
     for (const json& c : node["children"]) collect(doc, c.get<int>(), world, out);
@@ -90,14 +92,16 @@ TEST(GltfScene, RealScenesMatchAnIndependentReadingOfTheirNodes) {
       const json doc = json::parse(std::ifstream(file.path()));
       std::vector<Instance> expected;
       const int s = doc.value("scene", 0);
-      for (const json& r : doc["scenes"][std::size_t(s)]["nodes"]) collect(doc, r.get<int>(), glm::dmat4(1.0), expected);
+      for (const json& r : doc["scenes"][std::size_t(s)]["nodes"])
+        collect(doc, r.get<int>(), glm::dmat4(1.0), expected);
 
       const GltfScene g = load_gltf_scene(file.path().string());
       ASSERT_EQ(g.scene.objects.size(), expected.size());
       EXPECT_EQ(g.cameras.size(), doc.contains("cameras") ? doc["cameras"].size() : 0u);
       const std::vector<Aabb> exact = world_aabbs(g.scene, bounds::AabbUpdate::Recompute);
       std::vector<std::vector<Aabb>> by_method;
-      for (bounds::AabbUpdate m : {bounds::AabbUpdate::HullRecompute, bounds::AabbUpdate::TransformBox, bounds::AabbUpdate::HillClimb})
+      for (bounds::AabbUpdate m :
+           {bounds::AabbUpdate::HullRecompute, bounds::AabbUpdate::TransformBox, bounds::AabbUpdate::HillClimb})
         by_method.push_back(world_aabbs(g.scene, m));
       const std::vector<Obb> obbs = world_obbs(g.scene);
       const std::vector<Sphere> spheres = world_spheres(g.scene);
@@ -111,7 +115,10 @@ TEST(GltfScene, RealScenesMatchAnIndependentReadingOfTheirNodes) {
         EXPECT_LE(max_abs(glm::dmat4(o.world) - e.world), 1e-6 * std::max(max_abs(e.world), 1.0));
         if (glm::determinant(glm::dmat3(e.world)) < 0.0) ++mirrored;
         // The local box is the accessor's declared min/max (exporters print in decimal).
-        const json& acc = doc["accessors"][doc["meshes"][std::size_t(e.mesh)]["primitives"][std::size_t(e.primitive)]["attributes"]["POSITION"].get<std::size_t>()];
+        const json& acc =
+            doc["accessors"]
+               [doc["meshes"][std::size_t(e.mesh)]["primitives"][std::size_t(e.primitive)]["attributes"]["POSITION"]
+                    .get<std::size_t>()];
         const float scale = glm::length(o.local_bounds.extent()) + 1e-30f;
         for (int k = 0; k < 3; ++k) {
           EXPECT_NEAR(o.local_bounds.min[k], acc["min"][std::size_t(k)].get<double>(), 1e-6 * scale);
@@ -127,7 +134,8 @@ TEST(GltfScene, RealScenesMatchAnIndependentReadingOfTheirNodes) {
           declared_world.min = glm::min(declared_world.min, w);
           declared_world.max = glm::max(declared_world.max, w);
         }
-        const float wscale = glm::length(declared_world.extent()) + glm::length(declared_world.center()) * 1e-3f + 1e-30f;
+        const float wscale =
+            glm::length(declared_world.extent()) + glm::length(declared_world.center()) * 1e-3f + 1e-30f;
         for (int k = 0; k < 3; ++k) {
           EXPECT_GE(exact[i].min[k], declared_world.min[k] - 1e-5f * wscale);
           EXPECT_LE(exact[i].max[k], declared_world.max[k] + 1e-5f * wscale);
@@ -148,7 +156,8 @@ TEST(GltfScene, RealScenesMatchAnIndependentReadingOfTheirNodes) {
           const double tol = 1e-5 * (double(glm::length(declared_world.extent())) + 1e-30) + 1e-6 * glm::length(w);
           EXPECT_LE(glm::length(w - glm::dvec3(spheres[i].center)), double(spheres[i].radius) + tol);
           for (int k = 0; k < 3; ++k)
-            EXPECT_LE(std::abs(glm::dot(w - glm::dvec3(obbs[i].center), glm::dvec3(obbs[i].basis[k]))), double(obbs[i].half_extents[k]) + tol);
+            EXPECT_LE(std::abs(glm::dot(w - glm::dvec3(obbs[i].center), glm::dvec3(obbs[i].basis[k]))),
+                      double(obbs[i].half_extents[k]) + tol);
         }
       }
       objects += expected.size();
@@ -228,9 +237,16 @@ json tetra_gltf(const json& nodes, const json& scene_nodes) {
   std::memcpy(bin.data() + 48, idx, 24);
   json j;
   j["asset"] = {{"version", "2.0"}};
-  j["buffers"] = json::array({{{"byteLength", bin.size()}, {"uri", "data:application/octet-stream;base64," + base64(bin)}}});
-  j["bufferViews"] = json::array({{{"buffer", 0}, {"byteLength", 48}}, {{"buffer", 0}, {"byteOffset", 48}, {"byteLength", 24}}});
-  j["accessors"] = json::array({{{"bufferView", 0}, {"componentType", 5126}, {"count", 4}, {"type", "VEC3"}, {"min", {0, 0, 0}}, {"max", {2, 1, 3}}},
+  j["buffers"] =
+      json::array({{{"byteLength", bin.size()}, {"uri", "data:application/octet-stream;base64," + base64(bin)}}});
+  j["bufferViews"] =
+      json::array({{{"buffer", 0}, {"byteLength", 48}}, {{"buffer", 0}, {"byteOffset", 48}, {"byteLength", 24}}});
+  j["accessors"] = json::array({{{"bufferView", 0},
+                                 {"componentType", 5126},
+                                 {"count", 4},
+                                 {"type", "VEC3"},
+                                 {"min", {0, 0, 0}},
+                                 {"max", {2, 1, 3}}},
                                 {{"bufferView", 1}, {"componentType", 5123}, {"count", 12}, {"type", "SCALAR"}}});
   j["meshes"] = json::array({{{"primitives", json::array({{{"attributes", {{"POSITION", 0}}}, {"indices", 1}}})}}});
   j["nodes"] = nodes;
@@ -285,8 +301,8 @@ TEST(GltfScene, HierarchyMirroringAndSharedMeshes) {
   // Every method and volume encloses the known world vertices.
   const std::vector<std::vector<glm::vec3>> verts = {{{10, 0, 0}, {10, 0, 2}, {10, 2, 0}, {13, 0, 0}},
                                                      {{10, 5, 0}, {10, 5, -2}, {10, 6, 0}, {13, 5, 0}}};
-  for (bounds::AabbUpdate m : {bounds::AabbUpdate::Recompute, bounds::AabbUpdate::HullRecompute, bounds::AabbUpdate::TransformBox,
-                               bounds::AabbUpdate::HillClimb}) {
+  for (bounds::AabbUpdate m : {bounds::AabbUpdate::Recompute, bounds::AabbUpdate::HullRecompute,
+                               bounds::AabbUpdate::TransformBox, bounds::AabbUpdate::HillClimb}) {
     const std::vector<Aabb> boxes = world_aabbs(g.scene, m);
     for (std::size_t i = 0; i < 2; ++i)
       for (const glm::vec3& v : verts[i]) EXPECT_TRUE(box_contains(boxes[i], v)) << bounds::to_string(m) << " " << i;
@@ -311,8 +327,9 @@ TEST(GltfScene, SphereTransformIsTightForUniformScaleAndEnclosesForNonUniform) {
   EXPECT_GE(t.radius, 6.0f);
   EXPECT_LE(t.radius, 6.0f * (1 + 2e-6f));
   // Non-uniform: the longest axis wins, whatever the rotation.
-  glm::mat4 n = glm::mat4(glm::mat3_cast(glm::angleAxis(0.7f, glm::normalize(glm::vec3(1, 2, 3))))) *
-                glm::mat4(glm::vec4(1, 0, 0, 0), glm::vec4(0, 5, 0, 0), glm::vec4(0, 0, 0.5f, 0), glm::vec4(0, 0, 0, 1));
+  glm::mat4 n =
+      glm::mat4(glm::mat3_cast(glm::angleAxis(0.7f, glm::normalize(glm::vec3(1, 2, 3))))) *
+      glm::mat4(glm::vec4(1, 0, 0, 0), glm::vec4(0, 5, 0, 0), glm::vec4(0, 0, 0.5f, 0), glm::vec4(0, 0, 0, 1));
   const Sphere u = bounds::transform_sphere(s, n);
   EXPECT_GE(u.radius, 10.0f);
   EXPECT_LE(u.radius, 10.0f * (1 + 2e-6f));
@@ -330,7 +347,8 @@ TEST(GltfScene, MalformedFilesNameTheFileAndTheElement) {
   json two = tetra_gltf(json::array({{{"children", {2}}}, {{"children", {2}}}, {{"mesh", 0}}}), {0, 1});
   EXPECT_EQ(load_error("two.gltf", two), "two.gltf: nodes[2] has two parents: nodes[0] and nodes[1]");
   json child = tetra_gltf(json::array({{{"children", {1}}}, {{"mesh", 0}}}), {0, 1});
-  EXPECT_EQ(load_error("child.gltf", child), "child.gltf: scenes[0].nodes: nodes[1] is not a root (it is a child of nodes[0])");
+  EXPECT_EQ(load_error("child.gltf", child),
+            "child.gltf: scenes[0].nodes: nodes[1] is not a root (it is a child of nodes[0])");
   json missing_child = tetra_gltf(json::array({{{"children", {5}}}}), {0});
   EXPECT_EQ(load_error("kid.gltf", missing_child), "kid.gltf: nodes[0].children lists node 5, which does not exist");
 
@@ -348,24 +366,30 @@ TEST(GltfScene, MalformedFilesNameTheFileAndTheElement) {
   json float_index = j;
   float_index["accessors"][1]["componentType"] = 5126;
   EXPECT_EQ(load_error("fidx.gltf", float_index),
-            "fidx.gltf: meshes[0].primitives[0]: index accessor 1 has component type 5126, not UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT");
+            "fidx.gltf: meshes[0].primitives[0]: index accessor 1 has component type 5126, not UNSIGNED_BYTE, "
+            "UNSIGNED_SHORT or UNSIGNED_INT");
   json short_pos = j;
   short_pos["accessors"][0]["componentType"] = 5123;
-  EXPECT_NE(load_error("spos.gltf", short_pos).find("spos.gltf: meshes[0].primitives[0]: POSITION accessor 0 has component type 5123"),
+  EXPECT_NE(load_error("spos.gltf", short_pos)
+                .find("spos.gltf: meshes[0].primitives[0]: POSITION accessor 0 has component type 5123"),
             std::string::npos);
   json absurd = j;
   absurd["accessors"][0]["count"] = 4000000000u;
-  EXPECT_EQ(load_error("absurd.gltf", absurd), "absurd.gltf: meshes[0].primitives[0]: POSITION accessor 0 reads past its buffer view");
+  EXPECT_EQ(load_error("absurd.gltf", absurd),
+            "absurd.gltf: meshes[0].primitives[0]: POSITION accessor 0 reads past its buffer view");
   json past = j;
   past["accessors"][1]["count"] = 13;
-  EXPECT_EQ(load_error("past.gltf", past), "past.gltf: meshes[0].primitives[0]: index accessor 1 reads past its buffer view");
+  EXPECT_EQ(load_error("past.gltf", past),
+            "past.gltf: meshes[0].primitives[0]: index accessor 1 reads past its buffer view");
   json no_acc = j;
   no_acc["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = 9;
   EXPECT_NE(load_error("noacc.gltf", no_acc).find("noacc.gltf"), std::string::npos);
   json no_mesh = tetra_gltf(json::array({{{"mesh", 3}}}), {0});
   EXPECT_NE(load_error("nomesh.gltf", no_mesh).find("nomesh.gltf"), std::string::npos);
-  json bad_matrix = tetra_gltf(json::array({{{"mesh", 0}, {"matrix", {1, 0, 0, 1, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}}}}), {0});
-  EXPECT_EQ(load_error("proj.gltf", bad_matrix), "proj.gltf: nodes[0]: matrix is not affine (its last row must be 0 0 0 1)");
+  json bad_matrix =
+      tetra_gltf(json::array({{{"mesh", 0}, {"matrix", {1, 0, 0, 1, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}}}}), {0});
+  EXPECT_EQ(load_error("proj.gltf", bad_matrix),
+            "proj.gltf: nodes[0]: matrix is not affine (its last row must be 0 0 0 1)");
   json zero_q = tetra_gltf(json::array({{{"mesh", 0}, {"rotation", {0, 0, 0, 0}}}}), {0});
   EXPECT_EQ(load_error("zq.gltf", zero_q), "zq.gltf: nodes[0]: rotation is the zero quaternion");
   json truncated = j;
@@ -377,7 +401,8 @@ TEST(GltfScene, MalformedFilesNameTheFileAndTheElement) {
   json draco = j;
   draco["extensionsRequired"] = {"KHR_draco_mesh_compression"};
   draco["extensionsUsed"] = {"KHR_draco_mesh_compression"};
-  EXPECT_NE(load_error("draco.gltf", draco).find("draco.gltf: requires extension KHR_draco_mesh_compression"), std::string::npos);
+  EXPECT_NE(load_error("draco.gltf", draco).find("draco.gltf: requires extension KHR_draco_mesh_compression"),
+            std::string::npos);
   GltfSceneOptions o;
   o.scene = 3;
   EXPECT_EQ(load_error("scene.gltf", j, o), "scene.gltf: scene 3 does not exist (the file has 1 scenes)");
@@ -393,7 +418,8 @@ TEST(GltfScene, MalformedFilesNameTheFileAndTheElement) {
     std::memcpy(bin.data() + 48, idx, 24);
     nan["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64(bin);
   }
-  EXPECT_EQ(load_error("nan.gltf", nan), "nan.gltf: meshes[0].primitives[0]: POSITION accessor 0 vertex 1 has a NaN or infinite coordinate");
+  EXPECT_EQ(load_error("nan.gltf", nan),
+            "nan.gltf: meshes[0].primitives[0]: POSITION accessor 0 vertex 1 has a NaN or infinite coordinate");
   EXPECT_EQ(load_error("trunc2.gltf", json::parse(R"({"asset":{"version":"2.0"}})")), "no error");  // empty but valid
   EXPECT_THROW(load_gltf_scene("/nonexistent/scene.gltf"), InputError);
 }
@@ -402,37 +428,49 @@ TEST(GltfScene, MalformedFilesNameTheFileAndTheElement) {
 std::string glb_bytes(const json& j, const std::string& bin) {
   std::string text = j.dump();
   while (text.size() % 4) text += ' ';
-  auto u32 = [](std::uint32_t v) { return std::string(reinterpret_cast<const char*>(&v), 4); };  // little endian (x86, arm64)
+  auto u32 = [](std::uint32_t v) {
+    return std::string(reinterpret_cast<const char*>(&v), 4);
+  };  // little endian (x86, arm64)
   const std::uint32_t total = std::uint32_t(12 + 8 + text.size() + 8 + bin.size());
-  return "glTF" + u32(2) + u32(total) + u32(std::uint32_t(text.size())) + u32(0x4E4F534Au) + text + u32(std::uint32_t(bin.size())) +
-         u32(0x004E4942u) + bin;
+  return "glTF" + u32(2) + u32(total) + u32(std::uint32_t(text.size())) + u32(0x4E4F534Au) + text +
+         u32(std::uint32_t(bin.size())) + u32(0x004E4942u) + bin;
 }
 
 TEST(GltfScene, GlbWhoseBufferIsEmptyIsAnErrorNamingTheFile) {
   // A buffer of byteLength 0 with a BIN chunk: tinygltf's checks let it through and it then
   // indexes an empty vector (std::out_of_range); found by fuzz_gltf. Both readers must report
   // the file as unreadable.
-  const std::string path = write_temp("zerobuf.glb", glb_bytes(json::parse(R"({"asset":{"version":"2.0"},"buffers":[{"byteLength":0}]})"),
-                                                             std::string(4, '\0')));
+  const std::string path = write_temp(
+      "zerobuf.glb",
+      glb_bytes(json::parse(R"({"asset":{"version":"2.0"},"buffers":[{"byteLength":0}]})"), std::string(4, '\0')));
   for (int reader = 0; reader < 2; ++reader) {
     try {
-      if (reader == 0) load_gltf_scene(path);
-      else load_gltf_mesh_points(path);
+      if (reader == 0)
+        load_gltf_scene(path);
+      else
+        load_gltf_mesh_points(path);
       ADD_FAILURE() << "no error from reader " << reader;
     } catch (const InputError& e) {
       EXPECT_NE(std::string(e.what()).find(path + ": not a readable glTF file"), std::string::npos) << e.what();
     }
   }
   // The same file with a buffer of the chunk's size loads.
-  const std::string fine = write_temp("fourbuf.glb", glb_bytes(json::parse(R"({"asset":{"version":"2.0"},"buffers":[{"byteLength":4}]})"),
-                                                             std::string(4, '\0')));
+  const std::string fine = write_temp(
+      "fourbuf.glb",
+      glb_bytes(json::parse(R"({"asset":{"version":"2.0"},"buffers":[{"byteLength":4}]})"), std::string(4, '\0')));
   EXPECT_NO_THROW(load_gltf_scene(fine));
 }
 
 TEST(GltfScene, OrthographicAndPerspectiveCameras) {
-  json j = tetra_gltf(json::array({{{"mesh", 0}}, {{"camera", 0}, {"translation", {0, 0, 10}}}, {{"camera", 1}, {"translation", {0, 0, 10}}}}), {0, 1, 2});
-  j["cameras"] = json::array({{{"type", "perspective"}, {"name", "persp"}, {"perspective", {{"yfov", 0.8}, {"znear", 0.5}, {"zfar", 100}, {"aspectRatio", 1.5}}}},
-                              {{"type", "orthographic"}, {"orthographic", {{"xmag", 4}, {"ymag", 2}, {"znear", 0}, {"zfar", 50}}}}});
+  json j = tetra_gltf(
+      json::array(
+          {{{"mesh", 0}}, {{"camera", 0}, {"translation", {0, 0, 10}}}, {{"camera", 1}, {"translation", {0, 0, 10}}}}),
+      {0, 1, 2});
+  j["cameras"] = json::array(
+      {{{"type", "perspective"},
+        {"name", "persp"},
+        {"perspective", {{"yfov", 0.8}, {"znear", 0.5}, {"zfar", 100}, {"aspectRatio", 1.5}}}},
+       {{"type", "orthographic"}, {"orthographic", {{"xmag", 4}, {"ymag", 2}, {"znear", 0}, {"zfar", 50}}}}});
   const std::string path = write_temp("cams.gltf", j.dump());
   GltfSceneOptions o;
   o.camera = "persp";
@@ -472,7 +510,8 @@ TEST(GltfScene, MovingObjectsKeepTheirAabbsByTheChosenMethod) {
   }();
   std::vector<bounds::AabbTracker::Extremes> climb_state;
   for (int frame = 0; frame < 40; ++frame) {
-    const glm::mat4 spin = glm::mat4(glm::mat3_cast(glm::angleAxis(0.05f * float(frame), glm::normalize(glm::vec3(0.3f, 1.0f, 0.2f)))));
+    const glm::mat4 spin =
+        glm::mat4(glm::mat3_cast(glm::angleAxis(0.05f * float(frame), glm::normalize(glm::vec3(0.3f, 1.0f, 0.2f)))));
     for (std::size_t i = 0; i < scene.objects.size(); ++i) scene.objects[i].world = spin * base[i];
     const std::vector<Aabb> exact = world_aabbs(scene, bounds::AabbUpdate::Recompute);
     const std::vector<Aabb> kept = world_aabbs(scene, bounds::AabbUpdate::HillClimb, &climb_state);

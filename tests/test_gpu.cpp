@@ -11,16 +11,16 @@
 
 #include "cull/compare.hpp"
 #include "cull/reference.hpp"
+#include "edge_sets.hpp"
 #include "gpu/gpu_culler.hpp"
-#include "gpu/pass_support.hpp"
-#include "vk/compute_pipeline.hpp"
 #include "gpu/layout.hpp"
+#include "gpu/pass_support.hpp"
+#include "gpu_test_env.hpp"
 #include "scene/generators.hpp"
 #include "scene/gltf_scene.hpp"
-#include "edge_sets.hpp"
-#include "gpu_test_env.hpp"
 #include "test_util.hpp"
 #include "vk/check.hpp"
+#include "vk/compute_pipeline.hpp"
 
 namespace cullpipe {
 namespace {
@@ -45,12 +45,15 @@ std::vector<Classification> expect_agreement(gpu::GpuCuller& culler, const std::
     const reference::CullCounts counts = reference::classify_all(std::span<const Volume>(volumes), frusta[v], cpu);
     const gpu::ViewResult& g = result.views[v];
     // Without classes the counters and the list are checked (and no classes come back).
-    const std::span<const Classification> gpu_classes = options.classes ? std::span<const Classification>(g.classes) : cpu;
+    const std::span<const Classification> gpu_classes =
+        options.classes ? std::span<const Classification>(g.classes) : cpu;
     if (!options.classes) {
       EXPECT_TRUE(g.classes.empty()) << "view " << v;
     }
-    const Agreement a = check_agreement<Volume>(volumes, frusta[v], cpu, counts, gpu_classes, g.counts, g.visible_ids, capacity);
-    EXPECT_TRUE(a.ok()) << a.mismatches << " mismatches in view " << v << "; first: " << (a.reports.empty() ? "" : a.reports[0]);
+    const Agreement a =
+        check_agreement<Volume>(volumes, frusta[v], cpu, counts, gpu_classes, g.counts, g.visible_ids, capacity);
+    EXPECT_TRUE(a.ok()) << a.mismatches << " mismatches in view " << v
+                        << "; first: " << (a.reports.empty() ? "" : a.reports[0]);
     EXPECT_EQ(g.overflow, counts.visible > capacity) << "view " << v;
     if (v == 0) first = cpu;
   }
@@ -122,7 +125,8 @@ TEST_F(Gpu, GeneratedScenesManyViews) {
   for (SceneKind kind : {SceneKind::Uniform, SceneKind::Clustered, SceneKind::City}) {
     const Scene scene = generate_scene(kind, 20000, 5);
     std::vector<Frustum> frusta;
-    for (const Camera& c : camera_path(scene.camera, scene.bounds(), 6)) frusta.push_back(Frustum::from_view_proj(c.view_proj()));
+    for (const Camera& c : camera_path(scene.camera, scene.bounds(), 6))
+      frusta.push_back(Frustum::from_view_proj(c.view_proj()));
     SCOPED_TRACE(std::string(to_string(kind)));
     expect_agreement(culler(), world_aabbs(scene), frusta);
     expect_agreement(culler(), world_obbs(scene), frusta);
@@ -144,21 +148,24 @@ TEST_F(Gpu, GltfScenesAgree) {
       ++files;
       const GltfScene g = load_gltf_scene(file.path().string());
       std::vector<Frustum> frusta;
-      for (const Camera& c : camera_path(g.scene.camera, g.scene.bounds(), 8)) frusta.push_back(Frustum::from_view_proj(c.view_proj()));
+      for (const Camera& c : camera_path(g.scene.camera, g.scene.bounds(), 8))
+        frusta.push_back(Frustum::from_view_proj(c.view_proj()));
       for (std::size_t c = 0; c < g.cameras.size(); ++c) {
         if (g.cameras[c].node < 0) continue;
         GltfSceneOptions o;
         o.camera = std::to_string(c);
         frusta.push_back(Frustum::from_view_proj(load_gltf_scene(file.path().string(), o).scene.camera.view_proj()));
       }
-      for (bounds::AabbUpdate m : {bounds::AabbUpdate::Recompute, bounds::AabbUpdate::TransformBox, bounds::AabbUpdate::HillClimb})
+      for (bounds::AabbUpdate m :
+           {bounds::AabbUpdate::Recompute, bounds::AabbUpdate::TransformBox, bounds::AabbUpdate::HillClimb})
         expect_agreement(culler(), world_aabbs(g.scene, m), frusta);
       expect_agreement(culler(), world_obbs(g.scene), frusta);
       expect_agreement(culler(), world_spheres(g.scene), frusta);
       if (file.path().filename() == "VC.gltf") {  // 167 objects x 300 = 50,100
         const Scene big = replicate_scene(g.scene, 300, InstanceLayout::Random, 3);
         std::vector<Frustum> views;
-        for (const Camera& c : camera_path(big.camera, big.bounds(), 4)) views.push_back(Frustum::from_view_proj(c.view_proj()));
+        for (const Camera& c : camera_path(big.camera, big.bounds(), 4))
+          views.push_back(Frustum::from_view_proj(c.view_proj()));
         expect_agreement(culler(), world_aabbs(big), views);
         expect_agreement(culler(), world_spheres(big), views);
       }
@@ -212,14 +219,16 @@ NearPlaneSet near_plane_set(const Frustum& f, std::size_t per_plane) {
       Sphere sp = test::random_sphere(rng, 20.0f, 3.0f);
       const float target = (i % 2 ? -1.0f : 1.0f) * sp.radius;
       sp.center += (target - plane.distance(sp.center)) * n;
-      for (int st = 0; st < std::abs(steps); ++st) sp.center.x = std::nextafter(sp.center.x, steps > 0 ? 1e30f : -1e30f);
+      for (int st = 0; st < std::abs(steps); ++st)
+        sp.center.x = std::nextafter(sp.center.x, steps > 0 ? 1e30f : -1e30f);
       set.spheres.push_back(sp);
       // OBB: centre at distance +-r (projected radius) from the plane, nudged.
       Obb ob = test::random_obb(rng, 20.0f, 3.0f);
       float r = 0.0f;
       for (int k = 0; k < 3; ++k) r += std::abs(glm::dot(n, ob.basis[k])) * ob.half_extents[k];
       ob.center += ((i % 2 ? -r : r) - plane.distance(ob.center)) * n;
-      for (int st = 0; st < std::abs(steps); ++st) ob.center.y = std::nextafter(ob.center.y, steps > 0 ? 1e30f : -1e30f);
+      for (int st = 0; st < std::abs(steps); ++st)
+        ob.center.y = std::nextafter(ob.center.y, steps > 0 ? 1e30f : -1e30f);
       set.obbs.push_back(ob);
     }
   return set;
@@ -232,8 +241,10 @@ Classification classify_pn_fused(const Aabb& box, const Frustum& f) {
   for (const Plane& p : f.active()) {
     const glm::vec3& n = p.normal;
     auto dist = [&](glm::vec3 v) { return std::fma(n.z, v.z, std::fma(n.y, v.y, std::fma(n.x, v.x, p.d))); };
-    const glm::vec3 pv(n.x >= 0 ? box.max.x : box.min.x, n.y >= 0 ? box.max.y : box.min.y, n.z >= 0 ? box.max.z : box.min.z);
-    const glm::vec3 nv(n.x >= 0 ? box.min.x : box.max.x, n.y >= 0 ? box.min.y : box.max.y, n.z >= 0 ? box.min.z : box.max.z);
+    const glm::vec3 pv(n.x >= 0 ? box.max.x : box.min.x, n.y >= 0 ? box.max.y : box.min.y,
+                       n.z >= 0 ? box.max.z : box.min.z);
+    const glm::vec3 nv(n.x >= 0 ? box.min.x : box.max.x, n.y >= 0 ? box.min.y : box.max.y,
+                       n.z >= 0 ? box.min.z : box.max.z);
     if (dist(pv) < 0.0f) return Classification::Outside;
     if (dist(nv) < 0.0f) crossing = true;
   }
@@ -250,7 +261,8 @@ TEST_F(Gpu, VolumesWithinFloatStepsOfThePlanes) {
     EXPECT_GT(std::count(classes.begin(), classes.end(), Classification::Outside), 100);
     EXPECT_GT(std::count(classes.begin(), classes.end(), Classification::Intersecting), 100);
     std::size_t fused_differs = 0;
-    for (std::size_t i = 0; i < set.boxes.size(); ++i) fused_differs += classify_pn_fused(set.boxes[i], f) != classes[i];
+    for (std::size_t i = 0; i < set.boxes.size(); ++i)
+      fused_differs += classify_pn_fused(set.boxes[i], f) != classes[i];
     EXPECT_GT(fused_differs, 0u) << "the near-plane set would not catch contraction";
   }
 }
@@ -280,13 +292,13 @@ TEST_F(Gpu, BoxesAtTheEdgeOfTheirCentreBound) {
 TEST_F(Gpu, DegenerateBehindCameraHugeAndTiny) {
   const Frustum f = Frustum::from_view_proj(test::test_view_proj());
   std::vector<Aabb> boxes = {
-      {{0, 0, 0}, {0, 0, 0}},                     // point box at the target
-      {{-1, 0, -1}, {1, 0, 1}},                   // flat box
-      {{0, 0, 11}, {1, 1, 12}},                   // behind the camera (camera at z = 10)
-      {{-1, -1, 5}, {1, 1, 30}},                  // from behind the camera through the near plane
-      {{-1e30f, -1e30f, -1e30f}, {1e30f, 1e30f, 1e30f}},  // huge: encloses everything
-      {{1e30f, 0, 0}, {1.0001e30f, 1, 1}},        // huge and far away
-      {{1e-30f, 1e-30f, 1e-30f}, {2e-30f, 2e-30f, 2e-30f}},  // tiny, at the origin
+      {{0, 0, 0}, {0, 0, 0}},                                   // point box at the target
+      {{-1, 0, -1}, {1, 0, 1}},                                 // flat box
+      {{0, 0, 11}, {1, 1, 12}},                                 // behind the camera (camera at z = 10)
+      {{-1, -1, 5}, {1, 1, 30}},                                // from behind the camera through the near plane
+      {{-1e30f, -1e30f, -1e30f}, {1e30f, 1e30f, 1e30f}},        // huge: encloses everything
+      {{1e30f, 0, 0}, {1.0001e30f, 1, 1}},                      // huge and far away
+      {{1e-30f, 1e-30f, 1e-30f}, {2e-30f, 2e-30f, 2e-30f}},     // tiny, at the origin
       {{-1e-38f, -1e-38f, -1e-38f}, {1e-38f, 1e-38f, 1e-38f}},  // near the denormal range
   };
   const auto classes = expect_agreement(culler(), boxes, {f});
@@ -296,7 +308,8 @@ TEST_F(Gpu, DegenerateBehindCameraHugeAndTiny) {
   EXPECT_EQ(classes[4], Classification::Intersecting);
   EXPECT_EQ(classes[5], Classification::Outside);
   EXPECT_EQ(classes[6], Classification::Inside);
-  std::vector<Sphere> spheres = {{{0, 0, 0}, 0}, {{0, 0, 20}, 1}, {{0, 0, 0}, 1e30f}, {{1e30f, 0, 0}, 1}, {{0, 0, 0}, 1e-30f}};
+  std::vector<Sphere> spheres = {
+      {{0, 0, 0}, 0}, {{0, 0, 20}, 1}, {{0, 0, 0}, 1e30f}, {{1e30f, 0, 0}, 1}, {{0, 0, 0}, 1e-30f}};
   const auto sphere_classes = expect_agreement(culler(), spheres, {f});
   EXPECT_EQ(sphere_classes[1], Classification::Outside);
   EXPECT_EQ(sphere_classes[2], Classification::Intersecting);
@@ -311,13 +324,13 @@ TEST_F(Gpu, DegenerateBehindCameraHugeAndTiny) {
 // coordinates: the planes past a view's count decide nothing, whatever the shader keeps there.
 TEST_F(Gpu, FrustaOfFewerPlanesWithExtremeVolumes) {
   const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
-  std::vector<Sphere> spheres = {{{0.5f, 0.5f, 0}, 5},      {{0.5f, 0.5f, 0}, 1e30f}, {{0.5f, 0.5f, 0}, inf},
-                                 {{0.5f, 0.5f, 0}, -2},     {{0.5f, 0.5f, 0}, -inf},  {{inf, 0.5f, 0}, 1},
-                                 {{0.5f, -inf, 0}, 1},      {{nan, 0.5f, 0}, 1},      {{0.5f, 0.5f, 0}, nan},
-                                 {{10, 10, 0}, 5},          {{0.5f, 0.5f, inf}, 0.25f}};
-  std::vector<Aabb> boxes = {{{0.25f, 0.25f, -1}, {0.75f, 0.75f, 1}},  {{0.25f, 0.25f, -inf}, {0.75f, 0.75f, inf}},
-                             {{-inf, -inf, -inf}, {inf, inf, inf}},    {{0.25f, 0.25f, nan}, {0.75f, 0.75f, 1}},
-                             {{0.75f, 0.75f, 1}, {0.25f, 0.25f, -1}},  {{0.25f, 0.25f, -1e30f}, {0.75f, 0.75f, 1e30f}}};
+  std::vector<Sphere> spheres = {{{0.5f, 0.5f, 0}, 5},  {{0.5f, 0.5f, 0}, 1e30f},  {{0.5f, 0.5f, 0}, inf},
+                                 {{0.5f, 0.5f, 0}, -2}, {{0.5f, 0.5f, 0}, -inf},   {{inf, 0.5f, 0}, 1},
+                                 {{0.5f, -inf, 0}, 1},  {{nan, 0.5f, 0}, 1},       {{0.5f, 0.5f, 0}, nan},
+                                 {{10, 10, 0}, 5},      {{0.5f, 0.5f, inf}, 0.25f}};
+  std::vector<Aabb> boxes = {{{0.25f, 0.25f, -1}, {0.75f, 0.75f, 1}}, {{0.25f, 0.25f, -inf}, {0.75f, 0.75f, inf}},
+                             {{-inf, -inf, -inf}, {inf, inf, inf}},   {{0.25f, 0.25f, nan}, {0.75f, 0.75f, 1}},
+                             {{0.75f, 0.75f, 1}, {0.25f, 0.25f, -1}}, {{0.25f, 0.25f, -1e30f}, {0.75f, 0.75f, 1e30f}}};
   std::vector<Obb> obbs(5);
   for (Obb& o : obbs) o.center = {0.5f, 0.5f, 0};
   obbs[1].half_extents = {0.25f, 0.25f, inf};
@@ -350,7 +363,8 @@ TEST_F(Gpu, SubnormalCoordinatesAgree) {
       {{tiny, tiny, 0}, {1, 1, 1}},        // inside by a subnormal: INSIDE
   };
   const auto classes = expect_agreement(culler(), boxes, {f});
-  EXPECT_EQ(classes, (std::vector<Classification>{Classification::Outside, Classification::Intersecting, Classification::Inside}));
+  EXPECT_EQ(classes, (std::vector<Classification>{Classification::Outside, Classification::Intersecting,
+                                                  Classification::Inside}));
   std::vector<Sphere> spheres = {{{-2 * tiny, 1, 1}, tiny}, {{tiny, 1, 1}, 0.5f}};
   expect_agreement(culler(), spheres, {f});
 }
@@ -358,7 +372,8 @@ TEST_F(Gpu, SubnormalCoordinatesAgree) {
 TEST_F(Gpu, ManyViewsInOnePass) {
   const Scene scene = generate_scene(SceneKind::Clustered, 3000, 8);
   std::vector<Frustum> frusta;
-  for (const Camera& c : camera_path(scene.camera, scene.bounds(), 64)) frusta.push_back(Frustum::from_view_proj(c.view_proj()));
+  for (const Camera& c : camera_path(scene.camera, scene.bounds(), 64))
+    frusta.push_back(Frustum::from_view_proj(c.view_proj()));
   expect_agreement(culler(), world_obbs(scene), frusta);
 }
 
@@ -397,7 +412,8 @@ TEST_F(Gpu, ScenesLargerThanAStorageBufferAreCulledInSegments) {
   // What the limits allow per segment: the classes (4 bytes per object and view) and the
   // texel view of the volumes, in multiples of 256 objects.
   const std::size_t by_classes = std::size_t(range / (sizeof(std::uint32_t) * kViews));
-  const std::size_t by_texels = std::size_t(std::min<VkDeviceSize>(limits.maxTexelBufferElements, 0x7fffffffu) * 16 / sizeof(gpu::GpuObb));
+  const std::size_t by_texels =
+      std::size_t(std::min<VkDeviceSize>(limits.maxTexelBufferElements, 0x7fffffffu) * 16 / sizeof(gpu::GpuObb));
   const std::size_t per_segment = std::min(by_classes, by_texels) / 256 * 256;
   const std::size_t segments = (count + per_segment - 1) / per_segment;
   ASSERT_GE(segments, 2u);
@@ -499,13 +515,16 @@ TEST_F(Gpu, AMissingDeviceFeatureIsAClearError) {
   // What the cullers need is there; a feature this device lacks is named in the error. (lavapipe
   // has no clustered subgroup operations; on a device that has them the check passes.)
   const vk::Context& ctx = *GpuEnvironment::context;
-  EXPECT_NO_THROW(gpu::detail::check_subgroup_operations(ctx, VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_BALLOT_BIT, "flat culling"));
+  EXPECT_NO_THROW(gpu::detail::check_subgroup_operations(
+      ctx, VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_BALLOT_BIT, "flat culling"));
   VkPhysicalDeviceSubgroupProperties subgroup{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_SUBGROUP_PROPERTIES};
   VkPhysicalDeviceProperties2 properties{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2, &subgroup, {}};
   vkGetPhysicalDeviceProperties2(ctx.physical_device(), &properties);
-  if (subgroup.supportedOperations & VK_SUBGROUP_FEATURE_CLUSTERED_BIT) GTEST_SKIP() << "this device has clustered operations";
+  if (subgroup.supportedOperations & VK_SUBGROUP_FEATURE_CLUSTERED_BIT)
+    GTEST_SKIP() << "this device has clustered operations";
   try {
-    gpu::detail::check_subgroup_operations(ctx, VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_CLUSTERED_BIT, "a test pass");
+    gpu::detail::check_subgroup_operations(ctx, VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_CLUSTERED_BIT,
+                                           "a test pass");
     FAIL() << "expected vk::Error";
   } catch (const vk::Error& e) {
     const std::string what = e.what();
@@ -532,7 +551,8 @@ TEST_F(Gpu, CorruptShadersAreRefusedBeforeTheDriverSeesThem) {
   bad = sound;
   bad[1] = 0x00020000u;
   EXPECT_NE(vk::spirv_problem(bad).find("version"), std::string::npos);
-  for (const std::vector<std::uint32_t>& words : {std::vector<std::uint32_t>{}, std::vector<std::uint32_t>(sound.begin(), sound.end() - 1)}) {
+  for (const std::vector<std::uint32_t>& words :
+       {std::vector<std::uint32_t>{}, std::vector<std::uint32_t>(sound.begin(), sound.end() - 1)}) {
     try {
       vk::ComputePipeline pipe(*GpuEnvironment::context, vk::ComputePipelineDesc{words, 1, 0, {}, "test pipeline"});
       FAIL() << "expected vk::Error";
@@ -601,60 +621,61 @@ TEST_F(Gpu, PassesSplitIntoChunksAgree) {
 // visible objects in object order exactly, the draws are the templates of those objects with
 // their ids, and in arrival order the draws follow the visible ids one for one.
 template <class Volume>
-void expect_draws(gpu::GpuCuller& c, const std::vector<Volume>& volumes, const std::vector<Frustum>& frusta, std::uint64_t seed,
-                  std::size_t capacity = 0) {
+void expect_draws(gpu::GpuCuller& c, const std::vector<Volume>& volumes, const std::vector<Frustum>& frusta,
+                  std::uint64_t seed, std::size_t capacity = 0) {
   test::Rng rng{seed};
   std::vector<gpu::DrawCommand> templates(volumes.size());
   for (gpu::DrawCommand& d : templates)
     d = {std::uint32_t(rng.next() % 5000), 1 + std::uint32_t(rng.next() % 3), std::uint32_t(rng.next() % 100000),
-         int(rng.next() % 2001) - 1000, std::uint32_t(rng.next() % 70000), 0xdeadbeefu};
+         int(rng.next() % 2001) - 1000,    std::uint32_t(rng.next() % 70000), 0xdeadbeefu};
   c.upload(std::span<const Volume>(volumes));
   c.upload_draws(templates);
   std::vector<std::vector<std::uint32_t>> ordered_ids;
   for (bool ordered : {true, false})
     for (bool classes : {true, false}) {  // (without classes: pipelines of their own)
-    SCOPED_TRACE(std::string(ordered ? "ordered" : "arrival order") + (classes ? ", classes" : ", no classes"));
-    const gpu::CullResult r = c.cull(frusta, {classes, true, capacity, ordered, true});
-    ASSERT_EQ(r.views.size(), frusta.size());
-    if (ordered && classes)
-      for (const gpu::ViewResult& view : r.views) ordered_ids.push_back(view.visible_ids);
-    for (std::size_t v = 0; v < frusta.size(); ++v) {
-      std::vector<Classification> cpu(volumes.size());
-      const reference::CullCounts counts = reference::classify_all(std::span<const Volume>(volumes), frusta[v], cpu);
-      const gpu::ViewResult& g = r.views[v];
-      if (classes) {
-        EXPECT_EQ(g.classes, cpu) << "view " << v;
-      } else {
-        EXPECT_TRUE(g.classes.empty()) << "view " << v;
-      }
-      EXPECT_EQ(g.counts.visible, counts.visible);
-      EXPECT_EQ(g.counts.inside, counts.inside);
-      const std::size_t cap = capacity ? capacity : volumes.size();
-      EXPECT_EQ(g.overflow, counts.visible > cap);
-      std::vector<std::uint32_t> expected;
-      for (std::uint32_t i = 0; i < volumes.size(); ++i)
-        if (cpu[i] != Classification::Outside) expected.push_back(i);
-      if (expected.size() > cap) expected.resize(cap);
-      ASSERT_EQ(g.visible_ids.size(), expected.size()) << "view " << v;
-      ASSERT_EQ(g.draws.size(), expected.size()) << "view " << v;
-      if (ordered) {
-        EXPECT_EQ(g.visible_ids, expected) << "view " << v;
-      } else if (!capacity) {
-        std::vector<std::uint32_t> sorted = g.visible_ids;
-        std::sort(sorted.begin(), sorted.end());
-        EXPECT_EQ(sorted, expected) << "view " << v;
-      }
-      for (std::size_t k = 0; k < g.draws.size(); ++k) {
-        const gpu::DrawCommand& d = g.draws[k];
-        const std::uint32_t id = g.visible_ids[k];
-        ASSERT_EQ(d.object_id, id) << "view " << v << " draw " << k;
-        const gpu::DrawCommand& t = templates[id];
-        ASSERT_TRUE(d.index_count == t.index_count && d.instance_count == t.instance_count && d.first_index == t.first_index &&
-                    d.vertex_offset == t.vertex_offset && d.first_instance == t.first_instance)
-            << "view " << v << " draw " << k;
+      SCOPED_TRACE(std::string(ordered ? "ordered" : "arrival order") + (classes ? ", classes" : ", no classes"));
+      const gpu::CullResult r = c.cull(frusta, {classes, true, capacity, ordered, true});
+      ASSERT_EQ(r.views.size(), frusta.size());
+      if (ordered && classes)
+        for (const gpu::ViewResult& view : r.views) ordered_ids.push_back(view.visible_ids);
+      for (std::size_t v = 0; v < frusta.size(); ++v) {
+        std::vector<Classification> cpu(volumes.size());
+        const reference::CullCounts counts = reference::classify_all(std::span<const Volume>(volumes), frusta[v], cpu);
+        const gpu::ViewResult& g = r.views[v];
+        if (classes) {
+          EXPECT_EQ(g.classes, cpu) << "view " << v;
+        } else {
+          EXPECT_TRUE(g.classes.empty()) << "view " << v;
+        }
+        EXPECT_EQ(g.counts.visible, counts.visible);
+        EXPECT_EQ(g.counts.inside, counts.inside);
+        const std::size_t cap = capacity ? capacity : volumes.size();
+        EXPECT_EQ(g.overflow, counts.visible > cap);
+        std::vector<std::uint32_t> expected;
+        for (std::uint32_t i = 0; i < volumes.size(); ++i)
+          if (cpu[i] != Classification::Outside) expected.push_back(i);
+        if (expected.size() > cap) expected.resize(cap);
+        ASSERT_EQ(g.visible_ids.size(), expected.size()) << "view " << v;
+        ASSERT_EQ(g.draws.size(), expected.size()) << "view " << v;
+        if (ordered) {
+          EXPECT_EQ(g.visible_ids, expected) << "view " << v;
+        } else if (!capacity) {
+          std::vector<std::uint32_t> sorted = g.visible_ids;
+          std::sort(sorted.begin(), sorted.end());
+          EXPECT_EQ(sorted, expected) << "view " << v;
+        }
+        for (std::size_t k = 0; k < g.draws.size(); ++k) {
+          const gpu::DrawCommand& d = g.draws[k];
+          const std::uint32_t id = g.visible_ids[k];
+          ASSERT_EQ(d.object_id, id) << "view " << v << " draw " << k;
+          const gpu::DrawCommand& t = templates[id];
+          ASSERT_TRUE(d.index_count == t.index_count && d.instance_count == t.instance_count &&
+                      d.first_index == t.first_index && d.vertex_offset == t.vertex_offset &&
+                      d.first_instance == t.first_instance)
+              << "view " << v << " draw " << k;
+        }
       }
     }
-  }
   // Object order without reading the classes back: the scatter pass must still get this
   // pass's classes (a pass over the views in reverse order leaves other classes behind).
   const std::vector<Frustum> reversed(frusta.rbegin(), frusta.rend());
@@ -677,7 +698,8 @@ TEST_F(Gpu, OrderedCompactionAndDrawCommands) {
   for (Aabb& b : many) b = test::random_aabb(rng, 60.0f, 3.0f);
   const Scene city = generate_scene(SceneKind::City, 20000, 9);
   std::vector<Frustum> frusta;
-  for (const Camera& c : camera_path(city.camera, city.bounds(), 5)) frusta.push_back(Frustum::from_view_proj(c.view_proj()));
+  for (const Camera& c : camera_path(city.camera, city.bounds(), 5))
+    frusta.push_back(Frustum::from_view_proj(c.view_proj()));
   expect_draws(culler(), many, test_frusta(), 4);
   expect_draws(culler(), world_aabbs(city), frusta, 5);
   expect_draws(culler(), world_spheres(city), frusta, 6, 100);
@@ -691,12 +713,15 @@ TEST_F(Gpu, OrderedCompactionAndDrawCommands) {
   // invocation, and the largest run (every word of the shared arrays) where the device allows.
   const std::uint32_t max_group = std::min(GpuEnvironment::context->properties().limits.maxComputeWorkGroupSize[0],
                                            GpuEnvironment::context->properties().limits.maxComputeWorkGroupInvocations);
-  for (const gpu::GpuCullerConfig config : {gpu::GpuCullerConfig{100}, gpu::GpuCullerConfig{100, 3, 3}, gpu::GpuCullerConfig{64, 3, 1}}) {
-    SCOPED_TRACE("group size " + std::to_string(config.group_size) + ", " + std::to_string(config.objects_per_invocation) + " per invocation");
+  for (const gpu::GpuCullerConfig config :
+       {gpu::GpuCullerConfig{100}, gpu::GpuCullerConfig{100, 3, 3}, gpu::GpuCullerConfig{64, 3, 1}}) {
+    SCOPED_TRACE("group size " + std::to_string(config.group_size) + ", " +
+                 std::to_string(config.objects_per_invocation) + " per invocation");
     gpu::GpuCuller shaped(*GpuEnvironment::context, config);
     expect_draws(shaped, some, test_frusta(), 9);
   }
-  gpu::GpuCuller largest(*GpuEnvironment::context, gpu::GpuCullerConfig{std::min(max_group, gpu::MAX_CULL_GROUP_SIZE), 0, 32});
+  gpu::GpuCuller largest(*GpuEnvironment::context,
+                         gpu::GpuCullerConfig{std::min(max_group, gpu::MAX_CULL_GROUP_SIZE), 0, 32});
   expect_draws(largest, some, test_frusta(), 10, 5000);
 }
 
@@ -704,7 +729,8 @@ TEST_F(Gpu, OrderedCompactionAndDrawCommands) {
 // caller's command buffer and submitted by the caller; results identical to cull().
 TEST_F(Gpu, RecordsIntoTheCallersCommandBufferOnABorrowedDevice) {
   const vk::Context& owner = *GpuEnvironment::context;
-  vk::Context borrowed(vk::ExternalDevice{owner.instance(), owner.physical_device(), owner.device(), owner.queue(), owner.queue_family()});
+  vk::Context borrowed(vk::ExternalDevice{owner.instance(), owner.physical_device(), owner.device(), owner.queue(),
+                                          owner.queue_family()});
   EXPECT_FALSE(borrowed.owns_device());
   gpu::GpuCuller engine_culler(borrowed);
 
@@ -722,7 +748,8 @@ TEST_F(Gpu, RecordsIntoTheCallersCommandBufferOnABorrowedDevice) {
   pool_info.queueFamilyIndex = owner.queue_family();
   VkCommandPool pool = VK_NULL_HANDLE;
   ASSERT_EQ(vkCreateCommandPool(dev, &pool_info, nullptr, &pool), VK_SUCCESS);
-  VkCommandBufferAllocateInfo alloc{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO, nullptr, pool, VK_COMMAND_BUFFER_LEVEL_PRIMARY, 1};
+  VkCommandBufferAllocateInfo alloc{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO, nullptr, pool,
+                                    VK_COMMAND_BUFFER_LEVEL_PRIMARY, 1};
   VkCommandBuffer cmd = VK_NULL_HANDLE;
   ASSERT_EQ(vkAllocateCommandBuffers(dev, &alloc, &cmd), VK_SUCCESS);
   VkFenceCreateInfo fence_info{VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
@@ -789,7 +816,8 @@ TEST(GpuDevice, UnknownDeviceNameIsAClearError) {
     vk::Context ctx(options);
     FAIL() << "expected vk::Error";
   } catch (const vk::Error& e) {
-    EXPECT_NE(std::string(e.what()).find("no usable Vulkan device matching 'no-such-device-xyz'"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("no usable Vulkan device matching 'no-such-device-xyz'"), std::string::npos)
+        << e.what();
   }
 }
 

@@ -3,27 +3,26 @@
 // Vulkan device chosen by CULLPIPE_DEVICE with validation (including synchronization
 // validation) on: any message fails.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cstdio>
 #include <cstring>
-#include <unistd.h>
 #include <filesystem>
-#include <memory>
-
 #include <glm/gtc/matrix_transform.hpp>
+#include <memory>
 
 #include "bvh/builders.hpp"
 #include "bvh/bvh.hpp"
+#include "bvh_test_util.hpp"
 #include "cull/compare.hpp"
 #include "cull/reference.hpp"
+#include "edge_sets.hpp"
 #include "geom/validate.hpp"
 #include "gpu/bvh_culler.hpp"
+#include "gpu_test_env.hpp"
 #include "scene/generators.hpp"
 #include "scene/gltf_scene.hpp"
-#include "bvh_test_util.hpp"
-#include "edge_sets.hpp"
-#include "gpu_test_env.hpp"
 #include "test_util.hpp"
 #include "vk/check.hpp"
 
@@ -53,12 +52,15 @@ gpu::CullResult expect_agreement(gpu::BvhCuller& culler, const bvh::FlatTree& fl
     EXPECT_EQ(cpu.classes, flat_classes) << "CPU hierarchical vs flat, view " << v;
     const gpu::ViewResult& g = result.views[v];
     // Without classes the counters, test counts and list are checked (and no classes come back).
-    const std::span<const Classification> gpu_classes = options.classes ? std::span<const Classification>(g.classes) : cpu.classes;
+    const std::span<const Classification> gpu_classes =
+        options.classes ? std::span<const Classification>(g.classes) : cpu.classes;
     if (!options.classes) {
       EXPECT_TRUE(g.classes.empty()) << "view " << v;
     }
-    const Agreement a = check_agreement<Volume>(volumes, frusta[v], cpu.classes, counts, gpu_classes, g.counts, g.visible_ids, capacity);
-    EXPECT_TRUE(a.ok()) << a.mismatches << " mismatches in view " << v << "; first: " << (a.reports.empty() ? "" : a.reports[0]);
+    const Agreement a = check_agreement<Volume>(volumes, frusta[v], cpu.classes, counts, gpu_classes, g.counts,
+                                                g.visible_ids, capacity);
+    EXPECT_TRUE(a.ok()) << a.mismatches << " mismatches in view " << v
+                        << "; first: " << (a.reports.empty() ? "" : a.reports[0]);
     EXPECT_EQ(g.node_tests, cpu.node_tests) << "view " << v;
     EXPECT_EQ(g.object_tests, cpu.object_tests) << "view " << v;
     EXPECT_EQ(g.overflow, counts.visible > capacity) << "view " << v;
@@ -77,7 +79,8 @@ std::vector<Frustum> test_frusta() {
 
 std::vector<Frustum> path_frusta(const Scene& scene, std::size_t count) {
   std::vector<Frustum> frusta;
-  for (const Camera& c : camera_path(scene.camera, scene.bounds(), count)) frusta.push_back(Frustum::from_view_proj(c.view_proj()));
+  for (const Camera& c : camera_path(scene.camera, scene.bounds(), count))
+    frusta.push_back(Frustum::from_view_proj(c.view_proj()));
   return frusta;
 }
 
@@ -170,7 +173,8 @@ TEST_F(GpuBvh, ObbAndSphereHierarchiesAgree) {
   // Draws, a short list and the kind switching back to boxes on the same culler.
   const test::RandomVolumes v = test::random_volumes(rng, 3000, 40.0f, 3.0f);
   std::vector<gpu::DrawCommand> templates(v.spheres.size());
-  for (std::size_t i = 0; i < templates.size(); ++i) templates[i] = {std::uint32_t(3 + i % 7), 1, std::uint32_t(i), 0, 0, 0};
+  for (std::size_t i = 0; i < templates.size(); ++i)
+    templates[i] = {std::uint32_t(3 + i % 7), 1, std::uint32_t(i), 0, 0, 0};
   culler().upload_draws(templates);
   gpu::CullOptions options;
   options.draws = true;
@@ -216,8 +220,9 @@ TEST_F(GpuBvh, GeneratedScenesManyViewsInOnePass) {
     const gpu::CullResult r = expect_agreement(culler(), flat_tree(boxes), boxes, path_frusta(scene, 8));
     // The hierarchy pays: far fewer tests than objects in the first view.
     ASSERT_FALSE(r.views.empty());
-    std::printf("  %s: %zu of %zu visible, %zu node + %zu object tests on the GPU\n", std::string(to_string(kind)).c_str(),
-                r.views[0].counts.visible, boxes.size(), r.views[0].node_tests, r.views[0].object_tests);
+    std::printf("  %s: %zu of %zu visible, %zu node + %zu object tests on the GPU\n",
+                std::string(to_string(kind)).c_str(), r.views[0].counts.visible, boxes.size(), r.views[0].node_tests,
+                r.views[0].object_tests);
     EXPECT_LT(r.views[0].node_tests + r.views[0].object_tests, boxes.size() / 2);
   }
 }
@@ -241,8 +246,8 @@ TEST_F(GpuBvh, EverythingInsideEverythingOutsideAndDeepTrees) {
   for (Aabb& b : boxes) b = {b.min + glm::vec3(0, 0, 5.0f), b.max + glm::vec3(0, 0, 5.0f)};  // around z = 4.5
   const glm::mat4 view_proj = test::test_view_proj(90.0f, 1.0f);
   const glm::mat4 away = view_proj * glm::translate(glm::mat4(1.0f), glm::vec3(0, 0, 10.0f));  // all behind the camera
-  const gpu::CullResult r =
-      expect_agreement(culler(), flat_tree(boxes), boxes, {Frustum::from_view_proj(view_proj), Frustum::from_view_proj(away)});
+  const gpu::CullResult r = expect_agreement(culler(), flat_tree(boxes), boxes,
+                                             {Frustum::from_view_proj(view_proj), Frustum::from_view_proj(away)});
   ASSERT_EQ(r.views.size(), 2u);
   EXPECT_EQ(r.views[0].counts.inside, boxes.size());
   EXPECT_EQ(r.views[0].node_tests, 1u);
@@ -251,7 +256,8 @@ TEST_F(GpuBvh, EverythingInsideEverythingOutsideAndDeepTrees) {
   EXPECT_EQ(r.views[1].node_tests, 1u);
   // Points on a line with one object per leaf: the tree is deep.
   std::vector<Aabb> line;
-  for (int i = 0; i < 3000; ++i) line.push_back({glm::vec3(float(i) * 0.02f - 30.0f, 0, 0), glm::vec3(float(i) * 0.02f - 30.0f, 0.1f, 0)});
+  for (int i = 0; i < 3000; ++i)
+    line.push_back({glm::vec3(float(i) * 0.02f - 30.0f, 0, 0), glm::vec3(float(i) * 0.02f - 30.0f, 0.1f, 0)});
   expect_agreement(culler(), flat_tree(line, 1), line, test_frusta());
   EXPECT_GE(culler().levels(), 12u);
   // All boxes identical.
@@ -287,7 +293,9 @@ TEST_F(GpuBvh, EveryCutSizeAgrees) {
   std::vector<Aabb> boxes(6000);
   for (Aabb& b : boxes) b = test::random_aabb(rng, 40.0f, 3.0f);
   std::vector<Aabb> line;
-  for (int i = 0; i < 400; ++i) line.push_back({glm::vec3(float(i) * 0.2f - 40.0f, -1.0f, -20.0f), glm::vec3(float(i) * 0.2f - 39.9f, 1.0f, -19.0f)});
+  for (int i = 0; i < 400; ++i)
+    line.push_back(
+        {glm::vec3(float(i) * 0.2f - 40.0f, -1.0f, -20.0f), glm::vec3(float(i) * 0.2f - 39.9f, 1.0f, -19.0f)});
   const bvh::FlatTree chain = bvh::flatten(chain_tree(line));
   ASSERT_EQ(bvh::check_flat_tree(chain, std::span<const Aabb>(line)), "");
   const test::RandomVolumes v = test::random_volumes(rng, 3000, 40.0f, 3.0f);
@@ -343,7 +351,8 @@ TEST_F(GpuBvh, EveryCutSizeAgrees) {
 TEST_F(GpuBvh, EveryNodeStraddlingAPlaneWalksTheWholeTree) {
   std::vector<Aabb> boxes;
   for (int x = 0; x < 128; ++x)
-    for (int y = 0; y < 128; ++y) boxes.push_back({glm::vec3(float(x), float(y), -1.0f), glm::vec3(float(x) + 0.5f, float(y) + 0.5f, 1.0f)});
+    for (int y = 0; y < 128; ++y)
+      boxes.push_back({glm::vec3(float(x), float(y), -1.0f), glm::vec3(float(x) + 0.5f, float(y) + 0.5f, 1.0f)});
   const glm::vec4 plane(0, 0, 1, 0);
   const std::vector<Frustum> frusta = {Frustum::from_planes({&plane, 1})};
   struct Restore {
@@ -389,9 +398,11 @@ std::size_t largest_walk_stack(const bvh::FlatTree& t, std::span<const std::uint
 TEST(GpuBvhWalk, StackStaysWithinItsSharedMemory) {
   for (std::uint32_t height : {12u, gpu::BVH_CUT_MAX_HEIGHT}) {
     std::vector<Aabb> boxes;
-    for (std::uint32_t i = 0; i < (1u << height); ++i) boxes.push_back({glm::vec3(float(i), 0, 0), glm::vec3(float(i) + 0.5f, 1, 1)});
+    for (std::uint32_t i = 0; i < (1u << height); ++i)
+      boxes.push_back({glm::vec3(float(i), 0, 0), glm::vec3(float(i) + 0.5f, 1, 1)});
     const bvh::FlatTree flat = bvh::flatten(bvh::build_binned_sah(boxes, {1, 16}));
-    ASSERT_EQ(bvh::metrics(bvh::build_binned_sah(boxes, {1, 16})).depth, height + 1);  // complete: height levels below the root
+    ASSERT_EQ(bvh::metrics(bvh::build_binned_sah(boxes, {1, 16})).depth,
+              height + 1);  // complete: height levels below the root
     for (std::size_t lanes : {1u, 2u, 8u, 32u, 64u}) {
       // Subtrees of the same shape under every lane (replays of the one tree: their nodes are
       // told apart by an offset, which the replay does not need).
@@ -408,14 +419,14 @@ TEST(GpuBvhWalk, StackStaysWithinItsSharedMemory) {
 TEST_F(GpuBvh, CameraInsideObjectsAndExtremeSizes) {
   test::Rng rng{19};
   std::vector<Aabb> boxes;
-  const glm::vec3 eye(0, 0, 10);  // test_view_proj's eye
-  boxes.push_back({eye - glm::vec3(100.0f), eye + glm::vec3(100.0f)});       // a room around the camera
-  boxes.push_back({eye - glm::vec3(1.0f), eye + glm::vec3(1.0f)});           // the eye in a box past the near plane
-  boxes.push_back({eye - glm::vec3(0.01f), eye + glm::vec3(0.01f)});         // ... in one within the near distance
-  boxes.push_back({glm::vec3(-1e30f), glm::vec3(1e30f)});                    // everything
-  boxes.push_back({glm::vec3(0, 0, 0), glm::vec3(1e-30f)});                  // tiny, in view
-  boxes.push_back({glm::vec3(0, 0, 20), glm::vec3(0, 0, 20) + 1e-30f});      // tiny, behind the camera
-  boxes.push_back({glm::vec3(-1e30f, -1e30f, 1e29f), glm::vec3(1e30f)});      // huge, all behind the camera
+  const glm::vec3 eye(0, 0, 10);                                          // test_view_proj's eye
+  boxes.push_back({eye - glm::vec3(100.0f), eye + glm::vec3(100.0f)});    // a room around the camera
+  boxes.push_back({eye - glm::vec3(1.0f), eye + glm::vec3(1.0f)});        // the eye in a box past the near plane
+  boxes.push_back({eye - glm::vec3(0.01f), eye + glm::vec3(0.01f)});      // ... in one within the near distance
+  boxes.push_back({glm::vec3(-1e30f), glm::vec3(1e30f)});                 // everything
+  boxes.push_back({glm::vec3(0, 0, 0), glm::vec3(1e-30f)});               // tiny, in view
+  boxes.push_back({glm::vec3(0, 0, 20), glm::vec3(0, 0, 20) + 1e-30f});   // tiny, behind the camera
+  boxes.push_back({glm::vec3(-1e30f, -1e30f, 1e29f), glm::vec3(1e30f)});  // huge, all behind the camera
   for (int i = 0; i < 3000; ++i) boxes.push_back(test::random_aabb(rng, 30.0f, 2.0f));
   const std::vector<Frustum> frusta = test_frusta();
   const gpu::CullResult r = expect_agreement(culler(), flat_tree(boxes, 2), boxes, frusta);
@@ -514,7 +525,8 @@ TEST_F(GpuBvh, RecordsIntoTheCallersCommandBuffer) {
   pool_info.queueFamilyIndex = ctx.queue_family();
   VkCommandPool pool = VK_NULL_HANDLE;
   ASSERT_EQ(vkCreateCommandPool(dev, &pool_info, nullptr, &pool), VK_SUCCESS);
-  VkCommandBufferAllocateInfo alloc{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO, nullptr, pool, VK_COMMAND_BUFFER_LEVEL_PRIMARY, 1};
+  VkCommandBufferAllocateInfo alloc{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO, nullptr, pool,
+                                    VK_COMMAND_BUFFER_LEVEL_PRIMARY, 1};
   VkCommandBuffer cmd = VK_NULL_HANDLE;
   ASSERT_EQ(vkAllocateCommandBuffers(dev, &alloc, &cmd), VK_SUCCESS);
   VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
@@ -659,15 +671,16 @@ TEST_F(GpuBvh, ThousandsOfPassesDoNotGrowMemory) {
     const std::span<const Frustum> views(frusta.data(), std::size_t(1 + i % 4));
     const gpu::CullOptions options{i % 7 == 0, true, std::size_t(i % 3 == 0 ? 100 : 0)};
     const gpu::CullResult b = culler().cull(views, options), f = flat_culler.cull(views, options);
-    if (views.size() > 1 && (b.views[1].counts.visible != expected.visible || f.views[1].counts.visible != expected.visible))
+    if (views.size() > 1 &&
+        (b.views[1].counts.visible != expected.visible || f.views[1].counts.visible != expected.visible))
       ADD_FAILURE() << "pass " << i << " disagrees";
   };
   for (int i = 0; i < 100; ++i) pass(i);  // warm up: pipelines, buffers at their largest
   const std::size_t before = resident_bytes();
   for (int i = 0; i < 1000; ++i) pass(i);
   const std::size_t after = resident_bytes();
-  std::printf("  resident memory: %.1f MiB before, %.1f MiB after 1000 more passes of each culler\n", before / 1048576.0,
-              after / 1048576.0);
+  std::printf("  resident memory: %.1f MiB before, %.1f MiB after 1000 more passes of each culler\n",
+              before / 1048576.0, after / 1048576.0);
 #if defined(__SANITIZE_ADDRESS__)
   // AddressSanitizer keeps freed memory in quarantine, so resident memory grows regardless;
   // LeakSanitizer checks for leaks at exit instead.

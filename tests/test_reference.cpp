@@ -10,7 +10,8 @@ namespace {
 using reference::classify;
 using reference::classify_corners;
 using reference::classify_pn;
-constexpr Classification kOut = Classification::Outside, kIn = Classification::Inside, kCross = Classification::Intersecting;
+constexpr Classification kOut = Classification::Outside, kIn = Classification::Inside,
+                         kCross = Classification::Intersecting;
 
 // The axis-aligned cube [-1, 1]^3 as six inward planes.
 Frustum unit_cube() {
@@ -24,7 +25,7 @@ TEST(Reference, KnownAnswersAgainstACube) {
   EXPECT_EQ(classify_pn({{-1, -1, -1}, {1, 1, 1}}, f), kIn);  // touching from inside counts as inside
   EXPECT_EQ(classify_pn({{2, 0, 0}, {3, 1, 1}}, f), kOut);
   EXPECT_EQ(classify_pn({{0.5f, 0, 0}, {1.5f, 0.5f, 0.5f}}, f), kCross);
-  EXPECT_EQ(classify_pn({{1, 0, 0}, {2, 0, 0}}, f), kCross);  // touching from outside: not culled
+  EXPECT_EQ(classify_pn({{1, 0, 0}, {2, 0, 0}}, f), kCross);     // touching from outside: not culled
   EXPECT_EQ(classify_pn({{-5, -5, -5}, {5, 5, 5}}, f), kCross);  // encloses the frustum
 
   EXPECT_EQ(classify(Sphere{{0, 0, 0}, 0.5f}, f), kIn);
@@ -69,7 +70,8 @@ constexpr double kMargin = 1e-4;
 // Checks one box against the exact test; counts boxes that truly overlap and boxes the
 // plane test keeps although they are disjoint (conservative false positives).
 void check_box(const Obb& box, Classification c, const Frustum& f, int& exact_hits, int& false_positives) {
-  const std::array<test::dvec3, 3> dirs = {test::dvec3(box.basis[0]), test::dvec3(box.basis[1]), test::dvec3(box.basis[2])};
+  const std::array<test::dvec3, 3> dirs = {test::dvec3(box.basis[0]), test::dvec3(box.basis[1]),
+                                           test::dvec3(box.basis[2])};
   if (test::frustum_box_intersect(f, test::corners_d(box, kMargin), dirs)) {
     ++exact_hits;
     ASSERT_NE(c, kOut) << describe(box) << " overlaps the frustum " << describe(f);
@@ -146,10 +148,14 @@ TEST(Reference, ZeroAreaFrustaAreRefusedAndSliversStayConservative) {
     return p;
   };
   const glm::mat4 view = glm::lookAtRH(glm::vec3(0, 0, 10), glm::vec3(0), glm::vec3(0, 1, 0));
-  EXPECT_THROW(Frustum::from_view_proj(flip(glm::perspectiveRH_ZO(0.0f, 1.5f, 0.5f, 50.0f)) * view), std::invalid_argument);
-  EXPECT_THROW(Frustum::from_view_proj(flip(glm::perspectiveRH_ZO(1.0f, 1.5f, 5.0f, 5.0f)) * view), std::invalid_argument);
-  EXPECT_THROW(Frustum::from_view_proj(glm::orthoRH_ZO(2.0f, 2.0f, -1.0f, 1.0f, 0.5f, 50.0f) * view), std::invalid_argument);
-  const Frustum sliver = Frustum::from_view_proj(flip(glm::perspectiveRH_ZO(glm::radians(1e-4f), 1.0f, 0.5f, 50.0f)) * view);
+  EXPECT_THROW(Frustum::from_view_proj(flip(glm::perspectiveRH_ZO(0.0f, 1.5f, 0.5f, 50.0f)) * view),
+               std::invalid_argument);
+  EXPECT_THROW(Frustum::from_view_proj(flip(glm::perspectiveRH_ZO(1.0f, 1.5f, 5.0f, 5.0f)) * view),
+               std::invalid_argument);
+  EXPECT_THROW(Frustum::from_view_proj(glm::orthoRH_ZO(2.0f, 2.0f, -1.0f, 1.0f, 0.5f, 50.0f) * view),
+               std::invalid_argument);
+  const Frustum sliver =
+      Frustum::from_view_proj(flip(glm::perspectiveRH_ZO(glm::radians(1e-4f), 1.0f, 0.5f, 50.0f)) * view);
   EXPECT_EQ(classify_pn(Aabb{{-0.1f, -0.1f, -1}, {0.1f, 0.1f, 1}}, sliver), kCross);  // on the axis
   EXPECT_EQ(classify_pn(Aabb{{1, 1, -1}, {2, 2, 1}}, sliver), kOut);
   test::Rng rng{5};
@@ -196,8 +202,8 @@ TEST(Compare, AgreementCheckCatchesEveryKindOfDifference) {
 
   std::vector<Classification> wrong = cpu;  // one class flipped
   wrong[1] = kCross;
-  const Agreement a = check_agreement<Sphere>(spheres, f, cpu, counts, wrong, counts, ids, 3, 10,
-                                              std::vector<std::size_t>{10, 11, 12});
+  const Agreement a =
+      check_agreement<Sphere>(spheres, f, cpu, counts, wrong, counts, ids, 3, 10, std::vector<std::size_t>{10, 11, 12});
   EXPECT_EQ(a.mismatches, 1u);
   ASSERT_EQ(a.reports.size(), 1u);
   EXPECT_NE(a.reports[0].find("object 11: sphere center (5, 0, 0) radius 1"), std::string::npos) << a.reports[0];

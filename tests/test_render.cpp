@@ -34,8 +34,9 @@ const std::filesystem::path kScenes = std::filesystem::path(CULLPIPE_SHARED_DIR)
 // For each camera: culled image == unculled image; draws issued == visible objects by the CPU
 // reference; triangles drawn == the visible objects' triangles. Returns the total number of
 // (visible, culled) objects over the cameras, so callers can check the views were not trivial.
-std::pair<std::size_t, std::size_t> expect_culling_invisible(const Scene& scene, const std::vector<Camera>& cameras, BvKind bv,
-                                                             std::uint32_t width = 320, std::uint32_t height = 200) {
+std::pair<std::size_t, std::size_t> expect_culling_invisible(const Scene& scene, const std::vector<Camera>& cameras,
+                                                             BvKind bv, std::uint32_t width = 320,
+                                                             std::uint32_t height = 200) {
   render::RendererConfig config;
   config.width = width;
   config.height = height;
@@ -77,7 +78,8 @@ std::pair<std::size_t, std::size_t> expect_culling_invisible(const Scene& scene,
     culled_total += scene.objects.size() - counts.visible;
     // Something is drawn.
     std::size_t background = 0;
-    for (std::size_t p = 0; p < all.rgba.size(); p += 4) background += all.rgba[p] == all.rgba[0] && all.rgba[p + 1] == all.rgba[1];
+    for (std::size_t p = 0; p < all.rgba.size(); p += 4)
+      background += all.rgba[p] == all.rgba[0] && all.rgba[p + 1] == all.rgba[1];
     if (counts.visible > 0) {
       EXPECT_LT(background, all.rgba.size() / 4);
     }
@@ -117,8 +119,9 @@ TEST(Render, DepthConventionsAndCamerasInsideTheScene) {
 TEST(Render, GltfScenesCulledEqualsUnculled) {
   if (!std::filesystem::exists(kScenes)) GTEST_SKIP() << kScenes << " not present";
   std::size_t files = 0;
-  for (const char* name : {"VC/VC.gltf", "2CylinderEngine/2CylinderEngine.gltf", "NegativeScaleTest/NegativeScaleTest.gltf",
-                           "ReciprocatingSaw/ReciprocatingSaw.gltf", "CesiumMilkTruck/CesiumMilkTruck.gltf"}) {
+  for (const char* name :
+       {"VC/VC.gltf", "2CylinderEngine/2CylinderEngine.gltf", "NegativeScaleTest/NegativeScaleTest.gltf",
+        "ReciprocatingSaw/ReciprocatingSaw.gltf", "CesiumMilkTruck/CesiumMilkTruck.gltf"}) {
     const std::filesystem::path path = kScenes / name;
     if (!std::filesystem::exists(path)) continue;
     SCOPED_TRACE(path.string());
@@ -151,7 +154,8 @@ TEST(Render, TopDownImageAndPng) {
   EXPECT_LE(std::max(img.width, img.height), 420u);
   std::size_t inside = 0, outside = 0, white = 0;
   for (std::size_t p = 0; p < img.rgba.size(); p += 4) {
-    const std::uint32_t c = std::uint32_t(img.rgba[p]) << 24 | std::uint32_t(img.rgba[p + 1]) << 16 | std::uint32_t(img.rgba[p + 2]) << 8 | img.rgba[p + 3];
+    const std::uint32_t c = std::uint32_t(img.rgba[p]) << 24 | std::uint32_t(img.rgba[p + 1]) << 16 |
+                            std::uint32_t(img.rgba[p + 2]) << 8 | img.rgba[p + 3];
     inside += c == render::kColorInside;
     outside += c == render::kColorOutside;
     white += c == 0xffffffffu;

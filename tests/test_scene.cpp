@@ -1,4 +1,5 @@
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cstdio>
 #include <filesystem>
@@ -11,7 +12,6 @@
 #include "scene/generators.hpp"
 #include "scene/point_io.hpp"
 #include "scene/scene_io.hpp"
-#include <unistd.h>
 
 namespace cullpipe {
 namespace {
@@ -19,7 +19,8 @@ namespace {
 bool same_scene(const Scene& a, const Scene& b) {
   if (a.name != b.name || !(a.camera == b.camera) || a.objects.size() != b.objects.size()) return false;
   for (std::size_t i = 0; i < a.objects.size(); ++i)
-    if (!(a.objects[i].local_bounds == b.objects[i].local_bounds) || a.objects[i].world != b.objects[i].world) return false;
+    if (!(a.objects[i].local_bounds == b.objects[i].local_bounds) || a.objects[i].world != b.objects[i].world)
+      return false;
   return true;
 }
 
@@ -109,9 +110,8 @@ TEST(Camera, EveryDepthConventionGivesTheSameFrustumShape) {
   base.far_plane = 100.0f;
   // (point, inside the finite frustum?) -- camera looks down -z from z = 10.
   const std::vector<std::pair<glm::vec3, bool>> points = {
-      {{0, 0, 0}, true},      {{0, 0, 9.5f}, false},  {{0, 0, 8.5f}, true},   {{0, 9.5f, 0}, true},
-      {{0, 10.5f, 0}, false}, {{19.5f, 0, 0}, true},  {{20.5f, 0, 0}, false}, {{0, 0, -89}, true},
-      {{0, 0, -91}, false},   {{0, 0, 20}, false}};
+      {{0, 0, 0}, true},     {{0, 0, 9.5f}, false},  {{0, 0, 8.5f}, true}, {{0, 9.5f, 0}, true}, {{0, 10.5f, 0}, false},
+      {{19.5f, 0, 0}, true}, {{20.5f, 0, 0}, false}, {{0, 0, -89}, true},  {{0, 0, -91}, false}, {{0, 0, 20}, false}};
   for (int variant = 0; variant < 4; ++variant) {
     Camera c = base;
     c.reversed_z = variant & 1;
@@ -178,7 +178,8 @@ TEST(SceneIo, ErrorsNameTheFileAndElement) {
   };
   EXPECT_NE(error_of("{").find("bad.json: invalid JSON"), std::string::npos);
   EXPECT_EQ(error_of(R"({"format":"x","version":1,"objects":[]})"), "bad.json: format: expected \"cullpipe-scene\"");
-  EXPECT_NE(error_of(R"({"format":"cullpipe-scene","version":2,"objects":[]})").find("unsupported version 2"), std::string::npos);
+  EXPECT_NE(error_of(R"({"format":"cullpipe-scene","version":2,"objects":[]})").find("unsupported version 2"),
+            std::string::npos);
   EXPECT_EQ(error_of(R"({"format":"cullpipe-scene","version":1,"objects":[{"min":[0,0],"max":[1,1,1]}]})"),
             "bad.json: objects[0].min: expected 3 numbers, got 2");
   EXPECT_EQ(error_of(R"({"format":"cullpipe-scene","version":1,"objects":[{"min":[0,0,0],"max":[1,1e39,1]}]})"),
@@ -196,10 +197,14 @@ TEST(SceneIo, ErrorsNameTheFileAndElement) {
   EXPECT_EQ(error_of(R"({"format":"cullpipe-scene","version":1,"objects":[{"min":[0,0,0],"max":[1,1,1],
               "world":[1e38,0,0,0, 0,1,0,0, 0,0,1,0, 3e38,0,0,1]}]})"),
             "bad.json: objects[0]: world-space bounds: max.x is infinite");
-  EXPECT_EQ(error_of(R"({"format":"cullpipe-scene","version":1,"camera":{"eye":[0,0,1],"target":[0,0,0],"near":-1},"objects":[]})"),
-            "bad.json: camera.near: must be positive");
-  EXPECT_EQ(error_of(R"({"format":"cullpipe-scene","version":1,"camera":{"eye":[0,0,1],"target":[0,0,0],"reversed_z":"yes"},"objects":[]})"),
-            "bad.json: camera.reversed_z: expected true or false, got string");
+  EXPECT_EQ(
+      error_of(
+          R"({"format":"cullpipe-scene","version":1,"camera":{"eye":[0,0,1],"target":[0,0,0],"near":-1},"objects":[]})"),
+      "bad.json: camera.near: must be positive");
+  EXPECT_EQ(
+      error_of(
+          R"({"format":"cullpipe-scene","version":1,"camera":{"eye":[0,0,1],"target":[0,0,0],"reversed_z":"yes"},"objects":[]})"),
+      "bad.json: camera.reversed_z: expected true or false, got string");
   EXPECT_THROW(load_scene("/nonexistent/scene.json"), InputError);
 }
 
@@ -235,7 +240,8 @@ TEST(CullCaseIo, RejectsBadInputNamingTheElement) {
     }
     return std::string("no error");
   };
-  EXPECT_EQ(error_of(R"([{"sphere": {"center": [0,0,0], "radius": -1}}])"), "in.json: volumes[0].sphere: radius is negative");
+  EXPECT_EQ(error_of(R"([{"sphere": {"center": [0,0,0], "radius": -1}}])"),
+            "in.json: volumes[0].sphere: radius is negative");
   EXPECT_EQ(error_of(R"([{"aabb": {"center": [0,0,0], "half_extents": [1,-1,1]}}])"),
             "in.json: volumes[0].aabb.half_extents: negative extent");
   EXPECT_EQ(error_of(R"([{"aabb": {"min": [0,0,0], "max": [-1,1,1]}}])"), "in.json: volumes[0].aabb: min.x > max.x");
@@ -245,7 +251,8 @@ TEST(CullCaseIo, RejectsBadInputNamingTheElement) {
   EXPECT_EQ(error_of("[]", R"({"view_proj": [0,0,0,0, 0,0,0,0, 0,0,0,0, 0,0,0,0]})"),
             "in.json: frustum: view-projection matrix is singular (determinant 0)");
   EXPECT_EQ(error_of("[]", R"({"planes": [[0,0,0,1]]})"), "in.json: frustum: plane 0 has a zero normal");
-  EXPECT_EQ(error_of("[]", R"({"planes": [[1,0,0,-1e39]]})"), "in.json: frustum.planes[0][3]: number out of float range");
+  EXPECT_EQ(error_of("[]", R"({"planes": [[1,0,0,-1e39]]})"),
+            "in.json: frustum.planes[0][3]: number out of float range");
   EXPECT_EQ(error_of("[]", R"({"nothing": 1})"), "in.json: frustum: expected \"planes\" or \"view_proj\"");
   EXPECT_NE(error_of("[", "").find("in.json: invalid JSON"), std::string::npos);
   EXPECT_EQ(error_of("{}"), "in.json: volumes: expected an array");
@@ -260,7 +267,8 @@ namespace cullpipe {
 namespace {
 
 std::string write_temp(const std::string& name, const std::string& text) {
-  const auto path = std::filesystem::temp_directory_path() / ("cullpipe_points_" + std::to_string(::getpid()) + "_" + name);
+  const auto path =
+      std::filesystem::temp_directory_path() / ("cullpipe_points_" + std::to_string(::getpid()) + "_" + name);
   std::ofstream(path) << text;
   return path.string();
 }
@@ -351,8 +359,8 @@ std::string gltf_error(const std::string& name, const std::string& text) {
 std::string triangle_gltf(const std::string& accessor_patch, std::size_t byte_length = 36) {
   // (0,0,0) (1,0,0) (0,1,0) as little-endian floats
   const std::string b64 = "AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA";
-  return R"({"asset":{"version":"2.0"},"buffers":[{"byteLength":36,"uri":"data:application/octet-stream;base64,)" + b64 +
-         R"("}],"bufferViews":[{"buffer":0,"byteLength":)" + std::to_string(byte_length) +
+  return R"({"asset":{"version":"2.0"},"buffers":[{"byteLength":36,"uri":"data:application/octet-stream;base64,)" +
+         b64 + R"("}],"bufferViews":[{"buffer":0,"byteLength":)" + std::to_string(byte_length) +
          R"(}],"accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3",)" + accessor_patch +
          R"("min":[0,0,0],"max":[1,1,0]}],"meshes":[{"primitives":[{"attributes":{"POSITION":0}}]}]})";
 }
@@ -361,20 +369,26 @@ TEST(GltfPoints, ReadsAMinimalFileAndRejectsBrokenOnes) {
   const auto good = load_gltf_mesh_points(write_temp("ok.gltf", triangle_gltf("")));
   ASSERT_EQ(good.size(), 1u);
   EXPECT_EQ(good[0].positions, (std::vector<glm::vec3>{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}));
-  EXPECT_NE(gltf_error("trunc.gltf", triangle_gltf("").substr(0, 100)).find("trunc.gltf: not a readable glTF file"), std::string::npos);
-  EXPECT_NE(gltf_error("offset.gltf", triangle_gltf(R"("byteOffset":12,)")).find("POSITION accessor 0 reads past its buffer view"),
+  EXPECT_NE(gltf_error("trunc.gltf", triangle_gltf("").substr(0, 100)).find("trunc.gltf: not a readable glTF file"),
             std::string::npos);
-  EXPECT_NE(gltf_error("type.gltf", triangle_gltf("").replace(triangle_gltf("").find("5126"), 4, "5123")).find("not FLOAT"),
+  EXPECT_NE(gltf_error("offset.gltf", triangle_gltf(R"("byteOffset":12,)"))
+                .find("POSITION accessor 0 reads past its buffer view"),
             std::string::npos);
+  EXPECT_NE(
+      gltf_error("type.gltf", triangle_gltf("").replace(triangle_gltf("").find("5126"), 4, "5123")).find("not FLOAT"),
+      std::string::npos);
   EXPECT_EQ(gltf_error("missing.gltf", "{}").find("missing.gltf"), 0u);
   // Offsets near 2^64 must not wrap the range checks into an out-of-bounds read.
   std::string wrap_view = triangle_gltf("");
   wrap_view.replace(wrap_view.find(R"("buffer":0,)"), 11, R"("buffer":0,"byteOffset":18446744073709551615,)");
-  EXPECT_NE(gltf_error("wrap1.gltf", wrap_view).find("reads past"), std::string::npos) << gltf_error("wrap1.gltf", wrap_view);
+  EXPECT_NE(gltf_error("wrap1.gltf", wrap_view).find("reads past"), std::string::npos)
+      << gltf_error("wrap1.gltf", wrap_view);
   EXPECT_NE(gltf_error("wrap2.gltf", triangle_gltf(R"("byteOffset":18446744073709551604,)")).find("reads past"),
             std::string::npos);
-  EXPECT_NE(gltf_error("count.gltf", triangle_gltf("").replace(triangle_gltf("").find(R"("count":3)"), 9, R"("count":4)")).find("reads past"),
-            std::string::npos);
+  EXPECT_NE(
+      gltf_error("count.gltf", triangle_gltf("").replace(triangle_gltf("").find(R"("count":3)"), 9, R"("count":4)"))
+          .find("reads past"),
+      std::string::npos);
   EXPECT_THROW(load_gltf_mesh_points("/nonexistent/model.gltf"), InputError);
 }
 

@@ -11,11 +11,11 @@
 #include <glm/mat3x3.hpp>
 #include <vector>
 
+#include "core/splitmix.hpp"
 #include "geom/aabb.hpp"
 #include "geom/frustum.hpp"
 #include "geom/obb.hpp"
 #include "geom/sphere.hpp"
-#include "core/splitmix.hpp"
 
 namespace cullpipe::test {
 
@@ -87,7 +87,8 @@ inline std::array<dvec3, 8> frustum_vertices(const Frustum& f) {
     const Plane& c = f.planes[(i & 4) ? 5 : 4];
     const dvec3 na(a.normal), nb(b.normal), nc(c.normal);
     const double det = glm::dot(na, glm::cross(nb, nc));
-    out[std::size_t(i)] = (-double(a.d) * glm::cross(nb, nc) - double(b.d) * glm::cross(nc, na) - double(c.d) * glm::cross(na, nb)) / det;
+    out[std::size_t(i)] =
+        (-double(a.d) * glm::cross(nb, nc) - double(b.d) * glm::cross(nc, na) - double(c.d) * glm::cross(na, nb)) / det;
   }
   return out;
 }
@@ -103,7 +104,8 @@ inline void project(const dvec3* pts, std::size_t n, const dvec3& axis, double& 
 
 /// Exact separating-axis test between a 6-plane frustum and a box given by its 8 corners
 /// and 3 edge directions. True when the two closed convex sets intersect.
-inline bool frustum_box_intersect(const Frustum& f, const std::array<dvec3, 8>& box, const std::array<dvec3, 3>& box_dirs) {
+inline bool frustum_box_intersect(const Frustum& f, const std::array<dvec3, 8>& box,
+                                  const std::array<dvec3, 3>& box_dirs) {
   const auto fv = frustum_vertices(f);
   std::vector<dvec3> axes;
   for (const Plane& p : f.active()) axes.push_back(dvec3(p.normal));
@@ -162,7 +164,8 @@ inline double frustum_point_distance(const Frustum& f, const dvec3& p) {
     for (int s = 0; s < 2; ++s) {
       const int o1 = bit == 1 ? 2 : 1, o2 = bit == 4 ? 2 : 4;
       const int base = s ? bit : 0;
-      const dvec3 q[4] = {v[std::size_t(base)], v[std::size_t(base | o1)], v[std::size_t(base | o1 | o2)], v[std::size_t(base | o2)]};
+      const dvec3 q[4] = {v[std::size_t(base)], v[std::size_t(base | o1)], v[std::size_t(base | o1 | o2)],
+                          v[std::size_t(base | o2)]};
       dvec3 n = glm::normalize(glm::cross(q[1] - q[0], q[3] - q[0]));
       const double plane_dist = glm::dot(p - q[0], n);
       const dvec3 proj = p - plane_dist * n;

@@ -53,7 +53,8 @@ struct EngineDevice {
       std::vector<VkQueueFamilyProperties> families(nf);
       vkGetPhysicalDeviceQueueFamilyProperties(pd, &nf, families.data());
       for (std::uint32_t f = 0; f < nf && !physical; ++f)
-        if ((families[f].queueFlags & VK_QUEUE_GRAPHICS_BIT) && (families[f].queueFlags & VK_QUEUE_COMPUTE_BIT)) physical = pd, family = f;
+        if ((families[f].queueFlags & VK_QUEUE_GRAPHICS_BIT) && (families[f].queueFlags & VK_QUEUE_COMPUTE_BIT))
+          physical = pd, family = f;
       if (physical) break;
     }
     if (!physical) {
@@ -111,7 +112,8 @@ int main(int argc, char** argv) try {
   pi.queueFamilyIndex = engine.family;
   VkCommandPool pool = VK_NULL_HANDLE;
   check(vkCreateCommandPool(engine.device, &pi, nullptr, &pool), "vkCreateCommandPool");
-  VkCommandBufferAllocateInfo ai{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO, nullptr, pool, VK_COMMAND_BUFFER_LEVEL_PRIMARY, 1};
+  VkCommandBufferAllocateInfo ai{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO, nullptr, pool,
+                                 VK_COMMAND_BUFFER_LEVEL_PRIMARY, 1};
   VkCommandBuffer cmd = VK_NULL_HANDLE;
   check(vkAllocateCommandBuffers(engine.device, &ai, &cmd), "vkAllocateCommandBuffers");
   VkCommandBufferBeginInfo bi{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
@@ -135,8 +137,9 @@ int main(int argc, char** argv) try {
   std::vector<Classification> cpu(boxes.size());
   const reference::CullCounts counts = reference::classify_all(std::span<const Aabb>(boxes), frustum, cpu);
   const gpu::ViewResult& view = result.views[0];
-  std::printf("engine_example: %zu objects on %s; GPU: %zu visible, %zu draws; CPU reference: %zu visible\n", boxes.size(),
-              ctx.info().name.c_str(), std::size_t(view.counts.visible), view.draws.size(), std::size_t(counts.visible));
+  std::printf("engine_example: %zu objects on %s; GPU: %zu visible, %zu draws; CPU reference: %zu visible\n",
+              boxes.size(), ctx.info().name.c_str(), std::size_t(view.counts.visible), view.draws.size(),
+              std::size_t(counts.visible));
   if (view.classes != cpu || view.draws.size() != counts.visible) {
     std::fprintf(stderr, "engine_example: GPU and CPU disagree\n");
     return 1;

@@ -10,12 +10,12 @@
 #include <vector>
 
 #include "app/commands.hpp"
+#include "bvh/builders.hpp"
+#include "bvh/bvh.hpp"
 #include "cull/compare.hpp"
 #include "cull/cpu_bvh_culler.hpp"
 #include "cull/cpu_culler.hpp"
 #include "cull/reference.hpp"
-#include "bvh/builders.hpp"
-#include "bvh/bvh.hpp"
 #include "gpu/bvh_culler.hpp"
 #include "gpu/gpu_culler.hpp"
 #include "scene/scene.hpp"
@@ -30,12 +30,12 @@ struct BackendResults {
   std::vector<reference::CullCounts> cpu_counts, gpu_counts;
   std::vector<std::vector<std::uint32_t>> gpu_visible_ids;
   bool gpu_overflow = false;
-  double cpu_ns = 0.0;       ///< all views, on the CPU path that ran
-  std::string cpu_path;      ///< which: "reference" or "fast (avx512, 2 threads)"
-  bool fast_checked = false; ///< the fast path's answers were compared with the reference's (untimed)
+  double cpu_ns = 0.0;              ///< all views, on the CPU path that ran
+  std::string cpu_path;             ///< which: "reference" or "fast (avx512, 2 threads)"
+  bool fast_checked = false;        ///< the fast path's answers were compared with the reference's (untimed)
   std::size_t fast_mismatches = 0;  ///< differences between the fast path and the reference
-  double gpu_ns = 0.0;       ///< all views, GPU timestamps
-  double gpu_wall_ns = 0.0;  ///< all views, including submission and readback
+  double gpu_ns = 0.0;              ///< all views, GPU timestamps
+  double gpu_wall_ns = 0.0;         ///< all views, including submission and readback
   /// The uploads of the paths that keep their own copy of the scene (0: none ran): the fast
   /// CPU culler's and the GPU culler's, the first into fresh buffers (allocation included).
   double cpu_upload_ns = 0.0, gpu_upload_ns = 0.0;
@@ -108,8 +108,9 @@ inline BuiltBvh build_bvh(const std::string& builder, std::span<const Aabb> boxe
   if (leaf_size == 0) throw InputError("--leaf-size must be at least 1");
   check_builder_name(builder);
   if (boxes.size() > builder_size_limit(builder))
-    throw InputError("--builder " + builder + " is an exact oracle for at most " + std::to_string(builder_size_limit(builder)) +
-                     " objects; this scene has " + std::to_string(boxes.size()) + " (try agglomerative-local)");
+    throw InputError("--builder " + builder + " is an exact oracle for at most " +
+                     std::to_string(builder_size_limit(builder)) + " objects; this scene has " +
+                     std::to_string(boxes.size()) + " (try agglomerative-local)");
   bvh::BuildOptions options;
   options.max_leaf_size = leaf_size;
   BuiltBvh built;
@@ -120,7 +121,8 @@ inline BuiltBvh build_bvh(const std::string& builder, std::span<const Aabb> boxe
   } catch (const std::invalid_argument& e) {
     throw InputError(std::string("--builder: ") + e.what());
   }
-  built.build_ns = double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());
+  built.build_ns =
+      double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());
   built.metrics = bvh::metrics(tree);
   built.flat = bvh::flatten(tree);
   return built;
@@ -171,9 +173,11 @@ inline std::uint32_t cpu_range_objects(CpuPath cpu, std::optional<std::uint32_t>
 /// object by object (the classes do not depend on range_objects; the test counts do, and each
 /// side's are proved against the scalar traversal with its own).
 template <class Volume>
-BackendResults cull_bvh_on_backends(const bvh::FlatTree& tree, std::span<const Volume> boxes, std::span<const Frustum> frusta,
-                                    Backend backend, GpuBackend& gpu_backend, bool warm_up, CpuPath cpu = CpuPath::Reference,
-                                    std::optional<std::uint32_t> range_objects = std::nullopt, std::size_t max_reports = 10) {
+BackendResults cull_bvh_on_backends(const bvh::FlatTree& tree, std::span<const Volume> boxes,
+                                    std::span<const Frustum> frusta, Backend backend, GpuBackend& gpu_backend,
+                                    bool warm_up, CpuPath cpu = CpuPath::Reference,
+                                    std::optional<std::uint32_t> range_objects = std::nullopt,
+                                    std::size_t max_reports = 10) {
   BackendResults r;
   const bvh::TraversalOptions traversal{cpu_range_objects(cpu, range_objects, kind_of<Volume>())};
   if (backend != Backend::Gpu) {
@@ -195,15 +199,16 @@ BackendResults cull_bvh_on_backends(const bvh::FlatTree& tree, std::span<const V
       culler.cull(frusta, classes_only, results);  // every view in one pass
       r.cpu_ns = elapsed_ns(start);
       for (fast::CpuBvhViewResult& v : results) take(v.result);
-      r.cpu_path = "fast hierarchical (" + std::to_string(culler.threads()) + " threads, ranges of <= " +
-                   std::to_string(traversal.range_objects) + " objects)";
+      r.cpu_path = "fast hierarchical (" + std::to_string(culler.threads()) +
+                   " threads, ranges of <= " + std::to_string(traversal.range_objects) + " objects)";
       // The fast traversal is proved against the scalar one (untimed): classes and test counts.
       for (std::size_t v = 0; v < frusta.size(); ++v) {
         const bvh::HierarchicalResult h = bvh::cull_hierarchical(tree, boxes, frusta[v], traversal);
         std::size_t differ = h.node_tests != r.node_tests[v] || h.object_tests != r.object_tests[v] ? 1 : 0;
         for (std::size_t i = 0; i < h.classes.size(); ++i) differ += h.classes[i] != r.cpu[v][i];
         if (differ && r.mismatch_reports.size() < max_reports)
-          r.mismatch_reports.push_back("view " + std::to_string(v) + ": the fast CPU traversal differs from the scalar one in " +
+          r.mismatch_reports.push_back("view " + std::to_string(v) +
+                                       ": the fast CPU traversal differs from the scalar one in " +
                                        std::to_string(differ) + " places");
         r.fast_mismatches += differ;
       }
@@ -247,8 +252,9 @@ BackendResults cull_bvh_on_backends(const bvh::FlatTree& tree, std::span<const V
       if (view.node_tests != node_tests || view.object_tests != object_tests) {
         ++r.mismatches;
         if (r.mismatch_reports.size() < max_reports)
-          r.mismatch_reports.push_back("view " + std::to_string(v) + ": the GPU made " + std::to_string(view.node_tests) +
-                                       " node and " + std::to_string(view.object_tests) + " object tests, " + against + " " +
+          r.mismatch_reports.push_back("view " + std::to_string(v) + ": the GPU made " +
+                                       std::to_string(view.node_tests) + " node and " +
+                                       std::to_string(view.object_tests) + " object tests, " + against + " " +
                                        std::to_string(node_tests) + " and " + std::to_string(object_tests));
       }
     }
@@ -279,7 +285,8 @@ BackendResults cull_on_backends(std::span<const Volume> volumes, std::span<const
       r.cpu.push_back(std::move(view.classes));
       r.cpu_counts.push_back(view.counts);
     }
-    r.cpu_path = "fast (" + std::string(fast::to_string(culler.isa())) + ", " + std::to_string(culler.threads()) + " threads)";
+    r.cpu_path =
+        "fast (" + std::string(fast::to_string(culler.isa())) + ", " + std::to_string(culler.threads()) + " threads)";
     // The fast path is itself proved against the scalar oracle, object by object (untimed).
     std::vector<Classification> ref(volumes.size());
     for (std::size_t v = 0; v < frusta.size(); ++v) {
@@ -287,15 +294,17 @@ BackendResults cull_on_backends(std::span<const Volume> volumes, std::span<const
       r.fast_mismatches += count_mismatches(ref, r.cpu[v]) + (counts == r.cpu_counts[v] ? 0 : 1);
       for (std::size_t i = 0; i < ref.size() && r.mismatch_reports.size() < max_reports; ++i)
         if (ref[i] != r.cpu[v][i])
-          r.mismatch_reports.push_back("view " + std::to_string(v) + ", object " + std::to_string(i) + ": " + describe(volumes[i]) +
-                                       "; frustum " + describe(frusta[v]) + "; reference says " + std::string(to_string(ref[i])) +
-                                       ", fast CPU path says " + std::string(to_string(r.cpu[v][i])));
+          r.mismatch_reports.push_back("view " + std::to_string(v) + ", object " + std::to_string(i) + ": " +
+                                       describe(volumes[i]) + "; frustum " + describe(frusta[v]) + "; reference says " +
+                                       std::string(to_string(ref[i])) + ", fast CPU path says " +
+                                       std::string(to_string(r.cpu[v][i])));
     }
     r.fast_checked = true;
   } else if (backend != Backend::Gpu) {
     r.cpu.assign(frusta.size(), std::vector<Classification>(volumes.size()));
     const auto start = std::chrono::steady_clock::now();
-    for (std::size_t v = 0; v < frusta.size(); ++v) r.cpu_counts.push_back(reference::classify_all(volumes, frusta[v], r.cpu[v]));
+    for (std::size_t v = 0; v < frusta.size(); ++v)
+      r.cpu_counts.push_back(reference::classify_all(volumes, frusta[v], r.cpu[v]));
     r.cpu_ns = elapsed_ns(start);
     r.cpu_path = "reference";
   }

@@ -39,10 +39,14 @@ Built timed(const std::string& name, F&& build) {
 
 const char* dimension_name(bounds::ConvexHull::Dimension d) {
   switch (d) {
-    case bounds::ConvexHull::Dimension::Point: return "a point";
-    case bounds::ConvexHull::Dimension::Segment: return "a segment";
-    case bounds::ConvexHull::Dimension::Polygon: return "a polygon";
-    case bounds::ConvexHull::Dimension::Polyhedron: return "a polyhedron";
+    case bounds::ConvexHull::Dimension::Point:
+      return "a point";
+    case bounds::ConvexHull::Dimension::Segment:
+      return "a segment";
+    case bounds::ConvexHull::Dimension::Polygon:
+      return "a polygon";
+    case bounds::ConvexHull::Dimension::Polyhedron:
+      return "a polyhedron";
   }
   return "?";
 }
@@ -68,7 +72,8 @@ nlohmann::json report(const std::string& title, const std::vector<glm::vec3>& pt
   for (const auto* list : {&boxes, &spheres})
     for (const Built& b : *list) {
       const std::string why = std::visit([](const auto& v) { return invalid_reason(v); }, b.volume);
-      if (!why.empty()) throw InputError(title + ": " + b.builder + " gives no finite volume (" + why + "); coordinates too large");
+      if (!why.empty())
+        throw InputError(title + ": " + b.builder + " gives no finite volume (" + why + "); coordinates too large");
     }
   const double exact_box = boxes.back().size, exact_radius = spheres.back().size;
 
@@ -110,7 +115,8 @@ int bounds_command(const BoundsOptions& o, std::ostream& out, std::ostream& err)
     if (o.points_path.empty() == o.model_path.empty())
       throw InputError("bounds: give a glTF file (.gltf, .glb) or --points FILE (.txt, .off, .obj)");
     nlohmann::json sets = nlohmann::json::array();
-    out << "Sizes relative to the exact minimum: box volumes to the exact OBB's, sphere radii to the exact sphere's.\n\n";
+    out << "Sizes relative to the exact minimum: box volumes to the exact OBB's, sphere radii to the exact "
+           "sphere's.\n\n";
     if (!o.points_path.empty()) {
       sets.push_back(report(o.points_path, load_points(o.points_path), out));
     } else {

@@ -26,12 +26,15 @@ std::string right(const std::string& s, std::size_t width) {
   return s.size() >= width ? s : std::string(width - s.size(), ' ') + s;
 }
 
-std::string left(const std::string& s, std::size_t width) { return s.size() >= width ? s : s + std::string(width - s.size(), ' '); }
+std::string left(const std::string& s, std::size_t width) {
+  return s.size() >= width ? s : s + std::string(width - s.size(), ' ');
+}
 
 }  // namespace
 
 void list_bvh_builders(std::ostream& out) {
-  for (const bvh::BuilderInfo& b : bvh::builders()) out << left(std::string(b.name), 22) << "  " << b.description << "\n";
+  for (const bvh::BuilderInfo& b : bvh::builders())
+    out << left(std::string(b.name), 22) << "  " << b.description << "\n";
   out << left("top-down:axis=A,split=P,cost=C", 22)
       << "  any top-down combination: A = longest | distant | pca | best, P = median | mean | extent | binned,\n"
       << std::string(24, ' ') << "C = sah | volume | largest | overlap | separation | sah-guarded\n"
@@ -58,10 +61,11 @@ int bvh_command(const BvhOptions& o, std::ostream& out, std::ostream& err) {
     const std::size_t n = boxes.size();
     for (const auto& [name, from_all] : names)
       if (!from_all && n > builder_size_limit(name))
-        throw InputError("--builder " + name + " is an exact oracle for at most " + std::to_string(builder_size_limit(name)) +
-                         " objects; this scene has " + std::to_string(n));
-    out << "cullpipe bvh: " << (loaded.scene.name.empty() ? loaded.source : loaded.scene.name) << " (" << loaded.source << "), " << n
-        << " objects, leaves of <= " << o.leaf_size << ", median of " << o.repeats << (o.repeats == 1 ? " build\n\n" : " builds\n\n");
+        throw InputError("--builder " + name + " is an exact oracle for at most " +
+                         std::to_string(builder_size_limit(name)) + " objects; this scene has " + std::to_string(n));
+    out << "cullpipe bvh: " << (loaded.scene.name.empty() ? loaded.source : loaded.scene.name) << " (" << loaded.source
+        << "), " << n << " objects, leaves of <= " << o.leaf_size << ", median of " << o.repeats
+        << (o.repeats == 1 ? " build\n\n" : " builds\n\n");
     out << "  " << left("builder", 26)
         << "  build ms  Mobj/s   SAH cost     nodes    leaves  depth  leaf depth  balance  volume  overlap\n";
 
@@ -70,7 +74,8 @@ int bvh_command(const BvhOptions& o, std::ostream& out, std::ostream& err) {
     options.max_leaf_size = o.leaf_size;
     for (const auto& [name, from_all] : names) {
       if (n > builder_size_limit(name)) {  // only from "all": named ones were checked above
-        out << "  " << left(name, 26) << "  skipped: an exact oracle, for at most " << builder_size_limit(name) << " objects\n";
+        out << "  " << left(name, 26) << "  skipped: an exact oracle, for at most " << builder_size_limit(name)
+            << " objects\n";
         continue;
       }
       std::vector<double> times;
@@ -82,7 +87,8 @@ int bvh_command(const BvhOptions& o, std::ostream& out, std::ostream& err) {
         } catch (const std::invalid_argument& e) {
           throw InputError(std::string("--builder: ") + e.what());
         }
-        times.push_back(double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count()));
+        times.push_back(double(
+            std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count()));
       }
       std::nth_element(times.begin(), times.begin() + times.size() / 2, times.end());
       const double build_ns = times[times.size() / 2];
@@ -93,8 +99,8 @@ int bvh_command(const BvhOptions& o, std::ostream& out, std::ostream& err) {
       out << "  " << left(name, 26) << right(fixed(build_ns / 1e6, 2), 10) << right(fixed(rate, 2), 8)
           << right(fixed(m.basic.sah_cost, 2), 11) << right(std::to_string(m.basic.nodes), 10)
           << right(std::to_string(m.basic.leaves), 10) << right(std::to_string(m.basic.depth), 7)
-          << right(fixed(m.mean_leaf_depth, 1), 12) << right(fixed(m.balance, 2), 9) << right(fixed(m.total_volume, 1), 8)
-          << right(fixed(m.overlap_volume, 2), 9) << "\n";
+          << right(fixed(m.mean_leaf_depth, 1), 12) << right(fixed(m.balance, 2), 9)
+          << right(fixed(m.total_volume, 1), 8) << right(fixed(m.overlap_volume, 2), 9) << "\n";
       nlohmann::json histogram = nlohmann::json::object();
       for (std::size_t k = 0; k < m.leaf_sizes.size(); ++k)
         if (m.leaf_sizes[k]) histogram[std::to_string(k)] = m.leaf_sizes[k];
@@ -112,7 +118,8 @@ int bvh_command(const BvhOptions& o, std::ostream& out, std::ostream& err) {
                         {"leaf_sizes", histogram}});
     }
     out << "\n  SAH cost: traversal 1 per inner node + 1 per object in a leaf, weighted by area / root area.\n"
-        << "  volume, overlap: sums of node volumes and of sibling overlaps, / root volume. balance: depth / (log2 leaves + 1).\n";
+        << "  volume, overlap: sums of node volumes and of sibling overlaps, / root volume. balance: depth / (log2 "
+           "leaves + 1).\n";
     if (!o.json_path.empty()) {
       nlohmann::json j;
       j["scene"] = loaded.scene.name;

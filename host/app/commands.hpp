@@ -14,59 +14,60 @@ enum class Backend { Gpu, Cpu, Both };
 
 /// Exit codes of the tool.
 inline constexpr int kExitOk = 0;
-inline constexpr int kExitMismatch = 1;   ///< GPU and CPU disagreed
-inline constexpr int kExitBadInput = 2;   ///< bad arguments or input files
-inline constexpr int kExitNoDevice = 3;   ///< Vulkan failed or no usable device
-inline constexpr int kExitInternal = 4;   ///< a bug: an unexpected exception
+inline constexpr int kExitMismatch = 1;  ///< GPU and CPU disagreed
+inline constexpr int kExitBadInput = 2;  ///< bad arguments or input files
+inline constexpr int kExitNoDevice = 3;  ///< Vulkan failed or no usable device
+inline constexpr int kExitInternal = 4;  ///< a bug: an unexpected exception
 
 /// Options shared by commands that use a Vulkan device.
 struct DeviceOptions {
-  std::string device;      ///< device name substring; empty: CULLPIPE_DEVICE or the default
-  bool validation = false; ///< Vulkan validation layers on; any message fails the command
-  double gpu_memory_mib = 0; ///< device memory budget in MiB (vk::ContextOptions::memory_budget); 0: none
+  std::string device;         ///< device name substring; empty: CULLPIPE_DEVICE or the default
+  bool validation = false;    ///< Vulkan validation layers on; any message fails the command
+  double gpu_memory_mib = 0;  ///< device memory budget in MiB (vk::ContextOptions::memory_budget); 0: none
 };
 
 /// Where a scene comes from, shared by `run` and `render`.
 struct SceneOptions {
-  std::string scene_path;   ///< a cullpipe scene JSON or a glTF file (.gltf, .glb); empty with no `generate`: the default scene
-  std::string generate;     ///< "KIND:N" procedural scene instead of a file
+  std::string
+      scene_path;  ///< a cullpipe scene JSON or a glTF file (.gltf, .glb); empty with no `generate`: the default scene
+  std::string generate;  ///< "KIND:N" procedural scene instead of a file
   std::uint64_t seed = 1;
   // glTF scenes
-  int gltf_scene = -1;              ///< index in scenes[]; -1: the file's default scene
-  std::string camera;               ///< glTF camera name or index; empty: a camera framing the scene
-  std::string obb = "dito";         ///< OBB builder for mesh objects: pca | dito | hull-face | exact
-  std::string sphere = "exact";     ///< sphere builder for mesh objects: ritter | refined | exact
-  std::string aabb_update = "hull"; ///< world AABBs of mesh objects: recompute | hull | transform-box | hill-climb
+  int gltf_scene = -1;               ///< index in scenes[]; -1: the file's default scene
+  std::string camera;                ///< glTF camera name or index; empty: a camera framing the scene
+  std::string obb = "dito";          ///< OBB builder for mesh objects: pca | dito | hull-face | exact
+  std::string sphere = "exact";      ///< sphere builder for mesh objects: ritter | refined | exact
+  std::string aabb_update = "hull";  ///< world AABBs of mesh objects: recompute | hull | transform-box | hill-climb
   // Any scene
-  std::size_t instances = 1;        ///< copies of the scene
-  std::string layout = "grid";      ///< grid | random placement of the copies
+  std::size_t instances = 1;    ///< copies of the scene
+  std::string layout = "grid";  ///< grid | random placement of the copies
 };
 
 struct RunOptions : SceneOptions {
-  std::string bv = "aabb";  ///< aabb | obb | sphere
-  std::string cull = "flat";            ///< flat (every object) | bvh (hierarchical)
-  std::string builder = "binned-sah";   ///< --cull bvh: builder name (bvh::builders())
+  std::string bv = "aabb";                          ///< aabb | obb | sphere
+  std::string cull = "flat";                        ///< flat (every object) | bvh (hierarchical)
+  std::string builder = "binned-sah";               ///< --cull bvh: builder name (bvh::builders())
   std::uint32_t leaf_size = bvh::kCullingLeafSize;  ///< --cull bvh: most objects per leaf
   Backend backend = Backend::Both;
   std::string cpu = "reference";  ///< CPU side: reference (scalar oracle) | fast (SIMD, every core, bit-exact)
   /// --cull bvh on the CPU: bvh::TraversalOptions::range_objects (unset: the fast path's
   /// default with --cpu fast, 0 with --cpu reference; the GPU traversal always uses 0).
   std::optional<std::uint32_t> range_objects;
-  std::size_t views = 1;    ///< views along the camera path around the scene
-  std::string json_path;    ///< summary as JSON
-  std::string dump_path;    ///< planes, volumes and classes (classify schema)
+  std::size_t views = 1;  ///< views along the camera path around the scene
+  std::string json_path;  ///< summary as JSON
+  std::string dump_path;  ///< planes, volumes and classes (classify schema)
   DeviceOptions device;
 };
 
 struct RenderOptions : SceneOptions {
   std::string bv = "aabb";
-  std::size_t view = 0;           ///< which view of a `views`-camera path around the scene (0: the scene's camera)
+  std::size_t view = 0;  ///< which view of a `views`-camera path around the scene (0: the scene's camera)
   std::size_t views = 1;
-  bool no_cull = false;           ///< draw every object instead of the culling pass's draws
-  bool check = false;             ///< render both ways and require identical images
+  bool no_cull = false;  ///< draw every object instead of the culling pass's draws
+  bool check = false;    ///< render both ways and require identical images
   std::uint32_t width = 960, height = 540;
-  std::string out_path;           ///< PNG
-  std::string top_down_path;      ///< optional top-down debug PNG
+  std::string out_path;       ///< PNG
+  std::string top_down_path;  ///< optional top-down debug PNG
   DeviceOptions device;
 };
 

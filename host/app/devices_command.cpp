@@ -16,7 +16,8 @@ int devices_command(std::ostream& out, std::ostream& err) {
     for (std::size_t i = 0; i < devices.size(); ++i) {
       const auto& d = devices[i];
       out << i << ": " << d.name << " (" << d.type << ", Vulkan " << VK_API_VERSION_MAJOR(d.api_version) << "."
-          << VK_API_VERSION_MINOR(d.api_version) << "." << VK_API_VERSION_PATCH(d.api_version) << ", " << d.driver << ")\n";
+          << VK_API_VERSION_MINOR(d.api_version) << "." << VK_API_VERSION_PATCH(d.api_version) << ", " << d.driver
+          << ")\n";
     }
     return kExitOk;
   });

@@ -39,15 +39,15 @@ int render_command(const RenderOptions& o, std::ostream& out, std::ostream& err)
     std::uint64_t all_triangles = 0;
     for (std::size_t i = 0; i < renderer.object_count(); ++i) all_triangles += renderer.triangles(i);
 
-    out << "cullpipe render: " << loaded.source << ", " << scene.objects.size() << " objects, " << o.width << "x" << o.height
-        << ", device " << ctx.info().name << "\n";
+    out << "cullpipe render: " << loaded.source << ", " << scene.objects.size() << " objects, " << o.width << "x"
+        << o.height << ", device " << ctx.info().name << "\n";
     if (o.no_cull) {
       out << "  no culling: " << stats.draws << " draws";
     } else {
       std::size_t inside = 0;
       for (Classification c : stats.classes) inside += c == Classification::Inside;
-      out << "  culled with " << o.bv << ": " << stats.draws << " of " << scene.objects.size() << " objects drawn (" << inside
-          << " inside, " << stats.draws - inside << " intersecting)";
+      out << "  culled with " << o.bv << ": " << stats.draws << " of " << scene.objects.size() << " objects drawn ("
+          << inside << " inside, " << stats.draws - inside << " intersecting)";
     }
     if (stats.primitives_counted) out << ", " << stats.primitives << " of " << all_triangles << " triangles";
     out << "\n  wrote " << o.out_path << "\n";
@@ -71,8 +71,10 @@ int render_command(const RenderOptions& o, std::ostream& out, std::ostream& err)
         renderer.render(camera, true, &culled);
         classes = culled.classes;
       }
-      render::write_png(o.top_down_path, render::top_down_image(world_aabbs(scene, loaded.aabb_update), classes, camera, 900));
-      out << "  wrote " << o.top_down_path << " (top-down: green inside, amber intersecting, grey culled, white frustum)\n";
+      render::write_png(o.top_down_path,
+                        render::top_down_image(world_aabbs(scene, loaded.aabb_update), classes, camera, 900));
+      out << "  wrote " << o.top_down_path
+          << " (top-down: green inside, amber intersecting, grey culled, white frustum)\n";
     }
     if (ctx.validation_message_count() > 0)
       throw vk::Error(std::to_string(ctx.validation_message_count()) + " Vulkan validation message(s) reported");

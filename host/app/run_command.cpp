@@ -1,10 +1,11 @@
+#include <unistd.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <ostream>
-#include <unistd.h>
 
 #include "app/backends.hpp"
 #include "app/commands.hpp"
@@ -50,7 +51,8 @@ BackendResults cull_kind_bvh(const std::vector<Volume>& volumes, std::span<const
   const std::span<const Volume> span(volumes);
   built = build_bvh(o.builder, bvh::enclosing_boxes(span), o.leaf_size);
   if (!o.dump_path.empty()) dump_volumes.assign(volumes.begin(), volumes.end());
-  return cull_bvh_on_backends(built.flat, span, frusta, o.backend, gpu_backend, /*warm_up=*/true, cpu_path(o), o.range_objects);
+  return cull_bvh_on_backends(built.flat, span, frusta, o.backend, gpu_backend, /*warm_up=*/true, cpu_path(o),
+                              o.range_objects);
 }
 
 // Culls one kind of volume; with a dump path, also keeps the volumes for the dump.
@@ -84,7 +86,8 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
     if (o.views == 0) throw InputError("--views must be at least 1");
     if (o.cull != "flat" && o.cull != "bvh") throw InputError("--cull " + o.cull + ": expected flat or bvh");
     if (o.cpu != "reference" && o.cpu != "fast") throw InputError("--cpu " + o.cpu + ": expected reference or fast");
-    if (o.cpu == "fast" && o.backend == Backend::Gpu) throw InputError("--cpu fast needs the CPU side: use --backend cpu or both");
+    if (o.cpu == "fast" && o.backend == Backend::Gpu)
+      throw InputError("--cpu fast needs the CPU side: use --backend cpu or both");
     const bool hierarchical = o.cull == "bvh";
 
     LoadedScene loaded = load_scene_source(o);
@@ -110,8 +113,9 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
     BuiltBvh built;
     switch (*bv) {
       case BvKind::Aabb:
-        r = hierarchical ? cull_kind_bvh(world_aabbs(scene, loaded.aabb_update), frusta, o, gpu_backend, dump_volumes, built)
-                         : cull_kind(world_aabbs(scene, loaded.aabb_update), frusta, o, gpu_backend, dump_volumes);
+        r = hierarchical
+                ? cull_kind_bvh(world_aabbs(scene, loaded.aabb_update), frusta, o, gpu_backend, dump_volumes, built)
+                : cull_kind(world_aabbs(scene, loaded.aabb_update), frusta, o, gpu_backend, dump_volumes);
         break;
       case BvKind::Obb:
         r = hierarchical ? cull_kind_bvh(world_obbs(scene), frusta, o, gpu_backend, dump_volumes, built)
@@ -126,20 +130,21 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
     const std::size_t n = scene.objects.size();
     const bool have_cpu = !r.cpu.empty(), have_gpu = !r.gpu.empty();
     const auto& counts = have_cpu ? r.cpu_counts : r.gpu_counts;
-    out << "cullpipe run: " << (scene.name.empty() ? source : scene.name) << " (" << source << "), " << n << " objects, bv "
-        << o.bv << ", " << frusta.size() << (frusta.size() == 1 ? " view" : " views");
+    out << "cullpipe run: " << (scene.name.empty() ? source : scene.name) << " (" << source << "), " << n
+        << " objects, bv " << o.bv << ", " << frusta.size() << (frusta.size() == 1 ? " view" : " views");
     if (gpu_backend.context) out << ", device " << gpu_backend.context->info().name;
     out << "\n";
     if (from_gltf) {
-      out << "  volumes from mesh vertices: obb " << o.obb << ", sphere " << o.sphere << ", world aabb " << o.aabb_update;
+      out << "  volumes from mesh vertices: obb " << o.obb << ", sphere " << o.sphere << ", world aabb "
+          << o.aabb_update;
       if (zero_scale) out << "; " << zero_scale << " zero-scale instances skipped";
       out << "\n";
     }
     out << "  scene loaded in " << format_ms(load_ns) << " ms\n";
     if (hierarchical)
-      out << "  bvh: " << o.builder << ", leaves of <= " << o.leaf_size << ", " << built.metrics.nodes << " nodes, depth "
-          << built.metrics.depth << ", SAH cost " << format_fixed(built.metrics.sah_cost, 2) << ", built in "
-          << format_ms(built.build_ns) << " ms\n";
+      out << "  bvh: " << o.builder << ", leaves of <= " << o.leaf_size << ", " << built.metrics.nodes
+          << " nodes, depth " << built.metrics.depth << ", SAH cost " << format_fixed(built.metrics.sah_cost, 2)
+          << ", built in " << format_ms(built.build_ns) << " ms\n";
     out << "\n  view  objects  visible   inside  intersecting  outside  node tests  object tests\n";
     const std::size_t shown = std::min<std::size_t>(frusta.size(), 16);
     for (std::size_t v = 0; v < shown; ++v) {
@@ -153,18 +158,22 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
     out << "\n";
     const double object_views = double(std::max<std::size_t>(n * frusta.size(), 1));
     if (have_cpu)
-      out << "  cpu " << r.cpu_path << ": " << format_ms(r.cpu_ns) << " ms (" << format_ms(r.cpu_ns / object_views * 1e6)
-          << " ns per object-view)" << (r.cpu_upload_ns > 0 ? "; upload " + format_ms(r.cpu_upload_ns) + " ms" : "") << "\n";
+      out << "  cpu " << r.cpu_path << ": " << format_ms(r.cpu_ns) << " ms ("
+          << format_ms(r.cpu_ns / object_views * 1e6) << " ns per object-view)"
+          << (r.cpu_upload_ns > 0 ? "; upload " + format_ms(r.cpu_upload_ns) + " ms" : "") << "\n";
     if (have_gpu)
       out << "  gpu:           " << format_ms(r.gpu_ns) << " ms on the GPU (timestamps), " << format_ms(r.gpu_wall_ns)
           << " ms wall with submit and readback; upload " << format_ms(r.gpu_upload_ns) << " ms\n";
-    const std::string all_identical = "all " + std::to_string(n * frusta.size()) + " object-view classifications identical";
+    const std::string all_identical =
+        "all " + std::to_string(n * frusta.size()) + " object-view classifications identical";
     if (have_cpu && have_gpu && r.mismatches == 0 && r.fast_mismatches == 0)
-      out << "  agreement:     " << all_identical << " (" << (r.fast_checked ? "gpu == fast cpu == reference" : "gpu == cpu") << ")\n";
+      out << "  agreement:     " << all_identical << " ("
+          << (r.fast_checked ? "gpu == fast cpu == reference" : "gpu == cpu") << ")\n";
     else if (have_cpu && !have_gpu && r.fast_checked && r.fast_mismatches == 0)
       out << "  agreement:     " << all_identical << " (fast cpu == reference)\n";
     if (r.mismatches) out << "  agreement:     " << r.mismatches << " MISMATCHES between the GPU and the CPU\n";
-    if (r.fast_mismatches) out << "  agreement:     " << r.fast_mismatches << " MISMATCHES between the fast CPU path and the reference\n";
+    if (r.fast_mismatches)
+      out << "  agreement:     " << r.fast_mismatches << " MISMATCHES between the fast CPU path and the reference\n";
     if (r.gpu_overflow) out << "  warning: the GPU visible-id list overflowed\n";
 
     if (!o.json_path.empty()) {
@@ -202,7 +211,9 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
       }
       j["mismatches"] = r.mismatches;
       if (r.fast_checked) j["fast_mismatches"] = r.fast_mismatches;
-      j["agree"] = (have_cpu && have_gpu) || r.fast_checked ? nlohmann::json(r.mismatches == 0 && r.fast_mismatches == 0) : nlohmann::json(nullptr);
+      j["agree"] = (have_cpu && have_gpu) || r.fast_checked
+                       ? nlohmann::json(r.mismatches == 0 && r.fast_mismatches == 0)
+                       : nlohmann::json(nullptr);
       nlohmann::json per_view = nlohmann::json::array();
       for (std::size_t v = 0; v < counts.size(); ++v)
         per_view.push_back({{"visible", counts[v].visible},
@@ -217,22 +228,26 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
       CullCase c{frusta, frusta.size() > 1, std::move(dump_volumes), {}, {}};
       // The counts are the CPU traversal's when the CPU ran, else the GPU's (which descends to the leaves).
       const std::uint32_t range_objects = have_cpu ? cpu_range_objects(cpu_path(o), o.range_objects, *bv) : 0;
-      for (std::size_t v = 0; v < frusta.size(); ++v) c.tests.push_back({o.cull, r.node_tests[v], r.object_tests[v], range_objects});
+      for (std::size_t v = 0; v < frusta.size(); ++v)
+        c.tests.push_back({o.cull, r.node_tests[v], r.object_tests[v], range_objects});
       if (from_gltf) {
         // Where each object came from, and all its world-space volumes.
         const std::vector<Aabb> aabbs = world_aabbs(scene, loaded.aabb_update);
         const std::vector<Obb> obbs = world_obbs(scene);
         const std::vector<Sphere> spheres = world_spheres(scene);
         c.objects.reserve(n);
-        for (std::size_t i = 0; i < n; ++i) c.objects.push_back({scene.objects[i].origin, aabbs[i], obbs[i], spheres[i]});
+        for (std::size_t i = 0; i < n; ++i)
+          c.objects.push_back({scene.objects[i].origin, aabbs[i], obbs[i], spheres[i]});
       }
       json_util::write_file_atomic(o.dump_path, cull_case_to_json(c, have_cpu ? &r.cpu : &r.gpu));
     }
 
     if (r.mismatches || r.fast_mismatches) {
       err << "error: ";
-      if (r.mismatches) err << "GPU and CPU disagree (" << r.mismatches << " differences)" << (r.fast_mismatches ? "; " : "");
-      if (r.fast_mismatches) err << "the fast CPU path and the reference disagree (" << r.fast_mismatches << " differences)";
+      if (r.mismatches)
+        err << "GPU and CPU disagree (" << r.mismatches << " differences)" << (r.fast_mismatches ? "; " : "");
+      if (r.fast_mismatches)
+        err << "the fast CPU path and the reference disagree (" << r.fast_mismatches << " differences)";
       err << "; first ones:\n";
       for (const std::string& m : r.mismatch_reports) err << "  " << m << "\n";
       return kExitMismatch;

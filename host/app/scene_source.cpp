@@ -16,7 +16,8 @@ LoadedScene load_scene_source(const SceneOptions& o) {
   const auto sphere_method = bounds::parse_sphere_method(o.sphere);
   if (!sphere_method) throw InputError("--sphere " + o.sphere + ": expected ritter, refined or exact");
   const auto aabb_update = bounds::parse_aabb_update(o.aabb_update);
-  if (!aabb_update) throw InputError("--aabb-update " + o.aabb_update + ": expected recompute, hull, transform-box or hill-climb");
+  if (!aabb_update)
+    throw InputError("--aabb-update " + o.aabb_update + ": expected recompute, hull, transform-box or hill-climb");
   const auto layout = parse_instance_layout(o.layout);
   if (!layout) throw InputError("--layout " + o.layout + ": expected grid or random");
 
@@ -47,7 +48,8 @@ LoadedScene load_scene_source(const SceneOptions& o) {
   if (!from_gltf && (!o.camera.empty() || o.gltf_scene >= 0))
     throw InputError("--camera and --gltf-scene apply to glTF scenes only (" + source + " is not .gltf or .glb)");
   scene = replicate_scene(scene, o.instances, *layout, o.seed);
-  out.load_ns = double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - load_start).count());
+  out.load_ns = double(
+      std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - load_start).count());
 
   out.aabb_update = *aabb_update;
   return out;

@@ -38,22 +38,29 @@ Aabb transform_points(const Points& pts, const glm::mat4& m, double pad) {
 
 std::string_view to_string(AabbUpdate method) {
   switch (method) {
-    case AabbUpdate::Recompute: return "recompute";
-    case AabbUpdate::HullRecompute: return "hull";
-    case AabbUpdate::TransformBox: return "transform-box";
-    case AabbUpdate::HillClimb: return "hill-climb";
+    case AabbUpdate::Recompute:
+      return "recompute";
+    case AabbUpdate::HullRecompute:
+      return "hull";
+    case AabbUpdate::TransformBox:
+      return "transform-box";
+    case AabbUpdate::HillClimb:
+      return "hill-climb";
   }
   return "?";
 }
 
 std::optional<AabbUpdate> parse_aabb_update(std::string_view name) {
-  for (AabbUpdate m : {AabbUpdate::Recompute, AabbUpdate::HullRecompute, AabbUpdate::TransformBox, AabbUpdate::HillClimb})
+  for (AabbUpdate m :
+       {AabbUpdate::Recompute, AabbUpdate::HullRecompute, AabbUpdate::TransformBox, AabbUpdate::HillClimb})
     if (to_string(m) == name) return m;
   return std::nullopt;
 }
 
 AabbTracker::AabbTracker(std::span<const glm::vec3> local_points)
-    : points_(local_points.begin(), local_points.end()), hull_(convex_hull(local_points)), local_(aabb_of_points(local_points)) {
+    : points_(local_points.begin(), local_points.end()),
+      hull_(convex_hull(local_points)),
+      local_(aabb_of_points(local_points)) {
   // Climb over the hull vertices; for a linear hull, over their projections onto its line; for
   // a flat one, over its ring in the ring's own plane coordinates (U, V along plane_u and
   // plane_v), where it is convex exactly, with the plane's normal n = plane_u x plane_v, the
@@ -82,7 +89,8 @@ AabbTracker::AabbTracker(std::span<const glm::vec3> local_points)
   // Start every climb at the vertex extreme along the local axes.
   for (int axis = 0; axis < 3; ++axis)
     for (std::uint32_t v = 0; v < hull_.vertices.size(); ++v) {
-      if (hull_.vertices[v][axis] < hull_.vertices[extreme_[std::size_t(2 * axis)]][axis]) extreme_[std::size_t(2 * axis)] = v;
+      if (hull_.vertices[v][axis] < hull_.vertices[extreme_[std::size_t(2 * axis)]][axis])
+        extreme_[std::size_t(2 * axis)] = v;
       if (hull_.vertices[v][axis] > hull_.vertices[extreme_[std::size_t(2 * axis + 1)]][axis])
         extreme_[std::size_t(2 * axis + 1)] = v;
     }
@@ -103,7 +111,8 @@ AabbTracker::AabbTracker(std::span<const glm::vec3> local_points)
       for (std::uint32_t g : hull_.face_neighbours[f])
         for (std::uint32_t corner : hull_.faces[g]) {
           const dvec3 w = dvec3(hv[corner]) - a;
-          const double det = u.x * (v.y * w.z - v.z * w.y) + u.y * (v.z * w.x - v.x * w.z) + u.z * (v.x * w.y - v.y * w.x);
+          const double det =
+              u.x * (v.y * w.z - v.z * w.y) + u.y * (v.z * w.x - v.x * w.z) + u.z * (v.x * w.y - v.y * w.x);
           const double permanent = std::abs(u.x) * (std::abs(v.y * w.z) + std::abs(v.z * w.y)) +
                                    std::abs(u.y) * (std::abs(v.z * w.x) + std::abs(v.x * w.z)) +
                                    std::abs(u.z) * (std::abs(v.x * w.y) + std::abs(v.y * w.x));
@@ -119,23 +128,28 @@ Aabb AabbTracker::update(const glm::mat4& world, AabbUpdate method) {
 
 Aabb AabbTracker::update(const glm::mat4& world, AabbUpdate method, Extremes& extremes, std::size_t* steps) const {
   // A hull that failed validation may not contain the points: use every point instead.
-  if (!hull_.valid && (method == AabbUpdate::HullRecompute || method == AabbUpdate::HillClimb)) method = AabbUpdate::Recompute;
+  if (!hull_.valid && (method == AabbUpdate::HullRecompute || method == AabbUpdate::HillClimb))
+    method = AabbUpdate::Recompute;
   // A hull with an edge certainly folded inward is not walked (see the constructor).
   if (method == AabbUpdate::HillClimb && !climb_safe_) {
     if (steps) *steps = 0;  // no walk
     method = AabbUpdate::HullRecompute;
   }
   switch (method) {
-    case AabbUpdate::Recompute: return transform_points(points_, world, 0.0);
+    case AabbUpdate::Recompute:
+      return transform_points(points_, world, 0.0);
     case AabbUpdate::HullRecompute: {
       // A flat or linear hull's vertices lie up to the tolerance off its plane or line, and a
       // point up to the tolerance off it on the other side: twice the tolerance from the
       // vertices' polygon. A polyhedron's points lie within the tolerance of its faces.
-      const bool flat = hull_.dimension == ConvexHull::Dimension::Segment || hull_.dimension == ConvexHull::Dimension::Polygon;
+      const bool flat =
+          hull_.dimension == ConvexHull::Dimension::Segment || hull_.dimension == ConvexHull::Dimension::Polygon;
       return transform_points(hull_.vertices, world, flat ? 2.0 * hull_.tolerance : hull_.tolerance);
     }
-    case AabbUpdate::TransformBox: return local_.transformed(world);
-    case AabbUpdate::HillClimb: break;
+    case AabbUpdate::TransformBox:
+      return local_.transformed(world);
+    case AabbUpdate::HillClimb:
+      break;
   }
   // Hill climbing: for world axis i, maximise (and minimise) row_i(M) . p over hull vertices by
   // moving to a better neighbour until none is better. On a convex polytope a local maximum of
@@ -149,8 +163,11 @@ Aabb AabbTracker::update(const glm::mat4& world, AabbUpdate method, Extremes& ex
       const dvec3 dir = side ? r : -r;
       std::uint32_t& v = extremes[std::size_t(2 * axis + side)];
       // A flat hull's ring is walked in its plane coordinates (see the constructor).
-      const glm::dvec2 in_plane = ring_uv_.empty() ? glm::dvec2(0.0) : glm::dvec2(glm::dot(dir, hull_.plane_u), glm::dot(dir, hull_.plane_v));
-      const auto key = [&](std::uint32_t w) { return ring_uv_.empty() ? glm::dot(dir, climb_points_[w]) : glm::dot(in_plane, ring_uv_[w]); };
+      const glm::dvec2 in_plane =
+          ring_uv_.empty() ? glm::dvec2(0.0) : glm::dvec2(glm::dot(dir, hull_.plane_u), glm::dot(dir, hull_.plane_v));
+      const auto key = [&](std::uint32_t w) {
+        return ring_uv_.empty() ? glm::dot(dir, climb_points_[w]) : glm::dot(in_plane, ring_uv_[w]);
+      };
       double best = key(v);
       for (bool moved = true; moved;) {
         moved = false;
@@ -165,9 +182,10 @@ Aabb AabbTracker::update(const glm::mat4& world, AabbUpdate method, Extremes& ex
         ++climb_steps;
       }
       const double world_value =
-          (ring_uv_.empty() ? glm::dot(r, climb_points_[v])
-                            : glm::dot(glm::dvec2(glm::dot(r, hull_.plane_u), glm::dot(r, hull_.plane_v)), ring_uv_[v]) +
-                                  glm::dot(r, plane_n_) * plane_c_) +
+          (ring_uv_.empty()
+               ? glm::dot(r, climb_points_[v])
+               : glm::dot(glm::dvec2(glm::dot(r, hull_.plane_u), glm::dot(r, hull_.plane_v)), ring_uv_[v]) +
+                     glm::dot(r, plane_n_) * plane_c_) +
           dm[3][axis];
       (side ? hi : lo)[axis] = world_value;
     }

@@ -1,8 +1,8 @@
 #pragma once
 #include <array>
-#include <glm/mat4x4.hpp>
 #include <glm/ext/vector_double2.hpp>
 #include <glm/ext/vector_double3.hpp>
+#include <glm/mat4x4.hpp>
 #include <glm/vec3.hpp>
 #include <optional>
 #include <span>

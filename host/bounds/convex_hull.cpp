@@ -1,10 +1,10 @@
 #include "bounds/convex_hull.hpp"
 
 #include <algorithm>
-#include <tuple>
 #include <cfloat>
 #include <cmath>
 #include <glm/geometric.hpp>
+#include <tuple>
 
 #include "bounds/points.hpp"
 
@@ -233,8 +233,10 @@ ConvexHull convex_hull(std::span<const glm::vec3> points) {
   std::vector<std::uint32_t> unique_index(points.size());
   for (std::uint32_t i = 0; i < unique_index.size(); ++i) unique_index[i] = i;
   auto key = [&](std::uint32_t i) { return std::tuple(points[i].x, points[i].y, points[i].z); };
-  std::sort(unique_index.begin(), unique_index.end(), [&](std::uint32_t x, std::uint32_t y) { return key(x) < key(y); });
-  unique_index.erase(std::unique(unique_index.begin(), unique_index.end(), [&](std::uint32_t x, std::uint32_t y) { return key(x) == key(y); }),
+  std::sort(unique_index.begin(), unique_index.end(),
+            [&](std::uint32_t x, std::uint32_t y) { return key(x) < key(y); });
+  unique_index.erase(std::unique(unique_index.begin(), unique_index.end(),
+                                 [&](std::uint32_t x, std::uint32_t y) { return key(x) == key(y); }),
                      unique_index.end());
   std::vector<glm::vec3> unique_points;
   std::vector<dvec3> p;
@@ -332,7 +334,8 @@ ConvexHull convex_hull(std::span<const glm::vec3> points) {
     // Measured from the plane through vertices[0] with normal plane_u x plane_v, which users of
     // the hull can rebuild (AabbTracker walks the ring in that frame).
     const dvec3 plane_n = glm::cross(u, v), first(hull.vertices[0]);
-    for (const dvec3& q : p) hull.tolerance = std::max(hull.tolerance, std::abs(glm::dot(q - first, plane_n)) / glm::length(plane_n));
+    for (const dvec3& q : p)
+      hull.tolerance = std::max(hull.tolerance, std::abs(glm::dot(q - first, plane_n)) / glm::length(plane_n));
     hull.tolerance += rounding_margin;
     const std::uint32_t m = std::uint32_t(ring.size());
     for (std::uint32_t i = 0; i < m; ++i) {

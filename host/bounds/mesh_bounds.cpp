@@ -21,7 +21,8 @@ double largest_eigenvalue(const glm::dmat3& a) {
   const double p1 = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
   const double q = (a[0][0] + a[1][1] + a[2][2]) / 3.0;
   if (p1 == 0.0) return std::max({a[0][0], a[1][1], a[2][2]});
-  const double p2 = (a[0][0] - q) * (a[0][0] - q) + (a[1][1] - q) * (a[1][1] - q) + (a[2][2] - q) * (a[2][2] - q) + 2.0 * p1;
+  const double p2 =
+      (a[0][0] - q) * (a[0][0] - q) + (a[1][1] - q) * (a[1][1] - q) + (a[2][2] - q) * (a[2][2] - q) + 2.0 * p1;
   const double p = std::sqrt(p2 / 6.0);
   if (p == 0.0) return q;
   const glm::dmat3 b = (a - q * glm::dmat3(1.0)) * (1.0 / p);
@@ -34,10 +35,14 @@ double largest_eigenvalue(const glm::dmat3& a) {
 
 std::string_view to_string(ObbMethod method) {
   switch (method) {
-    case ObbMethod::Pca: return "pca";
-    case ObbMethod::Dito: return "dito";
-    case ObbMethod::HullFace: return "hull-face";
-    case ObbMethod::Exact: return "exact";
+    case ObbMethod::Pca:
+      return "pca";
+    case ObbMethod::Dito:
+      return "dito";
+    case ObbMethod::HullFace:
+      return "hull-face";
+    case ObbMethod::Exact:
+      return "exact";
   }
   return "?";
 }
@@ -50,9 +55,12 @@ std::optional<ObbMethod> parse_obb_method(std::string_view name) {
 
 std::string_view to_string(SphereMethod method) {
   switch (method) {
-    case SphereMethod::Ritter: return "ritter";
-    case SphereMethod::Refined: return "refined";
-    case SphereMethod::Exact: return "exact";
+    case SphereMethod::Ritter:
+      return "ritter";
+    case SphereMethod::Refined:
+      return "refined";
+    case SphereMethod::Exact:
+      return "exact";
   }
   return "?";
 }
@@ -80,21 +88,37 @@ Sphere transform_sphere(const Sphere& s, const glm::mat4& m) {
   Sphere out;
   out.center = glm::vec3(center);
   // The float centre moved by rounding: widen by that distance so nothing is lost.
-  out.radius = round_up(double(s.radius) * sigma + glm::length(glm::dvec3(out.center) - center) + 8.0 * 2.2e-16 * magnitude);
+  out.radius =
+      round_up(double(s.radius) * sigma + glm::length(glm::dvec3(out.center) - center) + 8.0 * 2.2e-16 * magnitude);
   return out;
 }
 
-MeshBounds::MeshBounds(std::span<const glm::vec3> local_points, const MeshBoundsOptions& options) : tracker_(local_points) {
+MeshBounds::MeshBounds(std::span<const glm::vec3> local_points, const MeshBoundsOptions& options)
+    : tracker_(local_points) {
   switch (options.obb) {
-    case ObbMethod::Pca: obb_ = pca_obb(local_points); break;
-    case ObbMethod::Dito: obb_ = dito_obb(local_points); break;
-    case ObbMethod::HullFace: obb_ = hull_face_obb(local_points, tracker_.hull()); break;
-    case ObbMethod::Exact: obb_ = exact_obb(local_points); break;
+    case ObbMethod::Pca:
+      obb_ = pca_obb(local_points);
+      break;
+    case ObbMethod::Dito:
+      obb_ = dito_obb(local_points);
+      break;
+    case ObbMethod::HullFace:
+      obb_ = hull_face_obb(local_points, tracker_.hull());
+      break;
+    case ObbMethod::Exact:
+      obb_ = exact_obb(local_points);
+      break;
   }
   switch (options.sphere) {
-    case SphereMethod::Ritter: sphere_ = ritter_sphere(local_points); break;
-    case SphereMethod::Refined: sphere_ = refined_sphere(local_points); break;
-    case SphereMethod::Exact: sphere_ = exact_sphere(local_points); break;
+    case SphereMethod::Ritter:
+      sphere_ = ritter_sphere(local_points);
+      break;
+    case SphereMethod::Refined:
+      sphere_ = refined_sphere(local_points);
+      break;
+    case SphereMethod::Exact:
+      sphere_ = exact_sphere(local_points);
+      break;
   }
 }
 

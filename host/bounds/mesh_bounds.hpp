@@ -26,7 +26,7 @@ std::string_view to_string(SphereMethod method);
 std::optional<SphereMethod> parse_sphere_method(std::string_view name);  ///< ritter, refined, exact
 
 struct MeshBoundsOptions {
-  ObbMethod obb = ObbMethod::Dito;           ///< fast by default; Exact on request
+  ObbMethod obb = ObbMethod::Dito;            ///< fast by default; Exact on request
   SphereMethod sphere = SphereMethod::Exact;  ///< Welzl: expected O(n), the tightest
 };
 

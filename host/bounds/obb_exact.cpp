@@ -74,7 +74,8 @@ class Sweeper {
         if (a > b) continue;  // each edge once
         const std::uint32_t g = hull.face_neighbours[f][std::size_t(k)];
         const dvec3 fa = normals_[f], fb = normals_[g];
-        if (glm::dot(fa, fb) > 1.0 - 1e-12 || glm::length(fa) == 0 || glm::length(fb) == 0) continue;  // flat edge: no arc
+        if (glm::dot(fa, fb) > 1.0 - 1e-12 || glm::length(fa) == 0 || glm::length(fb) == 0)
+          continue;  // flat edge: no arc
         edges_.push_back({a, b, fa, fb});
       }
   }
@@ -98,7 +99,9 @@ class Sweeper {
         if (ma * mb > 0.0 && std::abs(ma) > reach && std::abs(mb) > reach) continue;
         // n1(t) must be orthogonal to a point of e2's arc: n1.fa2 and n1.fb2 of opposite sign.
         const double A1 = glm::dot(a, e2.fa), B1 = glm::dot(b, e2.fa), A2 = glm::dot(a, e2.fb), B2 = glm::dot(b, e2.fb);
-        auto g = [&](double t) { return (A1 * std::cos(t) + B1 * std::sin(t)) * (A2 * std::cos(t) + B2 * std::sin(t)); };
+        auto g = [&](double t) {
+          return (A1 * std::cos(t) + B1 * std::sin(t)) * (A2 * std::cos(t) + B2 * std::sin(t));
+        };
         Roots cuts;
         cuts.push(0.0);
         trig_roots(A1, B1, 0.0, 0.0, theta, cuts);
@@ -195,8 +198,8 @@ class Sweeper {
 
   // Earliest t in (t0, hi] at which the support vertex v of direction sign * n_axis(t) stops
   // being the support (a neighbour w catches up), or hi.
-  double next_event(const dvec3& a, const dvec3& b, const dvec3& d2, int axis, int side, std::uint32_t v, double t0, double hi,
-                    const Frame& at_hi) const {
+  double next_event(const dvec3& a, const dvec3& b, const dvec3& d2, int axis, int side, std::uint32_t v, double t0,
+                    double hi, const Frame& at_hi) const {
     double best = hi;
     const dvec3 dir_hi = side ? -at_hi.n[axis] : at_hi.n[axis];
     for (std::uint32_t w : hull_.vertex_neighbours[v]) {
@@ -257,8 +260,8 @@ class Sweeper {
     }
   }
 
-  void minimise_piece(const dvec3& a, const dvec3& b, const dvec3& d2, const std::array<std::array<std::uint32_t, 2>, 3>& sup,
-                      double lo, double hi) {
+  void minimise_piece(const dvec3& a, const dvec3& b, const dvec3& d2,
+                      const std::array<std::array<std::uint32_t, 2>, 3>& sup, double lo, double hi) {
     auto vol = [&](double t, Frame& f) {
       f = frame(a, b, d2, t);
       return f.ok ? volume(f, sup) : std::numeric_limits<double>::infinity();
@@ -273,13 +276,15 @@ class Sweeper {
     // n_k(t).(p - q) with |p - q| <= the hull diameter D, and n_k turns at most at speed 1 (n1),
     // 2/|m| (n2) and 1 + 2/|m| (n3), m = d2 x n1, |m| changing at speed <= 1.
     const double len = hi - lo;
-    const double m_min = std::min(glm::length(glm::cross(d2, f_lo.n[0])), glm::length(glm::cross(d2, f_hi.n[0]))) - 0.5 * len;
+    const double m_min =
+        std::min(glm::length(glm::cross(d2, f_lo.n[0])), glm::length(glm::cross(d2, f_hi.n[0]))) - 0.5 * len;
     if (m_min > 0.0) {
       const double speed[3] = {1.0, 2.0 / m_min, 1.0 + 2.0 / m_min};
       double bound = 1.0;
       for (int k = 0; k < 3; ++k) {
         const dvec3 delta = p_[sup[std::size_t(k)][0]] - p_[sup[std::size_t(k)][1]];
-        const double w = std::min(glm::dot(f_lo.n[k], delta), glm::dot(f_hi.n[k], delta)) - speed[k] * diameter_ * 0.5 * len;
+        const double w =
+            std::min(glm::dot(f_lo.n[k], delta), glm::dot(f_hi.n[k], delta)) - speed[k] * diameter_ * 0.5 * len;
         bound *= std::max(w, 0.0);
       }
       if (bound >= best_) return;
@@ -314,7 +319,7 @@ class Sweeper {
 }  // namespace
 
 Obb exact_obb(std::span<const glm::vec3> points) {
-  const ConvexHull hull = convex_hull(points);  // checks the points
+  const ConvexHull hull = convex_hull(points);   // checks the points
   const Obb face = hull_face_obb(points, hull);  // the face-flush candidates
   if (hull.dimension != ConvexHull::Dimension::Polyhedron) return face;
   Sweeper sweeper(hull);

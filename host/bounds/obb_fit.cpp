@@ -147,7 +147,9 @@ std::vector<std::array<double, 2>> hull2d(std::vector<std::array<double, 2>> pts
 
 }  // namespace
 
-double volume(const Obb& b) { return 8.0 * double(b.half_extents.x) * double(b.half_extents.y) * double(b.half_extents.z); }
+double volume(const Obb& b) {
+  return 8.0 * double(b.half_extents.x) * double(b.half_extents.y) * double(b.half_extents.z);
+}
 
 namespace {
 

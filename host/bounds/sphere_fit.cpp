@@ -9,8 +9,8 @@
 #include <vector>
 
 #include "bounds/points.hpp"
-#include "geom/rounding.hpp"
 #include "core/splitmix.hpp"
+#include "geom/rounding.hpp"
 
 namespace cullpipe::bounds {
 
@@ -115,9 +115,9 @@ Ball ball4(const dvec3& a, const dvec3& b, const dvec3& c, const dvec3& d, const
       }
     return best;
   }
-  const dvec3 offset =
-      (glm::dot(v1, v1) * glm::cross(v2, v3) + glm::dot(v2, v2) * glm::cross(v3, v1) + glm::dot(v3, v3) * glm::cross(v1, v2)) /
-      (2.0 * det);
+  const dvec3 offset = (glm::dot(v1, v1) * glm::cross(v2, v3) + glm::dot(v2, v2) * glm::cross(v3, v1) +
+                        glm::dot(v3, v3) * glm::cross(v1, v2)) /
+                       (2.0 * det);
   return {a + offset, glm::dot(offset, offset)};
 }
 

@@ -22,10 +22,9 @@ using detail::merged;
 namespace {
 
 // A candidate pair of clusters (ids lo < hi) in a total order, so both exact builders make
-// the same merges even when costs tie: by cost (detail::measure of the merged box), then by objects in the pair (equal boxes merge
-// into a balanced tree), then by a hash of the ids (so among equal pairs the clusters do not
-// all want the same partner, which would make the priority queue re-pair nearly every cluster
-// after each merge), then by the ids.
+// the same merges even when costs tie: by cost (detail::measure of the merged box), then by objects in the pair (equal
+// boxes merge into a balanced tree), then by a hash of the ids (so among equal pairs the clusters do not all want the
+// same partner, which would make the priority queue re-pair nearly every cluster after each merge), then by the ids.
 struct PairKey {
   Measure cost;
   std::uint32_t objects = 0;
@@ -45,7 +44,8 @@ std::uint64_t mix(std::uint64_t x) {  // the SplitMix64 finaliser
 // (collapse_leaves reads counts of leaves only).
 PairKey pair_key(const std::vector<Node>& pool, std::uint32_t a, std::uint32_t b) {
   const std::uint32_t lo = std::min(a, b), hi = std::max(a, b);
-  return {measure(merged(pool[a].box, pool[b].box)), pool[a].count + pool[b].count, mix(std::uint64_t(lo) << 32 | hi), lo, hi};
+  return {measure(merged(pool[a].box, pool[b].box)), pool[a].count + pool[b].count, mix(std::uint64_t(lo) << 32 | hi),
+          lo, hi};
 }
 
 // One leaf per object: pool[i] holds object i.
@@ -118,8 +118,10 @@ std::vector<std::uint32_t> morton_order(std::span<const Aabb> boxes) {
   const double scale = extent > 0.0 && std::isfinite(kCells / extent) ? kCells / extent : 0.0;
   std::vector<std::pair<std::uint64_t, std::uint32_t>> keyed(n);
   for (std::size_t i = 0; i < n; ++i) {
-    const glm::dvec3 q = glm::clamp((glm::dvec3(boxes[i].center()) - lo) * scale, glm::dvec3(0.0), glm::dvec3(kCells - 1.0));
-    const std::uint64_t code = spread_bits(std::uint64_t(q.x)) << 2 | spread_bits(std::uint64_t(q.y)) << 1 | spread_bits(std::uint64_t(q.z));
+    const glm::dvec3 q =
+        glm::clamp((glm::dvec3(boxes[i].center()) - lo) * scale, glm::dvec3(0.0), glm::dvec3(kCells - 1.0));
+    const std::uint64_t code =
+        spread_bits(std::uint64_t(q.x)) << 2 | spread_bits(std::uint64_t(q.y)) << 1 | spread_bits(std::uint64_t(q.z));
     keyed[i] = {code, std::uint32_t(i)};
   }
   std::sort(keyed.begin(), keyed.end());
@@ -127,7 +129,6 @@ std::vector<std::uint32_t> morton_order(std::span<const Aabb> boxes) {
   for (std::size_t i = 0; i < n; ++i) order[i] = keyed[i].second;
   return order;
 }
-
 
 Tree build_agglomerative_brute(std::span<const Aabb> boxes, const BuildOptions& options) {
   const std::size_t n = boxes.size();

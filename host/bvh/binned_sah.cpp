@@ -62,7 +62,8 @@ namespace {
 // The variant build_binned_sah and BinnedSahBuilder use: AVX2 where the CPU has it, unless
 // CULLPIPE_ISA=portable (which also keeps the fast CPU path on its portable kernels).
 bool use_avx2() {
-  static const bool use = binned_sah_avx2_available() && !(std::getenv("CULLPIPE_ISA") && std::string_view(std::getenv("CULLPIPE_ISA")) == "portable");
+  static const bool use = binned_sah_avx2_available() &&
+                          !(std::getenv("CULLPIPE_ISA") && std::string_view(std::getenv("CULLPIPE_ISA")) == "portable");
   return use;
 }
 

@@ -52,7 +52,8 @@ inline void copy(Box8& to, const Box8& from) {
 // (lo + hi) * 0.5 per axis, as Aabb::center() (lo - (-hi) is lo + hi exactly); fourth lane 0.
 inline __m128 centroid(const Box8& r) {
   const __m128 xyz = _mm_castsi128_ps(_mm_set_epi32(0, -1, -1, -1));
-  return _mm_mul_ps(_mm_sub_ps(_mm_and_ps(_mm_load_ps(r.v), xyz), _mm_and_ps(_mm_load_ps(r.v + 4), xyz)), _mm_set1_ps(0.5f));
+  return _mm_mul_ps(_mm_sub_ps(_mm_and_ps(_mm_load_ps(r.v), xyz), _mm_and_ps(_mm_load_ps(r.v + 4), xyz)),
+                    _mm_set1_ps(0.5f));
 }
 inline void grow_point(Lanes& lo, Lanes& hi, __m128 c) {
   _mm_store_ps(lo.v, _mm_min_ps(c, _mm_load_ps(lo.v)));
@@ -91,7 +92,8 @@ inline double half_area(const Box8& b) {
   const __m128 l = _mm_load_ps(b.v), h = _mm_load_ps(b.v + 4);
   const __m128d uxy = _mm_add_pd(_mm_cvtps_pd(h), _mm_cvtps_pd(l));
   // Only the z lanes are converted (the fourth lanes hold an id's bits, not numbers).
-  const __m128d uz = _mm_add_sd(_mm_cvtss_sd(_mm_setzero_pd(), _mm_movehl_ps(h, h)), _mm_cvtss_sd(_mm_setzero_pd(), _mm_movehl_ps(l, l)));
+  const __m128d uz = _mm_add_sd(_mm_cvtss_sd(_mm_setzero_pd(), _mm_movehl_ps(h, h)),
+                                _mm_cvtss_sd(_mm_setzero_pd(), _mm_movehl_ps(l, l)));
   const __m128d p = _mm_mul_pd(uxy, _mm_shuffle_pd(uxy, uz, 1));  // (ux uy, uy uz)
   return _mm_cvtsd_f64(_mm_add_sd(_mm_add_sd(p, _mm_unpackhi_pd(p, p)), _mm_mul_sd(uz, uxy)));
 }
@@ -108,7 +110,8 @@ inline __m256d negated_extents(__m256 v) {
 // half_area of four boxes at once (the same operations per lane): their x, y and z lanes
 // transposed into vectors, so the fourth lanes (ids) are never converted.
 inline __m256d half_areas4(const Box8* b) {
-  const __m256 r0 = _mm256_load_ps(b[0].v), r1 = _mm256_load_ps(b[1].v), r2 = _mm256_load_ps(b[2].v), r3 = _mm256_load_ps(b[3].v);
+  const __m256 r0 = _mm256_load_ps(b[0].v), r1 = _mm256_load_ps(b[1].v), r2 = _mm256_load_ps(b[2].v),
+               r3 = _mm256_load_ps(b[3].v);
   const __m256 t0 = _mm256_unpacklo_ps(r0, r1), t1 = _mm256_unpacklo_ps(r2, r3);  // (x0 x1 y0 y1) per half
   const __m256 t2 = _mm256_unpackhi_ps(r0, r1), t3 = _mm256_unpackhi_ps(r2, r3);  // (z0 z1 w0 w1) per half
   const __m256 x = _mm256_shuffle_ps(t0, t1, _MM_SHUFFLE(1, 0, 1, 0));  // lo x of the four | -hi x of the four
@@ -120,13 +123,14 @@ inline __m256d half_areas4(const Box8* b) {
 #else
 inline std::uint32_t nonzero_mask(const std::uint32_t* counts) {
   const __m128i zero = _mm_setzero_si128();
-  const __m128i a = _mm_loadu_si128(reinterpret_cast<const __m128i*>(counts)), b = _mm_loadu_si128(reinterpret_cast<const __m128i*>(counts + 4));
+  const __m128i a = _mm_loadu_si128(reinterpret_cast<const __m128i*>(counts)),
+                b = _mm_loadu_si128(reinterpret_cast<const __m128i*>(counts + 4));
   const std::uint32_t empty = std::uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(a, zero)))) |
                               std::uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(b, zero)))) << 4;
   return ~empty & 0xffu;
 }
 #endif
-#else   // no SSE2: plain loops, the same results
+#else  // no SSE2: plain loops, the same results
 inline void grow(Box8& acc, const Box8& b) {
   for (int k = 0; k < 8; ++k) acc.v[k] = b.v[k] < acc.v[k] ? b.v[k] : acc.v[k];
 }
@@ -154,7 +158,8 @@ inline Indices bin_indices(const Lanes& c, const Lanes& lo, const Lanes& scale, 
 using Rec = Box8;
 inline Rec load(const Box8& b) { return b; }
 inline double half_area(const Box8& b) {
-  const double ux = double(b.v[4]) + double(b.v[0]), uy = double(b.v[5]) + double(b.v[1]), uz = double(b.v[6]) + double(b.v[2]);
+  const double ux = double(b.v[4]) + double(b.v[0]), uy = double(b.v[5]) + double(b.v[1]),
+               uz = double(b.v[6]) + double(b.v[2]);
   return ux * uy + uy * uz + uz * ux;
 }
 inline std::uint32_t nonzero_mask(const std::uint32_t* counts) {
@@ -206,13 +211,17 @@ constexpr std::size_t kByteOf[3] = {kLittle ? 0u : 3u, kLittle ? 1u : 2u, kLittl
 class Sweep {
  public:
   explicit Sweep(std::uint32_t bins)
-      : left_(round4(bins)), right_(round4(bins)), nl_(round4(bins)), nr_(CULLPIPE_BINNED_AVX2 ? 0 : round4(bins)), cost_(round4(bins)) {}
+      : left_(round4(bins)),
+        right_(round4(bins)),
+        nl_(round4(bins)),
+        nr_(CULLPIPE_BINNED_AVX2 ? 0 : round4(bins)),
+        cost_(round4(bins)) {}
 
   // The first candidate with the axis's least cost, when that cost is below best_cost (which
   // it then becomes); else kNone. Costs that are NaN never win; neither does +infinity.
   // `total`: the node's object count (the sum of count over the list).
-  std::uint32_t best(const Box8* bin, const std::uint32_t* count, const std::uint32_t* list, std::uint32_t k, std::uint32_t total,
-                     double& best_cost) {
+  std::uint32_t best(const Box8* bin, const std::uint32_t* count, const std::uint32_t* list, std::uint32_t k,
+                     std::uint32_t total, double& best_cost) {
     if (k < 2) return kNone;
     const std::uint32_t candidates = k - 1;
 #if CULLPIPE_BINNED_AVX2
@@ -237,9 +246,12 @@ class Sweep {
       // below 2^53: exact).
       const __m128i counts = _mm_loadu_si128(reinterpret_cast<const __m128i*>(nl_.data() + q));
       const __m256d signed_nl = _mm256_cvtepi32_pd(counts);
-      const __m256d nl = _mm256_add_pd(signed_nl, _mm256_and_pd(_mm256_cmp_pd(signed_nl, _mm256_setzero_pd(), _CMP_LT_OQ), _mm256_set1_pd(4294967296.0)));
+      const __m256d nl = _mm256_add_pd(
+          signed_nl,
+          _mm256_and_pd(_mm256_cmp_pd(signed_nl, _mm256_setzero_pd(), _CMP_LT_OQ), _mm256_set1_pd(4294967296.0)));
       const __m256d nr = _mm256_sub_pd(_mm256_set1_pd(double(total)), nl);
-      const __m256d cost = _mm256_add_pd(_mm256_mul_pd(half_areas4(left_.data() + q), nl), _mm256_mul_pd(half_areas4(right_.data() + q), nr));
+      const __m256d cost = _mm256_add_pd(_mm256_mul_pd(half_areas4(left_.data() + q), nl),
+                                         _mm256_mul_pd(half_areas4(right_.data() + q), nr));
       // Lanes past the last candidate hold stale boxes: +infinity, never chosen.
       const __m256d live = _mm256_castsi256_pd(
           _mm256_cmpgt_epi64(_mm256_set1_epi64x(std::int64_t(candidates - q)), _mm256_set_epi64x(3, 2, 1, 0)));
@@ -331,7 +343,8 @@ inline void store_record(Box8& r, const Aabb& b, std::uint32_t id) {
   const __m128 c = _mm_loadu_ps(p + 2);  // min.z max.x max.y max.z: both loads within the box
   const __m128 lo = _mm_or_ps(_mm_and_ps(a, xyz), _mm_andnot_ps(xyz, _mm_set1_ps(INFINITY)));
   const __m128 neg = _mm_xor_ps(_mm_shuffle_ps(c, c, _MM_SHUFFLE(0, 3, 2, 1)), _mm_set1_ps(-0.0f));  // -max, -min.z
-  const __m128 nh = _mm_or_ps(_mm_and_ps(neg, xyz), _mm_castsi128_ps(_mm_slli_si128(_mm_cvtsi32_si128(std::int32_t(id)), 12)));
+  const __m128 nh =
+      _mm_or_ps(_mm_and_ps(neg, xyz), _mm_castsi128_ps(_mm_slli_si128(_mm_cvtsi32_si128(std::int32_t(id)), 12)));
 #if CULLPIPE_BINNED_AVX2
   _mm256_store_ps(r.v, _mm256_set_m128(nh, lo));
 #else
@@ -372,14 +385,15 @@ class SideCentroids {
   inline void add(const Box8& r, std::uint32_t go_left) {
 #if CULLPIPE_BINNED_AVX2
     const __m256 xyz = _mm256_castsi256_ps(_mm256_set_epi32(0, -1, -1, -1, 0, -1, -1, -1));
-    const __m256 a = _mm256_and_ps(_mm256_load_ps(r.v), xyz);  // (lo, 0, -hi, 0)
+    const __m256 a = _mm256_and_ps(_mm256_load_ps(r.v), xyz);            // (lo, 0, -hi, 0)
     const __m256 d = _mm256_sub_ps(a, _mm256_permute2f128_ps(a, a, 1));  // lo - (-hi) in the low half
     // (c, 0, -c, 0): -c by flipping c's sign bit ((-hi - lo) * 0.5 would be +0 where c is).
     const __m256 v = _mm256_xor_ps(_mm256_mul_ps(_mm256_permute2f128_ps(d, d, 0), _mm256_set1_ps(0.5f)),
                                    _mm256_setr_ps(0.0f, 0.0f, 0.0f, 0.0f, -0.0f, -0.0f, -0.0f, 0.0f));
     const __m256 to_right = _mm256_castsi256_ps(_mm256_set1_epi32(std::int32_t(go_left) - 1));
     left_ = _mm256_min_ps(_mm256_or_ps(v, to_right), left_);
-    right_ = _mm256_min_ps(_mm256_or_ps(v, _mm256_xor_ps(to_right, _mm256_castsi256_ps(_mm256_set1_epi32(-1)))), right_);
+    right_ =
+        _mm256_min_ps(_mm256_or_ps(v, _mm256_xor_ps(to_right, _mm256_castsi256_ps(_mm256_set1_epi32(-1)))), right_);
 #else
     const __m128 xyz = _mm_castsi128_ps(_mm_set_epi32(0, -1, -1, -1));
     const __m128 lo = _mm_and_ps(_mm_load_ps(r.v), xyz), nh = _mm_and_ps(_mm_load_ps(r.v + 4), xyz);
@@ -424,7 +438,7 @@ class SideCentroids {
   __m128 left_lo_, left_nh_, right_lo_, right_nh_;
 #endif
 };
-#else   // no SSE2: the chosen side's box grown in place
+#else  // no SSE2: the chosen side's box grown in place
 class SideCentroids {
  public:
   void add(const Box8& r, std::uint32_t go_left) {
@@ -549,7 +563,9 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
     // are in flight at once (fewer ahead hide less of the chain; more gain nothing). Past the
     // last record, the last one is computed again.
     const std::uint32_t final_i = task.count - 1;
-    const auto indices_of = [&](std::uint32_t i) { return bin_indices(centroid(objs[std::min(i, final_i)]), lo, scale, last); };
+    const auto indices_of = [&](std::uint32_t i) {
+      return bin_indices(centroid(objs[std::min(i, final_i)]), lo, scale, last);
+    };
     auto ahead1 = indices_of(0), ahead2 = indices_of(1), ahead3 = indices_of(2);
     for (std::uint32_t i = 0; i < task.count; ++i) {
       const Rec r = load(objs[i]);
@@ -569,7 +585,8 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
       ++count_at(count2, o2);
     }
     for (int axis = 0; axis < 3; ++axis)
-      used_count[axis] = list_used(bin_count.data() + std::size_t(axis) * stride, stride, used.data() + std::size_t(axis) * stride);
+      used_count[axis] =
+          list_used(bin_count.data() + std::size_t(axis) * stride, stride, used.data() + std::size_t(axis) * stride);
     // Best binned SAH split over the three axes: bins [0, best_split] go left.
     double best_cost = INFINITY;
     int best_axis = -1;
@@ -577,8 +594,9 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
     for (int axis = 0; axis < 3; ++axis) {
       if (!usable[axis]) continue;
       const std::uint32_t* list = used.data() + std::size_t(axis) * stride;
-      const std::uint32_t j = sweep.best(bin.data() + std::size_t(axis) * stride, bin_count.data() + std::size_t(axis) * stride, list,
-                                         used_count[axis], task.count, best_cost);
+      const std::uint32_t j =
+          sweep.best(bin.data() + std::size_t(axis) * stride, bin_count.data() + std::size_t(axis) * stride, list,
+                     used_count[axis], task.count, best_cost);
       if (j != kNone) best_axis = axis, best_split = list[j];
     }
     std::uint32_t mid = 0, child_buffer = task.buffer;
@@ -603,7 +621,8 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
       const std::uint8_t* const split_bin = reinterpret_cast<const std::uint8_t*>(bin_of) + kByteOf[axis];
       for (std::uint32_t i = 0; i < task.count; ++i) {
         const Box8& ref = objs[i];
-        const std::uint32_t go_left = split_bin[sizeof(std::uint32_t) * std::size_t(i)] <= best_split;  // size_t: nodes past 2^30 objects
+        const std::uint32_t go_left =
+            split_bin[sizeof(std::uint32_t) * std::size_t(i)] <= best_split;  // size_t: nodes past 2^30 objects
         // l or r, as a select: GCC makes it a conditional move in both variants (a branch on
         // go_left would mispredict wherever the sides follow no pattern). `r + (l - r) * go_left` and
         // `r ^ ((l ^ r) & -go_left)` are branch-free whatever the compiler does, but cost more.
@@ -613,7 +632,8 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
         l += go_left;
         r += go_left ^ 1u;
       }
-      if (l != mid || r != task.count) throw std::logic_error("build_binned_sah: bin counts disagree with the partition");
+      if (l != mid || r != task.count)
+        throw std::logic_error("build_binned_sah: bin counts disagree with the partition");
       left_centroids = sides.left();
       right_centroids = sides.right();
     }

@@ -59,8 +59,8 @@ const std::array kEntries = {
           build_agglomerative_local),
     other("insertion-greedy", "insertion (fixed shuffle), descending to the cheaper child (+rotations)",
           build_insertion_greedy, true),
-    other("insertion-bnb", "insertion (fixed shuffle), best sibling by branch and bound (+rotations)", build_insertion_bnb,
-          true),
+    other("insertion-bnb", "insertion (fixed shuffle), best sibling by branch and bound (+rotations)",
+          build_insertion_bnb, true),
 };
 
 const std::array<BuilderInfo, kEntries.size()>& infos() {

@@ -74,8 +74,8 @@ struct BuildOptions {
   SplitAxis axis = SplitAxis::Best;
   SplitPosition position = SplitPosition::Binned;
   SplitCost cost = SplitCost::Sah;
-  std::uint32_t neighbours = 4;     ///< fast agglomerative: partners searched among this many Morton neighbours each side
-  bool rotations = false;           ///< insertion: rebalance by tree rotations along the insertion path
+  std::uint32_t neighbours = 4;  ///< fast agglomerative: partners searched among this many Morton neighbours each side
+  bool rotations = false;        ///< insertion: rebalance by tree rotations along the insertion path
   InsertionOrder insertion_order = InsertionOrder::Shuffled;  ///< insertion builders' order
 };
 

@@ -31,11 +31,13 @@ Classification classify_masked(const Aabb& box, const Frustum& frustum, std::uin
   return straddled ? Classification::Intersecting : Classification::Inside;
 }
 
-Classification classify_masked_margin(const Aabb& box, const Frustum& frustum, std::uint32_t mask, std::uint32_t& straddled) {
+Classification classify_masked_margin(const Aabb& box, const Frustum& frustum, std::uint32_t mask,
+                                      std::uint32_t& straddled) {
   straddled = 0;
   // Evaluated in this order, as in shaders/cull_bvh.comp (the margin is part of the contract:
   // docs/numerics.md, BVH node margins).
-  const float reach = std::max(std::abs(box.min.x), std::abs(box.max.x)) + std::max(std::abs(box.min.y), std::abs(box.max.y)) +
+  const float reach = std::max(std::abs(box.min.x), std::abs(box.max.x)) +
+                      std::max(std::abs(box.min.y), std::abs(box.max.y)) +
                       std::max(std::abs(box.min.z), std::abs(box.max.z));
   const auto planes = frustum.active();
   for (std::uint32_t k = 0; k < planes.size(); ++k) {
@@ -58,8 +60,9 @@ void require_unit_normals(const Frustum& frustum, const char* who) {
     const glm::vec3& n = frustum.planes[k].normal;
     const double length = std::sqrt(double(n.x) * n.x + double(n.y) * n.y + double(n.z) * n.z);
     if (!(std::abs(length - 1.0) <= kBvhUnitNormalTolerance))
-      throw std::invalid_argument(std::string(who) + ": plane " + std::to_string(k) + " has a normal of length " + std::to_string(length) +
-                                  "; hierarchies over OBBs and spheres need unit normals (Frustum::from_planes normalises)");
+      throw std::invalid_argument(
+          std::string(who) + ": plane " + std::to_string(k) + " has a normal of length " + std::to_string(length) +
+          "; hierarchies over OBBs and spheres need unit normals (Frustum::from_planes normalises)");
   }
 }
 
@@ -207,7 +210,8 @@ FlatTree flatten(const Tree& tree) {
     flat.leaf = node.leaf();
     out.nodes.push_back(flat);
     if (node.leaf()) {
-      out.objects.insert(out.objects.end(), tree.objects.begin() + node.first, tree.objects.begin() + node.first + node.count);
+      out.objects.insert(out.objects.end(), tree.objects.begin() + node.first,
+                         tree.objects.begin() + node.first + node.count);
     } else {
       const std::uint32_t left = node.left, right = node.right;  // f is invalidated by the pushes
       stack.push_back({right, 0, false});
@@ -228,8 +232,10 @@ std::string check_flat_tree_impl(const FlatTree& tree, std::size_t n, const Volu
   const std::size_t nodes = tree.nodes.size();
   const std::string kind = with_volumes ? std::string(to_string(kind_of<Volume>())) + " volumes" : "objects";
   if (tree.objects.size() != n)
-    return "the tree orders " + std::to_string(tree.objects.size()) + " objects, but " + std::to_string(n) + " " + kind + " were given";
-  if ((nodes == 0) != (n == 0)) return nodes ? "a tree over no objects must have no nodes" : "no nodes for " + std::to_string(n) + " objects";
+    return "the tree orders " + std::to_string(tree.objects.size()) + " objects, but " + std::to_string(n) + " " +
+           kind + " were given";
+  if ((nodes == 0) != (n == 0))
+    return nodes ? "a tree over no objects must have no nodes" : "no nodes for " + std::to_string(n) + " objects";
   std::vector<char> seen(n, 0);
   for (std::uint32_t o : tree.objects) {
     if (o >= n) return "object id " + std::to_string(o) + " out of range (" + std::to_string(n) + " objects)";
@@ -237,7 +243,8 @@ std::string check_flat_tree_impl(const FlatTree& tree, std::size_t n, const Volu
   }
   if (volumes)  // (before the leaves' checks, which assume valid volumes for their message)
     for (std::size_t i = 0; i < n; ++i)
-      if (!is_valid(volumes[i])) return std::string(to_string(kind_of<Volume>())) + " " + std::to_string(i) + ": " + invalid_reason(volumes[i]);
+      if (!is_valid(volumes[i]))
+        return std::string(to_string(kind_of<Volume>())) + " " + std::to_string(i) + ": " + invalid_reason(volumes[i]);
   // Depth of every node: children follow their parent in depth-first order.
   std::vector<std::uint32_t> depth(nodes, 0);
   if (nodes) {
@@ -256,13 +263,16 @@ std::string check_flat_tree_impl(const FlatTree& tree, std::size_t n, const Volu
       if (node.skip != i + 1) return at + "leaf whose skip is not the next node";
       std::size_t failed = node.first;  // past the last volume that passed
       // (every volume passed is_valid above)
-      if (volumes && !visit_leaf_volumes<true>(tree, std::span<const Volume>(volumes, n), i, i + 1, [&](std::size_t k, const Volume&) { failed = k + 1; }))
-        return at + "box does not enclose " + std::string(to_string(kind_of<Volume>())) + " " + std::to_string(tree.objects[failed]) +
+      if (volumes && !visit_leaf_volumes<true>(tree, std::span<const Volume>(volumes, n), i, i + 1,
+                                               [&](std::size_t k, const Volume&) { failed = k + 1; }))
+        return at + "box does not enclose " + std::string(to_string(kind_of<Volume>())) + " " +
+               std::to_string(tree.objects[failed]) +
                (std::is_same_v<Volume, Aabb> ? "" : " (build the tree over bvh::enclosing_boxes)");
     } else {
       if (i + 1 >= node.skip) return at + "inner node without children";
       const std::uint32_t second = tree.nodes[i + 1].skip;
-      if (second <= i + 1 || second >= node.skip) return at + "second child " + std::to_string(second) + " out of range";
+      if (second <= i + 1 || second >= node.skip)
+        return at + "second child " + std::to_string(second) + " out of range";
       const FlatNode &a = tree.nodes[i + 1], &b = tree.nodes[second];
       if (b.skip != node.skip) return at + "more than two children";
       if (a.first != node.first || b.first != a.first + a.count || std::size_t(a.count) + b.count != node.count)
@@ -316,7 +326,8 @@ HierarchicalResult cull_hierarchical_impl(const FlatTree& tree, std::span<const 
     const Classification c = classify_node<Volume>(node.box, frustum, mask, straddled);
     if (c == Classification::Outside) continue;
     if (c == Classification::Inside) {  // the whole range, no further tests
-      for (std::uint32_t k = node.first; k < node.first + node.count; ++k) r.classes[tree.objects[k]] = Classification::Inside;
+      for (std::uint32_t k = node.first; k < node.first + node.count; ++k)
+        r.classes[tree.objects[k]] = Classification::Inside;
       continue;
     }
     if (options.tests_objects_of(node)) {

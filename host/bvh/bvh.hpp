@@ -6,11 +6,11 @@
 #include <type_traits>
 #include <vector>
 
+#include "core/prefetch.hpp"
 #include "geom/aabb.hpp"
 #include "geom/classification.hpp"
 #include "geom/frustum.hpp"
 #include "geom/obb.hpp"
-#include "core/prefetch.hpp"
 #include "geom/sphere.hpp"
 
 /// Bounding volume hierarchies over object AABBs: the binned-SAH top-down builder, quality
@@ -76,7 +76,7 @@ class BinnedSahBuilder {
 
 /// Quality of a tree.
 struct Metrics {
-  double sah_cost = 0.0;       ///< sum over inner nodes of area/root area + over leaves of area/root area x count
+  double sah_cost = 0.0;  ///< sum over inner nodes of area/root area + over leaves of area/root area x count
   std::size_t nodes = 0, leaves = 0, depth = 0;
   std::size_t max_leaf_size = 0;
 };
@@ -111,14 +111,18 @@ FlatTree flatten(const Tree& tree);
 /// enclosing_box(). `depth`, when given, receives each node's depth (root 1). The cullers
 /// check this on upload: the traversals index by these links and ranges, and a box that does
 /// not enclose could drop a visible object. O(nodes + objects).
-std::string check_flat_tree(const FlatTree& tree, std::span<const Aabb> volumes, std::vector<std::uint32_t>* depth = nullptr);
-std::string check_flat_tree(const FlatTree& tree, std::span<const Obb> volumes, std::vector<std::uint32_t>* depth = nullptr);
-std::string check_flat_tree(const FlatTree& tree, std::span<const Sphere> volumes, std::vector<std::uint32_t>* depth = nullptr);
+std::string check_flat_tree(const FlatTree& tree, std::span<const Aabb> volumes,
+                            std::vector<std::uint32_t>* depth = nullptr);
+std::string check_flat_tree(const FlatTree& tree, std::span<const Obb> volumes,
+                            std::vector<std::uint32_t>* depth = nullptr);
+std::string check_flat_tree(const FlatTree& tree, std::span<const Sphere> volumes,
+                            std::vector<std::uint32_t>* depth = nullptr);
 /// check_flat_tree's checks of the tree alone, over `object_count` objects: all but the
 /// volumes' validity and the leaves' enclosure of them. For a caller that gathers the volumes
 /// in tree order anyway and checks those two on its copy (volume_in_leaf), sparing a second
 /// gather; on a failure there, check_flat_tree says what is wrong.
-std::string check_flat_structure(const FlatTree& tree, std::size_t object_count, std::vector<std::uint32_t>* depth = nullptr);
+std::string check_flat_structure(const FlatTree& tree, std::size_t object_count,
+                                 std::vector<std::uint32_t>* depth = nullptr);
 /// The check check_flat_tree makes of each object in a leaf with box `leaf`: the volume is
 /// valid (is_valid) and its enclosing_box() inside `leaf` (leaf_encloses, which assumes a
 /// valid volume).
@@ -136,8 +140,8 @@ bool leaf_encloses(const Aabb& leaf, const Sphere& volume);
 /// has passed is_valid already, so only leaf_encloses is checked (no volume's validity is
 /// checked twice).
 template <bool kKnownValid = false, class Volume, class Visit>
-bool visit_leaf_volumes(const FlatTree& tree, std::span<const Volume> volumes, std::size_t first_node, std::size_t end_node,
-                        Visit&& visit) {
+bool visit_leaf_volumes(const FlatTree& tree, std::span<const Volume> volumes, std::size_t first_node,
+                        std::size_t end_node, Visit&& visit) {
   const std::size_t n = tree.objects.size();
   for (std::size_t i = first_node; i < end_node; ++i) {
     const FlatNode& node = tree.nodes[i];
@@ -196,7 +200,8 @@ std::vector<Aabb> enclosing_boxes(std::span<const Volume> volumes) {
 /// OUTSIDE when the p-vertex is more than the margin behind a plane in `mask`; a plane goes to
 /// `straddled` unless the n-vertex is at least the margin in front. Past kBvhMarginLimit (or
 /// with NaN) a plane decides nothing: it is straddled.
-Classification classify_masked_margin(const Aabb& box, const Frustum& frustum, std::uint32_t mask, std::uint32_t& straddled);
+Classification classify_masked_margin(const Aabb& box, const Frustum& frustum, std::uint32_t mask,
+                                      std::uint32_t& straddled);
 
 /// The object tests of hierarchical culling, on the planes in `mask` only; the same float
 /// operations as the reference's flat tests (cull/reference.hpp).
@@ -236,7 +241,9 @@ struct TraversalOptions {
   std::uint32_t range_objects = 0;
   /// Whether a straddling `node` tests its objects rather than descending: a leaf, or with
   /// range_objects a node of at most that many objects.
-  bool tests_objects_of(const FlatNode& node) const { return node.leaf || (range_objects != 0 && node.count <= range_objects); }
+  bool tests_objects_of(const FlatNode& node) const {
+    return node.leaf || (range_objects != 0 && node.count <= range_objects);
+  }
   bool operator==(const TraversalOptions&) const = default;
 };
 

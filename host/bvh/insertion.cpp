@@ -4,12 +4,11 @@
 #include <algorithm>
 #include <cmath>
 #include <compare>
-#include <numeric>
 #include <functional>
+#include <glm/geometric.hpp>
+#include <numeric>
 #include <tuple>
 #include <vector>
-
-#include <glm/geometric.hpp>
 
 #include "bvh/box_ops.hpp"
 #include "bvh/builders.hpp"
@@ -50,7 +49,8 @@ class DynamicTree {
     const std::uint32_t sibling = search == Search::Greedy ? find_greedy(box) : find_best(box);
     // The sibling's place goes to a new inner node over (sibling, leaf).
     const std::uint32_t old_parent = nodes_[sibling].parent;
-    const std::uint32_t parent = add({merged(nodes_[sibling].box, box), old_parent, sibling, leaf, 0, nodes_[sibling].count + 1});
+    const std::uint32_t parent =
+        add({merged(nodes_[sibling].box, box), old_parent, sibling, leaf, 0, nodes_[sibling].count + 1});
     nodes_[sibling].parent = parent;
     nodes_[leaf].parent = parent;
     if (old_parent == kNone)
@@ -149,7 +149,8 @@ class DynamicTree {
       for (int k = 0; k < inner_count; ++k) {
         const Child& ch = inner[k];
         if (!(std::tie(ch.bound, kOne) < std::tie(best_cost, nodes_[best].count))) continue;
-        if (!next || std::tie(ch.bound, ch.distance, nodes_[ch.node].count) < std::tie(next->bound, next->distance, nodes_[next->node].count))
+        if (!next || std::tie(ch.bound, ch.distance, nodes_[ch.node].count) <
+                         std::tie(next->bound, next->distance, nodes_[next->node].count))
           next = &ch;
       }
       if (!next) break;
@@ -194,7 +195,9 @@ class DynamicTree {
       const Measure below = best_inherited + (measure(merged(n.box, box)) - measure(n.box));
       std::uint32_t next = kNone;
       for (const std::uint32_t c : {n.left, n.right})
-        if (measure(merged(nodes_[c].box, box)) + below <= best_cost && (next == kNone || nodes_[c].count < nodes_[next].count)) next = c;
+        if (measure(merged(nodes_[c].box, box)) + below <= best_cost &&
+            (next == kNone || nodes_[c].count < nodes_[next].count))
+          next = c;
       if (next == kNone) break;
       best = next;
       best_inherited = below;
@@ -207,7 +210,8 @@ class DynamicTree {
   void rotate(std::uint32_t a) {
     const std::uint32_t b = nodes_[a].left, c = nodes_[a].right;
     Measure best{};  // a swap must save something (strictly less than zero change)
-    std::uint32_t take = kNone, give = kNone, into = kNone;  // swap child `give` of a with grandchild `take` under `into`
+    std::uint32_t take = kNone, give = kNone,
+                  into = kNone;  // swap child `give` of a with grandchild `take` under `into`
     const auto consider = [&](std::uint32_t child, std::uint32_t other) {
       const DynNode& o = nodes_[other];
       if (o.leaf()) return;

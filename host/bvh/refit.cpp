@@ -130,7 +130,8 @@ Tree collapse_leaves(const Tree& tree, std::uint32_t max_leaf_size) {
         const Node& g = tree.nodes[gather.back()];
         gather.pop_back();
         if (g.leaf()) {
-          out.objects.insert(out.objects.end(), tree.objects.begin() + g.first, tree.objects.begin() + g.first + g.count);
+          out.objects.insert(out.objects.end(), tree.objects.begin() + g.first,
+                             tree.objects.begin() + g.first + g.count);
         } else {
           gather.push_back(g.right);
           gather.push_back(g.left);

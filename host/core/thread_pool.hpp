@@ -14,7 +14,8 @@ namespace cullpipe {
 class TaskRef {
  public:
   template <class F>
-  TaskRef(F& f) : object_(&f), call_([](void* o, std::size_t t) { (*static_cast<F*>(o))(t); }) {}  // NOLINT: implicit by design
+  TaskRef(F& f)
+      : object_(&f), call_([](void* o, std::size_t t) { (*static_cast<F*>(o))(t); }) {}  // NOLINT: implicit by design
   void operator()(std::size_t t) const { call_(object_, t); }
   /// A task that does nothing.
   static TaskRef none() { return TaskRef(); }

@@ -1,17 +1,17 @@
 #pragma once
-#include <cstddef>
 #include <algorithm>
+#include <cstddef>
 #include <cstdint>
 #include <span>
 #include <string>
 #include <vector>
 
+#include "cull/reference.hpp"
 #include "geom/aabb.hpp"
 #include "geom/classification.hpp"
 #include "geom/frustum.hpp"
 #include "geom/obb.hpp"
 #include "geom/sphere.hpp"
-#include "cull/reference.hpp"
 
 namespace cullpipe {
 
@@ -62,12 +62,14 @@ Agreement check_agreement(std::span<const Volume> volumes, const Frustum& frustu
   for (std::size_t i = 0; i < volumes.size() && i < cpu.size() && i < gpu.size() && a.reports.size() < max_reports; ++i)
     if (cpu[i] != gpu[i])
       report(describe_mismatch(object_ids.empty() ? i : object_ids[i], volumes[i], frustum, cpu[i], gpu[i]));
-  if (cpu.size() != gpu.size()) report("the GPU returned " + std::to_string(gpu.size()) + " classes for " + std::to_string(cpu.size()) + " objects");
+  if (cpu.size() != gpu.size())
+    report("the GPU returned " + std::to_string(gpu.size()) + " classes for " + std::to_string(cpu.size()) +
+           " objects");
   if (!(cpu_counts == gpu_counts)) {
     ++a.mismatches;
-    report("GPU counters (visible " + std::to_string(gpu_counts.visible) + ", inside " + std::to_string(gpu_counts.inside) +
-           ") differ from the CPU's (visible " + std::to_string(cpu_counts.visible) + ", inside " +
-           std::to_string(cpu_counts.inside) + ")");
+    report("GPU counters (visible " + std::to_string(gpu_counts.visible) + ", inside " +
+           std::to_string(gpu_counts.inside) + ") differ from the CPU's (visible " +
+           std::to_string(cpu_counts.visible) + ", inside " + std::to_string(cpu_counts.inside) + ")");
   }
   std::vector<std::uint32_t> ids(gpu_visible_ids.begin(), gpu_visible_ids.end());
   std::sort(ids.begin(), ids.end());
@@ -78,7 +80,8 @@ Agreement check_agreement(std::span<const Volume> volumes, const Frustum& frustu
   if (expected.size() <= capacity)
     list_ok = list_ok && ids == expected;
   else
-    list_ok = list_ok && ids.size() == capacity && std::includes(expected.begin(), expected.end(), ids.begin(), ids.end());
+    list_ok =
+        list_ok && ids.size() == capacity && std::includes(expected.begin(), expected.end(), ids.begin(), ids.end());
   if (!list_ok) {
     ++a.mismatches;
     report("the GPU's visible-id list (" + std::to_string(ids.size()) + " ids) is not the CPU's visible set (" +

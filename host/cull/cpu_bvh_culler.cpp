@@ -9,15 +9,15 @@
 #include <stdexcept>
 #include <string>
 
-#include "cull/kernel_select.hpp"
 #include "core/thread_pool.hpp"
+#include "cull/kernel_select.hpp"
 
 namespace cullpipe::fast {
 
 namespace {
 
-constexpr std::uint32_t kRangeChunk = 16384;  // objects per accepted-range task
-constexpr std::size_t kTaskObjects = 8192;     // at most one subtree task per this many objects
+constexpr std::uint32_t kRangeChunk = 16384;       // objects per accepted-range task
+constexpr std::size_t kTaskObjects = 8192;         // at most one subtree task per this many objects
 constexpr std::size_t kLargeTaskObjects = 131072;  // subtree tasks of about this many objects where there are enough
 
 }  // namespace
@@ -39,7 +39,8 @@ struct CpuBvhCuller::Task {
 
 CpuBvhCuller::CpuBvhCuller(unsigned threads, std::optional<Isa> isa) : isa_(isa.value_or(best_isa())) {
   if (!isa_supported(isa_))
-    throw std::invalid_argument("CpuBvhCuller: this CPU (or build) cannot run the " + std::string(to_string(isa_)) + " kernels");
+    throw std::invalid_argument("CpuBvhCuller: this CPU (or build) cannot run the " + std::string(to_string(isa_)) +
+                                " kernels");
   kernels_ = std::make_unique<detail::KernelTable>(detail::kernels(isa_));
   pool_ = std::make_unique<ThreadPool>(threads);
 }
@@ -52,12 +53,17 @@ namespace {
 /// A volume's columns as the walk kernels read them (detail::kWalk*Columns).
 template <std::size_t Columns>
 using WalkColumns = std::array<float, Columns>;
-WalkColumns<detail::kWalkAabbColumns> walk_columns(const Aabb& b) { return {b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z}; }
-WalkColumns<detail::kWalkObbColumns> walk_columns(const Obb& b) {
-  return {b.center.x,   b.center.y,   b.center.z,   b.basis[0].x,     b.basis[0].y,     b.basis[0].z,     b.basis[1].x,    b.basis[1].y,
-          b.basis[1].z, b.basis[2].x, b.basis[2].y, b.basis[2].z, b.half_extents.x, b.half_extents.y, b.half_extents.z};
+WalkColumns<detail::kWalkAabbColumns> walk_columns(const Aabb& b) {
+  return {b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z};
 }
-WalkColumns<detail::kWalkSphereColumns> walk_columns(const Sphere& s) { return {s.center.x, s.center.y, s.center.z, s.radius}; }
+WalkColumns<detail::kWalkObbColumns> walk_columns(const Obb& b) {
+  return {b.center.x,   b.center.y,   b.center.z,       b.basis[0].x,     b.basis[0].y,
+          b.basis[0].z, b.basis[1].x, b.basis[1].y,     b.basis[1].z,     b.basis[2].x,
+          b.basis[2].y, b.basis[2].z, b.half_extents.x, b.half_extents.y, b.half_extents.z};
+}
+WalkColumns<detail::kWalkSphereColumns> walk_columns(const Sphere& s) {
+  return {s.center.x, s.center.y, s.center.z, s.radius};
+}
 
 float float_bits(std::uint32_t u) { return std::bit_cast<float>(u); }
 
@@ -118,7 +124,8 @@ void CpuBvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume
   if (!all_in_leaves.load()) refuse();
   // Zeros past the last object: in its block's columns, and the block after.
   for (std::size_t c = 0; c < columns; ++c)
-    std::fill(blocks + detail::walk_block_offset(n, columns) + c * block, blocks + n / block * block_floats + (c + 1) * block, 0.0f);
+    std::fill(blocks + detail::walk_block_offset(n, columns) + c * block,
+              blocks + n / block * block_floats + (c + 1) * block, 0.0f);
   std::fill(blocks + (block_count - 1) * block_floats, blocks + block_count * block_floats, 0.0f);
 
   // Nothing below throws: every resize is within the reserved capacity.
@@ -167,14 +174,16 @@ void CpuBvhCuller::cull(const Frustum& frustum, const CpuBvhCullOptions& options
   cull_views(std::span<const Frustum>(&frustum, 1), options, std::span<const Output>(&out, 1));
 }
 
-void CpuBvhCuller::cull(std::span<const Frustum> views, const CpuBvhCullOptions& options, std::vector<CpuBvhViewResult>& results) {
+void CpuBvhCuller::cull(std::span<const Frustum> views, const CpuBvhCullOptions& options,
+                        std::vector<CpuBvhViewResult>& results) {
   results.resize(views.size());
   outputs_.clear();
   for (CpuBvhViewResult& v : results) outputs_.push_back({&v.result, &v.visible_ids});
   cull_views(views, options, outputs_);
 }
 
-void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOptions& options, std::span<const Output> outs) {
+void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOptions& options,
+                              std::span<const Output> outs) {
   if (kind_ != BvKind::Aabb)
     for (const Frustum& f : views) bvh::require_unit_normals(f, "CpuBvhCuller");
   const std::size_t n = tree_.objects.size(), view_count = views.size();
@@ -207,7 +216,8 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
   // or two each; much larger ones list more object ranges than the caches keep until they are
   // tested.
   const std::size_t threads = pool_->size();
-  const std::size_t wanted = std::clamp<std::size_t>(std::max(n / kLargeTaskObjects, std::min(n / kTaskObjects, threads * 4)), 1, threads * 16);
+  const std::size_t wanted = std::clamp<std::size_t>(
+      std::max(n / kLargeTaskObjects, std::min(n / kTaskObjects, threads * 4)), 1, threads * 16);
   std::vector<Task>& tasks = tasks_;
   tasks.clear();
   for (std::uint32_t v = 0; v < view_count; ++v) {
@@ -218,19 +228,22 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
     frontier.assign(1, {Task::Subtree, 0, (1u << frustum.active().size()) - 1u, v});
     std::size_t head = 0;
     auto accept = [&](std::uint32_t first, std::uint32_t count) {
-      for (std::uint32_t k = 0; k < count; k += kRangeChunk) tasks.push_back({Task::Inside, first + k, std::min(kRangeChunk, count - k), v});
+      for (std::uint32_t k = 0; k < count; k += kRangeChunk)
+        tasks.push_back({Task::Inside, first + k, std::min(kRangeChunk, count - k), v});
     };
     while (head != frontier.size() && frontier.size() - head + tasks.size() - first_task < wanted) {
       const Task t = frontier[head++];
       const bvh::FlatNode& node = nodes[t.node_or_first];
-      if (bvh::TraversalOptions{range_objects}.tests_objects_of(node)) {  // leaves (and small nodes) go to the threads whole
+      if (bvh::TraversalOptions{range_objects}.tests_objects_of(
+              node)) {  // leaves (and small nodes) go to the threads whole
         tasks.push_back(t);
         continue;
       }
       ++outs[v].result->node_tests;
       std::uint32_t straddled = 0;
-      const Classification c = kind_ == BvKind::Aabb ? bvh::classify_node<Aabb>(node.box, frustum, t.mask_or_count, straddled)
-                                                     : bvh::classify_masked_margin(node.box, frustum, t.mask_or_count, straddled);
+      const Classification c = kind_ == BvKind::Aabb
+                                   ? bvh::classify_node<Aabb>(node.box, frustum, t.mask_or_count, straddled)
+                                   : bvh::classify_masked_margin(node.box, frustum, t.mask_or_count, straddled);
       if (c == Classification::Outside) continue;
       if (c == Classification::Inside) {
         accept(node.first, node.count);
@@ -257,11 +270,13 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
     std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return before(keys[a], keys[b]); });
   };
   if (ids) {
-    sort_order([&](std::size_t i) {
-      const Task& t = tasks[i];
-      return std::uint64_t(t.view) << 32 | (t.kind == Task::Inside ? t.node_or_first : nodes[t.node_or_first].first);
-    },
-               std::less<std::uint64_t>());
+    sort_order(
+        [&](std::size_t i) {
+          const Task& t = tasks[i];
+          return std::uint64_t(t.view) << 32 |
+                 (t.kind == Task::Inside ? t.node_or_first : nodes[t.node_or_first].first);
+        },
+        std::less<std::uint64_t>());
     frontier_.clear();  // (the walk's queue, done with: the tasks in their new order, copied back
                         // so each vector keeps its role and a steady pass allocates nothing)
     for (std::uint32_t t : order) frontier_.push_back(tasks[t]);
@@ -275,7 +290,8 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
   work_.resize(pool_->size());
   std::size_t most_work = 0;
   for (const Task& t : tasks)
-    if (t.kind == Task::Subtree) most_work = std::max(most_work, detail::walk_work_words(nodes[t.node_or_first].skip - t.node_or_first));
+    if (t.kind == Task::Subtree)
+      most_work = std::max(most_work, detail::walk_work_words(nodes[t.node_or_first].skip - t.node_or_first));
   for (std::vector<std::uint32_t>& w : work_)
     if (w.size() < most_work) w.resize(most_work);
   // Each subtree task marks its visible objects in its own words of marks_ (a bit per object
@@ -297,18 +313,19 @@ void CpuBvhCuller::cull_views(std::span<const Frustum> views, const CpuBvhCullOp
   }
   planes_.clear();
   for (const Frustum& f : views) planes_.push_back(detail::plane_set(f));
-  const detail::WalkTree walk_tree{walk_nodes_.data(),   walk_blocks_.data(),   objects.data(),        range_objects,
+  const detail::WalkTree walk_tree{walk_nodes_.data(),   walk_blocks_.data(),  objects.data(),      range_objects,
                                    bvh::kBvhMarginScale, bvh::kBvhMarginFloor, bvh::kBvhMarginLimit};
   const detail::WalkKernel walk = kind_ == BvKind::Obb      ? kernels_->walk_obb
                                   : kind_ == BvKind::Sphere ? kernels_->walk_sphere
                                                             : kernels_->walk_aabb;
   // The threads take the largest subtrees first and the accepted ranges (short, even) last,
   // so the pass does not end waiting on one thread's large subtree.
-  sort_order([&](std::size_t i) -> std::uint64_t {
-    const Task& t = tasks[i];
-    return t.kind == Task::Inside ? 0 : nodes[t.node_or_first].skip - t.node_or_first;
-  },
-             std::greater<std::uint64_t>());
+  sort_order(
+      [&](std::size_t i) -> std::uint64_t {
+        const Task& t = tasks[i];
+        return t.kind == Task::Inside ? 0 : nodes[t.node_or_first].skip - t.node_or_first;
+      },
+      std::greater<std::uint64_t>());
   pool_->parallel_for(tasks.size(), [&](std::size_t claimed) {
     const std::size_t index = order_[claimed];
     const Task& task = tasks[index];

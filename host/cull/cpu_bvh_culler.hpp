@@ -23,7 +23,7 @@ namespace cullpipe::fast {
 namespace detail {
 struct KernelTable;
 struct PlaneSet;
-}
+}  // namespace detail
 
 /// What a CpuBvhCuller pass fills.
 struct CpuBvhCullOptions {
@@ -64,10 +64,10 @@ struct CpuBvhViewResult {
 /// plane, each lane doing the scalar test's float operations in its order on the planes of its
 /// own mask; then the object ranges it found, up to 64 objects at a time tested plane by
 /// plane, W at a time, read straight from the volumes in tree order, in blocks of 16 objects
-/// with a vector per column (a range is one run of cache lines there). The tests are the scalar traversal's, in another order; the visible
-/// objects are marked in a bitmap and listed in tree order. INSIDE ranges are split into chunks
-/// so one large accepted subtree still uses every core. Objects are written by id, and a
-/// subtree's objects are its own, so no two threads write the same class.
+/// with a vector per column (a range is one run of cache lines there). The tests are the scalar traversal's, in another
+/// order; the visible objects are marked in a bitmap and listed in tree order. INSIDE ranges are split into chunks so
+/// one large accepted subtree still uses every core. Objects are written by id, and a subtree's objects are its own, so
+/// no two threads write the same class.
 ///
 /// Why object ranges: a node test costs several times what an object of a range does (records
 /// gathered into lanes, work lists kept and prefetches, against contiguous loads), so near the
@@ -89,8 +89,8 @@ class CpuBvhCuller {
   CpuBvhCuller& operator=(const CpuBvhCuller&) = delete;
 
   /// Copies the tree and the volumes (in tree order, in blocks of 16 with a vector per
-  /// column, so a node's volumes are one run of memory). Throws std::invalid_argument unless the tree's object list is a permutation of
-  /// the ids of the volumes and every leaf's box encloses its volumes (their enclosing boxes):
+  /// column, so a node's volumes are one run of memory). Throws std::invalid_argument unless the tree's object list is
+  /// a permutation of the ids of the volumes and every leaf's box encloses its volumes (their enclosing boxes):
   /// bvh::check_flat_tree, with its message; a refused upload leaves the last one. The threads
   /// gather and check the volumes together, into a second set of blocks that replaces the
   /// first when all have passed (the two take turns, so the blocks take twice their size:
@@ -149,12 +149,12 @@ class CpuBvhCuller {
   cullpipe::detail::CacheLineVector<float> spare_blocks_;  // the next upload's blocks (then the last one's)
   // Per-pass working storage, kept so passes reuse it.
   std::vector<Task> tasks_;
-  std::vector<Task> frontier_;  // the top of the tree, breadth first; then the tasks' sort
-  std::vector<std::uint32_t> order_;  // the tasks in the order the threads take them
+  std::vector<Task> frontier_;            // the top of the tree, breadth first; then the tasks' sort
+  std::vector<std::uint32_t> order_;      // the tasks in the order the threads take them
   std::vector<std::uint64_t> sort_keys_;  // per task, the key of the sort at hand
   std::vector<Tally> tallies_;
-  std::vector<std::uint64_t> marks_;  // the subtree tasks' visible objects, a bit each; zero between passes
-  bool marks_clean_ = true;            // false from a pass's walk until its listing has cleared marks_
+  std::vector<std::uint64_t> marks_;              // the subtree tasks' visible objects, a bit each; zero between passes
+  bool marks_clean_ = true;                       // false from a pass's walk until its listing has cleared marks_
   std::vector<std::vector<std::uint32_t>> work_;  // per pool thread: a walk's work lists
   std::vector<std::size_t> offsets_;
   std::vector<detail::PlaneSet> planes_;  // per view

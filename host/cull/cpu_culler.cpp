@@ -11,10 +11,10 @@
 #include <string>
 
 #include "core/aligned_vector.hpp"
-#include "cull/kernel_select.hpp"
-#include "geom/plane_bounds.hpp"
-#include "cull/simd_kernels.hpp"
 #include "core/thread_pool.hpp"
+#include "cull/kernel_select.hpp"
+#include "cull/simd_kernels.hpp"
+#include "geom/plane_bounds.hpp"
 
 namespace cullpipe::fast {
 
@@ -25,9 +25,12 @@ constexpr std::size_t kPad = 16;  // widest vector, in floats
 bool cpu_runs(Isa isa) {
 #if defined(CULLPIPE_HAVE_X86_KERNELS)
   switch (isa) {
-    case Isa::Portable: return true;
-    case Isa::Avx2: return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
-    case Isa::Avx512: return __builtin_cpu_supports("avx512f");
+    case Isa::Portable:
+      return true;
+    case Isa::Avx2:
+      return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+    case Isa::Avx512:
+      return __builtin_cpu_supports("avx512f");
   }
   return false;
 #else
@@ -60,7 +63,8 @@ PlaneSet plane_set(const Frustum& f) {
     s.d[k] = f.planes[k].d;
     s.unit_normals = s.unit_normals && plane_bounds::unit_normal(n);
     const float margin = plane_bounds::plane_margin(f.planes[k].d);
-    s.max_margin = std::isnan(s.max_margin) || std::isnan(margin) ? std::numeric_limits<float>::quiet_NaN() : std::max(s.max_margin, margin);
+    s.max_margin = std::isnan(s.max_margin) || std::isnan(margin) ? std::numeric_limits<float>::quiet_NaN()
+                                                                  : std::max(s.max_margin, margin);
   }
   // The lower bounds' factors: the smallest |n|_1 and |n|_2, rounded down, times 2^-8 (q's step) and
   // 1 - 2^-12 (the packing's 2^-15 and the kernel's roundings); 0 outside [1/2, 2].
@@ -71,14 +75,16 @@ PlaneSet plane_set(const Frustum& f) {
     l1 = std::min(l1, std::fabs(x) + std::fabs(y) + std::fabs(z));
     l2 = std::min(l2, std::sqrt(x * x + y * y + z * z));
   }
-  auto scale = [](double c) { return c >= 0.5 && c <= 2.0 ? static_cast<float>(c * (1.0 - 0x1p-30) * 0x1p-8 * (1.0 - 0x1p-12)) : 0.0f; };
+  auto scale = [](double c) {
+    return c >= 0.5 && c <= 2.0 ? static_cast<float>(c * (1.0 - 0x1p-30) * 0x1p-8 * (1.0 - 0x1p-12)) : 0.0f;
+  };
   s.lower_scale_l1 = scale(l1);
   s.lower_scale_l2 = scale(l2);
   // The first pair of planes whose normals are opposite within kMirrorSlack (float sums are
   // exact in double). The bounds cover its distance: docs/numerics.md, Mirrored planes.
   auto mirrors = [&](std::uint32_t i, std::uint32_t j) {
-    return std::fabs(double(s.nx[i]) + s.nx[j]) <= kMirrorSlack && std::fabs(double(s.ny[i]) + s.ny[j]) <= kMirrorSlack &&
-           std::fabs(double(s.nz[i]) + s.nz[j]) <= kMirrorSlack;
+    return std::fabs(double(s.nx[i]) + s.nx[j]) <= kMirrorSlack &&
+           std::fabs(double(s.ny[i]) + s.ny[j]) <= kMirrorSlack && std::fabs(double(s.nz[i]) + s.nz[j]) <= kMirrorSlack;
   };
   for (std::uint32_t i = 0; i < s.count && !s.mirrored; ++i)
     for (std::uint32_t j = i + 1; j < s.count && !s.mirrored; ++j)
@@ -101,9 +107,12 @@ struct ColumnsFree {
 
 std::string_view to_string(Isa isa) {
   switch (isa) {
-    case Isa::Portable: return "portable";
-    case Isa::Avx2: return "avx2";
-    case Isa::Avx512: return "avx512";
+    case Isa::Portable:
+      return "portable";
+    case Isa::Avx2:
+      return "avx2";
+    case Isa::Avx512:
+      return "avx512";
   }
   return "invalid";
 }
@@ -139,9 +148,9 @@ struct CpuCuller::Impl {
   ThreadPool pool;
   detail::KernelTable table{};
   std::size_t chunk = 16384;
-  std::size_t padded = 0;     // floats per component array
+  std::size_t padded = 0;  // floats per component array
   std::unique_ptr<float[], ColumnsFree> data;
-  std::size_t capacity = 0;   // floats allocated
+  std::size_t capacity = 0;          // floats allocated
   std::vector<const float*> arrays;  // component array starts
   float* records = nullptr;          // per-object records after the arrays (OBB), or null
   std::size_t record_size = 0;       // floats per record
@@ -159,7 +168,8 @@ struct CpuCuller::Impl {
     padded = (count + kPad - 1) / kPad * kPad + kPad;  // one spare vector: loads past the end stay in bounds
     const std::size_t floats = (components + record_floats) * padded;
     if (floats > capacity) {
-      data = std::unique_ptr<float[], ColumnsFree>(cullpipe::detail::CacheLineAllocator<float>().allocate(floats), ColumnsFree{floats});
+      data = std::unique_ptr<float[], ColumnsFree>(cullpipe::detail::CacheLineAllocator<float>().allocate(floats),
+                                                   ColumnsFree{floats});
       capacity = floats;
     }
     arrays.resize(components);
@@ -178,7 +188,8 @@ struct CpuCuller::Impl {
 CpuCuller::CpuCuller(const CpuCullerConfig& config) {
   isa_ = config.isa.value_or(best_isa());
   if (!isa_supported(isa_))
-    throw std::invalid_argument("CpuCuller: this CPU (or build) cannot run the " + std::string(to_string(isa_)) + " kernels");
+    throw std::invalid_argument("CpuCuller: this CPU (or build) cannot run the " + std::string(to_string(isa_)) +
+                                " kernels");
   impl_ = std::make_unique<Impl>(config.threads);
   impl_->table = detail::kernels(isa_);
   impl_->chunk = std::max<std::size_t>(kPad, (config.chunk_objects + kPad - 1) / kPad * kPad);
@@ -258,14 +269,15 @@ std::size_t CpuCuller::bytes_per_object() const { return (impl_->arrays.size() +
 
 namespace {
 /// Reads each of `spans`, split into tasks of at most `per_task` floats, and ORs what it read.
-std::uint32_t touch_spans(ThreadPool& pool, const detail::KernelTable& table, std::span<const std::span<const float>> spans,
-                          std::size_t per_task) {
+std::uint32_t touch_spans(ThreadPool& pool, const detail::KernelTable& table,
+                          std::span<const std::span<const float>> spans, std::size_t per_task) {
   std::vector<std::size_t> first_task(spans.size() + 1, 0);  // tasks of span s: first_task[s] ..
   for (std::size_t s = 0; s < spans.size(); ++s)
     first_task[s + 1] = first_task[s] + std::max<std::size_t>(1, (spans[s].size() + per_task - 1) / per_task);
   std::vector<std::uint32_t> bits(first_task.back(), 0);
   pool.parallel_for(bits.size(), [&](std::size_t t) {
-    const std::size_t s = static_cast<std::size_t>(std::upper_bound(first_task.begin(), first_task.end(), t) - first_task.begin()) - 1;
+    const std::size_t s =
+        static_cast<std::size_t>(std::upper_bound(first_task.begin(), first_task.end(), t) - first_task.begin()) - 1;
     const float* data = spans[s].data();
     const std::size_t begin = (t - first_task[s]) * per_task, end = std::min(spans[s].size(), begin + per_task);
     if (begin >= end) return;
@@ -294,7 +306,8 @@ std::uint32_t CpuCuller::touch_bounds(bool streamed_only) {
   const std::size_t used = (count_ + kPad - 1) / kPad * kPad;
   std::vector<std::span<const float>> spans;
   constexpr std::size_t kStreamed = kStreamedBytesPerObject / sizeof(float);  // the first columns: centre x y z, bound
-  for (std::size_t c = 0; c < impl_->arrays.size() && (!streamed_only || c < kStreamed); ++c) spans.emplace_back(impl_->arrays[c], used);
+  for (std::size_t c = 0; c < impl_->arrays.size() && (!streamed_only || c < kStreamed); ++c)
+    spans.emplace_back(impl_->arrays[c], used);
   if (impl_->records && !streamed_only) spans.emplace_back(impl_->records, used * impl_->record_size);
   return touch_spans(impl_->pool, impl_->table, spans, impl_->chunk);
 }
@@ -320,7 +333,8 @@ std::vector<CpuViewResult> CpuCuller::cull(std::span<const Frustum> views, const
   return results;
 }
 
-void CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& options, std::vector<CpuViewResult>& results) {
+void CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& options,
+                     std::vector<CpuViewResult>& results) {
   Impl& m = *impl_;
   const std::size_t n = count_;
   const std::size_t chunks = std::max<std::size_t>(1, (n + m.chunk - 1) / m.chunk);
@@ -334,7 +348,8 @@ void CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& optio
   // listed from the runs' bits straight into the result, each id written once instead of
   // twice (sparse runs write too few ids for it to matter).
   const std::size_t slot = m.chunk + kPad;
-  const std::size_t bits_slot = m.chunk / m.table.lanes, runs_slot = (m.chunk + detail::kRunObjects - 1) / detail::kRunObjects;
+  const std::size_t bits_slot = m.chunk / m.table.lanes,
+                    runs_slot = (m.chunk + detail::kRunObjects - 1) / detail::kRunObjects;
   if (options.visible_ids) {
     auto room = [&](std::vector<std::unique_ptr<std::uint32_t[]>>& buffers, std::size_t& size, std::size_t need) {
       if (size < need) {  // too small: reallocate every view's
@@ -350,8 +365,10 @@ void CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& optio
     room(m.runs, m.runs_size, chunks * runs_slot);
   }
   for (CpuViewResult& r : results) {
-    if (options.classes) r.classes.resize(n);
-    else r.classes.clear();
+    if (options.classes)
+      r.classes.resize(n);
+    else
+      r.classes.clear();
   }
   m.chunk_counts.assign(views.size() * chunks, {});
 
@@ -420,8 +437,10 @@ void CpuCuller::cull(std::span<const Frustum> views, const CpuCullOptions& optio
     const std::uint32_t* const out_end = out + m.chunk_counts[task].visible;
     for (std::size_t run = begin, r = 0; run < end; run += detail::kRunObjects, ++r) {
       if (runs[r] & detail::kDenseRun) {
-        const std::size_t vectors = (std::min(end, run + detail::kRunObjects) - run + m.table.lanes - 1) / m.table.lanes;
-        out = m.table.expand(bits + (run - begin) / m.table.lanes, vectors, static_cast<std::uint32_t>(run), out, out_end);
+        const std::size_t vectors =
+            (std::min(end, run + detail::kRunObjects) - run + m.table.lanes - 1) / m.table.lanes;
+        out = m.table.expand(bits + (run - begin) / m.table.lanes, vectors, static_cast<std::uint32_t>(run), out,
+                             out_end);
       } else {
         const std::uint32_t count = runs[r] & detail::kRunCount;
         out = std::copy(ids, ids + count, out);

@@ -54,8 +54,8 @@ struct CpuCullOptions {
 
 /// One view's result.
 struct CpuViewResult {
-  std::vector<Classification> classes;      ///< per object, in object order (with options.classes)
-  std::vector<std::uint32_t> visible_ids;   ///< INSIDE/INTERSECTING objects, in object order
+  std::vector<Classification> classes;     ///< per object, in object order (with options.classes)
+  std::vector<std::uint32_t> visible_ids;  ///< INSIDE/INTERSECTING objects, in object order
   reference::CullCounts counts;
 };
 

@@ -1,10 +1,10 @@
 #include "cull/reference.hpp"
 
-#include "geom/pn_vertex.hpp"
-#include "geom/volume_tests.hpp"
-
 #include <cmath>
 #include <stdexcept>
+
+#include "geom/pn_vertex.hpp"
+#include "geom/volume_tests.hpp"
 
 namespace cullpipe::reference {
 
@@ -32,7 +32,9 @@ Classification classify_corners(const Aabb& box, const Frustum& frustum) {
 
 Classification classify(const Obb& box, const Frustum& frustum) { return classify_planes(box, frustum, kAllPlanes); }
 
-Classification classify(const Sphere& sphere, const Frustum& frustum) { return classify_planes(sphere, frustum, kAllPlanes); }
+Classification classify(const Sphere& sphere, const Frustum& frustum) {
+  return classify_planes(sphere, frustum, kAllPlanes);
+}
 
 namespace {
 

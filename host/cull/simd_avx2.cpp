@@ -5,6 +5,17 @@
 #include "cull/simd_kernels.inl"
 
 namespace cullpipe::fast::detail {
-KernelTable avx2_kernels() { return {avx2::cull_aabb, avx2::cull_obb, avx2::cull_sphere, avx2::touch, avx2::touch_columns,
-          avx2::walk_aabb, avx2::walk_obb, avx2::walk_sphere, avx2::expand_ids, avx2::list_marked, 8}; }
+KernelTable avx2_kernels() {
+  return {avx2::cull_aabb,
+          avx2::cull_obb,
+          avx2::cull_sphere,
+          avx2::touch,
+          avx2::touch_columns,
+          avx2::walk_aabb,
+          avx2::walk_obb,
+          avx2::walk_sphere,
+          avx2::expand_ids,
+          avx2::list_marked,
+          8};
+}
 }  // namespace cullpipe::fast::detail

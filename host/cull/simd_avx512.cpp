@@ -5,6 +5,17 @@
 #include "cull/simd_kernels.inl"
 
 namespace cullpipe::fast::detail {
-KernelTable avx512_kernels() { return {avx512::cull_aabb, avx512::cull_obb, avx512::cull_sphere, avx512::touch, avx512::touch_columns,
-          avx512::walk_aabb, avx512::walk_obb, avx512::walk_sphere, avx512::expand_ids, avx512::list_marked, 16}; }
+KernelTable avx512_kernels() {
+  return {avx512::cull_aabb,
+          avx512::cull_obb,
+          avx512::cull_sphere,
+          avx512::touch,
+          avx512::touch_columns,
+          avx512::walk_aabb,
+          avx512::walk_obb,
+          avx512::walk_sphere,
+          avx512::expand_ids,
+          avx512::list_marked,
+          16};
+}
 }  // namespace cullpipe::fast::detail

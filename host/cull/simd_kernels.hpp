@@ -116,7 +116,8 @@ struct ChunkCounts {
 
 using AabbKernel = ChunkCounts (*)(const AabbArrays&, std::size_t begin, std::size_t end, const PlaneSet&, ChunkOutput);
 using ObbKernel = ChunkCounts (*)(const ObbArrays&, std::size_t begin, std::size_t end, const PlaneSet&, ChunkOutput);
-using SphereKernel = ChunkCounts (*)(const SphereArrays&, std::size_t begin, std::size_t end, const PlaneSet&, ChunkOutput);
+using SphereKernel = ChunkCounts (*)(const SphereArrays&, std::size_t begin, std::size_t end, const PlaneSet&,
+                                     ChunkOutput);
 
 /// Reads data[begin..end) (end - begin a multiple of 16 or data padded to one) and returns
 /// the OR of its bits: the memory floor of a pass, with the same loads as the kernels.
@@ -130,13 +131,13 @@ using TouchColumnsKernel = std::uint32_t (*)(const float* const* columns, std::s
 /// bvh::FlatTree; object order is the flat tree's). Nodes are stored in sibling pairs: the two
 /// children of a node are the two halves (slots 2p and 2p + 1) of one 64-byte pair record p, so
 /// that testing them reads one cache line; pair 0 holds the root alone (slot 0).
-constexpr std::size_t kWalkNodeFloats = 8;     ///< per slot: min x y z, object count (bits), max x y z, link (bits)
+constexpr std::size_t kWalkNodeFloats = 8;  ///< per slot: min x y z, object count (bits), max x y z, link (bits)
 /// A slot's link: kWalkLeaf for a leaf, else the pair holding its children (first child in
 /// the low slot).
 constexpr std::uint32_t kWalkLeaf = 0x80000000u;
-constexpr std::size_t kWalkAabbColumns = 6;     ///< min x y z, max x y z
-constexpr std::size_t kWalkObbColumns = 15;     ///< centre, u0, u1, u2, half extents
-constexpr std::size_t kWalkSphereColumns = 4;   ///< centre, radius
+constexpr std::size_t kWalkAabbColumns = 6;    ///< min x y z, max x y z
+constexpr std::size_t kWalkObbColumns = 15;    ///< centre, u0, u1, u2, half extents
+constexpr std::size_t kWalkSphereColumns = 4;  ///< centre, radius
 /// The volumes' blocks: kWalkBlock objects in tree order, each of their columns 16 floats (a
 /// cache line), so an object range is one run of lines in memory, not a run per column.
 constexpr std::size_t kWalkBlock = 16;
@@ -146,7 +147,7 @@ constexpr std::size_t walk_block_offset(std::size_t pos, std::size_t columns) {
   return pos / kWalkBlock * kWalkBlock * columns + pos % kWalkBlock;
 }
 struct WalkTree {
-  const float* nodes;           ///< kWalkNodeFloats per slot, 2 slots per pair
+  const float* nodes;  ///< kWalkNodeFloats per slot, 2 slots per pair
   /// The volumes in tree order, in blocks (kWalk*Columns columns for the kind): column c of
   /// the object at tree position k is blocks[(k / kWalkBlock) * kWalkBlock * columns +
   /// c * kWalkBlock + k % kWalkBlock]; the last block is padded with zeros, and one more
@@ -189,20 +190,21 @@ struct WalkCounts {
   std::uint32_t visible = 0, inside = 0;
 };
 
-/// Tests the subtree at `root`, as bvh::cull_hierarchical does: the same tests, results and counts (not in the same order).
+/// Tests the subtree at `root`, as bvh::cull_hierarchical does: the same tests, results and counts (not in the same
+/// order).
 using WalkKernel = WalkCounts (*)(const WalkTree&, WalkRoot, const PlaneSet&, WalkOutput);
 
 /// Writes first + W v + l for every set bit l of bits[v], v = 0..vectors-1 (W: the kernels'
 /// lanes), in that order from `out`, and returns the new end; never writes at or past out_end.
-using ExpandKernel = std::uint32_t* (*)(const std::uint32_t* bits, std::size_t vectors, std::uint32_t first, std::uint32_t* out,
-                                        const std::uint32_t* out_end);
+using ExpandKernel = std::uint32_t* (*)(const std::uint32_t* bits, std::size_t vectors, std::uint32_t first,
+                                        std::uint32_t* out, const std::uint32_t* out_end);
 
 /// Writes from[64 w + l] for every set bit l of marks[w], w = 0..words-1, in that order from
 /// `out`, and returns the new end; never writes at or past out_end. Reads from[0, 64 (words -
 /// 1)) whole (the words before the last) and, in the last word, only where a bit is set.
 /// Leaves every word of marks zero.
-using ListKernel = std::uint32_t* (*)(std::uint64_t* marks, std::size_t words, const std::uint32_t* from, std::uint32_t* out,
-                                      const std::uint32_t* out_end);
+using ListKernel = std::uint32_t* (*)(std::uint64_t* marks, std::size_t words, const std::uint32_t* from,
+                                      std::uint32_t* out, const std::uint32_t* out_end);
 
 struct KernelTable {
   AabbKernel aabb;

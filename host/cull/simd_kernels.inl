@@ -17,8 +17,11 @@
 //   simd_list.inl     ids from bits and marks; the read-floor loops
 //   simd_resolve.inl  the flat pass per volume kind (the reference's full tests)
 //   simd_walk.inl     the hierarchy walk
+// (In this order: each part uses the ones above it.)
+// clang-format off
 #include "cull/simd_lanes.inl"
 #include "cull/simd_settle.inl"
 #include "cull/simd_list.inl"
 #include "cull/simd_resolve.inl"
 #include "cull/simd_walk.inl"
+// clang-format on

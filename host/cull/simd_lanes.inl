@@ -133,10 +133,12 @@ inline std::uint32_t* append_ids(std::uint32_t* ids, std::uint32_t base, std::ui
 /// loads of the ids instead.)
 inline void compress_store(std::uint32_t* out, vi values, std::uint32_t lanes) {
 #if CULLPIPE_SIMD_LANES == 16 && defined(__AVX512F__)
-  _mm512_storeu_si512(out, _mm512_maskz_compress_epi32(static_cast<__mmask16>(lanes), reinterpret_cast<__m512i>(values)));
+  _mm512_storeu_si512(out,
+                      _mm512_maskz_compress_epi32(static_cast<__mmask16>(lanes), reinterpret_cast<__m512i>(values)));
 #elif CULLPIPE_SIMD_LANES == 8 && defined(__AVX2__)
   const __m256i order = _mm256_cvtepu8_epi32(_mm_cvtsi64_si128(static_cast<long long>(kCompress.entry[lanes])));
-  _mm256_storeu_si256(reinterpret_cast<__m256i*>(out), _mm256_permutevar8x32_epi32(reinterpret_cast<__m256i>(values), order));
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(out),
+                      _mm256_permutevar8x32_epi32(reinterpret_cast<__m256i>(values), order));
 #else
   for (unsigned l = 0; l < W; ++l) {
     *out = static_cast<std::uint32_t>(values[l]);
@@ -158,8 +160,8 @@ inline vi lanes_of(std::uint32_t bits) {
 /// Writes the classes and visible ids of the W objects at `i` (of which `valid` are real) and
 /// counts them, from their lane bits: `outside` behind a plane, `crossing` straddling one
 /// (counts only where not outside).
-inline void emit(std::size_t i, std::size_t begin, unsigned valid, std::uint32_t outside, std::uint32_t crossing, ChunkOutput& out,
-                 ChunkCounts& counts) {
+inline void emit(std::size_t i, std::size_t begin, unsigned valid, std::uint32_t outside, std::uint32_t crossing,
+                 ChunkOutput& out, ChunkCounts& counts) {
   const std::uint32_t lanes = valid >= W ? kAllLanes : (1u << valid) - 1u;
   const std::uint32_t visible = ~outside & lanes;
   if (out.classes) {
@@ -188,19 +190,29 @@ inline void gather_columns(const float* records, const std::uint32_t* at, unsign
   // AVX-512 shuffle intrinsics trip -Wmaybe-uninitialized in its own header.)
   typedef float v4f __attribute__((vector_size(16)));
   typedef float v8f __attribute__((vector_size(32)));
-  auto unpack_lo = [](vf x, vf y) { return __builtin_shufflevector(x, y, 0, 16, 1, 17, 4, 20, 5, 21, 8, 24, 9, 25, 12, 28, 13, 29); };
-  auto unpack_hi = [](vf x, vf y) { return __builtin_shufflevector(x, y, 2, 18, 3, 19, 6, 22, 7, 23, 10, 26, 11, 27, 14, 30, 15, 31); };
-  auto pick_low_pairs = [](vf x, vf y) { return __builtin_shufflevector(x, y, 0, 1, 16, 17, 4, 5, 20, 21, 8, 9, 24, 25, 12, 13, 28, 29); };
-  auto pick_high_pairs = [](vf x, vf y) { return __builtin_shufflevector(x, y, 2, 3, 18, 19, 6, 7, 22, 23, 10, 11, 26, 27, 14, 15, 30, 31); };
+  auto unpack_lo = [](vf x, vf y) {
+    return __builtin_shufflevector(x, y, 0, 16, 1, 17, 4, 20, 5, 21, 8, 24, 9, 25, 12, 28, 13, 29);
+  };
+  auto unpack_hi = [](vf x, vf y) {
+    return __builtin_shufflevector(x, y, 2, 18, 3, 19, 6, 22, 7, 23, 10, 26, 11, 27, 14, 30, 15, 31);
+  };
+  auto pick_low_pairs = [](vf x, vf y) {
+    return __builtin_shufflevector(x, y, 0, 1, 16, 17, 4, 5, 20, 21, 8, 9, 24, 25, 12, 13, 28, 29);
+  };
+  auto pick_high_pairs = [](vf x, vf y) {
+    return __builtin_shufflevector(x, y, 2, 3, 18, 19, 6, 7, 22, 23, 10, 11, 26, 27, 14, 15, 30, 31);
+  };
   if constexpr (Floats == 4) {
     vf a[4];
     for (unsigned i = 0; i < 4; ++i) {  // lane k of a[i]: record 4k + i
       v4f r[4];
       for (unsigned k = 0; k < 4; ++k) __builtin_memcpy(&r[k], row[i + 4 * k], sizeof r[k]);
-      const v8f lo = __builtin_shufflevector(r[0], r[1], 0, 1, 2, 3, 4, 5, 6, 7), hi = __builtin_shufflevector(r[2], r[3], 0, 1, 2, 3, 4, 5, 6, 7);
+      const v8f lo = __builtin_shufflevector(r[0], r[1], 0, 1, 2, 3, 4, 5, 6, 7),
+                hi = __builtin_shufflevector(r[2], r[3], 0, 1, 2, 3, 4, 5, 6, 7);
       a[i] = __builtin_shufflevector(lo, hi, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
     }
-    const vf t0 = unpack_lo(a[0], a[1]), t1 = unpack_hi(a[0], a[1]), t2 = unpack_lo(a[2], a[3]), t3 = unpack_hi(a[2], a[3]);
+    const vf t0 = unpack_lo(a[0], a[1]), t1 = unpack_hi(a[0], a[1]), t2 = unpack_lo(a[2], a[3]),
+             t3 = unpack_hi(a[2], a[3]);
     col[0] = pick_low_pairs(t0, t2);
     col[1] = pick_high_pairs(t0, t2);
     col[2] = pick_low_pairs(t1, t3);
@@ -226,15 +238,18 @@ inline void gather_columns(const float* records, const std::uint32_t* at, unsign
       // u[c] blocks: records 0-3 column c, 0-3 column c + 4, 8-11 column c, 8-11 column c + 4;
       // u[c + 4] the same for records 4-7 and 12-15.
       for (unsigned c = 0; c < 4; ++c) {
-        col[base + c] = __builtin_shufflevector(u[c], u[c + 4], 0, 1, 2, 3, 16, 17, 18, 19, 8, 9, 10, 11, 24, 25, 26, 27);
-        col[base + c + 4] = __builtin_shufflevector(u[c], u[c + 4], 4, 5, 6, 7, 20, 21, 22, 23, 12, 13, 14, 15, 28, 29, 30, 31);
+        col[base + c] =
+            __builtin_shufflevector(u[c], u[c + 4], 0, 1, 2, 3, 16, 17, 18, 19, 8, 9, 10, 11, 24, 25, 26, 27);
+        col[base + c + 4] =
+            __builtin_shufflevector(u[c], u[c + 4], 4, 5, 6, 7, 20, 21, 22, 23, 12, 13, 14, 15, 28, 29, 30, 31);
       }
     }
   }
 #elif CULLPIPE_SIMD_LANES == 8 && defined(__AVX2__)
   if constexpr (Floats == 4) {
     __m256 a[4];
-    for (unsigned i = 0; i < 4; ++i) a[i] = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(row[i])), _mm_loadu_ps(row[i + 4]), 1);
+    for (unsigned i = 0; i < 4; ++i)
+      a[i] = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(row[i])), _mm_loadu_ps(row[i + 4]), 1);
     const __m256 t0 = _mm256_unpacklo_ps(a[0], a[1]), t1 = _mm256_unpackhi_ps(a[0], a[1]);
     const __m256 t2 = _mm256_unpacklo_ps(a[2], a[3]), t3 = _mm256_unpackhi_ps(a[2], a[3]);
     col[0] = reinterpret_cast<vf>(_mm256_shuffle_ps(t0, t2, 0x44));
@@ -284,7 +299,8 @@ inline vi load_ints_where(const std::uint32_t* p, std::uint32_t lanes) {
 #if CULLPIPE_SIMD_LANES == 16 && defined(__AVX512F__)
   return reinterpret_cast<vi>(_mm512_maskz_loadu_epi32(static_cast<__mmask16>(lanes), p));
 #elif CULLPIPE_SIMD_LANES == 8 && defined(__AVX2__)
-  return reinterpret_cast<vi>(_mm256_maskload_epi32(reinterpret_cast<const int*>(p), reinterpret_cast<__m256i>(lanes_of(lanes))));
+  return reinterpret_cast<vi>(
+      _mm256_maskload_epi32(reinterpret_cast<const int*>(p), reinterpret_cast<__m256i>(lanes_of(lanes))));
 #else
   vi v = {};
   for (unsigned l = 0; l < W; ++l)
@@ -297,9 +313,11 @@ inline vi load_ints_where(const std::uint32_t* p, std::uint32_t lanes) {
 /// the reference computes (those are written out in its order).
 inline vf mul_add(float a, vf b, vf c) {
 #if CULLPIPE_SIMD_LANES == 16 && defined(__AVX512F__)
-  return reinterpret_cast<vf>(_mm512_fmadd_ps(_mm512_set1_ps(a), reinterpret_cast<__m512>(b), reinterpret_cast<__m512>(c)));
+  return reinterpret_cast<vf>(
+      _mm512_fmadd_ps(_mm512_set1_ps(a), reinterpret_cast<__m512>(b), reinterpret_cast<__m512>(c)));
 #elif CULLPIPE_SIMD_LANES == 8 && defined(__FMA__)
-  return reinterpret_cast<vf>(_mm256_fmadd_ps(_mm256_set1_ps(a), reinterpret_cast<__m256>(b), reinterpret_cast<__m256>(c)));
+  return reinterpret_cast<vf>(
+      _mm256_fmadd_ps(_mm256_set1_ps(a), reinterpret_cast<__m256>(b), reinterpret_cast<__m256>(c)));
 #else
   return a * b + c;
 #endif
@@ -308,9 +326,11 @@ inline vf mul_add(float a, vf b, vf c) {
 /// a * b - c, fused where the instruction set has it (bounds only).
 inline vf mul_sub(vf a, vf b, vf c) {
 #if CULLPIPE_SIMD_LANES == 16 && defined(__AVX512F__)
-  return reinterpret_cast<vf>(_mm512_fmsub_ps(reinterpret_cast<__m512>(a), reinterpret_cast<__m512>(b), reinterpret_cast<__m512>(c)));
+  return reinterpret_cast<vf>(
+      _mm512_fmsub_ps(reinterpret_cast<__m512>(a), reinterpret_cast<__m512>(b), reinterpret_cast<__m512>(c)));
 #elif CULLPIPE_SIMD_LANES == 8 && defined(__FMA__)
-  return reinterpret_cast<vf>(_mm256_fmsub_ps(reinterpret_cast<__m256>(a), reinterpret_cast<__m256>(b), reinterpret_cast<__m256>(c)));
+  return reinterpret_cast<vf>(
+      _mm256_fmsub_ps(reinterpret_cast<__m256>(a), reinterpret_cast<__m256>(b), reinterpret_cast<__m256>(c)));
 #else
   return a * b - c;
 #endif

@@ -7,13 +7,15 @@ namespace cullpipe::fast::detail {
 namespace CULLPIPE_SIMD_NS {
 namespace {
 
-std::uint32_t* expand_ids(const std::uint32_t* bits, std::size_t vectors, std::uint32_t first, std::uint32_t* out, const std::uint32_t* out_end) {
+std::uint32_t* expand_ids(const std::uint32_t* bits, std::size_t vectors, std::uint32_t first, std::uint32_t* out,
+                          const std::uint32_t* out_end) {
   for (std::size_t v = 0; v < vectors; ++v, first += W) {
     if (out_end - out >= static_cast<std::ptrdiff_t>(W)) {  // room for the vector store
       out = append_ids(out, first, bits[v]);
       continue;
     }
-    for (std::uint32_t rest = bits[v]; rest != 0; rest &= rest - 1) *out++ = first + static_cast<std::uint32_t>(__builtin_ctz(rest));
+    for (std::uint32_t rest = bits[v]; rest != 0; rest &= rest - 1)
+      *out++ = first + static_cast<std::uint32_t>(__builtin_ctz(rest));
   }
   return out;
 }
@@ -29,7 +31,8 @@ std::uint32_t* list_marked(std::uint64_t* marks, std::size_t words, const std::u
     if (word == 0) {
       // Most words are 0 (the objects out of view): the zero words after one are skipped a
       // vector of words at a time.
-      while (w + 1 + kVectorWords <= words && all_zero(load_ints(reinterpret_cast<const std::uint32_t*>(marks + w + 1)))) {
+      while (w + 1 + kVectorWords <= words &&
+             all_zero(load_ints(reinterpret_cast<const std::uint32_t*>(marks + w + 1)))) {
         w += kVectorWords;
         from += 64 * kVectorWords;
       }
@@ -61,7 +64,8 @@ std::uint32_t* list_marked(std::uint64_t* marks, std::size_t words, const std::u
         out += __builtin_popcount(lanes);
         continue;
       }
-      for (std::uint32_t rest = lanes; rest != 0 && out != out_end; rest &= rest - 1) *out++ = from[q * W + static_cast<unsigned>(__builtin_ctz(rest))];
+      for (std::uint32_t rest = lanes; rest != 0 && out != out_end; rest &= rest - 1)
+        *out++ = from[q * W + static_cast<unsigned>(__builtin_ctz(rest))];
     }
   }
   return out;

@@ -4,6 +4,17 @@
 #include "cull/simd_kernels.inl"
 
 namespace cullpipe::fast::detail {
-KernelTable portable_kernels() { return {portable::cull_aabb, portable::cull_obb, portable::cull_sphere, portable::touch, portable::touch_columns,
-          portable::walk_aabb, portable::walk_obb, portable::walk_sphere, portable::expand_ids, portable::list_marked, 4}; }
+KernelTable portable_kernels() {
+  return {portable::cull_aabb,
+          portable::cull_obb,
+          portable::cull_sphere,
+          portable::touch,
+          portable::touch_columns,
+          portable::walk_aabb,
+          portable::walk_obb,
+          portable::walk_sphere,
+          portable::expand_ids,
+          portable::list_marked,
+          4};
+}
 }  // namespace cullpipe::fast::detail

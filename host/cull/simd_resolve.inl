@@ -8,8 +8,10 @@ namespace CULLPIPE_SIMD_NS {
 namespace {
 
 // AABBs: the open boxes get the reference's p/n-vertex test.
-ChunkCounts cull_aabb(const AabbArrays& a, std::size_t begin, std::size_t end, const PlaneSet& planes, ChunkOutput out) {
-  auto resolve = [&](const std::uint32_t* objects, unsigned count, std::uint32_t& outside_bits, std::uint32_t& crossing_bits) {
+ChunkCounts cull_aabb(const AabbArrays& a, std::size_t begin, std::size_t end, const PlaneSet& planes,
+                      ChunkOutput out) {
+  auto resolve = [&](const std::uint32_t* objects, unsigned count, std::uint32_t& outside_bits,
+                     std::uint32_t& crossing_bits) {
     vf box[kAabbRecordFloats];  // min x y z, max x y z, two spare
     gather_columns(a.records, objects, count, box);
     const vf zero = {};
@@ -27,12 +29,14 @@ ChunkCounts cull_aabb(const AabbArrays& a, std::size_t begin, std::size_t end, c
     crossing_bits = lane_bits(crossing);
   };
   auto prefetch = [&](std::uint32_t o) { __builtin_prefetch(a.records + std::size_t(o) * kAabbRecordFloats); };
-  return cull_settled({a.c_x, a.c_y, a.c_z, a.bound}, begin, end, planes, planes.lower_scale_l1, prefetch, resolve, out);
+  return cull_settled({a.c_x, a.c_y, a.c_z, a.bound}, begin, end, planes, planes.lower_scale_l1, prefetch, resolve,
+                      out);
 }
 
 // OBBs: the open ones get the reference's projected-radius test.
 ChunkCounts cull_obb(const ObbArrays& a, std::size_t begin, std::size_t end, const PlaneSet& planes, ChunkOutput out) {
-  auto resolve = [&](const std::uint32_t* objects, unsigned count, std::uint32_t& outside_bits, std::uint32_t& crossing_bits) {
+  auto resolve = [&](const std::uint32_t* objects, unsigned count, std::uint32_t& outside_bits,
+                     std::uint32_t& crossing_bits) {
     vf col[kObbRecordFloats];  // centre, axes u0 u1 u2, half extents, a spare
     gather_columns(a.records, objects, count, col);
     vi outside = {}, crossing = {};
@@ -50,7 +54,8 @@ ChunkCounts cull_obb(const ObbArrays& a, std::size_t begin, std::size_t end, con
     crossing_bits = lane_bits(crossing);
   };
   auto prefetch = [&](std::uint32_t o) { __builtin_prefetch(a.records + std::size_t(o) * kObbRecordFloats); };
-  return cull_settled({a.c_x, a.c_y, a.c_z, a.bound}, begin, end, planes, planes.lower_scale_l2, prefetch, resolve, out);
+  return cull_settled({a.c_x, a.c_y, a.c_z, a.bound}, begin, end, planes, planes.lower_scale_l2, prefetch, resolve,
+                      out);
 }
 
 /// The reference's sphere test of W spheres (centre, radius) on every plane.
@@ -66,21 +71,25 @@ inline void test_spheres_all(vf cx, vf cy, vf cz, vf radius, const PlaneSet& pla
 // Spheres: the open ones get the reference's signed-distance test, their centres and radii
 // read from the columns (16 bytes of records per sphere would double what an upload writes).
 // Without unit normals every sphere is tested that way, a vector at a time.
-ChunkCounts cull_sphere(const SphereArrays& a, std::size_t begin, std::size_t end, const PlaneSet& planes, ChunkOutput out) {
+ChunkCounts cull_sphere(const SphereArrays& a, std::size_t begin, std::size_t end, const PlaneSet& planes,
+                        ChunkOutput out) {
   if (!planes.unit_normals) {
     ChunkCounts counts;
     for (std::size_t run = begin, r = 0; run < end; run += kRunObjects, ++r) {
       const std::uint32_t* const ids_before = out.ids;
       for (std::size_t i = run; i < smaller(end, run + kRunObjects); i += W) {
         vi outside, crossing;
-        test_spheres_all(load(a.c_x + i), load(a.c_y + i), load(a.c_z + i), load(a.radius + i), planes, outside, crossing);
-        emit(i, begin, static_cast<unsigned>(smaller(W, end - i)), lane_bits(outside), lane_bits(crossing), out, counts);
+        test_spheres_all(load(a.c_x + i), load(a.c_y + i), load(a.c_z + i), load(a.radius + i), planes, outside,
+                         crossing);
+        emit(i, begin, static_cast<unsigned>(smaller(W, end - i)), lane_bits(outside), lane_bits(crossing), out,
+             counts);
       }
       if (out.runs) out.runs[r] = static_cast<std::uint32_t>(out.ids - ids_before);  // (every run's ids listed)
     }
     return counts;
   }
-  auto resolve = [&](const std::uint32_t* objects, unsigned count, std::uint32_t& outside_bits, std::uint32_t& crossing_bits) {
+  auto resolve = [&](const std::uint32_t* objects, unsigned count, std::uint32_t& outside_bits,
+                     std::uint32_t& crossing_bits) {
     alignas(64) float col[4][W];
     for (unsigned l = 0; l < W; ++l) {
       const std::uint32_t o = objects[l < count ? l : 0];
@@ -97,7 +106,8 @@ ChunkCounts cull_sphere(const SphereArrays& a, std::size_t begin, std::size_t en
     __builtin_prefetch(a.c_z + o);
     __builtin_prefetch(a.radius + o);
   };
-  return cull_settled({a.c_x, a.c_y, a.c_z, a.bound}, begin, end, planes, 0x1p-8f * (1.0f - 0x1p-12f), prefetch, resolve, out);
+  return cull_settled({a.c_x, a.c_y, a.c_z, a.bound}, begin, end, planes, 0x1p-8f * (1.0f - 0x1p-12f), prefetch,
+                      resolve, out);
 }
 
 }  // namespace

@@ -27,8 +27,10 @@ inline void remove_ids(std::uint32_t* ids, std::uint32_t count, const std::uint3
     std::uint32_t hi = count;
     while (from < hi) {
       const std::uint32_t mid = from + (hi - from) / 2;
-      if (ids[mid] < value) from = mid + 1;
-      else hi = mid;
+      if (ids[mid] < value)
+        from = mid + 1;
+      else
+        hi = mid;
     }
     return from;
   };
@@ -120,11 +122,14 @@ __attribute__((noinline)) RunTally scan_run(const RunScan& r, Prefetch prefetch)
     const vf reach_in = mul_sub(q * stored, lower, margin);
     record(i, b, lanes, less_bits(m, -reach), at_least_bits(m, reach), less_bits(abs(m), reach_in));
   };
-  auto tail_lanes = [&](std::size_t first) { return run_end - first >= W ? kAllLanes : (1u << (run_end - first)) - 1u; };
+  auto tail_lanes = [&](std::size_t first) {
+    return run_end - first >= W ? kAllLanes : (1u << (run_end - first)) - 1u;
+  };
   std::size_t first = run, block = 0;  // the next vector's first object and index
   if (!r.settles || r.no_planes) {
     // No bound holds (every object open), or no planes (every object INSIDE).
-    for (; first < run_end; first += W, ++block) record(first, block, tail_lanes(first), 0, r.no_planes ? kAllLanes : 0, 0);
+    for (; first < run_end; first += W, ++block)
+      record(first, block, tail_lanes(first), 0, r.no_planes ? kAllLanes : 0, 0);
     return {visible_count, across_count, opened_count};
   }
   // A cache line of each stream per step (kLine / W vectors, no lane checks), the line kAhead
@@ -155,13 +160,14 @@ __attribute__((noinline)) RunTally scan_run(const RunScan& r, Prefetch prefetch)
 /// scan_run for a run's appending and classes, chosen once per run.
 template <bool kMirror, class Prefetch>
 RunTally scan_run_for(bool appending, bool classes, const RunScan& r, Prefetch prefetch) {
-  if (appending) return classes ? scan_run<true, true, kMirror>(r, prefetch) : scan_run<true, false, kMirror>(r, prefetch);
+  if (appending)
+    return classes ? scan_run<true, true, kMirror>(r, prefetch) : scan_run<true, false, kMirror>(r, prefetch);
   return classes ? scan_run<false, true, kMirror>(r, prefetch) : scan_run<false, false, kMirror>(r, prefetch);
 }
 
 template <class Prefetch, class Resolve>
-ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t end, const PlaneSet& planes, float lower_scale, Prefetch prefetch,
-                         Resolve resolve, ChunkOutput out) {
+ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t end, const PlaneSet& planes,
+                         float lower_scale, Prefetch prefetch, Resolve resolve, ChunkOutput out) {
   constexpr std::size_t kRunBlocks = kRunObjects / W;
   constexpr unsigned kRemovedAtMost = 64;  // appended ids removed one by one, at most
   static_assert(kRunObjects % W == 0);
@@ -196,9 +202,10 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
     const std::size_t run_index = (run - begin) / kRunObjects;
     // (Not where no bound can settle an object: every object would be appended, most of them
     // to be removed.)
-    const bool appending = out.ids && bound_settles && (!listed_by_runs || !(out.runs[run_index] & (kDenseRun | kListedDense)));
-    const RunScan scan{&a,         &planes,   order,        lower_scale, run, run_end, end, settles, no_planes, run_visible_bits,
-                       out.ids, crossing_bits, open};
+    const bool appending =
+        out.ids && bound_settles && (!listed_by_runs || !(out.runs[run_index] & (kDenseRun | kListedDense)));
+    const RunScan scan{&a,        &planes,          order,   lower_scale,   run, run_end, end, settles,
+                       no_planes, run_visible_bits, out.ids, crossing_bits, open};
     const RunTally tally = mirrored ? scan_run_for<true>(appending, out.classes != nullptr, scan, prefetch)
                                     : scan_run_for<false>(appending, out.classes != nullptr, scan, prefetch);
     std::uint32_t run_visible = tally.visible;
@@ -232,7 +239,8 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
       classes_only.classes = out.classes;
       ChunkCounts unused;
       for (std::size_t i = run, b = 0; i < run_end; i += W, ++b)
-        emit(i, begin, static_cast<unsigned>(smaller(W, end - i)), ~run_visible_bits[b], crossing_bits[b], classes_only, unused);
+        emit(i, begin, static_cast<unsigned>(smaller(W, end - i)), ~run_visible_bits[b], crossing_bits[b], classes_only,
+             unused);
     }
     if (!out.ids) continue;
     const bool dense = run_visible * kDenseShare > run_end - run;
@@ -240,11 +248,14 @@ ChunkCounts cull_settled(const CentreArrays& a, std::size_t begin, std::size_t e
     // mispredict about once per 70 objects.
     auto list_run = [&] {
       std::uint32_t* ids = out.ids;
-      for (std::size_t i = run, b = 0; i < run_end; i += W, ++b) ids = append_ids(ids, static_cast<std::uint32_t>(i), run_visible_bits[b]);
+      for (std::size_t i = run, b = 0; i < run_end; i += W, ++b)
+        ids = append_ids(ids, static_cast<std::uint32_t>(i), run_visible_bits[b]);
     };
     if (appending) {
-      if (gone > kRemovedAtMost) list_run();  // many gone: listed again from the bits
-      else if (gone) remove_ids(out.ids, appended, open, gone);
+      if (gone > kRemovedAtMost)
+        list_run();  // many gone: listed again from the bits
+      else if (gone)
+        remove_ids(out.ids, appended, open, gone);
       if (out.runs) out.runs[run_index] = run_visible | (dense ? kListedDense : 0u);
     } else if (dense && listed_by_runs) {  // no ids: its vectors' visible lanes are in `bits`
       out.runs[run_index] = kDenseRun | run_visible;

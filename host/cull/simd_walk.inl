@@ -14,16 +14,14 @@ namespace {
 // planes one by one. The object ranges of straddling leaves (and, with range_objects, of
 // straddling nodes of at most that many objects) go to a second list, tested at the end in
 // groups of up to 64 objects, W at a time, loaded straight from the volumes' blocks in tree
-// order (WalkTree::blocks) against the planes their node straddles. Every lane does the scalar test's float operations in its
-// order (bvh::classify_masked for boxes, classify_masked_margin for the nodes of OBB and
-// sphere trees, classify_planes for OBBs and spheres) and the planes outside its mask count
-// for nothing. The scalar tests stop at the first plane that rejects, which does not change
-// their answer (OUTSIDE wins over anything found before or after), so testing every plane
-// gives the same class, and the same straddled planes whenever the class is not OUTSIDE.
-// Every node and object the depth-first traversal tests is tested here once, so the counts
-// are its counts. The order of the tests is not its order, so the visible objects are marked
-// in a bitmap (by position in the subtree's range), from which the caller lists them in tree
-// order.
+// order (WalkTree::blocks) against the planes their node straddles. Every lane does the scalar test's float operations
+// in its order (bvh::classify_masked for boxes, classify_masked_margin for the nodes of OBB and sphere trees,
+// classify_planes for OBBs and spheres) and the planes outside its mask count for nothing. The scalar tests stop at the
+// first plane that rejects, which does not change their answer (OUTSIDE wins over anything found before or after), so
+// testing every plane gives the same class, and the same straddled planes whenever the class is not OUTSIDE. Every node
+// and object the depth-first traversal tests is tested here once, so the counts are its counts. The order of the tests
+// is not its order, so the visible objects are marked in a bitmap (by position in the subtree's range), from which the
+// caller lists them in tree order.
 
 inline std::uint32_t bits_of(float word) {
   std::uint32_t bits;
@@ -51,8 +49,8 @@ struct BoxPlanes {
 /// planes in each lane's `mask`: `outside` nonzero where a p-vertex is behind, `straddled` the
 /// planes whose n-vertex is behind. With `margin` (OBB and sphere trees),
 /// classify_masked_margin.
-inline void test_boxes(const vf* box, vi mask, std::uint32_t any, const PlaneSet& planes, const BoxPlanes& columns, const WalkTree* margin,
-                       vi& outside, vi& straddled) {
+inline void test_boxes(const vf* box, vi mask, std::uint32_t any, const PlaneSet& planes, const BoxPlanes& columns,
+                       const WalkTree* margin, vi& outside, vi& straddled) {
   outside = straddled = vi{};
   const vf zero = {};
   vf reach = {};
@@ -184,12 +182,14 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
   const bool root_high = root.slot & 1u;  // the root's sibling (low slot) comes first in the pair's range
   work_pair[0] = root.slot / 2;
   work_mask[0] = root.mask | (root_high ? kSkipLow : kSkipHigh);
-  work_first[0] = root_high ? root.first - bits_of(t.nodes[std::size_t(root.slot - 1) * kWalkNodeFloats + 3]) : root.first;
+  work_first[0] =
+      root_high ? root.first - bits_of(t.nodes[std::size_t(root.slot - 1) * kWalkNodeFloats + 3]) : root.first;
   std::size_t head = 0, tail = 1;
   vi lane_index;
   for (unsigned l = 0; l < W; ++l) lane_index[l] = static_cast<std::int32_t>(l);
   const vi odd = -(lane_index & 1);  // -1 in the high slots' lanes
-  const vi skip_bit = (~odd & static_cast<std::int32_t>(kSkipLow)) | (odd & static_cast<std::int32_t>(kSkipHigh));  // the slot's skip flag
+  const vi skip_bit = (~odd & static_cast<std::int32_t>(kSkipLow)) |
+                      (odd & static_cast<std::int32_t>(kSkipHigh));  // the slot's skip flag
   while (head != tail) {
     // W / 2 pairs from the list (reads past its end stay in its room), their slots a lane each.
     const unsigned pairs = static_cast<unsigned>(smaller(tail - head, W / 2));
@@ -213,8 +213,8 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
     __builtin_memcpy(count_of, &col[3], sizeof count_of);
     __builtin_memcpy(link_of, &col[7], sizeof link_of);
     // The low slot's range comes first: the high slot's starts past it.
-    const vi lane_first =
-        reinterpret_cast<vi>(reinterpret_cast<vu>(low_first) + reinterpret_cast<vu>(odd & even_lanes_doubled(reinterpret_cast<vi>(col[3]))));
+    const vi lane_first = reinterpret_cast<vi>(
+        reinterpret_cast<vu>(low_first) + reinterpret_cast<vu>(odd & even_lanes_doubled(reinterpret_cast<vi>(col[3]))));
     __builtin_memcpy(first_of, &lane_first, sizeof first_of);
     vi outside, straddled;
     test_boxes(col, lane_mask, any, planes, columns, margin, outside, straddled);
@@ -222,7 +222,8 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
     const vi link = reinterpret_cast<vi>(col[7]), count = reinterpret_cast<vi>(col[3]);
     const std::uint32_t live = ~lane_bits(outside != 0) & valid;
     // Leaves (kWalkLeaf: the sign bit), and with range_objects the nodes of at most that many objects.
-    const std::uint32_t ends = lane_bits(link < 0) | (t.range_objects ? lane_bits(reinterpret_cast<vu>(count) <= small_limit) : 0u);
+    const std::uint32_t ends =
+        lane_bits(link < 0) | (t.range_objects ? lane_bits(reinterpret_cast<vu>(count) <= small_limit) : 0u);
     const std::uint32_t inner = live & ~ends & ~lane_bits(straddled == 0);
     // Straddling inner nodes: their children's pair listed, with the planes still to test.
     if (inner) {
@@ -313,13 +314,15 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
           crossing_bits |= std::uint64_t(lane_bits(crossing != 0)) << j;
         }
       }
-      const std::uint64_t valid = (size == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << size) - 1u) & (~std::uint64_t{0} << low);
+      const std::uint64_t valid =
+          (size == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << size) - 1u) & (~std::uint64_t{0} << low);
       const std::uint64_t visible = ~outside_bits & valid;
       counts.visible += static_cast<std::uint32_t>(__builtin_popcountll(visible));
       counts.inside += static_cast<std::uint32_t>(__builtin_popcountll(visible & ~crossing_bits));
       if (out.classes)
         for (std::uint32_t l = low; l < size; ++l)
-          out.classes[t.ids[at + l]] = visible >> l & 1u ? (crossing_bits >> l & 1u ? kIntersecting : kInside) : kOutside;
+          out.classes[t.ids[at + l]] =
+              visible >> l & 1u ? (crossing_bits >> l & 1u ? kIntersecting : kInside) : kOutside;
       if (marks) {
         if (at < range_first) {  // the subtree's range starts inside this vector (no lane below it is valid)
           marks[0] |= visible >> (range_first - at);
@@ -335,8 +338,12 @@ WalkCounts walk(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOu
   return counts;
 }
 
-WalkCounts walk_aabb(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOutput out) { return walk<WalkKind::Aabb>(t, root, planes, out); }
-WalkCounts walk_obb(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOutput out) { return walk<WalkKind::Obb>(t, root, planes, out); }
+WalkCounts walk_aabb(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOutput out) {
+  return walk<WalkKind::Aabb>(t, root, planes, out);
+}
+WalkCounts walk_obb(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOutput out) {
+  return walk<WalkKind::Obb>(t, root, planes, out);
+}
 WalkCounts walk_sphere(const WalkTree& t, WalkRoot root, const PlaneSet& planes, WalkOutput out) {
   return walk<WalkKind::Sphere>(t, root, planes, out);
 }

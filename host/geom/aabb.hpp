@@ -12,13 +12,11 @@ struct Aabb {
   glm::vec3 max{0.0f};
 
   glm::vec3 center() const { return (min + max) * 0.5f; }
-  glm::vec3 extent() const { return max - min; }          ///< full size per axis (diameter)
+  glm::vec3 extent() const { return max - min; }  ///< full size per axis (diameter)
   glm::vec3 half_extent() const { return (max - min) * 0.5f; }
 
   /// Corner i: bit 0 selects max.x, bit 1 max.y, bit 2 max.z.
-  glm::vec3 corner(int i) const {
-    return {(i & 1) ? max.x : min.x, (i & 2) ? max.y : min.y, (i & 4) ? max.z : min.z};
-  }
+  glm::vec3 corner(int i) const { return {(i & 1) ? max.x : min.x, (i & 2) ? max.y : min.y, (i & 4) ? max.z : min.z}; }
   std::array<glm::vec3, 8> corners() const {
     std::array<glm::vec3, 8> c;
     for (int i = 0; i < 8; ++i) c[static_cast<std::size_t>(i)] = corner(i);

@@ -18,11 +18,17 @@ struct Sphere;
 template <class Volume>
 constexpr BvKind kind_of();
 template <>
-constexpr BvKind kind_of<Aabb>() { return BvKind::Aabb; }
+constexpr BvKind kind_of<Aabb>() {
+  return BvKind::Aabb;
+}
 template <>
-constexpr BvKind kind_of<Obb>() { return BvKind::Obb; }
+constexpr BvKind kind_of<Obb>() {
+  return BvKind::Obb;
+}
 template <>
-constexpr BvKind kind_of<Sphere>() { return BvKind::Sphere; }
+constexpr BvKind kind_of<Sphere>() {
+  return BvKind::Sphere;
+}
 
 inline std::optional<BvKind> parse_bv_kind(std::string_view s) {
   if (s == "aabb") return BvKind::Aabb;

@@ -38,11 +38,9 @@ Frustum Frustum::from_view_proj(const glm::mat4& m) {
   const glm::vec4 r0 = row(0), r1 = row(1), r2 = row(2), r3 = row(3);
   for (int i = 0; i < 4; ++i)
     if (!all_finite(row(i)))
-      throw std::invalid_argument("view-projection matrix has a NaN or infinite entry in row " +
-                                  std::to_string(i));
+      throw std::invalid_argument("view-projection matrix has a NaN or infinite entry in row " + std::to_string(i));
   const double det = glm::determinant(glm::dmat4(m));
-  if (!(std::abs(det) > 0.0))
-    throw std::invalid_argument("view-projection matrix is singular (determinant 0)");
+  if (!(std::abs(det) > 0.0)) throw std::invalid_argument("view-projection matrix is singular (determinant 0)");
 
   const glm::vec4 raw[6] = {r3 + r0, r3 - r0, r3 + r1, r3 - r1, r2, r3 - r2};
   Frustum f;
@@ -55,8 +53,8 @@ Frustum Frustum::from_view_proj(const glm::mat4& m) {
     // A zero normal with positive d is a plane at infinity (always satisfied): drop it.
     // Only the depth planes may be at infinity; anything else is degenerate.
     if (i >= 4 && raw[i].w > 0.0f) continue;
-    throw std::invalid_argument(std::string("view-projection matrix gives a degenerate ") +
-                                plane_name(i) + " plane (zero normal)");
+    throw std::invalid_argument(std::string("view-projection matrix gives a degenerate ") + plane_name(i) +
+                                " plane (zero normal)");
   }
   return f;
 }

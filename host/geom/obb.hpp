@@ -1,8 +1,8 @@
 #pragma once
 #include <array>
+#include <glm/ext/matrix_double4x4.hpp>
 #include <glm/mat3x3.hpp>
 #include <glm/mat4x4.hpp>
-#include <glm/ext/matrix_double4x4.hpp>
 #include <glm/vec3.hpp>
 
 #include "geom/aabb.hpp"

@@ -12,9 +12,7 @@ struct Plane {
 
   /// Signed distance (scaled by |n|), evaluated as ((n.x*p.x + n.y*p.y) + n.z*p.z) + d.
   /// This exact order is the one the shaders use; do not reorder.
-  float distance(const glm::vec3& p) const {
-    return normal.x * p.x + normal.y * p.y + normal.z * p.z + d;
-  }
+  float distance(const glm::vec3& p) const { return normal.x * p.x + normal.y * p.y + normal.z * p.z + d; }
 
   glm::vec4 as_vec4() const { return {normal, d}; }
   static Plane from_vec4(const glm::vec4& v) { return {glm::vec3(v), v.w}; }

@@ -3,9 +3,8 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
-#include <limits>
-
 #include <glm/vec3.hpp>
+#include <limits>
 
 namespace cullpipe::plane_bounds {
 
@@ -16,7 +15,8 @@ namespace {
 /// (No nextafter: a library call per object would dominate an upload.)
 float float_at_least(double x) {
   const double up = x * (1.0 + 0x1p-23);
-  return up > double(std::numeric_limits<float>::max()) ? std::numeric_limits<float>::infinity() : static_cast<float>(up);
+  return up > double(std::numeric_limits<float>::max()) ? std::numeric_limits<float>::infinity()
+                                                        : static_cast<float>(up);
 }
 
 }  // namespace
@@ -65,7 +65,8 @@ float obb_plane_bound(const Obb& b) {
   double gram_bound = 0.0;
   for (int i = 0; i < 3; ++i)
     gram_bound = std::max(gram_bound, dot(i, i) + std::fabs(dot(i, (i + 1) % 3)) + std::fabs(dot(i, (i + 2) % 3)));
-  const double tight = std::sqrt(gram_bound) * std::sqrt(h_squares) * (1.0 + 0x1p-39) + 0x1p-21 * sum + 0x1p-120 * h_sum;
+  const double tight =
+      std::sqrt(gram_bound) * std::sqrt(h_squares) * (1.0 + 0x1p-39) + 0x1p-21 * sum + 0x1p-120 * h_sum;
   // (A NaN `tight`, from 0 x inf, leaves `sum`; a NaN `sum` stays NaN.)
   const double radius = tight < sum ? tight : sum;
   return float_at_least(radius * (1.0 + 0x1p-16) + 0x1p-18 * size + 0x1p-100);
@@ -112,32 +113,38 @@ double obb_lower(const Obb& b) {
     smallest = std::min(smallest, h);
     sum += h;
     for (int j = 0; j < 3; ++j)
-      gram[i][j] = double(b.basis[i].x) * b.basis[j].x + double(b.basis[i].y) * b.basis[j].y + double(b.basis[i].z) * b.basis[j].z;
+      gram[i][j] = double(b.basis[i].x) * b.basis[j].x + double(b.basis[i].y) * b.basis[j].y +
+                   double(b.basis[i].z) * b.basis[j].z;
     spread += std::sqrt(gram[i][i]) * h;
     size += std::fabs(double(b.center[i]));
   }
   double g = std::numeric_limits<double>::infinity();
-  for (int i = 0; i < 3; ++i) g = std::min(g, gram[i][i] - std::fabs(gram[i][(i + 1) % 3]) - std::fabs(gram[i][(i + 2) % 3]));
+  for (int i = 0; i < 3; ++i)
+    g = std::min(g, gram[i][i] - std::fabs(gram[i][(i + 1) % 3]) - std::fabs(gram[i][(i + 2) % 3]));
   g -= 0x1p-48 * std::max({gram[0][0], gram[1][1], gram[2][2]});
   if (!(g > 0.0) || !std::isfinite(g)) return 0.0;
-  return (smallest * std::sqrt(g) * (1.0 - 0x1p-40) - 0x1p-21 * spread) * (1.0 - 0x1p-20) - 0x1p-17 * size - 0x1p-118 * sum;
+  return (smallest * std::sqrt(g) * (1.0 - 0x1p-40) - 0x1p-21 * spread) * (1.0 - 0x1p-20) - 0x1p-17 * size -
+         0x1p-118 * sum;
 }
 
 /// Still a bound (it grew by less than 2^-14 of itself), and the kernels read q bound / 256 <= lower (1 + 2^-15)
 /// back; q = 0 past 2^119 keeps q bound finite. Proof: docs/numerics.md, Packed lower bounds.
 float pack_lower(float bound, double lower) {
   if (!(bound > 0.0f) || !std::isfinite(bound)) return bound;
-  std::uint32_t bits = (std::bit_cast<std::uint32_t>(bound) + 255u) & ~255u;  // (a carry into the exponent is still larger)
+  std::uint32_t bits =
+      (std::bit_cast<std::uint32_t>(bound) + 255u) & ~255u;  // (a carry into the exponent is still larger)
   const float rounded = std::bit_cast<float>(bits);
   if (!std::isfinite(rounded)) return rounded;
   const bool small = rounded <= 0x1p119f;
-  const double q = small && lower > 0.0 ? std::floor(std::min(255.0, 256.0 * (lower / double(rounded)) * (1.0 - 0x1p-40))) : 0.0;
+  const double q =
+      small && lower > 0.0 ? std::floor(std::min(255.0, 256.0 * (lower / double(rounded)) * (1.0 - 0x1p-40))) : 0.0;
   return std::bit_cast<float>(bits | static_cast<std::uint32_t>(q));
 }
 
 float plane_margin(float d) {
   const double magnitude = std::fabs(double(d));
-  return magnitude <= 0x1p120 ? float_at_least(0x1p-18 * magnitude + 0x1p-100) : std::numeric_limits<float>::quiet_NaN();
+  return magnitude <= 0x1p120 ? float_at_least(0x1p-18 * magnitude + 0x1p-100)
+                              : std::numeric_limits<float>::quiet_NaN();
 }
 
 bool unit_normal(const glm::vec3& n) {
@@ -169,6 +176,5 @@ void obb_plane_bounds(std::span<const Obb> boxes, std::span<float> out) {
   const NearestNoFlush mode;
   for (std::size_t i = 0; i < boxes.size(); ++i) out[i] = obb_plane_bound(boxes[i]);
 }
-
 
 }  // namespace cullpipe::plane_bounds

@@ -2,10 +2,9 @@
 // Settling bounds: per-object bounds that decide most plane tests from one centre distance,
 // with the same answer as the reference's full test. The fast CPU kernels and the GPU flat
 // pass both store them. Proofs: docs/numerics.md, Settling bounds and Packed lower bounds. Internal.
-#include <span>
-
 #include <glm/vec3.hpp>
 #include <glm/vec4.hpp>
+#include <span>
 #if defined(__SSE__)
 #include <xmmintrin.h>
 #endif

@@ -13,13 +13,13 @@ namespace cullpipe {
 /// smallest subnormal of the step's sign; -inf / +inf stay where they are.
 inline float float_below(float f) {
   const std::uint32_t u = std::bit_cast<std::uint32_t>(f), magnitude = u & 0x7fffffffu;
-  if (magnitude > 0x7f800000u || u == 0xff800000u) return f;  // NaN, -inf
+  if (magnitude > 0x7f800000u || u == 0xff800000u) return f;     // NaN, -inf
   if (magnitude == 0) return std::bit_cast<float>(0x80000001u);  // -denorm_min
   return std::bit_cast<float>(u >> 31 ? u + 1 : u - 1);          // away from zero if negative
 }
 inline float float_above(float f) {
   const std::uint32_t u = std::bit_cast<std::uint32_t>(f), magnitude = u & 0x7fffffffu;
-  if (magnitude > 0x7f800000u || u == 0x7f800000u) return f;  // NaN, +inf
+  if (magnitude > 0x7f800000u || u == 0x7f800000u) return f;     // NaN, +inf
   if (magnitude == 0) return std::bit_cast<float>(0x00000001u);  // denorm_min
   return std::bit_cast<float>(u >> 31 ? u - 1 : u + 1);
 }
@@ -37,8 +37,8 @@ inline float tiny_to_float(double v, bool up) {
   const std::uint64_t bits = std::bit_cast<std::uint64_t>(v), magnitude = bits & 0x7fffffffffffffffu;
   const bool negative = bits >> 63;
   const std::uint32_t sign = negative ? 0x80000000u : 0u;
-  if (magnitude == 0) return std::bit_cast<float>(sign);  // +-0 as it is
-  if (magnitude < std::bit_cast<std::uint64_t>(0x1p-1000))  // (a double subnormal too: DAZ reads it as 0)
+  if (magnitude == 0) return std::bit_cast<float>(sign);             // +-0 as it is
+  if (magnitude < std::bit_cast<std::uint64_t>(0x1p-1000))           // (a double subnormal too: DAZ reads it as 0)
     return std::bit_cast<float>(up != negative ? sign | 1u : sign);  // the smallest subnormal away from zero, or zero
   const double scaled = std::fabs(v) * 0x1p149;
   // Away from zero for round_up of a positive v and round_down of a negative one.

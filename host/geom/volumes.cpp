@@ -1,7 +1,7 @@
 #include <algorithm>
 #include <cmath>
-#include <string>
 #include <glm/geometric.hpp>
+#include <string>
 
 #include "geom/aabb.hpp"
 #include "geom/obb.hpp"
@@ -51,7 +51,9 @@ glm::dmat3 orthonormalise(glm::dvec3 u, glm::dvec3 v, const glm::dvec3& w) {
 
 }  // namespace
 
-Obb Obb::from_transformed_aabb(const Aabb& local, const glm::mat4& m) { return from_transformed_aabb(local, glm::dmat4(m)); }
+Obb Obb::from_transformed_aabb(const Aabb& local, const glm::mat4& m) {
+  return from_transformed_aabb(local, glm::dmat4(m));
+}
 
 Obb Obb::from_transformed_aabb(const Aabb& local, const glm::dmat4& m) {
   Obb b;
@@ -102,7 +104,8 @@ template <class Fail>
 bool check_finite(const char* what, const glm::vec3& v, Fail& fail) {
   for (int i = 0; i < 3; ++i)
     if (!std::isfinite(v[i]))
-      return fail([&] { return std::string(what) + "." + axis_name(i) + (std::isnan(v[i]) ? " is NaN" : " is infinite"); });
+      return fail(
+          [&] { return std::string(what) + "." + axis_name(i) + (std::isnan(v[i]) ? " is NaN" : " is infinite"); });
   return true;
 }
 
@@ -120,8 +123,10 @@ bool check(const Obb& b, Fail& fail) {
   const char* const names[3] = {"axes[0]", "axes[1]", "axes[2]"};
   for (int k = 0; k < 3; ++k) {
     if (!check_finite(names[k], b.basis[k], fail)) return false;
-    if (b.half_extents[k] < 0.0f) return fail([&] { return std::string("half_extents.") + axis_name(k) + " is negative"; });
-    if (std::abs(glm::length(b.basis[k]) - 1.0f) > 1e-3f) return fail([&] { return std::string(names[k]) + " is not unit length"; });
+    if (b.half_extents[k] < 0.0f)
+      return fail([&] { return std::string("half_extents.") + axis_name(k) + " is negative"; });
+    if (std::abs(glm::length(b.basis[k]) - 1.0f) > 1e-3f)
+      return fail([&] { return std::string(names[k]) + " is not unit length"; });
     for (int j = 0; j < k; ++j)
       if (std::abs(glm::dot(b.basis[k], b.basis[j])) > 1e-3f)
         return fail([&] { return std::string(names[j]) + " and " + names[k] + " are not orthogonal"; });

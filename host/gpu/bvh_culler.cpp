@@ -9,8 +9,8 @@
 #include <type_traits>
 
 #include "bvh/box_ops.hpp"
-#include "geom/plane_bounds.hpp"
 #include "core/prefetch.hpp"
+#include "geom/plane_bounds.hpp"
 #include "geom/validate.hpp"
 #include "gpu/pass_support.hpp"
 #include "vk/check.hpp"
@@ -25,20 +25,22 @@ constexpr VkBufferUsageFlags kStorage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
 constexpr VkBufferUsageFlags kTexel = VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT;
 // Object volumes, views, nodes, the object order and the centre bounds are read through uniform
 // texel buffers (see cull_bvh.comp).
-constexpr std::uint32_t kTexelBindings =
-    1u << BINDING_BOUNDS | 1u << BINDING_VIEWS | 1u << BVH_BINDING_NODES | 1u << BVH_BINDING_OBJECTS | 1u << BVH_BINDING_CENTRES;
+constexpr std::uint32_t kTexelBindings = 1u << BINDING_BOUNDS | 1u << BINDING_VIEWS | 1u << BVH_BINDING_NODES |
+                                         1u << BVH_BINDING_OBJECTS | 1u << BVH_BINDING_CENTRES;
 // The traversal records are written and read back within the pass through a storage texel
 // buffer: on lavapipe an image load gathers the lanes' records into a vector, where a
 // storage-buffer load inserts each lane's words through the stack (a stall per lane and word).
 constexpr std::uint32_t kRecordBindings = 1u << BVH_BINDING_RECORDS;
 constexpr VkBufferUsageFlags kRecordUsage = VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT;
-constexpr std::uint32_t kStorageBindings = BVH_BINDING_COUNT - std::uint32_t(std::popcount(kTexelBindings | kRecordBindings));
+constexpr std::uint32_t kStorageBindings =
+    BVH_BINDING_COUNT - std::uint32_t(std::popcount(kTexelBindings | kRecordBindings));
 
 }  // namespace
 
 BvhCuller::BvhCuller(const vk::Context& ctx)
     : ctx_(ctx),
-      subtree_objects_(ctx.properties().deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU ? kCpuSubtreeObjects : kGpuSubtreeObjects),
+      subtree_objects_(ctx.properties().deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU ? kCpuSubtreeObjects
+                                                                                  : kGpuSubtreeObjects),
       stack_in_records_(ctx.properties().deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU) {
   const VkPhysicalDeviceLimits& limits = ctx_.properties().limits;
   // A workgroup is one subgroup (cull_bvh.comp walks the subtrees of a subgroup together, on
@@ -52,18 +54,20 @@ BvhCuller::BvhCuller(const vk::Context& ctx)
                     ctx_.info().name + " allows " + std::to_string(limits.maxComputeWorkGroupInvocations));
   const std::uint32_t stack_bytes = group_size_ * BVH_STACK_PER_INVOCATION * 4;
   if (limits.maxComputeSharedMemorySize < stack_bytes)
-    throw vk::Error("hierarchical culling needs " + std::to_string(stack_bytes) + " bytes of shared memory per workgroup; " +
-                    ctx_.info().name + " has " + std::to_string(limits.maxComputeSharedMemorySize));
+    throw vk::Error("hierarchical culling needs " + std::to_string(stack_bytes) +
+                    " bytes of shared memory per workgroup; " + ctx_.info().name + " has " +
+                    std::to_string(limits.maxComputeSharedMemorySize));
   if (limits.maxPerStageDescriptorStorageBuffers < kStorageBindings)
     throw vk::Error("hierarchical culling needs " + std::to_string(kStorageBindings) + " storage buffers per stage; " +
                     ctx_.info().name + " allows " + std::to_string(limits.maxPerStageDescriptorStorageBuffers));
   detail::check_texel_format(ctx_, "hierarchical culling");
   detail::check_record_format(ctx_, "hierarchical culling");
-  detail::check_subgroup_operations(ctx_, VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT |
-                                              VK_SUBGROUP_FEATURE_BALLOT_BIT | VK_SUBGROUP_FEATURE_SHUFFLE_BIT,
+  detail::check_subgroup_operations(ctx_,
+                                    VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT |
+                                        VK_SUBGROUP_FEATURE_BALLOT_BIT | VK_SUBGROUP_FEATURE_SHUFFLE_BIT,
                                     "hierarchical culling");
   resources_ = std::make_unique<detail::PassResources>(ctx_, pipeline(false, true).set_layout(), BVH_BINDING_COUNT,
-                                                      kTexelBindings, kRecordBindings);
+                                                       kTexelBindings, kRecordBindings);
 }
 
 BvhCuller::~BvhCuller() = default;
@@ -72,10 +76,15 @@ const vk::ComputePipeline& BvhCuller::pipeline(bool draws, bool classes) {
   const PipelineKey key{.kind = kind_, .draws = draws, .classes = classes, .stack_in_records = stack_in_records_};
   return pipelines_.get(key, [&] {
     const std::string name = "hierarchical cull (" + std::string(to_string(key.kind)) + (key.draws ? ", draws" : "") +
-                             (key.classes ? ", classes" : "") + (key.stack_in_records ? ", stacks in records" : "") + ")";
+                             (key.classes ? ", classes" : "") + (key.stack_in_records ? ", stacks in records" : "") +
+                             ")";
     // Specialization constants: 1 group size, 2 volume kind, 3 draws, 4 classes, 5 stacks in the records.
     static_assert(BV_KIND_AABB == 0 && BV_KIND_OBB == 1 && BV_KIND_SPHERE == 2, "BvKind order must match the shader");
-    const std::uint32_t spec[6] = {0u, group_size_, std::uint32_t(key.kind), key.draws ? 1u : 0u, key.classes ? 1u : 0u,
+    const std::uint32_t spec[6] = {0u,
+                                   group_size_,
+                                   std::uint32_t(key.kind),
+                                   key.draws ? 1u : 0u,
+                                   key.classes ? 1u : 0u,
                                    key.stack_in_records ? 1u : 0u};
     return std::make_unique<vk::ComputePipeline>(
         ctx_, vk::ComputePipelineDesc{std::span<const std::uint32_t>(cullpipe_cull_bvh_spv), BVH_BINDING_COUNT,
@@ -92,7 +101,8 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
   const std::size_t n = boxes.size(), nodes = tree.nodes.size();
   const std::string kind(to_string(kind_of<Volume>()));
   auto bad = [&](const std::string& what) { throw std::invalid_argument("BvhCuller::upload: " + what); };
-  if (nodes >= std::size_t(UINT32_MAX) || n >= std::size_t(UINT32_MAX)) bad("too many nodes or objects for 32-bit indices");
+  if (nodes >= std::size_t(UINT32_MAX) || n >= std::size_t(UINT32_MAX))
+    bad("too many nodes or objects for 32-bit indices");
   // The layout flatten() gives, which the traversal relies on (skip links, nested ranges).
   std::vector<std::uint32_t> depth;
   if (const std::string why = bvh::check_flat_tree(tree, boxes, &depth); !why.empty()) bad(why);
@@ -116,17 +126,20 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
     const std::uint32_t last = cuts[std::min(cuts.size(), g + group_size_) - 1];
     const std::size_t span = std::size_t(tree.nodes[last].skip) - cuts[g];
     if (span >= BVH_WORKGROUP_NODE_SPAN)
-      throw std::length_error("BvhCuller::upload: the subtrees of one workgroup (" + std::to_string(group_size_) + " cut subtrees from node " +
-                              std::to_string(cuts[g]) + ") span " + std::to_string(span) + " nodes; at most " +
-                              std::to_string(BVH_WORKGROUP_NODE_SPAN - 1) + " are supported (use smaller subtrees: set_subtree_objects)");
+      throw std::length_error("BvhCuller::upload: the subtrees of one workgroup (" + std::to_string(group_size_) +
+                              " cut subtrees from node " + std::to_string(cuts[g]) + ") span " + std::to_string(span) +
+                              " nodes; at most " + std::to_string(BVH_WORKGROUP_NODE_SPAN - 1) +
+                              " are supported (use smaller subtrees: set_subtree_objects)");
   }
 
   using Packed = decltype(pack(boxes[0]));
-  const VkDeviceSize box_bytes = VkDeviceSize(n) * sizeof(Packed), node_bytes = VkDeviceSize(nodes) * sizeof(GpuBvhNode);
+  const VkDeviceSize box_bytes = VkDeviceSize(n) * sizeof(Packed),
+                     node_bytes = VkDeviceSize(nodes) * sizeof(GpuBvhNode);
   detail::check_texel_range(ctx_, box_bytes, std::to_string(n) + " " + kind + " volumes");
   detail::check_texel_range(ctx_, node_bytes, std::to_string(nodes) + " BVH nodes");
   // The object order as texels of four ids (padded).
-  const VkDeviceSize order_bytes = (VkDeviceSize(n) + 3) / 4 * 16, cut_bytes = VkDeviceSize(cuts.size()) * sizeof(std::uint32_t);
+  const VkDeviceSize order_bytes = (VkDeviceSize(n) + 3) / 4 * 16,
+                     cut_bytes = VkDeviceSize(cuts.size()) * sizeof(std::uint32_t);
   detail::check_texel_range(ctx_, order_bytes, std::to_string(n) + " object ids");
   constexpr bool kBoxes = std::is_same_v<Volume, Aabb>;  // (only boxes are settled by a centre bound)
   const VkDeviceSize centre_bytes = kBoxes ? VkDeviceSize(n) * sizeof(glm::vec4) : 0;
@@ -145,7 +158,8 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
   for (std::size_t i = 0; i < nodes; ++i) {
     const bvh::FlatNode& node = tree.nodes[i];
     const std::uint32_t second = node.leaf ? bvh::kNone : tree.nodes[i + 1].skip;
-    gpu_nodes[i] = {node.box.min, node.first, node.box.max, node.count, node.skip, second, node.leaf ? 1u : 0u, depth[i]};
+    gpu_nodes[i] = {node.box.min, node.first, node.box.max,        node.count,
+                    node.skip,    second,     node.leaf ? 1u : 0u, depth[i]};
   }
   auto gpu_boxes = bounds_.as<Packed>();
   // Boxes also get their centre bounds (the flat pass's, in tree order), a block at a time.
@@ -190,20 +204,23 @@ void BvhCuller::update_descriptors() {
   if (!descriptors_dirty_) return;
   static_assert(BINDING_BOUNDS == 0 && BINDING_CLASSES == 1 && BINDING_VISIBLE == 2 && BINDING_COUNTERS == 3 &&
                 BINDING_VIEWS == 4 && BINDING_DRAW_TEMPLATES == 5 && BINDING_DRAWS == 6 && BVH_BINDING_NODES == 7 &&
-                BVH_BINDING_OBJECTS == 8 && BVH_BINDING_CUTS == 9 && BVH_BINDING_RECORDS == 10 && BVH_BINDING_CENTRES == 11 &&
-                BVH_BINDING_COUNT == 12);
-  const vk::Buffer* const buffers[BVH_BINDING_COUNT] = {&bounds_, &classes_, &visible_, &counters_, &views_,   &templates_,
-                                                        &draws_,  &nodes_,   &objects_, &cuts_,     &records_, &centres_};
+                BVH_BINDING_OBJECTS == 8 && BVH_BINDING_CUTS == 9 && BVH_BINDING_RECORDS == 10 &&
+                BVH_BINDING_CENTRES == 11 && BVH_BINDING_COUNT == 12);
+  const vk::Buffer* const buffers[BVH_BINDING_COUNT] = {&bounds_,  &classes_,   &visible_, &counters_,
+                                                        &views_,   &templates_, &draws_,   &nodes_,
+                                                        &objects_, &cuts_,      &records_, &centres_};
   resources_->write(buffers);
   descriptors_dirty_ = false;
 }
 
 void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& options) {
   if (options.ordered)
-    throw std::invalid_argument("hierarchical culling writes visible ids in arrival order; CullOptions::ordered is not supported");
+    throw std::invalid_argument(
+        "hierarchical culling writes visible ids in arrival order; CullOptions::ordered is not supported");
   if (options.draws && template_count_ != object_count_)
-    throw std::invalid_argument("draw commands requested, but " + std::to_string(template_count_) + " draw templates were uploaded for " +
-                                std::to_string(object_count_) + " objects (call upload_draws)");
+    throw std::invalid_argument("draw commands requested, but " + std::to_string(template_count_) +
+                                " draw templates were uploaded for " + std::to_string(object_count_) +
+                                " objects (call upload_draws)");
   const std::size_t v = views.size();
   for (const Frustum& f : views) {
     if (f.plane_count > MAX_FRUSTUM_PLANES) throw std::invalid_argument("a frustum has more than 6 planes");
@@ -214,13 +231,14 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   const VkPhysicalDeviceLimits& limits = ctx_.properties().limits;
   groups_per_view_ = (cut_count_ + group_size_ - 1) / group_size_;
   const std::size_t groups = groups_per_view_ * v;
-  const std::size_t max_x = max_groups_x_ ? std::min(max_groups_x_, limits.maxComputeWorkGroupCount[0]) : limits.maxComputeWorkGroupCount[0];
+  const std::size_t max_x =
+      max_groups_x_ ? std::min(max_groups_x_, limits.maxComputeWorkGroupCount[0]) : limits.maxComputeWorkGroupCount[0];
   group_x_ = std::min<std::size_t>(std::max<std::size_t>(groups, 1), max_x);
   group_y_ = (groups + group_x_ - 1) / group_x_;
   if (group_y_ > limits.maxComputeWorkGroupCount[1])
-    throw std::length_error(std::to_string(v) + " views of " + std::to_string(cut_count_) + " BVH subtrees need " + std::to_string(groups) +
-                            " workgroups; " + ctx_.info().name + " dispatches at most " + std::to_string(max_x) + " x " +
-                            std::to_string(limits.maxComputeWorkGroupCount[1]));
+    throw std::length_error(std::to_string(v) + " views of " + std::to_string(cut_count_) + " BVH subtrees need " +
+                            std::to_string(groups) + " workgroups; " + ctx_.info().name + " dispatches at most " +
+                            std::to_string(max_x) + " x " + std::to_string(limits.maxComputeWorkGroupCount[1]));
   const std::string views_x = std::to_string(v) + " views x ";
   auto check = [&](VkDeviceSize bytes, const std::string& what) { detail::check_storage_range(ctx_, bytes, what); };
   const VkDeviceSize outputs = VkDeviceSize(object_count_) * v * sizeof(std::uint32_t);
@@ -228,14 +246,16 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   const VkDeviceSize draw_bytes = options.draws ? VkDeviceSize(capacity) * v * sizeof(DrawCommand) : 0;
   // A cut subtree has at most as many records as objects: one scratch slot per object and view.
   // A record per object and view, then (stacks in the records) each workgroup's walk stack.
-  const VkDeviceSize stack_records = stack_in_records_ ? VkDeviceSize(groups_per_view_) * v * group_size_ * BVH_STACK_PER_INVOCATION : 0;
+  const VkDeviceSize stack_records =
+      stack_in_records_ ? VkDeviceSize(groups_per_view_) * v * group_size_ * BVH_STACK_PER_INVOCATION : 0;
   const VkDeviceSize record_bytes = (VkDeviceSize(object_count_) * v + stack_records) * detail::kRecordBytes;
   detail::check_texel_range(ctx_, VkDeviceSize(v) * sizeof(GpuFrustum), std::to_string(v) + " views");
   check(VkDeviceSize(v) * sizeof(ViewCounters), std::to_string(v) + " view counters");
   check(outputs, views_x + std::to_string(object_count_) + " objects of output");
   check(visible, views_x + std::to_string(capacity) + " visible ids");
   check(draw_bytes, views_x + std::to_string(capacity) + " draw commands");
-  detail::check_record_range(ctx_, record_bytes, views_x + std::to_string(object_count_) + " objects of traversal records");
+  detail::check_record_range(ctx_, record_bytes,
+                             views_x + std::to_string(object_count_) + " objects of traversal records");
   bool& dirty = descriptors_dirty_;
   detail::ensure_buffer(ctx_, bounds_, 0, kTexel, "object volume buffer", dirty);
   detail::ensure_buffer(ctx_, nodes_, 0, kTexel, "BVH node buffer", dirty);
@@ -243,10 +263,12 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   detail::ensure_buffer(ctx_, objects_, 0, kTexel, "BVH object order buffer", dirty);
   detail::ensure_buffer(ctx_, cuts_, 0, kStorage, "BVH cut buffer", dirty);
   detail::ensure_buffer(ctx_, templates_, 0, kStorage, "draw template buffer", dirty);
-  detail::ensure_buffer(ctx_, classes_, outputs, kStorage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, "classification buffer", dirty);
+  detail::ensure_buffer(ctx_, classes_, outputs, kStorage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, "classification buffer",
+                        dirty);
   detail::ensure_buffer(ctx_, visible_, visible, kStorage, "visible-id buffer", dirty);
   detail::ensure_buffer(ctx_, counters_, v * sizeof(ViewCounters),
-                        kStorage | VK_BUFFER_USAGE_TRANSFER_DST_BIT | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "counter buffer", dirty);
+                        kStorage | VK_BUFFER_USAGE_TRANSFER_DST_BIT | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT,
+                        "counter buffer", dirty);
   detail::ensure_buffer(ctx_, views_, v * sizeof(GpuFrustum), kTexel, "view buffer", dirty);
   detail::ensure_buffer(ctx_, draws_, draw_bytes, kStorage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "draw buffer", dirty);
   detail::ensure_buffer(ctx_, records_, record_bytes, kRecordUsage, "BVH traversal record buffer", dirty);
@@ -267,7 +289,8 @@ void BvhCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
   detail::record_entry_barrier(ctx_, cmd);
   vkCmdFillBuffer(cmd, counters_.handle(), 0, view_count * sizeof(ViewCounters), 0);
   // Objects no pass reaches are OUTSIDE; without class readback the buffer is left as is.
-  if (object_count_ && last_options_.classes) vkCmdFillBuffer(cmd, classes_.handle(), 0, VkDeviceSize(object_count_) * view_count * 4, CLASS_OUTSIDE);
+  if (object_count_ && last_options_.classes)
+    vkCmdFillBuffer(cmd, classes_.handle(), 0, VkDeviceSize(object_count_) * view_count * 4, CLASS_OUTSIDE);
   detail::record_transfer_to_compute(cmd);
   if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, timestamps, 0);
 
@@ -304,7 +327,8 @@ CullResult BvhCuller::cull(std::span<const Frustum> views, const CullOptions& op
   if (views.empty()) return {};
   return detail::timed_pass(
       *resources_, [&] { prepare(views, options); },
-      [&](VkCommandBuffer cmd, VkQueryPool timestamps) { record_passes(cmd, timestamps); }, [&] { return read_results(); });
+      [&](VkCommandBuffer cmd, VkQueryPool timestamps) { record_passes(cmd, timestamps); },
+      [&] { return read_results(); });
 }
 
 }  // namespace cullpipe::gpu

@@ -7,8 +7,8 @@
 #include <string>
 #include <system_error>
 
-#include "geom/plane_bounds.hpp"
 #include "core/thread_pool.hpp"
+#include "geom/plane_bounds.hpp"
 #include "gpu/layout.hpp"
 #include "gpu/pass_support.hpp"
 #include "vk/check.hpp"
@@ -38,15 +38,17 @@ GpuCuller::GpuCuller(const vk::Context& ctx, const GpuCullerConfig& config) : ct
   const VkPhysicalDeviceLimits& limits = ctx_.properties().limits;
   group_size_ = std::max<std::uint32_t>(
       1, std::min({config.group_size, limits.maxComputeWorkGroupSize[0], limits.maxComputeWorkGroupInvocations}));
-  detail::check_subgroup_operations(ctx_, VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT | VK_SUBGROUP_FEATURE_BALLOT_BIT |
-                                             VK_SUBGROUP_FEATURE_SHUFFLE_BIT,
+  detail::check_subgroup_operations(ctx_,
+                                    VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT |
+                                        VK_SUBGROUP_FEATURE_BALLOT_BIT | VK_SUBGROUP_FEATURE_SHUFFLE_BIT,
                                     "flat culling");
   detail::check_texel_format(ctx_, "flat culling");
   objects_per_invocation_ = std::clamp<std::uint32_t>(config.objects_per_invocation, 1, 32);
   max_segment_objects_ = config.max_segment_objects;
   upload_threads_ = config.upload_threads;
-  max_groups_ = config.max_groups_per_dispatch ? std::min(config.max_groups_per_dispatch, limits.maxComputeWorkGroupCount[0])
-                                               : limits.maxComputeWorkGroupCount[0];
+  max_groups_ = config.max_groups_per_dispatch
+                    ? std::min(config.max_groups_per_dispatch, limits.maxComputeWorkGroupCount[0])
+                    : limits.maxComputeWorkGroupCount[0];
   group_size_ = std::min(group_size_, MAX_CULL_GROUP_SIZE);
   // Every pipeline has the same set layout; the flat AABB one of default options (arrival
   // order, classes) is built now, for the descriptor set, the others on first use.
@@ -64,8 +66,8 @@ const vk::ComputePipeline& GpuCuller::pipeline(PipelineKey key) {
     std::string name;
     if (key.shader == Shader::Cull) {
       spirv = cullpipe_cull_flat_spv;
-      name = "flat cull (" + std::string(to_string(key.kind)) + (key.ordered ? ", ordered" : "") + (key.draws ? ", draws" : "") +
-             (key.classes ? ", classes" : "") + ")";
+      name = "flat cull (" + std::string(to_string(key.kind)) + (key.ordered ? ", ordered" : "") +
+             (key.draws ? ", draws" : "") + (key.classes ? ", classes" : "") + ")";
     } else if (key.shader == Shader::CompactScan) {
       spirv = cullpipe_compact_scan_spv;
       name = "ordered compaction scan";
@@ -75,10 +77,12 @@ const vk::ComputePipeline& GpuCuller::pipeline(PipelineKey key) {
     }
     // Specialization constants: 0 kind, 1 group size, 2 ordered, 3 draws, 4 objects per
     // invocation (every pass: the ordered passes' unit is a workgroup's run of objects), 5 classes.
-    const std::uint32_t spec[6] = {kind_index(key.kind), group_size_, key.ordered ? 1u : 0u, key.draws ? 1u : 0u,
+    const std::uint32_t spec[6] = {kind_index(key.kind),    group_size_,
+                                   key.ordered ? 1u : 0u,   key.draws ? 1u : 0u,
                                    objects_per_invocation_, key.classes ? 1u : 0u};
     return std::make_unique<vk::ComputePipeline>(
-        ctx_, vk::ComputePipelineDesc{spirv, kBindingCount, sizeof(FlatCullParams), spec, name.c_str(), kTexelBindings});
+        ctx_,
+        vk::ComputePipelineDesc{spirv, kBindingCount, sizeof(FlatCullParams), spec, name.c_str(), kTexelBindings});
   });
 }
 
@@ -89,18 +93,21 @@ GpuCuller::~GpuCuller() = default;
 // large buffer costs more than culling it). `fill(first, end)` writes objects [first, end);
 // with `centres` (AABBs) the centre-bound buffer is sized for them too.
 template <class Fill>
-void GpuCuller::upload_volumes(BvKind kind, std::size_t count, std::size_t bytes_per_object, bool centres, Fill&& fill) {
+void GpuCuller::upload_volumes(BvKind kind, std::size_t count, std::size_t bytes_per_object, bool centres,
+                               Fill&& fill) {
   const std::string what = std::to_string(count) + " " + std::string(to_string(kind)) + " volumes";
   if (count > std::numeric_limits<std::uint32_t>::max())
     throw std::length_error(what + ": object ids are 32-bit (at most 4294967295 objects)");
-  const VkDeviceSize bytes = VkDeviceSize(count) * bytes_per_object, centre_bytes = VkDeviceSize(count) * sizeof(glm::vec4);
+  const VkDeviceSize bytes = VkDeviceSize(count) * bytes_per_object,
+                     centre_bytes = VkDeviceSize(count) * sizeof(glm::vec4);
   // Both sizes are checked before anything changes: a scene that cannot fit keeps the old one.
   detail::check_allocation_size(ctx_, bytes, what);
   if (centres) detail::check_allocation_size(ctx_, centre_bytes, what + " (centre bounds)");
   object_count_ = 0;  // stays 0 if an allocation below fails: no pass on half-written buffers
   bytes_per_object_ = bytes_per_object;
   descriptors_dirty_ = true;  // segment ranges depend on the object size and count
-  if (centres) detail::ensure_buffer(ctx_, centres_, centre_bytes, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
+  if (centres)
+    detail::ensure_buffer(ctx_, centres_, centre_bytes, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
   detail::ensure_buffer(ctx_, bounds_, bytes, kBoundsUsage, "bounds buffer", descriptors_dirty_);
   const std::size_t tasks = (count + kUploadChunk - 1) / kUploadChunk;
   auto task = [&](std::size_t t) { fill(t * kUploadChunk, std::min(count, (t + 1) * kUploadChunk)); };
@@ -126,7 +133,8 @@ void GpuCuller::upload(std::span<const Aabb> volumes) {
   upload_volumes(BvKind::Aabb, volumes.size(), sizeof(GpuAabb), true, [&](std::size_t first, std::size_t end) {
     GpuAabb* out = bounds_.as<GpuAabb>().data();
     for (std::size_t i = first; i < end; ++i) out[i] = pack(volumes[i]);
-    plane_bounds::aabb_centre_bounds(volumes.subspan(first, end - first), centres_.as<glm::vec4>().subspan(first, end - first));
+    plane_bounds::aabb_centre_bounds(volumes.subspan(first, end - first),
+                                     centres_.as<glm::vec4>().subspan(first, end - first));
   });
 }
 
@@ -159,7 +167,8 @@ void GpuCuller::upload_draws(std::span<const DrawCommand> templates) {
   detail::check_allocation_size(ctx_, bytes, std::to_string(templates.size()) + " draw templates");
   template_count_ = 0;
   descriptors_dirty_ = true;  // segment ranges of the templates
-  detail::ensure_buffer(ctx_, templates_, bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "draw template buffer", descriptors_dirty_);
+  detail::ensure_buffer(ctx_, templates_, bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "draw template buffer",
+                        descriptors_dirty_);
   if (bytes) std::memcpy(templates_.data(), templates.data(), bytes);
   template_count_ = templates.size();
 }
@@ -171,21 +180,28 @@ void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capac
   const VkDeviceSize groups = ordered ? group_count_bytes(view_count) : 0;
   // Classes are bound per segment (plan_segments keeps each within range); all of them must
   // still fit one allocation.
-  detail::check_allocation_size(ctx_, outputs, std::to_string(view_count) + " views x " + std::to_string(object_count_) + " objects of output");
-  detail::check_storage_range(ctx_, visible, std::to_string(view_count) + " views x " + std::to_string(visible_capacity) + " visible ids");
-  detail::check_storage_range(ctx_, draw_bytes, std::to_string(view_count) + " views x " + std::to_string(visible_capacity) + " draw commands");
+  detail::check_allocation_size(
+      ctx_, outputs, std::to_string(view_count) + " views x " + std::to_string(object_count_) + " objects of output");
+  detail::check_storage_range(
+      ctx_, visible, std::to_string(view_count) + " views x " + std::to_string(visible_capacity) + " visible ids");
+  detail::check_storage_range(
+      ctx_, draw_bytes, std::to_string(view_count) + " views x " + std::to_string(visible_capacity) + " draw commands");
   detail::check_texel_range(ctx_, VkDeviceSize(view_count) * sizeof(GpuFrustum), std::to_string(view_count) + " views");
-  detail::check_storage_range(ctx_, groups, std::to_string(view_count) + " views x " + std::to_string(object_count_) + " objects of workgroup counts");
+  detail::check_storage_range(
+      ctx_, groups,
+      std::to_string(view_count) + " views x " + std::to_string(object_count_) + " objects of workgroup counts");
   constexpr VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
   bool& dirty = descriptors_dirty_;
   detail::ensure_buffer(ctx_, classes_, outputs, storage, "classification buffer", dirty);
   detail::ensure_buffer(ctx_, visible_, visible, storage, "visible-id buffer", dirty);
   detail::ensure_buffer(ctx_, counters_, view_count * sizeof(ViewCounters),
-                storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "counter buffer", dirty);
+                        storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT,
+                        "counter buffer", dirty);
   detail::ensure_buffer(ctx_, views_, view_count * sizeof(GpuFrustum), kBoundsUsage, "view buffer", dirty);
   detail::ensure_buffer(ctx_, draws_, draw_bytes, storage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "draw buffer", dirty);
   detail::ensure_buffer(ctx_, templates_, 0, storage, "draw template buffer", dirty);
-  detail::ensure_buffer(ctx_, group_counts_, groups, storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, "group count buffer", dirty);
+  detail::ensure_buffer(ctx_, group_counts_, groups, storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, "group count buffer",
+                        dirty);
 }
 
 VkDeviceSize GpuCuller::group_count_bytes(std::size_t view_count) const {
@@ -196,9 +212,9 @@ VkDeviceSize GpuCuller::group_count_bytes(std::size_t view_count) const {
 
 GpuCuller::SegmentPlan GpuCuller::plan_segments(std::size_t view_count, bool ordered) const {
   // Objects per segment: as many as every per-object binding allows within one storage buffer
-  // range (the bounds: one texel buffer view), rounded down to a multiple of 256 so every segment's offset in every buffer is a
-  // multiple of 256 x (bytes per object) >= 1 KiB, and so of any minStorageBufferOffsetAlignment
-  // (at most 256 bytes by the Vulkan spec).
+  // range (the bounds: one texel buffer view), rounded down to a multiple of 256 so every segment's offset in every
+  // buffer is a multiple of 256 x (bytes per object) >= 1 KiB, and so of any minStorageBufferOffsetAlignment (at most
+  // 256 bytes by the Vulkan spec).
   const VkDeviceSize range = ctx_.properties().limits.maxStorageBufferRange;
   std::size_t s = object_count_;
   s = std::min<std::size_t>(s, detail::texel_range(ctx_) / bytes_per_object_);
@@ -231,17 +247,22 @@ void GpuCuller::update_descriptors() {
     auto whole = [&](const vk::Buffer& b) { return Range{&b, 0, std::min<VkDeviceSize>(b.size(), range)}; };
     // Texel views: whole texels within one texel buffer view.
     auto texels = [&](const vk::Buffer& b) {
-      return Range{&b, 0, std::min<VkDeviceSize>(b.size(), detail::texel_range(ctx_)) / detail::kTexelBytes * detail::kTexelBytes};
+      return Range{
+          &b, 0,
+          std::min<VkDeviceSize>(b.size(), detail::texel_range(ctx_)) / detail::kTexelBytes * detail::kTexelBytes};
     };
-    Range ranges[kBindingCount] = {texels(bounds_), whole(classes_),   whole(visible_), whole(counters_),      texels(views_),
-                                   whole(templates_), whole(draws_), whole(group_counts_), texels(centres_)};
+    Range ranges[kBindingCount] = {texels(bounds_),  whole(classes_),      whole(visible_),
+                                   whole(counters_), texels(views_),       whole(templates_),
+                                   whole(draws_),    whole(group_counts_), texels(centres_)};
     if (segment_count_ > 1) {  // one segment binds whole buffers
       const VkDeviceSize first = VkDeviceSize(seg) * segment_objects_;
       const VkDeviceSize n = std::min<VkDeviceSize>(segment_objects_, object_count_ - first);
       ranges[BINDING_BOUNDS] = {&bounds_, first * bytes_per_object_, n * bytes_per_object_};
       ranges[BINDING_CLASSES] = {&classes_, first * views * sizeof(std::uint32_t), n * views * sizeof(std::uint32_t)};
-      if (kind_ == BvKind::Aabb) ranges[BINDING_CENTRES] = {&centres_, first * sizeof(glm::vec4), n * sizeof(glm::vec4)};
-      if (template_count_ == object_count_) ranges[BINDING_DRAW_TEMPLATES] = {&templates_, first * sizeof(DrawCommand), n * sizeof(DrawCommand)};
+      if (kind_ == BvKind::Aabb)
+        ranges[BINDING_CENTRES] = {&centres_, first * sizeof(glm::vec4), n * sizeof(glm::vec4)};
+      if (template_count_ == object_count_)
+        ranges[BINDING_DRAW_TEMPLATES] = {&templates_, first * sizeof(DrawCommand), n * sizeof(DrawCommand)};
     }
     resources_->write(seg, ranges);
   }
@@ -253,8 +274,9 @@ void GpuCuller::update_descriptors() {
 void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& options) {
   const std::size_t capacity = options.visible_capacity ? options.visible_capacity : object_count_;
   if (options.draws && template_count_ != object_count_)
-    throw std::invalid_argument("draw commands requested, but " + std::to_string(template_count_) + " draw templates were uploaded for " +
-                                std::to_string(object_count_) + " objects (call upload_draws)");
+    throw std::invalid_argument("draw commands requested, but " + std::to_string(template_count_) +
+                                " draw templates were uploaded for " + std::to_string(object_count_) +
+                                " objects (call upload_draws)");
   if (views.size() > ctx_.properties().limits.maxComputeWorkGroupCount[1])
     throw std::length_error(std::to_string(views.size()) + " views exceed the device's dispatch limit of " +
                             std::to_string(ctx_.properties().limits.maxComputeWorkGroupCount[1]));
@@ -299,7 +321,8 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
   const VkDescriptorSet set = resources_->set();
   // The ordered passes always write classes (the scatter pass reads them); the arrival-order
   // pass only when they are read back (a pipeline of its own, see WRITE_CLASSES in cull_flat.comp).
-  const FlatCullParams base_params{std::uint32_t(object_count_), 0, std::uint32_t(view_count), std::uint32_t(last_capacity_), 0};
+  const FlatCullParams base_params{std::uint32_t(object_count_), 0, std::uint32_t(view_count),
+                                   std::uint32_t(last_capacity_), 0};
   // One pass over every object: per segment (its own descriptor set), in chunks of at most
   // max_groups_ workgroups.
   auto object_pass = [&](const vk::ComputePipeline& pipe, std::uint32_t objects_per_invocation) {
@@ -310,8 +333,8 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
       const VkDescriptorSet segment_set = resources_->set(seg);
       vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.layout(), 0, 1, &segment_set, 0, nullptr);
       const std::uint64_t segment_first = std::uint64_t(seg) * segment_objects_;
-      const std::uint64_t segment_count = segment_count_ > 1 ? std::min<std::uint64_t>(segment_objects_, object_count_ - segment_first)
-                                                             : object_count_;
+      const std::uint64_t segment_count =
+          segment_count_ > 1 ? std::min<std::uint64_t>(segment_objects_, object_count_ - segment_first) : object_count_;
       for (std::uint64_t first = 0; first < segment_count; first += objects_per_dispatch) {
         if (first > 0 || seg > 0) compute_to_compute();  // successive dispatches update the same counters
         const std::uint64_t count = std::min<std::uint64_t>(objects_per_dispatch, segment_count - first);
@@ -320,7 +343,8 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
         params.first_object = std::uint32_t(first);
         params.id_base = std::uint32_t(segment_first);
         vkCmdPushConstants(cmd, pipe.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
-        vkCmdDispatch(cmd, std::uint32_t((count + objects_per_group - 1) / objects_per_group), std::uint32_t(view_count), 1);
+        vkCmdDispatch(cmd, std::uint32_t((count + objects_per_group - 1) / objects_per_group),
+                      std::uint32_t(view_count), 1);
       }
     }
   };
@@ -349,8 +373,8 @@ void GpuCuller::record(VkCommandBuffer cmd, std::span<const Frustum> views, cons
 }
 
 CullResult GpuCuller::read_results() const {
-  CullResult result = detail::read_outputs({counters_, classes_, visible_, draws_}, object_count_, last_view_count_, last_capacity_,
-                                           last_options_, segment_count_ > 1 ? segment_objects_ : 0);
+  CullResult result = detail::read_outputs({counters_, classes_, visible_, draws_}, object_count_, last_view_count_,
+                                           last_capacity_, last_options_, segment_count_ > 1 ? segment_objects_ : 0);
   for (ViewResult& view : result.views) view.object_tests = object_count_;  // flat: every object, no nodes
   return result;
 }
@@ -359,7 +383,8 @@ CullResult GpuCuller::cull(std::span<const Frustum> views, const CullOptions& op
   if (views.empty()) return {};
   return detail::timed_pass(
       *resources_, [&] { prepare(views, options); },
-      [&](VkCommandBuffer cmd, VkQueryPool timestamps) { record_passes(cmd, timestamps); }, [&] { return read_results(); });
+      [&](VkCommandBuffer cmd, VkQueryPool timestamps) { record_passes(cmd, timestamps); },
+      [&] { return read_results(); });
 }
 
 }  // namespace cullpipe::gpu

@@ -30,15 +30,15 @@ class PassResources;
 
 /// One view's result of a GPU culling pass.
 struct ViewResult {
-  std::vector<Classification> classes;     ///< per object, in object order
+  std::vector<Classification> classes;  ///< per object, in object order
   /// Ids of INSIDE/INTERSECTING objects: in object order with CullOptions::ordered, else in
   /// GPU arrival order.
   std::vector<std::uint32_t> visible_ids;
   /// With CullOptions::draws: one draw per visible id, in the same order: the object's
   /// template (upload_draws) with object_id set.
   std::vector<DrawCommand> draws;
-  reference::CullCounts counts;            ///< as counted by the GPU
-  bool overflow = false;                   ///< more visible objects than the list could hold
+  reference::CullCounts counts;  ///< as counted by the GPU
+  bool overflow = false;         ///< more visible objects than the list could hold
   /// Work done: hierarchical passes count node boxes tested and objects tested in
   /// INTERSECTING leaves; a flat pass tests no nodes and every object.
   std::size_t node_tests = 0;
@@ -182,9 +182,13 @@ class GpuCuller {
   };
   const vk::ComputePipeline& pipeline(PipelineKey key);
   /// The cull pass in arrival order; the ordered passes' counting cull and their scatter.
-  PipelineKey arrival_key(const CullOptions& o) const { return {.kind = kind_, .draws = o.draws, .classes = o.classes}; }
+  PipelineKey arrival_key(const CullOptions& o) const {
+    return {.kind = kind_, .draws = o.draws, .classes = o.classes};
+  }
   PipelineKey ordered_key() const { return {.kind = kind_, .ordered = true, .classes = true}; }
-  static PipelineKey scatter_key(const CullOptions& o) { return {.shader = PipelineKey::Shader::CompactScatter, .draws = o.draws}; }
+  static PipelineKey scatter_key(const CullOptions& o) {
+    return {.shader = PipelineKey::Shader::CompactScatter, .draws = o.draws};
+  }
   void update_descriptors();
 
   const vk::Context& ctx_;

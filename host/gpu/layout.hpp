@@ -3,11 +3,11 @@
 // Every conversion copies floats unchanged, so CPU and GPU see bit-identical inputs.
 #include <limits>
 
-#include "shared/cull_types.h"  // shaders/shared/, on the include path of cullpipe_gpu
 #include "geom/aabb.hpp"
 #include "geom/frustum.hpp"
 #include "geom/obb.hpp"
 #include "geom/sphere.hpp"
+#include "shared/cull_types.h"  // shaders/shared/, on the include path of cullpipe_gpu
 
 namespace cullpipe::gpu {
 

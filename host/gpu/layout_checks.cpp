@@ -1,8 +1,9 @@
 // Compile-time checks that the C++ view of shaders/shared/cull_types.h matches std430, so the
 // structs written once there mean the same bytes to the host and to the shaders.
+#include <vulkan/vulkan.h>
+
 #include <bit>
 #include <cstddef>
-#include <vulkan/vulkan.h>
 
 #include "bvh/bvh.hpp"
 #include "gpu/layout.hpp"
@@ -29,7 +30,8 @@ static_assert(offsetof(GpuObb, axis_z) == 48);
 static_assert(sizeof(GpuSphere) == SPHERE_VEC4S * 16);
 static_assert(offsetof(GpuSphere, center_radius) == 0);
 
-static_assert(sizeof(GpuFrustum) == 112 && sizeof(GpuFrustum) == FRUSTUM_TEXELS * 16 && offsetof(GpuFrustum, plane_count) == MAX_FRUSTUM_PLANES * 16);
+static_assert(sizeof(GpuFrustum) == 112 && sizeof(GpuFrustum) == FRUSTUM_TEXELS * 16 &&
+              offsetof(GpuFrustum, plane_count) == MAX_FRUSTUM_PLANES * 16);
 static_assert(offsetof(GpuFrustum, planes) == 0);
 static_assert(offsetof(GpuFrustum, plane_count) == 96);
 static_assert(offsetof(GpuFrustum, settle_margin) == 100);
@@ -58,7 +60,8 @@ static_assert(offsetof(GpuBvhNode, second_child) == 36);
 static_assert(offsetof(GpuBvhNode, leaf) == 40);
 static_assert(sizeof(BvhCullParams) == 20);
 static_assert(offsetof(BvhCullParams, cut_count) == 12 && offsetof(BvhCullParams, groups_per_view) == 16);
-static_assert(BVH_STACK_PER_INVOCATION >= 1 + 2 * BVH_CUT_MAX_HEIGHT, "the walk stack holds a cut node and two nodes per level below it, per lane");
+static_assert(BVH_STACK_PER_INVOCATION >= 1 + 2 * BVH_CUT_MAX_HEIGHT,
+              "the walk stack holds a cut node and two nodes per level below it, per lane");
 
 // DrawCommand starts with exactly VkDrawIndexedIndirectCommand.
 static_assert(sizeof(DrawCommand) == 24);

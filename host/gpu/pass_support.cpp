@@ -28,10 +28,14 @@ void check_subgroup_operations(const vk::Context& ctx, VkSubgroupFeatureFlags ne
   const VkSubgroupFeatureFlags missing = compute ? needed & ~subgroup.supportedOperations : needed;
   if (!missing) return;
   static const std::pair<VkSubgroupFeatureFlagBits, const char*> names[] = {
-      {VK_SUBGROUP_FEATURE_BASIC_BIT, "basic"},   {VK_SUBGROUP_FEATURE_VOTE_BIT, "vote"},
-      {VK_SUBGROUP_FEATURE_ARITHMETIC_BIT, "arithmetic"}, {VK_SUBGROUP_FEATURE_BALLOT_BIT, "ballot"},
-      {VK_SUBGROUP_FEATURE_SHUFFLE_BIT, "shuffle"},       {VK_SUBGROUP_FEATURE_SHUFFLE_RELATIVE_BIT, "shuffle relative"},
-      {VK_SUBGROUP_FEATURE_CLUSTERED_BIT, "clustered"},   {VK_SUBGROUP_FEATURE_QUAD_BIT, "quad"}};
+      {VK_SUBGROUP_FEATURE_BASIC_BIT, "basic"},
+      {VK_SUBGROUP_FEATURE_VOTE_BIT, "vote"},
+      {VK_SUBGROUP_FEATURE_ARITHMETIC_BIT, "arithmetic"},
+      {VK_SUBGROUP_FEATURE_BALLOT_BIT, "ballot"},
+      {VK_SUBGROUP_FEATURE_SHUFFLE_BIT, "shuffle"},
+      {VK_SUBGROUP_FEATURE_SHUFFLE_RELATIVE_BIT, "shuffle relative"},
+      {VK_SUBGROUP_FEATURE_CLUSTERED_BIT, "clustered"},
+      {VK_SUBGROUP_FEATURE_QUAD_BIT, "quad"}};
   std::string list;
   for (const auto& [bit, name] : names)
     if (missing & bit) list += (list.empty() ? "" : ", ") + std::string(name);
@@ -42,8 +46,8 @@ void check_storage_range(const vk::Context& ctx, VkDeviceSize bytes, const std::
   const VkDeviceSize limit = ctx.properties().limits.maxStorageBufferRange;
   if (bytes > limit)
     throw std::length_error(what + " needs " + std::to_string(bytes) + " bytes (" + mib(bytes) +
-                            "), more than one storage buffer can hold on " + ctx.info().name + " (maxStorageBufferRange " +
-                            std::to_string(limit) + " bytes, " + mib(limit) + ")");
+                            "), more than one storage buffer can hold on " + ctx.info().name +
+                            " (maxStorageBufferRange " + std::to_string(limit) + " bytes, " + mib(limit) + ")");
 }
 
 VkDeviceSize texel_range(const vk::Context& ctx) {
@@ -54,17 +58,20 @@ VkDeviceSize texel_range(const vk::Context& ctx) {
 void check_texel_range(const vk::Context& ctx, VkDeviceSize bytes, const std::string& what) {
   const VkDeviceSize limit = texel_range(ctx);
   if (bytes > limit)
-    throw std::length_error(what + " needs " + std::to_string(bytes) + " bytes (" + mib(bytes) + "), more than one texel buffer view covers on " +
-                            ctx.info().name + " (maxTexelBufferElements " + std::to_string(ctx.properties().limits.maxTexelBufferElements) +
-                            " of 16 bytes, " + mib(limit) + " usable)");
+    throw std::length_error(
+        what + " needs " + std::to_string(bytes) + " bytes (" + mib(bytes) +
+        "), more than one texel buffer view covers on " + ctx.info().name + " (maxTexelBufferElements " +
+        std::to_string(ctx.properties().limits.maxTexelBufferElements) + " of 16 bytes, " + mib(limit) + " usable)");
 }
 
 void check_record_range(const vk::Context& ctx, VkDeviceSize bytes, const std::string& what) {
-  const VkDeviceSize limit = std::min<VkDeviceSize>(ctx.properties().limits.maxTexelBufferElements, 0x7fffffffu) * kRecordBytes;
+  const VkDeviceSize limit =
+      std::min<VkDeviceSize>(ctx.properties().limits.maxTexelBufferElements, 0x7fffffffu) * kRecordBytes;
   if (bytes > limit)
-    throw std::length_error(what + " needs " + std::to_string(bytes) + " bytes (" + mib(bytes) + "), more than one texel buffer view covers on " +
-                            ctx.info().name + " (maxTexelBufferElements " + std::to_string(ctx.properties().limits.maxTexelBufferElements) +
-                            " of 8 bytes, " + mib(limit) + " usable)");
+    throw std::length_error(
+        what + " needs " + std::to_string(bytes) + " bytes (" + mib(bytes) +
+        "), more than one texel buffer view covers on " + ctx.info().name + " (maxTexelBufferElements " +
+        std::to_string(ctx.properties().limits.maxTexelBufferElements) + " of 8 bytes, " + mib(limit) + " usable)");
 }
 
 void check_record_format(const vk::Context& ctx, const std::string& who) {
@@ -93,30 +100,32 @@ void ensure_buffer(const vk::Context& ctx, vk::Buffer& buffer, VkDeviceSize byte
 void record_entry_barrier(const vk::Context& ctx, VkCommandBuffer cmd) {
   const VkMemoryBarrier barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, 0, 0};  // execution dependency (WAR)
   vkCmdPipelineBarrier(cmd,
-                       VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT |
-                           graphics_stages(ctx),
-                       VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &barrier, 0, nullptr, 0,
-                       nullptr);
+                       VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT |
+                           VK_PIPELINE_STAGE_TRANSFER_BIT | graphics_stages(ctx),
+                       VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &barrier, 0,
+                       nullptr, 0, nullptr);
 }
 
 void record_exit_barrier(const vk::Context& ctx, VkCommandBuffer cmd) {
-  const VkMemoryBarrier barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, VK_ACCESS_SHADER_WRITE_BIT,
-                                VK_ACCESS_INDIRECT_COMMAND_READ_BIT | VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_HOST_READ_BIT};
+  const VkMemoryBarrier barrier{
+      VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, VK_ACCESS_SHADER_WRITE_BIT,
+      VK_ACCESS_INDIRECT_COMMAND_READ_BIT | VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_HOST_READ_BIT};
   vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
-                       VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_HOST_BIT |
-                           graphics_stages(ctx),
+                       VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT |
+                           VK_PIPELINE_STAGE_HOST_BIT | graphics_stages(ctx),
                        0, 1, &barrier, 0, nullptr, 0, nullptr);
 }
 
 void record_transfer_to_compute(VkCommandBuffer cmd) {
   const VkMemoryBarrier barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, VK_ACCESS_TRANSFER_WRITE_BIT,
                                 VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT};
-  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &barrier, 0, nullptr, 0,
-                       nullptr);
+  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &barrier, 0,
+                       nullptr, 0, nullptr);
 }
 
 void record_compute_to_compute(VkCommandBuffer cmd, bool indirect) {
-  VkMemoryBarrier barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT,
+  VkMemoryBarrier barrier{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr,
+                          VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT,
                           VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT};
   VkPipelineStageFlags dst = VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT;
   if (indirect) {
@@ -127,13 +136,15 @@ void record_compute_to_compute(VkCommandBuffer cmd, bool indirect) {
 }
 
 CullResult timed_pass(PassResources& resources, const std::function<void()>& prepare,
-                      const std::function<void(VkCommandBuffer, VkQueryPool)>& record, const std::function<CullResult()>& read) {
+                      const std::function<void(VkCommandBuffer, VkQueryPool)>& record,
+                      const std::function<CullResult()>& read) {
   const auto start = std::chrono::steady_clock::now();
   prepare();
   const double gpu_ns = resources.run(record);
   CullResult result = read();
   result.timings.gpu_ns = gpu_ns;
-  result.timings.wall_ns = double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());
+  result.timings.wall_ns =
+      double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());
   return result;
 }
 
@@ -142,13 +153,14 @@ void check_allocation_size(const vk::Context& ctx, VkDeviceSize bytes, const std
   VkPhysicalDeviceProperties2 properties{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2, &m3, {}};
   vkGetPhysicalDeviceProperties2(ctx.physical_device(), &properties);
   if (bytes > m3.maxMemoryAllocationSize)
-    throw std::length_error(what + " needs " + std::to_string(bytes) + " bytes (" + mib(bytes) + "), more than one memory allocation can hold on " +
-                            ctx.info().name + " (maxMemoryAllocationSize " + std::to_string(m3.maxMemoryAllocationSize) + " bytes, " +
+    throw std::length_error(what + " needs " + std::to_string(bytes) + " bytes (" + mib(bytes) +
+                            "), more than one memory allocation can hold on " + ctx.info().name +
+                            " (maxMemoryAllocationSize " + std::to_string(m3.maxMemoryAllocationSize) + " bytes, " +
                             mib(m3.maxMemoryAllocationSize) + ")");
 }
 
-CullResult read_outputs(const OutputBuffers& buffers, std::size_t object_count, std::size_t view_count, std::size_t capacity,
-                        const CullOptions& options, std::size_t segment_objects) {
+CullResult read_outputs(const OutputBuffers& buffers, std::size_t object_count, std::size_t view_count,
+                        std::size_t capacity, const CullOptions& options, std::size_t segment_objects) {
   if (segment_objects == 0 || segment_objects > object_count) segment_objects = object_count;
   CullResult result;
   result.views.resize(view_count);
@@ -185,7 +197,11 @@ CullResult read_outputs(const OutputBuffers& buffers, std::size_t object_count, 
 
 PassResources::PassResources(const vk::Context& ctx, VkDescriptorSetLayout layout, std::uint32_t binding_count,
                              std::uint32_t texel_bindings, std::uint32_t record_bindings)
-    : ctx_(ctx), binding_count_(binding_count), texel_bindings_(texel_bindings), record_bindings_(record_bindings), layout_(layout) {
+    : ctx_(ctx),
+      binding_count_(binding_count),
+      texel_bindings_(texel_bindings),
+      record_bindings_(record_bindings),
+      layout_(layout) {
   try {
     VkDevice dev = ctx_.device();
     ensure_sets(1);
@@ -244,7 +260,8 @@ void PassResources::ensure_sets(std::size_t count) {
   VkDescriptorPoolSize pool_sizes[3];
   std::uint32_t size_count = 0;
   if (binding_count_ > texels + records)
-    pool_sizes[size_count++] = {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, (binding_count_ - texels - records) * std::uint32_t(count)};
+    pool_sizes[size_count++] = {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER,
+                                (binding_count_ - texels - records) * std::uint32_t(count)};
   if (texels) pool_sizes[size_count++] = {VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER, texels * std::uint32_t(count)};
   if (records) pool_sizes[size_count++] = {VK_DESCRIPTOR_TYPE_STORAGE_TEXEL_BUFFER, records * std::uint32_t(count)};
   VkDescriptorPoolCreateInfo pool_info{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
@@ -304,7 +321,8 @@ void PassResources::write(std::size_t index, std::span<const Range> ranges) {
     writes[b].dstBinding = b;
     writes[b].descriptorCount = 1;
     if (texel(b) || record(b)) {
-      writes[b].descriptorType = texel(b) ? VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_TEXEL_BUFFER;
+      writes[b].descriptorType =
+          texel(b) ? VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_TEXEL_BUFFER;
       writes[b].pTexelBufferView = &views[b];
     } else {
       writes[b].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
@@ -328,8 +346,8 @@ double PassResources::run(const std::function<void(VkCommandBuffer, VkQueryPool)
   ctx_.submit_and_wait(cmd_);
   if (!query_pool_) return 0.0;
   std::uint64_t stamps[2] = {0, 0};
-  CULLPIPE_VK_CHECK(vkGetQueryPoolResults(ctx_.device(), query_pool_, 0, 2, sizeof(stamps), stamps, sizeof(std::uint64_t),
-                                          VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT));
+  CULLPIPE_VK_CHECK(vkGetQueryPoolResults(ctx_.device(), query_pool_, 0, 2, sizeof(stamps), stamps,
+                                          sizeof(std::uint64_t), VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT));
   const std::uint32_t bits = ctx_.timestamp_valid_bits();
   const std::uint64_t mask = bits >= 64 ? ~0ull : (1ull << bits) - 1;
   return double((stamps[1] - stamps[0]) & mask) * ctx_.timestamp_period_ns();

@@ -79,8 +79,8 @@ struct OutputBuffers {
 /// Reads a completed pass's outputs back as the options ask (counts and test counts always).
 /// The classes are stored per segment of `segment_objects` objects (0: one segment of all),
 /// each segment as [view][object within the segment].
-CullResult read_outputs(const OutputBuffers& buffers, std::size_t object_count, std::size_t view_count, std::size_t capacity,
-                        const CullOptions& options, std::size_t segment_objects = 0);
+CullResult read_outputs(const OutputBuffers& buffers, std::size_t object_count, std::size_t view_count,
+                        std::size_t capacity, const CullOptions& options, std::size_t segment_objects = 0);
 
 /// Throws std::length_error naming `what` and the device limit when `bytes` exceed one memory
 /// allocation (maxMemoryAllocationSize).
@@ -92,7 +92,8 @@ class PassResources;
 /// `prepare()`, then `record` between timestamps, submit and wait, then `read()`. Fills the
 /// result's timings: GPU time between the timestamps, wall time around all of it.
 CullResult timed_pass(PassResources& resources, const std::function<void()>& prepare,
-                      const std::function<void(VkCommandBuffer, VkQueryPool)>& record, const std::function<CullResult()>& read);
+                      const std::function<void(VkCommandBuffer, VkQueryPool)>& record,
+                      const std::function<CullResult()>& read);
 
 /// Descriptor sets of storage buffers (and uniform texel buffers, whose buffer views it owns),
 /// a command buffer and a two-entry timestamp pool.
@@ -101,8 +102,8 @@ class PassResources {
   /// Bindings 0..binding_count-1 of `layout`: storage buffers, except bit i of
   /// `texel_bindings` makes binding i a uniform texel buffer of kTexelFormat, and bit i of
   /// `record_bindings` a storage texel buffer of kRecordFormat.
-  PassResources(const vk::Context& ctx, VkDescriptorSetLayout layout, std::uint32_t binding_count, std::uint32_t texel_bindings = 0,
-                std::uint32_t record_bindings = 0);
+  PassResources(const vk::Context& ctx, VkDescriptorSetLayout layout, std::uint32_t binding_count,
+                std::uint32_t texel_bindings = 0, std::uint32_t record_bindings = 0);
   ~PassResources();
   PassResources(const PassResources&) = delete;
   PassResources& operator=(const PassResources&) = delete;

@@ -63,21 +63,25 @@ void write_png(const std::string& path, const Image& image) {
   const auto append = [](void* context, void* data, int size) {
     static_cast<std::string*>(context)->append(static_cast<const char*>(data), std::size_t(size));
   };
-  if (!stbi_write_png_to_func(append, &png, int(image.width), int(image.height), 4, image.rgba.data(), int(image.width * 4)))
+  if (!stbi_write_png_to_func(append, &png, int(image.width), int(image.height), 4, image.rgba.data(),
+                              int(image.width * 4)))
     throw InputError(path + ": cannot encode the PNG image");
   write_file_atomic(path, png);
 }
 
 std::size_t count_different_pixels(const Image& a, const Image& b) {
-  if (a.width != b.width || a.height != b.height || a.rgba.size() != b.rgba.size()) return std::numeric_limits<std::size_t>::max();
+  if (a.width != b.width || a.height != b.height || a.rgba.size() != b.rgba.size())
+    return std::numeric_limits<std::size_t>::max();
   std::size_t n = 0;
   for (std::size_t i = 0; i < a.rgba.size(); i += 4)
-    if (a.rgba[i] != b.rgba[i] || a.rgba[i + 1] != b.rgba[i + 1] || a.rgba[i + 2] != b.rgba[i + 2] || a.rgba[i + 3] != b.rgba[i + 3]) ++n;
+    if (a.rgba[i] != b.rgba[i] || a.rgba[i + 1] != b.rgba[i + 1] || a.rgba[i + 2] != b.rgba[i + 2] ||
+        a.rgba[i + 3] != b.rgba[i + 3])
+      ++n;
   return n;
 }
 
-Image top_down_image(const std::vector<Aabb>& world_boxes, const std::vector<Classification>& classes, const Camera& camera,
-                     std::uint32_t size) {
+Image top_down_image(const std::vector<Aabb>& world_boxes, const std::vector<Classification>& classes,
+                     const Camera& camera, std::uint32_t size) {
   // The frustum's corners: unproject the clip-space corners; an infinite or very far far
   // plane is cut at `far_limit` from the eye so the drawing stays readable.
   float lo_x = camera.eye.x, hi_x = camera.eye.x, lo_z = camera.eye.z, hi_z = camera.eye.z;
@@ -116,7 +120,9 @@ Image top_down_image(const std::vector<Aabb>& world_boxes, const std::vector<Cla
   const auto pz = [&](float z) { return int(std::floor((z - cz) * scale + 0.5f * float(img.height))); };
 
   for (int pass = 0; pass < 3; ++pass) {  // outside, then intersecting, then inside on top
-    const Classification want = pass == 0 ? Classification::Outside : pass == 1 ? Classification::Intersecting : Classification::Inside;
+    const Classification want = pass == 0   ? Classification::Outside
+                                : pass == 1 ? Classification::Intersecting
+                                            : Classification::Inside;
     const std::uint32_t color = pass == 0 ? kColorOutside : pass == 1 ? kColorIntersecting : kColorInside;
     for (std::size_t i = 0; i < world_boxes.size() && i < classes.size(); ++i) {
       if (classes[i] != want) continue;
@@ -130,7 +136,8 @@ Image top_down_image(const std::vector<Aabb>& world_boxes, const std::vector<Cla
     }
   }
   // Frustum edges: near quad, far quad, and the four side edges.
-  static const int edges[12][2] = {{0, 1}, {1, 3}, {3, 2}, {2, 0}, {4, 5}, {5, 7}, {7, 6}, {6, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
+  static const int edges[12][2] = {{0, 1}, {1, 3}, {3, 2}, {2, 0}, {4, 5}, {5, 7},
+                                   {7, 6}, {6, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
   for (const auto& e : edges) {
     const glm::vec3& a = corners[std::size_t(e[0])];
     const glm::vec3& b = corners[std::size_t(e[1])];

@@ -34,7 +34,7 @@ inline constexpr std::uint32_t kColorOutside = 0x5a5f69ff;       ///< grey
 /// top), the frustum's edges projected onto the plane (its far end at `far_limit` from the
 /// eye when the far plane is infinite or farther) and the eye. `size` pixels on the longer
 /// side of the area shown (the objects' and the frustum's extent).
-Image top_down_image(const std::vector<Aabb>& world_boxes, const std::vector<Classification>& classes, const Camera& camera,
-                     std::uint32_t size);
+Image top_down_image(const std::vector<Aabb>& world_boxes, const std::vector<Classification>& classes,
+                     const Camera& camera, std::uint32_t size);
 
 }  // namespace cullpipe::render

@@ -26,13 +26,18 @@ glm::vec4 object_color(std::size_t id) {
   const float h = std::fmod(0.11f + 0.61803398875f * float(id % 100000), 1.0f) * 6.0f;
   const float s = 0.55f, v = 0.92f;
   const float c = v * s, x = c * (1.0f - std::abs(std::fmod(h, 2.0f) - 1.0f)), m = v - c;
-  glm::vec3 rgb = h < 1 ? glm::vec3(c, x, 0) : h < 2 ? glm::vec3(x, c, 0) : h < 3 ? glm::vec3(0, c, x)
-                : h < 4 ? glm::vec3(0, x, c) : h < 5 ? glm::vec3(x, 0, c) : glm::vec3(c, 0, x);
+  glm::vec3 rgb = h < 1   ? glm::vec3(c, x, 0)
+                  : h < 2 ? glm::vec3(x, c, 0)
+                  : h < 3 ? glm::vec3(0, c, x)
+                  : h < 4 ? glm::vec3(0, x, c)
+                  : h < 5 ? glm::vec3(x, 0, c)
+                          : glm::vec3(c, 0, x);
   return glm::vec4(rgb + m, 1.0f);
 }
 
 // The unit cube [0,1]^3: 8 corners, 12 triangles.
-const glm::vec3 kCubeVertices[8] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0}, {0, 0, 1}, {1, 0, 1}, {0, 1, 1}, {1, 1, 1}};
+const glm::vec3 kCubeVertices[8] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0},
+                                    {0, 0, 1}, {1, 0, 1}, {0, 1, 1}, {1, 1, 1}};
 const std::uint32_t kCubeIndices[36] = {0, 2, 1, 1, 2, 3, 4, 5, 6, 5, 7, 6, 0, 1, 4, 1, 5, 4,
                                         2, 6, 3, 3, 6, 7, 0, 4, 2, 2, 4, 6, 1, 3, 5, 3, 7, 5};
 
@@ -47,12 +52,14 @@ VkShaderModule shader_module(VkDevice dev, const std::uint32_t* code, std::size_
 
 }  // namespace
 
-Renderer::Renderer(const vk::Context& ctx, const Scene& scene, const RendererConfig& config) : ctx_(ctx), config_(config) {
+Renderer::Renderer(const vk::Context& ctx, const Scene& scene, const RendererConfig& config)
+    : ctx_(ctx), config_(config) {
   if (!ctx.draw_indirect_count())
-    throw vk::Error("the renderer needs drawIndirectCount, multiDrawIndirect and drawIndirectFirstInstance, which " + ctx.info().name +
-                    " does not offer (or which the borrowed device did not enable)");
+    throw vk::Error("the renderer needs drawIndirectCount, multiDrawIndirect and drawIndirectFirstInstance, which " +
+                    ctx.info().name + " does not offer (or which the borrowed device did not enable)");
   if (!(ctx.queue_flags() & VK_QUEUE_GRAPHICS_BIT))
-    throw vk::Error("the renderer needs a queue with graphics and compute; " + ctx.info().name + "'s chosen queue has no graphics");
+    throw vk::Error("the renderer needs a queue with graphics and compute; " + ctx.info().name +
+                    "'s chosen queue has no graphics");
   if (config_.width == 0 || config_.height == 0 || config_.width > ctx.properties().limits.maxFramebufferWidth ||
       config_.height > ctx.properties().limits.maxFramebufferHeight)
     throw std::invalid_argument("image size " + std::to_string(config_.width) + "x" + std::to_string(config_.height) +
@@ -77,8 +84,10 @@ Renderer::Renderer(const vk::Context& ctx, const Scene& scene, const RendererCon
         if (it == placed.end()) {
           if (vertices.size() + o.triangles->positions.size() > std::size_t(std::numeric_limits<std::int32_t>::max()) ||
               indices.size() + o.triangles->indices.size() > std::numeric_limits<std::uint32_t>::max())
-            throw std::length_error("the scene's distinct meshes have more vertices or indices than one draw can address");
-          p = {std::uint32_t(indices.size()), std::uint32_t(o.triangles->indices.size()), std::int32_t(vertices.size())};
+            throw std::length_error(
+                "the scene's distinct meshes have more vertices or indices than one draw can address");
+          p = {std::uint32_t(indices.size()), std::uint32_t(o.triangles->indices.size()),
+               std::int32_t(vertices.size())};
           vertices.insert(vertices.end(), o.triangles->positions.begin(), o.triangles->positions.end());
           indices.insert(indices.end(), o.triangles->indices.begin(), o.triangles->indices.end());
           it = placed.emplace(o.triangles.get(), p).first;
@@ -92,19 +101,25 @@ Renderer::Renderer(const vk::Context& ctx, const Scene& scene, const RendererCon
       objects[i].color = object_color(i);
       templates_[i] = {p.index_count, 1, p.first_index, p.vertex_offset, std::uint32_t(i), 0};
     }
-    const auto upload = [&](vk::Buffer& b, const void* data, std::size_t bytes, VkBufferUsageFlags usage, const char* what) {
+    const auto upload = [&](vk::Buffer& b, const void* data, std::size_t bytes, VkBufferUsageFlags usage,
+                            const char* what) {
       b = vk::Buffer(ctx_, std::max<std::size_t>(bytes, 16), usage, what);
       if (bytes) std::memcpy(b.data(), data, bytes);
     };
-    upload(vertices_, vertices.data(), vertices.size() * sizeof(glm::vec3), VK_BUFFER_USAGE_VERTEX_BUFFER_BIT, "vertex buffer");
-    upload(indices_, indices.data(), indices.size() * sizeof(std::uint32_t), VK_BUFFER_USAGE_INDEX_BUFFER_BIT, "index buffer");
-    upload(objects_, objects.data(), objects.size() * sizeof(RenderObject), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "render object buffer");
+    upload(vertices_, vertices.data(), vertices.size() * sizeof(glm::vec3), VK_BUFFER_USAGE_VERTEX_BUFFER_BIT,
+           "vertex buffer");
+    upload(indices_, indices.data(), indices.size() * sizeof(std::uint32_t), VK_BUFFER_USAGE_INDEX_BUFFER_BIT,
+           "index buffer");
+    upload(objects_, objects.data(), objects.size() * sizeof(RenderObject), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT,
+           "render object buffer");
     upload(all_draws_, templates_.data(), templates_.size() * sizeof(DrawCommand), VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT,
            "unculled draw buffer");
     if (n > ctx_.properties().limits.maxDrawIndirectCount)
-      throw std::length_error(std::to_string(n) + " objects are more draws than one indirect draw call may issue on " + ctx_.info().name +
-                              " (maxDrawIndirectCount " + std::to_string(ctx_.properties().limits.maxDrawIndirectCount) + ")");
-    readback_ = vk::Buffer(ctx_, VkDeviceSize(config_.width) * config_.height * 4, VK_BUFFER_USAGE_TRANSFER_DST_BIT, "image readback buffer");
+      throw std::length_error(std::to_string(n) + " objects are more draws than one indirect draw call may issue on " +
+                              ctx_.info().name + " (maxDrawIndirectCount " +
+                              std::to_string(ctx_.properties().limits.maxDrawIndirectCount) + ")");
+    readback_ = vk::Buffer(ctx_, VkDeviceSize(config_.width) * config_.height * 4, VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                           "image readback buffer");
 
     // ---- the culling pass on the same device ----
     culler_ = std::make_unique<gpu::GpuCuller>(ctx_);
@@ -182,8 +197,8 @@ void Renderer::create_targets() {
   };
   make_image(VK_FORMAT_R8G8B8A8_UNORM, VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT,
              VK_IMAGE_ASPECT_COLOR_BIT, color_, color_memory_, color_view_, "colour image");
-  make_image(VK_FORMAT_D32_SFLOAT, VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT, VK_IMAGE_ASPECT_DEPTH_BIT, depth_, depth_memory_,
-             depth_view_, "depth image");
+  make_image(VK_FORMAT_D32_SFLOAT, VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT, VK_IMAGE_ASPECT_DEPTH_BIT, depth_,
+             depth_memory_, depth_view_, "depth image");
 
   VkAttachmentDescription attachments[2]{};
   attachments[0].format = VK_FORMAT_R8G8B8A8_UNORM;
@@ -281,8 +296,20 @@ void Renderer::create_pipelines() {
   try {
     frag = shader_module(dev, cullpipe_render_mesh_frag_spv, sizeof(cullpipe_render_mesh_frag_spv));
     VkPipelineShaderStageCreateInfo stages[2]{};
-    stages[0] = {VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO, nullptr, 0, VK_SHADER_STAGE_VERTEX_BIT, vert, "main", nullptr};
-    stages[1] = {VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO, nullptr, 0, VK_SHADER_STAGE_FRAGMENT_BIT, frag, "main", nullptr};
+    stages[0] = {VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO,
+                 nullptr,
+                 0,
+                 VK_SHADER_STAGE_VERTEX_BIT,
+                 vert,
+                 "main",
+                 nullptr};
+    stages[1] = {VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO,
+                 nullptr,
+                 0,
+                 VK_SHADER_STAGE_FRAGMENT_BIT,
+                 frag,
+                 "main",
+                 nullptr};
     VkVertexInputBindingDescription vb{0, sizeof(glm::vec3), VK_VERTEX_INPUT_RATE_VERTEX};
     VkVertexInputAttributeDescription va{0, 0, VK_FORMAT_R32G32B32_SFLOAT, 0};
     VkPipelineVertexInputStateCreateInfo vertex_input{VK_STRUCTURE_TYPE_PIPELINE_VERTEX_INPUT_STATE_CREATE_INFO};
@@ -310,7 +337,8 @@ void Renderer::create_pipelines() {
     depth.depthTestEnable = VK_TRUE;
     depth.depthWriteEnable = VK_TRUE;
     VkPipelineColorBlendAttachmentState blend_attachment{};
-    blend_attachment.colorWriteMask = VK_COLOR_COMPONENT_R_BIT | VK_COLOR_COMPONENT_G_BIT | VK_COLOR_COMPONENT_B_BIT | VK_COLOR_COMPONENT_A_BIT;
+    blend_attachment.colorWriteMask =
+        VK_COLOR_COMPONENT_R_BIT | VK_COLOR_COMPONENT_G_BIT | VK_COLOR_COMPONENT_B_BIT | VK_COLOR_COMPONENT_A_BIT;
     VkPipelineColorBlendStateCreateInfo blend{VK_STRUCTURE_TYPE_PIPELINE_COLOR_BLEND_STATE_CREATE_INFO};
     blend.attachmentCount = 1;
     blend.pAttachments = &blend_attachment;
@@ -408,8 +436,8 @@ Image Renderer::render(const Camera& camera, bool cull, FrameStats* stats) {
     // n <= maxDrawIndirectCount (checked at construction): one call either way. The culled
     // count (view 0's visible_count) cannot exceed the capacity n: maxDrawCount = n.
     if (cull) {
-      vkCmdDrawIndexedIndirectCount(cmd_, culler_->draw_buffer().handle(), 0, culler_->counter_buffer().handle(), 0, std::uint32_t(n),
-                                    sizeof(DrawCommand));
+      vkCmdDrawIndexedIndirectCount(cmd_, culler_->draw_buffer().handle(), 0, culler_->counter_buffer().handle(), 0,
+                                    std::uint32_t(n), sizeof(DrawCommand));
     } else {
       vkCmdDrawIndexedIndirect(cmd_, all_draws_.handle(), 0, std::uint32_t(n), sizeof(DrawCommand));
     }
@@ -421,8 +449,10 @@ Image Renderer::render(const Camera& camera, bool cull, FrameStats* stats) {
   copy.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
   copy.imageExtent = {config_.width, config_.height, 1};
   vkCmdCopyImageToBuffer(cmd_, color_, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, readback_.handle(), 1, &copy);
-  VkMemoryBarrier to_host{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, VK_ACCESS_TRANSFER_WRITE_BIT, VK_ACCESS_HOST_READ_BIT};
-  vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &to_host, 0, nullptr, 0, nullptr);
+  VkMemoryBarrier to_host{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, VK_ACCESS_TRANSFER_WRITE_BIT,
+                          VK_ACCESS_HOST_READ_BIT};
+  vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &to_host, 0, nullptr, 0,
+                       nullptr);
   CULLPIPE_VK_CHECK(vkEndCommandBuffer(cmd_));
   ctx_.submit_and_wait(cmd_);
 

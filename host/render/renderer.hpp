@@ -18,7 +18,7 @@ namespace cullpipe::render {
 struct RendererConfig {
   std::uint32_t width = 960;
   std::uint32_t height = 540;
-  BvKind bv = BvKind::Aabb;                                        ///< volume the culling pass tests
+  BvKind bv = BvKind::Aabb;                                            ///< volume the culling pass tests
   bounds::AabbUpdate aabb_update = bounds::AabbUpdate::HullRecompute;  ///< world AABBs of mesh objects
 };
 

@@ -18,7 +18,8 @@ Frustum read_frustum(const json_util::Reader& r, const json& f, const std::strin
       const json& planes = f["planes"];
       if (!planes.is_array() || planes.empty() || planes.size() > 6) r.fail(path + ".planes", "expected 1 to 6 planes");
       std::vector<glm::vec4> v;
-      for (std::size_t i = 0; i < planes.size(); ++i) v.push_back(r.vec4(planes[i], path + ".planes[" + std::to_string(i) + "]"));
+      for (std::size_t i = 0; i < planes.size(); ++i)
+        v.push_back(r.vec4(planes[i], path + ".planes[" + std::to_string(i) + "]"));
       return Frustum::from_planes(v);
     }
     if (f.contains("view_proj")) return Frustum::from_view_proj(r.mat4(f["view_proj"], path + ".view_proj"));
@@ -81,7 +82,8 @@ Volume read_volume(const json_util::Reader& r, const json& v, const std::string&
 json volume_to_json(const Volume& v) {
   using json_util::to_json;
   if (const Aabb* a = std::get_if<Aabb>(&v)) return {{"aabb", {{"min", to_json(a->min)}, {"max", to_json(a->max)}}}};
-  if (const Sphere* s = std::get_if<Sphere>(&v)) return {{"sphere", {{"center", to_json(s->center)}, {"radius", s->radius}}}};
+  if (const Sphere* s = std::get_if<Sphere>(&v))
+    return {{"sphere", {{"center", to_json(s->center)}, {"radius", s->radius}}}};
   const Obb& o = std::get<Obb>(v);
   return {{"obb",
            {{"center", to_json(o.center)},
@@ -139,7 +141,10 @@ std::string cull_case_to_json(const CullCase& c, const std::vector<std::vector<C
     if (i < c.objects.size()) {
       const CullCase::Object& o = c.objects[i];
       json obj;
-      obj["gltf"] = {{"node", o.origin.node}, {"mesh", o.origin.mesh}, {"primitive", o.origin.primitive}, {"instance", o.origin.instance}};
+      obj["gltf"] = {{"node", o.origin.node},
+                     {"mesh", o.origin.mesh},
+                     {"primitive", o.origin.primitive},
+                     {"instance", o.origin.instance}};
       for (const Volume& w : {Volume(o.aabb), Volume(o.obb), Volume(o.sphere)}) obj.update(volume_to_json(w));
       v["object"] = std::move(obj);
     }
@@ -158,7 +163,10 @@ std::string cull_case_to_json(const CullCase& c, const std::vector<std::vector<C
   if (!c.tests.empty()) {
     json tests = json::array();
     for (std::size_t v = 0; v < c.tests.size(); ++v) {
-      json t = {{"view", v}, {"cull", c.tests[v].cull}, {"node_tests", c.tests[v].node_tests}, {"object_tests", c.tests[v].object_tests}};
+      json t = {{"view", v},
+                {"cull", c.tests[v].cull},
+                {"node_tests", c.tests[v].node_tests},
+                {"object_tests", c.tests[v].object_tests}};
       if (c.tests[v].cull == "bvh") t["range_objects"] = c.tests[v].range_objects;
       tests.push_back(std::move(t));
     }

@@ -55,9 +55,12 @@ std::optional<SceneKind> parse_scene_kind(std::string_view name) {
 
 std::string_view to_string(SceneKind kind) {
   switch (kind) {
-    case SceneKind::Uniform: return "uniform";
-    case SceneKind::Clustered: return "clustered";
-    case SceneKind::City: return "city";
+    case SceneKind::Uniform:
+      return "uniform";
+    case SceneKind::Clustered:
+      return "clustered";
+    case SceneKind::City:
+      return "city";
   }
   return "?";
 }
@@ -71,7 +74,8 @@ Scene generate_scene(SceneKind kind, std::size_t count, std::uint64_t seed) {
   switch (kind) {
     case SceneKind::Uniform:
       for (std::size_t i = 0; i < count; ++i) {
-        const glm::vec3 p(rng.uniform(-0.5f, 0.5f) * side, rng.uniform(-0.5f, 0.5f) * side, rng.uniform(-0.5f, 0.5f) * side);
+        const glm::vec3 p(rng.uniform(-0.5f, 0.5f) * side, rng.uniform(-0.5f, 0.5f) * side,
+                          rng.uniform(-0.5f, 0.5f) * side);
         scene.objects.push_back(random_box(rng, p));
       }
       break;
@@ -121,8 +125,11 @@ std::pair<SceneKind, std::size_t> parse_generate_spec(std::string_view spec) {
   const auto colon = spec.find(':');
   const std::string kind_name(spec.substr(0, colon));
   const auto kind = parse_scene_kind(kind_name);
-  if (!kind) throw InputError("--generate " + std::string(spec) + ": unknown kind '" + kind_name + "' (uniform, clustered, city)");
-  if (colon == std::string_view::npos) throw InputError("--generate " + std::string(spec) + ": expected KIND:N, e.g. city:2000");
+  if (!kind)
+    throw InputError("--generate " + std::string(spec) + ": unknown kind '" + kind_name +
+                     "' (uniform, clustered, city)");
+  if (colon == std::string_view::npos)
+    throw InputError("--generate " + std::string(spec) + ": expected KIND:N, e.g. city:2000");
   const std::string n_text(spec.substr(colon + 1));
   char* end = nullptr;
   const double n = std::strtod(n_text.c_str(), &end);
@@ -141,8 +148,8 @@ Scene replicate_scene(const Scene& model, std::size_t copies, InstanceLayout lay
   if (copies == 0) throw InputError("--instances must be at least 1");
   if (copies == 1) return model;
   if (model.objects.size() > kMaxSceneObjects / copies)
-    throw InputError(std::to_string(copies) + " copies of " + std::to_string(model.objects.size()) + " objects exceed the limit of " +
-                     std::to_string(kMaxSceneObjects) + " objects per scene");
+    throw InputError(std::to_string(copies) + " copies of " + std::to_string(model.objects.size()) +
+                     " objects exceed the limit of " + std::to_string(kMaxSceneObjects) + " objects per scene");
   const Aabb b = model.bounds();
   const glm::vec3 c = b.center(), e = b.extent();
   const float cell = std::max({e.x, e.z, 0.25f * e.y, 1e-3f}) * 1.25f;
@@ -156,12 +163,14 @@ Scene replicate_scene(const Scene& model, std::size_t copies, InstanceLayout lay
   for (std::size_t k = 0; k < copies; ++k) {
     glm::mat4 place;
     if (layout == InstanceLayout::Grid) {
-      const float x = (float(k % side) - 0.5f * float(side - 1)) * cell, z = (float(k / side) - 0.5f * float(side - 1)) * cell;
+      const float x = (float(k % side) - 0.5f * float(side - 1)) * cell,
+                  z = (float(k / side) - 0.5f * float(side - 1)) * cell;
       place = glm::translate(glm::mat4(1.0f), glm::vec3(x, 0.0f, z)) * to_origin;
     } else {
       const float half = 0.5f * float(side) * cell;
       const glm::vec3 at(rng.uniform(-half, half), 0.0f, rng.uniform(-half, half));
-      place = glm::rotate(glm::translate(glm::mat4(1.0f), at), rng.uniform(0.0f, 6.2831853f), glm::vec3(0, 1, 0)) * to_origin;
+      place = glm::rotate(glm::translate(glm::mat4(1.0f), at), rng.uniform(0.0f, 6.2831853f), glm::vec3(0, 1, 0)) *
+              to_origin;
     }
     for (const SceneObject& o : model.objects) {
       SceneObject copy = o;

@@ -16,7 +16,6 @@
 namespace cullpipe::gltf {
 namespace {
 
-
 // Loading images is switched off: accept any image without decoding it.
 bool skip_image(tinygltf::Image*, const int, std::string*, std::string*, int, int, const unsigned char*, int, void*) {
   return true;
@@ -26,8 +25,8 @@ bool skip_image(tinygltf::Image*, const int, std::string*, std::string*, int, in
 // `element_size` bytes at the view's stride lie inside its buffer view and buffer. `what`
 // names the accessor in errors. Range checks by subtraction, so no sum can wrap around
 // (every offset comes from the file).
-const unsigned char* accessor_data(const tinygltf::Model& model, const tinygltf::Accessor& acc, std::size_t element_size,
-                                   std::size_t& stride, const std::string& what) {
+const unsigned char* accessor_data(const tinygltf::Model& model, const tinygltf::Accessor& acc,
+                                   std::size_t element_size, std::size_t& stride, const std::string& what) {
   if (acc.bufferView < 0 || std::size_t(acc.bufferView) >= model.bufferViews.size())
     throw InputError(what + "has no valid buffer view");
   const tinygltf::BufferView& view = model.bufferViews[std::size_t(acc.bufferView)];
@@ -79,7 +78,8 @@ tinygltf::Model load_model(const std::string& path) {
   return model;
 }
 
-Positions read_positions(const tinygltf::Model& model, std::size_t mesh, std::size_t primitive, const std::string& where) {
+Positions read_positions(const tinygltf::Model& model, std::size_t mesh, std::size_t primitive,
+                         const std::string& where) {
   const tinygltf::Primitive& prim = model.meshes[mesh].primitives[primitive];
   const auto it = prim.attributes.find("POSITION");
   if (it == prim.attributes.end()) throw InputError(where + "no POSITION attribute");
@@ -102,7 +102,8 @@ Positions read_positions(const tinygltf::Model& model, std::size_t mesh, std::si
     float v[3];
     std::memcpy(v, base + i * stride, sizeof v);
     for (float c : v)
-      if (!std::isfinite(c)) throw InputError(what + "vertex " + std::to_string(i) + " has a NaN or infinite coordinate");
+      if (!std::isfinite(c))
+        throw InputError(what + "vertex " + std::to_string(i) + " has a NaN or infinite coordinate");
     out.points.emplace_back(v[0], v[1], v[2]);
   }
   if (acc.minValues.size() == 3 && acc.maxValues.size() == 3) {
@@ -132,9 +133,15 @@ std::vector<std::uint32_t> read_indices(const tinygltf::Model& model, const tiny
   if (acc.type != TINYGLTF_TYPE_SCALAR) throw InputError(what + "is not SCALAR");
   std::size_t size = 0;
   switch (acc.componentType) {
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: size = 1; break;
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: size = 2; break;
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: size = 4; break;
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+      size = 1;
+      break;
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT:
+      size = 2;
+      break;
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT:
+      size = 4;
+      break;
     default:
       throw InputError(what + "has component type " + std::to_string(acc.componentType) +
                        ", not UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT");
@@ -172,8 +179,10 @@ std::vector<std::uint32_t> triangle_list(int mode, const std::vector<std::uint32
       break;
     case TINYGLTF_MODE_TRIANGLE_STRIP:
       for (std::size_t i = 2; i < n; ++i) {
-        if (i % 2 == 0) out.insert(out.end(), {indices[i - 2], indices[i - 1], indices[i]});
-        else out.insert(out.end(), {indices[i - 1], indices[i - 2], indices[i]});
+        if (i % 2 == 0)
+          out.insert(out.end(), {indices[i - 2], indices[i - 1], indices[i]});
+        else
+          out.insert(out.end(), {indices[i - 1], indices[i - 2], indices[i]});
       }
       break;
     case TINYGLTF_MODE_TRIANGLE_FAN:

@@ -1,12 +1,12 @@
 #pragma once
 // Internal to host/scene: tinygltf loading and range-checked accessor reads shared by the
 // glTF readers (gltf_points.cpp, gltf_scene.cpp). Not a public header.
+#include <tiny_gltf.h>
+
 #include <glm/vec3.hpp>
 #include <optional>
 #include <string>
 #include <vector>
-
-#include <tiny_gltf.h>
 
 #include "geom/aabb.hpp"
 
@@ -29,7 +29,8 @@ struct Positions {
 /// ("FILE: meshes[2].primitives[0]: "). Throws InputError for a missing, sparse, non-VEC3 or
 /// non-FLOAT accessor, a read past its buffer view or buffer, an empty accessor, or a NaN or
 /// infinite coordinate.
-Positions read_positions(const tinygltf::Model& model, std::size_t mesh, std::size_t primitive, const std::string& where);
+Positions read_positions(const tinygltf::Model& model, std::size_t mesh, std::size_t primitive,
+                         const std::string& where);
 
 /// Reads the primitive's index accessor, if any: a scalar of UNSIGNED_BYTE/SHORT/INT, within
 /// its buffer view, and every index below `vertex_count` (InputError otherwise). Without an

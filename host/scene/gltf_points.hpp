@@ -9,8 +9,8 @@ namespace cullpipe {
 
 /// The vertex positions of one glTF mesh, in the mesh's own space (no node transforms).
 struct GltfMeshPoints {
-  std::string name;   ///< the mesh's name, or "mesh N"
-  int mesh = 0;       ///< index in the file's meshes[]
+  std::string name;                  ///< the mesh's name, or "mesh N"
+  int mesh = 0;                      ///< index in the file's meshes[]
   std::vector<glm::vec3> positions;  ///< POSITION of every primitive, concatenated
   /// The union of the POSITION accessors' declared min/max, when every accessor has them
   /// (the glTF spec requires them; an independent check of the data).

@@ -30,7 +30,8 @@ dmat4 local_transform(const tinygltf::Node& node, const std::string& where) {
       if (!std::isfinite(x)) throw InputError(where + what + " has a NaN or infinite value");
   };
   if (!node.matrix.empty()) {
-    if (node.matrix.size() != 16) throw InputError(where + "matrix has " + std::to_string(node.matrix.size()) + " values, not 16");
+    if (node.matrix.size() != 16)
+      throw InputError(where + "matrix has " + std::to_string(node.matrix.size()) + " values, not 16");
     finite(node.matrix, "matrix");
     dmat4 m;
     for (int c = 0; c < 4; ++c)
@@ -110,14 +111,17 @@ Camera gltf_camera(const tinygltf::Camera& cam, const dmat4& world, const std::s
 
 }  // namespace
 
-bool is_gltf_path(const std::string& path) { return gltf::ends_with_ci(path, ".gltf") || gltf::ends_with_ci(path, ".glb"); }
+bool is_gltf_path(const std::string& path) {
+  return gltf::ends_with_ci(path, ".gltf") || gltf::ends_with_ci(path, ".glb");
+}
 
 GltfScene load_gltf_scene(const std::string& path, const GltfSceneOptions& options) {
   const tinygltf::Model model = gltf::load_model(path);
   const std::string file = path + ": ";
   for (const std::string& ext : model.extensionsRequired)
     if (is_geometry_extension(ext))
-      throw InputError(file + "requires extension " + ext + ", which cullpipe cannot decode (positions are unreadable without it)");
+      throw InputError(file + "requires extension " + ext +
+                       ", which cullpipe cannot decode (positions are unreadable without it)");
 
   // Parents: glTF nodes form disjoint trees, so each node has at most one parent.
   const std::size_t node_count = model.nodes.size();
@@ -125,8 +129,10 @@ GltfScene load_gltf_scene(const std::string& path, const GltfSceneOptions& optio
   for (std::size_t i = 0; i < node_count; ++i)
     for (int c : model.nodes[i].children) {
       if (c < 0 || std::size_t(c) >= node_count)
-        throw InputError(file + idx("nodes", i) + ".children lists node " + std::to_string(c) + ", which does not exist");
-      if (std::size_t(c) == i) throw InputError(file + idx("nodes", i) + " is its own child (a cycle in the node graph)");
+        throw InputError(file + idx("nodes", i) + ".children lists node " + std::to_string(c) +
+                         ", which does not exist");
+      if (std::size_t(c) == i)
+        throw InputError(file + idx("nodes", i) + " is its own child (a cycle in the node graph)");
       if (parent[std::size_t(c)] >= 0)
         throw InputError(file + idx("nodes", std::size_t(c)) + " has two parents: nodes[" +
                          std::to_string(parent[std::size_t(c)]) + "] and nodes[" + std::to_string(i) + "]");
@@ -139,7 +145,8 @@ GltfScene load_gltf_scene(const std::string& path, const GltfSceneOptions& optio
       std::vector<std::size_t> walk;
       for (std::size_t n = start;;) {
         if (state[n] == 2) break;
-        if (state[n] == 1) throw InputError(file + idx("nodes", n) + " is its own ancestor (a cycle in the node graph)");
+        if (state[n] == 1)
+          throw InputError(file + idx("nodes", n) + " is its own ancestor (a cycle in the node graph)");
         state[n] = 1;
         walk.push_back(n);
         if (parent[n] < 0) break;
@@ -153,7 +160,8 @@ GltfScene load_gltf_scene(const std::string& path, const GltfSceneOptions& optio
   std::vector<int> roots;
   std::string scene_name;
   if (model.scenes.empty()) {
-    if (options.scene > 0) throw InputError(file + "has no scenes[]; scene " + std::to_string(options.scene) + " does not exist");
+    if (options.scene > 0)
+      throw InputError(file + "has no scenes[]; scene " + std::to_string(options.scene) + " does not exist");
     for (std::size_t i = 0; i < node_count; ++i)
       if (parent[i] < 0) roots.push_back(int(i));
   } else {
@@ -166,7 +174,8 @@ GltfScene load_gltf_scene(const std::string& path, const GltfSceneOptions& optio
     std::vector<char> listed(node_count, 0);
     for (int r : roots) {
       const std::string where = file + idx("scenes", std::size_t(s)) + ".nodes: ";
-      if (r < 0 || std::size_t(r) >= node_count) throw InputError(where + "node " + std::to_string(r) + " does not exist");
+      if (r < 0 || std::size_t(r) >= node_count)
+        throw InputError(where + "node " + std::to_string(r) + " does not exist");
       if (parent[std::size_t(r)] >= 0)
         throw InputError(where + "nodes[" + std::to_string(r) + "] is not a root (it is a child of nodes[" +
                          std::to_string(parent[std::size_t(r)]) + "])");
@@ -248,7 +257,8 @@ GltfScene load_gltf_scene(const std::string& path, const GltfSceneOptions& optio
       const double det = glm::determinant(glm::dmat3(world));
       for (std::size_t p = 0; p < model.meshes[m].primitives.size(); ++p) {
         const Primitive& prim = primitive(m, p);
-        if (!(std::abs(det) > 0.0) || glm::determinant(glm::mat3(glm::mat4(world))) == 0.0f) {  // scale 0: draws nothing
+        if (!(std::abs(det) > 0.0) ||
+            glm::determinant(glm::mat3(glm::mat4(world))) == 0.0f) {  // scale 0: draws nothing
           ++out.zero_scale_instances;
           continue;
         }
@@ -277,14 +287,16 @@ GltfScene load_gltf_scene(const std::string& path, const GltfSceneOptions& optio
     int chosen = -1;
     for (const GltfCamera& c : out.cameras)
       if (c.name == options.camera) chosen = c.index;
-    if (chosen < 0 && !options.camera.empty() &&
-        std::all_of(options.camera.begin(), options.camera.end(), [](char ch) { return std::isdigit(static_cast<unsigned char>(ch)); })) {
+    if (chosen < 0 && !options.camera.empty() && std::all_of(options.camera.begin(), options.camera.end(), [](char ch) {
+          return std::isdigit(static_cast<unsigned char>(ch));
+        })) {
       const unsigned long v = std::stoul(options.camera.substr(0, 9));
       if (options.camera.size() <= 9 && v < out.cameras.size()) chosen = int(v);
     }
     if (chosen < 0) {
       std::string names;
-      for (const GltfCamera& c : out.cameras) names += (names.empty() ? "" : ", ") + std::to_string(c.index) + " \"" + c.name + "\"";
+      for (const GltfCamera& c : out.cameras)
+        names += (names.empty() ? "" : ", ") + std::to_string(c.index) + " \"" + c.name + "\"";
       throw InputError(file + "no camera \"" + options.camera + "\"; the file has " +
                        (names.empty() ? std::string("no cameras") : "cameras " + names));
     }

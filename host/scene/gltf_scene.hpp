@@ -9,17 +9,17 @@
 namespace cullpipe {
 
 struct GltfSceneOptions {
-  int scene = -1;       ///< index in scenes[]; -1: the file's default scene (scene 0 if none is marked)
-  std::string camera;   ///< "": a camera framing the scene; else a camera's name or its index in cameras[]
+  int scene = -1;                    ///< index in scenes[]; -1: the file's default scene (scene 0 if none is marked)
+  std::string camera;                ///< "": a camera framing the scene; else a camera's name or its index in cameras[]
   bounds::MeshBoundsOptions bounds;  ///< OBB and sphere builders for every mesh primitive
   bool keep_triangles = true;        ///< keep each primitive's triangles (SceneObject::triangles), for drawing
 };
 
 /// A glTF camera as found in the file.
 struct GltfCamera {
-  int index = 0;      ///< in cameras[]
-  std::string name;   ///< the camera's name, else its node's name, else "camera N"
-  int node = -1;      ///< the first node of the chosen scene that places it; -1 when none does
+  int index = 0;     ///< in cameras[]
+  std::string name;  ///< the camera's name, else its node's name, else "camera N"
+  int node = -1;     ///< the first node of the chosen scene that places it; -1 when none does
 };
 
 struct GltfScene {

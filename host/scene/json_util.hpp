@@ -55,14 +55,16 @@ struct Reader {
 
   glm::vec4 vec4(const json& v, const std::string& path) const {
     array(v, path, 4);
-    return {number(v[0], path + "[0]"), number(v[1], path + "[1]"), number(v[2], path + "[2]"), number(v[3], path + "[3]")};
+    return {number(v[0], path + "[0]"), number(v[1], path + "[1]"), number(v[2], path + "[2]"),
+            number(v[3], path + "[3]")};
   }
 
   glm::mat4 mat4(const json& v, const std::string& path) const {  // 16 numbers, column-major
     array(v, path, 16);
     glm::mat4 m;
     for (int c = 0; c < 4; ++c)
-      for (int r = 0; r < 4; ++r) m[c][r] = number(v[std::size_t(c * 4 + r)], path + "[" + std::to_string(c * 4 + r) + "]");
+      for (int r = 0; r < 4; ++r)
+        m[c][r] = number(v[std::size_t(c * 4 + r)], path + "[" + std::to_string(c * 4 + r) + "]");
     return m;
   }
 };

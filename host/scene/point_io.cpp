@@ -91,7 +91,9 @@ std::vector<glm::vec3> load_points(const std::string& path) {
     if (whole >> extra) r.fail("more than three numbers on a line");
   }
   if (in.bad()) throw InputError(path + ": read error");
-  if (off && off_remaining > 0) throw InputError(path + ": file ends before all " + std::to_string(points.size() + std::size_t(off_remaining)) + " vertices");
+  if (off && off_remaining > 0)
+    throw InputError(path + ": file ends before all " + std::to_string(points.size() + std::size_t(off_remaining)) +
+                     " vertices");
   if (points.empty()) throw InputError(path + ": no points");
   return points;
 }

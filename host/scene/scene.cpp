@@ -94,7 +94,8 @@ void validate(const Scene& scene, const std::string& source) {
     if (const std::string why = invalid_reason(ob); !why.empty()) throw InputError(where + "world-space OBB: " + why);
     if (o.mesh) {
       const Sphere s = o.mesh->world_sphere(o.world);
-      if (const std::string why = invalid_reason(s); !why.empty()) throw InputError(where + "world-space sphere: " + why);
+      if (const std::string why = invalid_reason(s); !why.empty())
+        throw InputError(where + "world-space sphere: " + why);
     }
     // The world sphere's radius is at most the world AABB's diagonal.
     if (!std::isfinite(float(glm::length(glm::dvec3(w.max) - glm::dvec3(w.min)))))

@@ -54,7 +54,8 @@ Scene parse_scene(const std::string& text, const std::string& source) {
     if (c.contains("far")) cam.far_plane = r.number(c["far"], "camera.far");
     if (c.contains("reversed_z")) cam.reversed_z = r.boolean(c["reversed_z"], "camera.reversed_z");
     if (c.contains("infinite_far")) cam.infinite_far = r.boolean(c["infinite_far"], "camera.infinite_far");
-    if (!(cam.fov_y_degrees > 0.0f && cam.fov_y_degrees < 180.0f)) r.fail("camera.fov_y_degrees", "must be in (0, 180)");
+    if (!(cam.fov_y_degrees > 0.0f && cam.fov_y_degrees < 180.0f))
+      r.fail("camera.fov_y_degrees", "must be in (0, 180)");
     if (!(cam.aspect > 0.0f)) r.fail("camera.aspect", "must be positive");
     if (!(cam.near_plane > 0.0f)) r.fail("camera.near", "must be positive");
     if (!cam.infinite_far && !(cam.far_plane > cam.near_plane)) r.fail("camera.far", "must be greater than near");
@@ -102,6 +103,8 @@ std::string scene_to_json(const Scene& scene) {
   return root.dump(1) + "\n";
 }
 
-void save_scene(const std::string& path, const Scene& scene) { json_util::write_file_atomic(path, scene_to_json(scene)); }
+void save_scene(const std::string& path, const Scene& scene) {
+  json_util::write_file_atomic(path, scene_to_json(scene));
+}
 
 }  // namespace cullpipe

@@ -33,16 +33,19 @@ std::string spirv_problem(std::span<const std::uint32_t> words) {
 ComputePipeline::ComputePipeline(const Context& ctx, const ComputePipelineDesc& desc)
     : device_(ctx.device()), push_constant_size_(desc.push_constant_size) {
   const std::string name = desc.name;
-  if (const std::string why = spirv_problem(desc.spirv); !why.empty()) throw Error(name + ": SPIR-V is corrupt: " + why);
+  if (const std::string why = spirv_problem(desc.spirv); !why.empty())
+    throw Error(name + ": SPIR-V is corrupt: " + why);
   if (desc.push_constant_size > ctx.properties().limits.maxPushConstantsSize)
-    throw Error(name + ": needs " + std::to_string(desc.push_constant_size) + " bytes of push constants, device allows " +
+    throw Error(name + ": needs " + std::to_string(desc.push_constant_size) +
+                " bytes of push constants, device allows " +
                 std::to_string(ctx.properties().limits.maxPushConstantsSize));
 
   VkShaderModule module = VK_NULL_HANDLE;
   try {
     std::vector<VkDescriptorSetLayoutBinding> bindings(desc.binding_count);
     for (std::uint32_t i = 0; i < desc.binding_count; ++i) {
-      const bool texel = i < 32 && (desc.uniform_texel_bindings >> i & 1u), storage_texel = i < 32 && (desc.storage_texel_bindings >> i & 1u);
+      const bool texel = i < 32 && (desc.uniform_texel_bindings >> i & 1u),
+                 storage_texel = i < 32 && (desc.storage_texel_bindings >> i & 1u);
       bindings[i] = {i,
                      texel           ? VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER
                      : storage_texel ? VK_DESCRIPTOR_TYPE_STORAGE_TEXEL_BUFFER

@@ -11,13 +11,13 @@ namespace cullpipe::vk {
 
 /// What a compute pipeline is built from.
 struct ComputePipelineDesc {
-  std::span<const std::uint32_t> spirv;            ///< SPIR-V words, entry point "main"
-  std::uint32_t binding_count = 0;                 ///< bindings 0..n-1 of set 0: storage buffers, except those below
-  std::uint32_t push_constant_size = 0;            ///< bytes; checked against the device limit
-  std::span<const std::uint32_t> specialization;   ///< values of constant_id 0..n-1 (32-bit each)
-  const char* name = "compute pipeline";           ///< for error messages
-  std::uint32_t uniform_texel_bindings = 0;        ///< bit i set: binding i is a uniform texel buffer
-  std::uint32_t storage_texel_bindings = 0;        ///< bit i set: binding i is a storage texel buffer
+  std::span<const std::uint32_t> spirv;           ///< SPIR-V words, entry point "main"
+  std::uint32_t binding_count = 0;                ///< bindings 0..n-1 of set 0: storage buffers, except those below
+  std::uint32_t push_constant_size = 0;           ///< bytes; checked against the device limit
+  std::span<const std::uint32_t> specialization;  ///< values of constant_id 0..n-1 (32-bit each)
+  const char* name = "compute pipeline";          ///< for error messages
+  std::uint32_t uniform_texel_bindings = 0;       ///< bit i set: binding i is a uniform texel buffer
+  std::uint32_t storage_texel_bindings = 0;       ///< bit i set: binding i is a storage texel buffer
 };
 
 /// Why `words` is not a structurally sound SPIR-V module (header, then instructions that

@@ -13,7 +13,8 @@ namespace cullpipe::vk {
 const char* result_name(VkResult r) {
   switch (r) {
 #define CULLPIPE_RESULT(x) \
-  case x: return #x;
+  case x:                  \
+    return #x;
     CULLPIPE_RESULT(VK_SUCCESS)
     CULLPIPE_RESULT(VK_NOT_READY)
     CULLPIPE_RESULT(VK_TIMEOUT)
@@ -39,7 +40,8 @@ const char* result_name(VkResult r) {
     CULLPIPE_RESULT(VK_ERROR_INVALID_OPAQUE_CAPTURE_ADDRESS)
     CULLPIPE_RESULT(VK_PIPELINE_COMPILE_REQUIRED)
 #undef CULLPIPE_RESULT
-    default: return "VK_RESULT_UNKNOWN";
+    default:
+      return "VK_RESULT_UNKNOWN";
   }
 }
 
@@ -57,11 +59,16 @@ std::string lower(std::string s) {
 
 const char* type_name(VkPhysicalDeviceType t) {
   switch (t) {
-    case VK_PHYSICAL_DEVICE_TYPE_DISCRETE_GPU: return "discrete";
-    case VK_PHYSICAL_DEVICE_TYPE_INTEGRATED_GPU: return "integrated";
-    case VK_PHYSICAL_DEVICE_TYPE_VIRTUAL_GPU: return "virtual";
-    case VK_PHYSICAL_DEVICE_TYPE_CPU: return "cpu";
-    default: return "other";
+    case VK_PHYSICAL_DEVICE_TYPE_DISCRETE_GPU:
+      return "discrete";
+    case VK_PHYSICAL_DEVICE_TYPE_INTEGRATED_GPU:
+      return "integrated";
+    case VK_PHYSICAL_DEVICE_TYPE_VIRTUAL_GPU:
+      return "virtual";
+    case VK_PHYSICAL_DEVICE_TYPE_CPU:
+      return "cpu";
+    default:
+      return "other";
   }
 }
 
@@ -97,8 +104,9 @@ VkInstance create_instance(bool validation, const VkDebugUtilsMessengerCreateInf
     vkEnumerateInstanceLayerProperties(&n, nullptr);
     std::vector<VkLayerProperties> available(n);
     vkEnumerateInstanceLayerProperties(&n, available.data());
-    const bool found = std::any_of(available.begin(), available.end(),
-                                   [](const VkLayerProperties& l) { return std::strcmp(l.layerName, kValidationLayer) == 0; });
+    const bool found = std::any_of(available.begin(), available.end(), [](const VkLayerProperties& l) {
+      return std::strcmp(l.layerName, kValidationLayer) == 0;
+    });
     if (!found)
       throw Error(std::string("validation was requested but ") + kValidationLayer +
                   " is not installed (Debian: apt-get install vulkan-validationlayers)");
@@ -159,7 +167,8 @@ int usable_queue_family(VkPhysicalDevice pd, std::string& why) {
   int best = -1, best_score = -1;
   for (std::uint32_t i = 0; i < n; ++i) {
     if (!(families[i].queueFlags & VK_QUEUE_COMPUTE_BIT)) continue;
-    const int score = ((families[i].queueFlags & VK_QUEUE_GRAPHICS_BIT) ? 2 : 0) + (families[i].timestampValidBits ? 1 : 0);
+    const int score =
+        ((families[i].queueFlags & VK_QUEUE_GRAPHICS_BIT) ? 2 : 0) + (families[i].timestampValidBits ? 1 : 0);
     if (score > best_score) best = int(i), best_score = score;
   }
   if (best < 0) why = "has no compute queue";
@@ -186,16 +195,18 @@ void Context::reserve_memory(VkDeviceSize bytes, const std::string& what) const 
   const VkDeviceSize before = memory_in_use_.fetch_add(bytes);
   if (budget && before + bytes > budget) {
     memory_in_use_ -= bytes;
-    throw Error("allocating " + what + " failed: VK_ERROR_OUT_OF_DEVICE_MEMORY (memory budget of " + std::to_string(budget) +
-                    " bytes, " + std::to_string(before) + " in use)",
+    throw Error("allocating " + what + " failed: VK_ERROR_OUT_OF_DEVICE_MEMORY (memory budget of " +
+                    std::to_string(budget) + " bytes, " + std::to_string(before) + " in use)",
                 VK_ERROR_OUT_OF_DEVICE_MEMORY);
   }
 }
 
-Context::Context(const ContextOptions& options) : on_message_(options.on_message), memory_budget_(options.memory_budget) {
+Context::Context(const ContextOptions& options)
+    : on_message_(options.on_message), memory_budget_(options.memory_budget) {
   try {
     VkDebugUtilsMessengerCreateInfoEXT info{VK_STRUCTURE_TYPE_DEBUG_UTILS_MESSENGER_CREATE_INFO_EXT};
-    info.messageSeverity = VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT;
+    info.messageSeverity =
+        VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT;
     info.messageType = VK_DEBUG_UTILS_MESSAGE_TYPE_GENERAL_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_TYPE_VALIDATION_BIT_EXT |
                        VK_DEBUG_UTILS_MESSAGE_TYPE_PERFORMANCE_BIT_EXT;
     info.pfnUserCallback = &Context::debug_callback;
@@ -256,7 +267,8 @@ Context::Context(const ContextOptions& options) : on_message_(options.on_message
     enable.features.multiDrawIndirect = f2.features.multiDrawIndirect;
     enable.features.drawIndirectFirstInstance = f2.features.drawIndirectFirstInstance;
     enable.features.pipelineStatisticsQuery = f2.features.pipelineStatisticsQuery;
-    draw_indirect_count_ = f12.drawIndirectCount && f2.features.multiDrawIndirect && f2.features.drawIndirectFirstInstance;
+    draw_indirect_count_ =
+        f12.drawIndirectCount && f2.features.multiDrawIndirect && f2.features.drawIndirectFirstInstance;
     pipeline_statistics_ = f2.features.pipelineStatisticsQuery;
 
     const float priority = 1.0f;

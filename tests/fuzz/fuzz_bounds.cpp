@@ -9,12 +9,12 @@
 // a hill-climbing walk stopped 0.6 short among points at 7*10^9 and 1: docs/numerics.md,
 // World-space volumes). The first byte's low bit also runs the exact OBB
 // (slow on large hulls, so only for sets of at most 64 points).
-#include <glm/ext/matrix_transform.hpp>
-#include <glm/geometric.hpp>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <glm/ext/matrix_transform.hpp>
+#include <glm/geometric.hpp>
 #include <vector>
 
 #include "bounds/aabb_update.hpp"
@@ -73,7 +73,8 @@ void check_obb(const Obb& b, const Points& p, const char* what) {
 // sphere_fit.hpp: the radius is the largest double distance, rounded up.
 void check_sphere(const Sphere& s, const Points& p, const char* what) {
   for (std::size_t i = 0; i < p.size(); ++i)
-    if (!(glm::length(glm::dvec3(p[i]) - glm::dvec3(s.center)) <= double(s.radius) * (1 + 1e-12) + 1e-300)) fail(what, i);
+    if (!(glm::length(glm::dvec3(p[i]) - glm::dvec3(s.center)) <= double(s.radius) * (1 + 1e-12) + 1e-300))
+      fail(what, i);
 }
 
 }  // namespace
@@ -97,13 +98,15 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       bounds::AabbTracker tracker(p);
       check_hull(tracker.hull(), p);
       const glm::mat4 turn = glm::rotate(glm::mat4(1.0f), 0.7f, glm::normalize(glm::vec3(1, 2, 3)));
-      for (const glm::mat4& m : {glm::mat4(1.0f), turn, glm::translate(glm::mat4(1.0f), glm::vec3(3.0f, -2.0f, 0.5f)) * turn}) {
+      for (const glm::mat4& m :
+           {glm::mat4(1.0f), turn, glm::translate(glm::mat4(1.0f), glm::vec3(3.0f, -2.0f, 0.5f)) * turn}) {
         const Aabb full = tracker.update(m, bounds::AabbUpdate::Recompute);
         tracker.update(m, bounds::AabbUpdate::HillClimb);
         tracker.update(m, bounds::AabbUpdate::HullRecompute);
         const Aabb b = tracker.update(m, bounds::AabbUpdate::TransformBox);
         for (int k = 0; k < 3; ++k)
-          if (!(b.min[k] <= full.min[k] && full.max[k] <= b.max[k])) fail("the transform-box update misses the recomputed box", std::size_t(k));
+          if (!(b.min[k] <= full.min[k] && full.max[k] <= b.max[k]))
+            fail("the transform-box update misses the recomputed box", std::size_t(k));
       }
     } catch (const bounds::BadPoints&) {
       // Documented: an empty set or a non-finite coordinate.

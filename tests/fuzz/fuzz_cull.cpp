@@ -12,14 +12,13 @@
 //     objects in tree order (with and without classes), and a two-view pass gives each view
 //     what a pass of its own gives.
 // Any difference prints the object, its volume, the planes and both answers, and aborts.
-#include <glm/gtc/quaternion.hpp>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <glm/gtc/quaternion.hpp>
 #include <numeric>
 #include <random>
 #include <span>
@@ -47,7 +46,9 @@ class Bytes {
   Bytes(const std::uint8_t* data, std::size_t size) : data_(data), size_(size) {}
   std::uint8_t u8() { return at_ < size_ ? data_[at_++] : 0; }
   std::int16_t i16() { return static_cast<std::int16_t>(u8() | u8() << 8); }
-  std::uint32_t u32() { return std::uint32_t(u8()) | std::uint32_t(u8()) << 8 | std::uint32_t(u8()) << 16 | std::uint32_t(u8()) << 24; }
+  std::uint32_t u32() {
+    return std::uint32_t(u8()) | std::uint32_t(u8()) << 8 | std::uint32_t(u8()) << 16 | std::uint32_t(u8()) << 24;
+  }
 
  private:
   const std::uint8_t* data_;
@@ -55,8 +56,8 @@ class Bytes {
 };
 
 template <class Volume>
-[[noreturn]] void fail(const std::string& what, const std::vector<Volume>& volumes, const Frustum& f, std::size_t object, int expected,
-                       int got) {
+[[noreturn]] void fail(const std::string& what, const std::vector<Volume>& volumes, const Frustum& f,
+                       std::size_t object, int expected, int got) {
   std::fprintf(stderr, "fuzz_cull: %s\n", what.c_str());
   if (object < volumes.size()) std::fprintf(stderr, "  object %zu: %s\n", object, describe(volumes[object]).c_str());
   std::fprintf(stderr, "  planes %s\n", describe(f).c_str());
@@ -74,7 +75,9 @@ Aabb make(Bytes& in, float scale, Aabb*) {
   const glm::vec3 e{extent(in, scale), extent(in, scale), extent(in, scale)};
   return {c - e, c + e};
 }
-Sphere make(Bytes& in, float scale, Sphere*) { return {{coord(in, scale), coord(in, scale), coord(in, scale)}, extent(in, scale)}; }
+Sphere make(Bytes& in, float scale, Sphere*) {
+  return {{coord(in, scale), coord(in, scale), coord(in, scale)}, extent(in, scale)};
+}
 Obb make(Bytes& in, float scale, Obb*) {
   Obb b;
   b.center = {coord(in, scale), coord(in, scale), coord(in, scale)};
@@ -145,7 +148,8 @@ void run(Bytes& in, std::uint8_t flags) {
   for (std::size_t i = 0; i < base; ++i) volumes.push_back(make(in, scale, static_cast<Volume*>(nullptr)));
   // Copies side by side along x, one grid of 160 steps apart (the coordinates span +-64 + 16).
   for (std::size_t c = 1; c < copies; ++c)
-    for (std::size_t i = 0; i < base; ++i) volumes.push_back(moved(volumes[i], glm::vec3(float(c) * 160.0f * scale, 0.0f, 0.0f)));
+    for (std::size_t i = 0; i < base; ++i)
+      volumes.push_back(moved(volumes[i], glm::vec3(float(c) * 160.0f * scale, 0.0f, 0.0f)));
   const std::size_t n = volumes.size();
 
   // The frustum: planes of small-integer coefficients, at the scene's scale.
@@ -198,9 +202,12 @@ void run(Bytes& in, std::uint8_t flags) {
   const reference::CullCounts ref_counts = reference::classify_all(std::span<const Volume>(volumes), f, ref);
   const bvh::HierarchicalResult expected = bvh::cull_hierarchical(tree, std::span<const Volume>(volumes), f, {range});
   for (std::size_t i = 0; i < n; ++i)
-    if (expected.classes[i] != ref[i]) fail("cull_hierarchical's class differs from the reference's", volumes, f, i, int(ref[i]), int(expected.classes[i]));
+    if (expected.classes[i] != ref[i])
+      fail("cull_hierarchical's class differs from the reference's", volumes, f, i, int(ref[i]),
+           int(expected.classes[i]));
   if (expected.visible != ref_counts.visible || expected.inside != ref_counts.inside)
-    fail("cull_hierarchical's counts differ from the reference's", volumes, f, n, int(ref_counts.visible), int(expected.visible));
+    fail("cull_hierarchical's counts differ from the reference's", volumes, f, n, int(ref_counts.visible),
+         int(expected.visible));
   std::vector<std::uint32_t> ref_ids, tree_ids;
   for (std::size_t i = 0; i < n; ++i)
     if (is_visible(ref[i])) ref_ids.push_back(static_cast<std::uint32_t>(i));
@@ -208,8 +215,9 @@ void run(Bytes& in, std::uint8_t flags) {
     if (is_visible(ref[o])) tree_ids.push_back(o);
 
   for (Isa isa : fast::supported_isas()) {
-    const std::string at = std::string(" (isa ") + std::string(to_string(isa)) + ", " + std::to_string(threads) + " threads, range " +
-                           std::to_string(range) + ", " + std::to_string(n) + " objects, " + std::to_string(tree.nodes.size()) + " nodes)";
+    const std::string at = std::string(" (isa ") + std::string(to_string(isa)) + ", " + std::to_string(threads) +
+                           " threads, range " + std::to_string(range) + ", " + std::to_string(n) + " objects, " +
+                           std::to_string(tree.nodes.size()) + " nodes)";
     // Flat. A run guesses from the last pass whether to list its ids as it classifies them:
     // a fresh culler's first pass guesses every run sparse (the dense ones list and flag
     // themselves); after a pass that finds every run dense, the sparse runs are listed from
@@ -217,27 +225,36 @@ void run(Bytes& in, std::uint8_t flags) {
     fast::CpuCuller flat({threads, isa, chunk});
     flat.upload(std::span<const Volume>(volumes));
     const Frustum everything;  // no planes: every object INSIDE
-    static const char* const kPasses[] = {", a fresh culler's pass", ", after an all-dense pass", ", the pass after that"};
+    static const char* const kPasses[] = {", a fresh culler's pass", ", after an all-dense pass",
+                                          ", the pass after that"};
     for (const char* pass : kPasses) {
-      if (pass == kPasses[1]) (void)flat.cull(std::span<const Frustum>(&everything, 1), fast::CpuCullOptions{false, true});
+      if (pass == kPasses[1])
+        (void)flat.cull(std::span<const Frustum>(&everything, 1), fast::CpuCullOptions{false, true});
       const std::vector<fast::CpuViewResult> got = flat.cull(std::span<const Frustum>(&f, 1));
       for (std::size_t i = 0; i < n; ++i)
         if (got[0].classes[i] != ref[i])
-          fail("CpuCuller's class differs from the reference's" + at + pass, volumes, f, i, int(ref[i]), int(got[0].classes[i]));
-      if (!(got[0].counts == ref_counts)) fail("CpuCuller's counts differ" + at + pass, volumes, f, n, int(ref_counts.visible), int(got[0].counts.visible));
+          fail("CpuCuller's class differs from the reference's" + at + pass, volumes, f, i, int(ref[i]),
+               int(got[0].classes[i]));
+      if (!(got[0].counts == ref_counts))
+        fail("CpuCuller's counts differ" + at + pass, volumes, f, n, int(ref_counts.visible),
+             int(got[0].counts.visible));
       if (got[0].visible_ids != ref_ids)
-        fail("CpuCuller's visible list differs" + at + pass, volumes, f, n, int(ref_ids.size()), int(got[0].visible_ids.size()));
+        fail("CpuCuller's visible list differs" + at + pass, volumes, f, n, int(ref_ids.size()),
+             int(got[0].visible_ids.size()));
     }
     // Two views in one call (each chunk read once for both): the first as alone, the second
     // seeing everything INSIDE.
     const Frustum two_views[2] = {f, everything};
     const std::vector<fast::CpuViewResult> two = flat.cull(two_views);
     for (std::size_t i = 0; i < n; ++i)
-      if (two[0].classes[i] != ref[i]) fail("CpuCuller's class differs with two views" + at, volumes, f, i, int(ref[i]), int(two[0].classes[i]));
+      if (two[0].classes[i] != ref[i])
+        fail("CpuCuller's class differs with two views" + at, volumes, f, i, int(ref[i]), int(two[0].classes[i]));
     if (!(two[0].counts == ref_counts) || two[0].visible_ids != ref_ids)
-      fail("CpuCuller's counts or list differ with two views" + at, volumes, f, n, int(ref_counts.visible), int(two[0].counts.visible));
+      fail("CpuCuller's counts or list differ with two views" + at, volumes, f, n, int(ref_counts.visible),
+           int(two[0].counts.visible));
     if (two[1].counts.visible != n || two[1].counts.inside != n || two[1].visible_ids.size() != n)
-      fail("CpuCuller's second view (no planes) is not all INSIDE" + at, volumes, everything, n, int(n), int(two[1].counts.inside));
+      fail("CpuCuller's second view (no planes) is not all INSIDE" + at, volumes, everything, n, int(n),
+           int(two[1].counts.inside));
 
     // Hierarchical: classes and list, the list alone, two views.
     fast::CpuBvhCuller fast_bvh(threads, isa);
@@ -246,17 +263,21 @@ void run(Bytes& in, std::uint8_t flags) {
     std::vector<std::uint32_t> ids;
     fast_bvh.cull(f, {true, true, range}, h, ids);
     for (std::size_t i = 0; i < n; ++i)
-      if (h.classes[i] != expected.classes[i]) fail("CpuBvhCuller's class differs" + at, volumes, f, i, int(expected.classes[i]), int(h.classes[i]));
-    if (h.node_tests != expected.node_tests) fail("CpuBvhCuller's node tests differ" + at, volumes, f, n, int(expected.node_tests), int(h.node_tests));
+      if (h.classes[i] != expected.classes[i])
+        fail("CpuBvhCuller's class differs" + at, volumes, f, i, int(expected.classes[i]), int(h.classes[i]));
+    if (h.node_tests != expected.node_tests)
+      fail("CpuBvhCuller's node tests differ" + at, volumes, f, n, int(expected.node_tests), int(h.node_tests));
     if (h.object_tests != expected.object_tests)
       fail("CpuBvhCuller's object tests differ" + at, volumes, f, n, int(expected.object_tests), int(h.object_tests));
     if (h.visible != expected.visible || h.inside != expected.inside)
       fail("CpuBvhCuller's counts differ" + at, volumes, f, n, int(expected.inside), int(h.inside));
-    if (ids != tree_ids) fail("CpuBvhCuller's visible list differs" + at, volumes, f, n, int(tree_ids.size()), int(ids.size()));
+    if (ids != tree_ids)
+      fail("CpuBvhCuller's visible list differs" + at, volumes, f, n, int(tree_ids.size()), int(ids.size()));
     bvh::HierarchicalResult listed;
     std::vector<std::uint32_t> listed_ids;
     fast_bvh.cull(f, {false, true, range}, listed, listed_ids);
-    if (listed_ids != tree_ids || listed.visible != expected.visible || listed.inside != expected.inside || !listed.classes.empty())
+    if (listed_ids != tree_ids || listed.visible != expected.visible || listed.inside != expected.inside ||
+        !listed.classes.empty())
       fail("CpuBvhCuller's list-only pass differs" + at, volumes, f, n, int(tree_ids.size()), int(listed_ids.size()));
     Frustum all;  // a second view that sees everything (every volume is INSIDE its one plane)
     all.planes[0] = Plane{{0.0f, 0.0f, 1.0f}, 1e35f};
@@ -264,9 +285,10 @@ void run(Bytes& in, std::uint8_t flags) {
     const Frustum views[2] = {f, all};
     std::vector<fast::CpuBvhViewResult> both;
     fast_bvh.cull(views, {true, true, range}, both);
-    if (both[0].result.classes != h.classes || both[0].visible_ids != ids || both[0].result.node_tests != h.node_tests ||
-        both[0].result.object_tests != h.object_tests)
-      fail("CpuBvhCuller's two-view pass differs from its one-view pass" + at, volumes, f, n, int(ids.size()), int(both[0].visible_ids.size()));
+    if (both[0].result.classes != h.classes || both[0].visible_ids != ids ||
+        both[0].result.node_tests != h.node_tests || both[0].result.object_tests != h.object_tests)
+      fail("CpuBvhCuller's two-view pass differs from its one-view pass" + at, volumes, f, n, int(ids.size()),
+           int(both[0].visible_ids.size()));
     if (both[1].visible_ids != tree.objects || both[1].result.inside != n)
       fail("CpuBvhCuller's everything view lost objects" + at, volumes, f, n, int(n), int(both[1].visible_ids.size()));
   }
@@ -278,9 +300,15 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   Bytes in(data, size);
   const std::uint8_t flags = in.u8();
   switch (flags % 3) {
-    case 0: run<Aabb>(in, flags); break;
-    case 1: run<Sphere>(in, flags); break;
-    default: run<Obb>(in, flags); break;
+    case 0:
+      run<Aabb>(in, flags);
+      break;
+    case 1:
+      run<Sphere>(in, flags);
+      break;
+    default:
+      run<Obb>(in, flags);
+      break;
   }
   return 0;
 }

@@ -24,7 +24,10 @@ inline const std::filesystem::path& temp_dir() {
   static const std::filesystem::path dir = [] {
     std::filesystem::path d = std::filesystem::temp_directory_path() / ("cullpipe_fuzz_" + std::to_string(::getpid()));
     std::filesystem::create_directories(d);
-    std::atexit([] { std::error_code ec; std::filesystem::remove_all(temp_dir(), ec); });
+    std::atexit([] {
+      std::error_code ec;
+      std::filesystem::remove_all(temp_dir(), ec);
+    });
     return d;
   }();
   return dir;
@@ -32,7 +35,8 @@ inline const std::filesystem::path& temp_dir() {
 
 inline std::string write_temp(const std::uint8_t* data, std::size_t size, const std::string& name) {
   const std::filesystem::path p = temp_dir() / name;
-  std::ofstream(p, std::ios::binary | std::ios::trunc).write(reinterpret_cast<const char*>(data), std::streamsize(size));
+  std::ofstream(p, std::ios::binary | std::ios::trunc)
+      .write(reinterpret_cast<const char*>(data), std::streamsize(size));
   return p.string();
 }
 
