@@ -1,0 +1,180 @@
+#include "cull/occlusion.hpp"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "cull/reference.hpp"
+
+namespace cullpipe::occlusion {
+
+namespace {
+
+// Margins, each proved in docs/numerics.md, "Occlusion footprints".
+constexpr float kClipError = 0x1p-18f;      // of a clip row's magnitude bound: ours and the vertex pipeline's error
+constexpr float kTiny = 0x1p-100f;          // subnormal roundings
+constexpr float kPixelMargin = 0.0625f;     // pixels: the rasteriser's snapping, our roundings
+constexpr float kPixelRelative = 0x1p-20f;  // of a pixel coordinate's magnitude
+constexpr float kDepthMargin = 0x1p-20f;    // depth: the rasteriser's interpolation, our roundings
+
+/// A volume as the footprint sees it: its corners, and per world axis a bound on the magnitude
+/// of any of its points' coordinates (and of the error in the corners as computed).
+struct Corners {
+  glm::vec3 p[8];
+  glm::vec3 magnitude;
+};
+
+/// The bounds of x / w over x in [x_lo, x_hi] and w in [w_lo, w_hi], 0 < w_lo.
+float quotient_lo(float x_lo, float w_lo, float w_hi) { return x_lo >= 0.0f ? x_lo / w_hi : x_lo / w_lo; }
+float quotient_hi(float x_hi, float w_lo, float w_hi) { return x_hi >= 0.0f ? x_hi / w_lo : x_hi / w_hi; }
+
+/// The pixel range [first, last] of ndc range [lo, hi] on a viewport side of `size` pixels.
+void pixel_range(float lo, float hi, std::uint32_t size, std::uint32_t& first, std::uint32_t& last) {
+  const float half = 0.5f * float(size);
+  const float from = (lo + 1.0f) * half, to = (hi + 1.0f) * half;
+  const float a = std::floor(from - (kPixelMargin + std::fabs(from) * kPixelRelative));
+  const float b = std::floor(to + (kPixelMargin + std::fabs(to) * kPixelRelative));
+  const float top = float(size - 1);
+  first = std::uint32_t(std::min(std::max(a, 0.0f), top));
+  last = std::uint32_t(std::min(std::max(b, 0.0f), top));
+}
+
+Footprint project(const Corners& c, const OcclusionView& view) {
+  const glm::mat4& m = view.view_proj;
+  // Per clip row r, the error allowed in any point's clip coordinate: kClipError times a bound
+  // on sum_j |m[j][r]| |p_j| + |m[3][r]| over the volume's points.
+  float e[4];
+  for (int r = 0; r < 4; ++r) {
+    const float a = ((std::fabs(m[0][r]) * c.magnitude.x + std::fabs(m[1][r]) * c.magnitude.y) +
+                     std::fabs(m[2][r]) * c.magnitude.z) +
+                    std::fabs(m[3][r]);
+    e[r] = a * kClipError + kTiny;
+  }
+  float x_lo = INFINITY, x_hi = -INFINITY, y_lo = INFINITY, y_hi = -INFINITY, z_lo = INFINITY, z_hi = -INFINITY;
+  Footprint f;
+  for (const glm::vec3& p : c.p) {
+    float v[4];
+    for (int r = 0; r < 4; ++r) v[r] = ((m[0][r] * p.x + m[1][r] * p.y) + m[2][r] * p.z) + m[3][r];
+    const float w_lo = v[3] - e[3], w_hi = v[3] + e[3];
+    if (!(w_lo > 0.0f)) return f;  // at or behind the eye (or NaN): not projected
+    x_lo = std::min(x_lo, quotient_lo(v[0] - e[0], w_lo, w_hi));
+    x_hi = std::max(x_hi, quotient_hi(v[0] + e[0], w_lo, w_hi));
+    y_lo = std::min(y_lo, quotient_lo(v[1] - e[1], w_lo, w_hi));
+    y_hi = std::max(y_hi, quotient_hi(v[1] + e[1], w_lo, w_hi));
+    z_lo = std::min(z_lo, quotient_lo(v[2] - e[2], w_lo, w_hi));
+    z_hi = std::max(z_hi, quotient_hi(v[2] + e[2], w_lo, w_hi));
+  }
+  if (!std::isfinite(x_lo) || !std::isfinite(x_hi) || !std::isfinite(y_lo) || !std::isfinite(y_hi) ||
+      !std::isfinite(z_lo) || !std::isfinite(z_hi))
+    return f;
+  pixel_range(x_lo, x_hi, view.width, f.x0, f.x1);
+  pixel_range(y_lo, y_hi, view.height, f.y0, f.y1);
+  f.nearest = view.reversed_z ? z_hi + (kDepthMargin + std::fabs(z_hi) * kDepthMargin)
+                              : z_lo - (kDepthMargin + std::fabs(z_lo) * kDepthMargin);
+  f.projected = true;
+  return f;
+}
+
+/// Corners of a box given by centre, three axes scaled by their half extents, computed in float
+/// as ((c + s0 a0) + s1 a1) + s2 a2; magnitude_j = ((|c_j| + |a0_j|) + |a1_j|) + |a2_j| bounds
+/// every point's coordinate and, times 2^-21, the corners' rounding.
+Corners box_corners(const glm::vec3& c, const glm::vec3& a0, const glm::vec3& a1, const glm::vec3& a2) {
+  Corners k;
+  for (int i = 0; i < 8; ++i) {
+    const glm::vec3 s0 = (i & 1) ? a0 : -a0, s1 = (i & 2) ? a1 : -a1, s2 = (i & 4) ? a2 : -a2;
+    k.p[i] = ((c + s0) + s1) + s2;
+  }
+  k.magnitude = ((glm::abs(c) + glm::abs(a0)) + glm::abs(a1)) + glm::abs(a2);
+  return k;
+}
+
+template <class Volume>
+Classification classify_volume(const Volume& v, const Frustum& frustum, const OcclusionView& view,
+                               const DepthPyramid& pyramid, const OcclusionOptions& options) {
+  check_view(view, pyramid, options);
+  const Classification c = reference::classify(v, frustum);
+  if (c == Classification::Outside) return c;
+  return occluded(footprint(v, view), pyramid, options) ? Classification::Occluded : c;
+}
+
+}  // namespace
+
+Footprint footprint(const Aabb& box, const OcclusionView& view) {
+  Corners k;
+  for (int i = 0; i < 8; ++i) k.p[i] = box.corner(i);  // exact
+  k.magnitude = glm::max(glm::abs(box.min), glm::abs(box.max));
+  return project(k, view);
+}
+
+Footprint footprint(const Obb& box, const OcclusionView& view) {
+  return project(box_corners(box.center, box.basis[0] * box.half_extents.x, box.basis[1] * box.half_extents.y,
+                             box.basis[2] * box.half_extents.z),
+                 view);
+}
+
+Footprint footprint(const Sphere& s, const OcclusionView& view) {
+  const float r = std::fabs(s.radius);
+  return project(box_corners(s.center, glm::vec3(r, 0.0f, 0.0f), glm::vec3(0.0f, r, 0.0f), glm::vec3(0.0f, 0.0f, r)),
+                 view);
+}
+
+unsigned test_level(const Footprint& f, const DepthPyramid& pyramid, std::uint32_t texels_per_axis) {
+  unsigned k = 0;
+  while (k + 1 < pyramid.levels.size() &&
+         ((f.x1 >> k) - (f.x0 >> k) >= texels_per_axis || (f.y1 >> k) - (f.y0 >> k) >= texels_per_axis))
+    ++k;
+  return k;
+}
+
+bool occluded(const Footprint& f, const DepthPyramid& pyramid, const OcclusionOptions& options) {
+  if (!f.projected) return false;
+  const unsigned k = test_level(f, pyramid, options.texels_per_axis);
+  const PyramidLevel& level = pyramid.levels[k];
+  const std::uint32_t tx0 = texel_of(f.x0, k, level.width), tx1 = texel_of(f.x1, k, level.width);
+  const std::uint32_t ty0 = texel_of(f.y0, k, level.height), ty1 = texel_of(f.y1, k, level.height);
+  for (std::uint32_t y = ty0; y <= ty1; ++y)
+    for (std::uint32_t x = tx0; x <= tx1; ++x) {
+      const float farthest = pyramid.at(k, x, y);
+      // Hidden only behind a depth strictly nearer than the volume's nearest (NaN: not hidden).
+      if (!(pyramid.reversed_z ? f.nearest < farthest : f.nearest > farthest)) return false;
+    }
+  return true;
+}
+
+void check_view(const OcclusionView& view, const DepthPyramid& pyramid, const OcclusionOptions& options) {
+  const auto size = [](std::uint32_t w, std::uint32_t h) { return std::to_string(w) + "x" + std::to_string(h); };
+  if (view.width != pyramid.width || view.height != pyramid.height)
+    throw std::invalid_argument("occlusion: a " + size(view.width, view.height) + " view does not match a " +
+                                size(pyramid.width, pyramid.height) + " depth pyramid");
+  if (view.width == 0 || view.height == 0 || view.width > kMaxViewportSide || view.height > kMaxViewportSide)
+    throw std::invalid_argument("occlusion: a " + size(view.width, view.height) + " viewport (each side 1 to " +
+                                std::to_string(kMaxViewportSide) + ")");
+  if (view.reversed_z != pyramid.reversed_z)
+    throw std::invalid_argument(std::string("occlusion: a ") + (view.reversed_z ? "reversed-Z" : "standard-depth") +
+                                " view against a " + (pyramid.reversed_z ? "reversed-Z" : "standard-depth") +
+                                " pyramid");
+  for (int c = 0; c < 4; ++c)
+    for (int r = 0; r < 4; ++r)
+      if (!std::isfinite(view.view_proj[c][r]))
+        throw std::invalid_argument("occlusion: the view-projection matrix has a non-finite entry");
+  const std::uint32_t t = options.texels_per_axis;
+  if (t != 2 && t != 4 && t != 8 && t != 16)
+    throw std::invalid_argument("occlusion: texels_per_axis " + std::to_string(t) + " (2, 4, 8 or 16)");
+}
+
+Classification classify(const Aabb& box, const Frustum& frustum, const OcclusionView& view, const DepthPyramid& pyramid,
+                        const OcclusionOptions& options) {
+  return classify_volume(box, frustum, view, pyramid, options);
+}
+Classification classify(const Obb& box, const Frustum& frustum, const OcclusionView& view, const DepthPyramid& pyramid,
+                        const OcclusionOptions& options) {
+  return classify_volume(box, frustum, view, pyramid, options);
+}
+Classification classify(const Sphere& sphere, const Frustum& frustum, const OcclusionView& view,
+                        const DepthPyramid& pyramid, const OcclusionOptions& options) {
+  return classify_volume(sphere, frustum, view, pyramid, options);
+}
+
+}  // namespace cullpipe::occlusion

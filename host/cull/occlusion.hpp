@@ -1,0 +1,75 @@
+#pragma once
+// The scalar occlusion test, the oracle for the GPU's: a volume's conservative screen footprint
+// (a pixel rectangle and a bound on its nearest depth) against a depth pyramid. Written for
+// clarity, one object at a time, in float with every operation in the order the shader takes.
+#include <cstdint>
+#include <glm/mat4x4.hpp>
+
+#include "cull/depth_pyramid.hpp"
+#include "geom/aabb.hpp"
+#include "geom/classification.hpp"
+#include "geom/frustum.hpp"
+#include "geom/obb.hpp"
+#include "geom/sphere.hpp"
+
+namespace cullpipe::occlusion {
+
+/// The view a depth image was rendered from: its view-projection matrix (Vulkan clip space, as
+/// Frustum::from_view_proj takes it), the viewport (the depth image's size; viewport depth
+/// range 0..1) and the depth direction (reversed_z: 1 nearest, GREATER test).
+struct OcclusionView {
+  glm::mat4 view_proj{1.0f};
+  std::uint32_t width = 0, height = 0;
+  bool reversed_z = false;
+};
+
+/// The largest viewport side the footprint's pixel margin is proved for.
+inline constexpr std::uint32_t kMaxViewportSide = 16384;
+
+/// How an occlusion test reads the pyramid.
+struct OcclusionOptions {
+  /// The test reads the finest level at which the footprint spans at most this many texels per
+  /// axis (2, 4, 8 or 16): 2 is the classic 2x2 test; more texels read, tighter answers.
+  std::uint32_t texels_per_axis = 4;
+};
+
+/// A volume's screen footprint: every pixel any of its fragments can cover lies in
+/// [x0, x1] x [y0, y1] (inclusive, clamped to the viewport), and no fragment depth is nearer
+/// than `nearest`. Not `projected` when some point of the volume may be at or behind the eye
+/// (clip w <= 0), or a value overflowed: such a volume is never occluded.
+struct Footprint {
+  bool projected = false;
+  std::uint32_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  float nearest = 0.0f;
+  bool operator==(const Footprint&) const = default;
+};
+
+/// The footprints of boxes from their eight corners, of spheres from their bounding boxes'.
+/// Proof that they hold for the rasteriser's fragments: docs/numerics.md, "Occlusion footprints".
+Footprint footprint(const Aabb& box, const OcclusionView& view);
+Footprint footprint(const Obb& box, const OcclusionView& view);
+Footprint footprint(const Sphere& sphere, const OcclusionView& view);
+
+/// The pyramid level the test reads for `f`: the finest at which [x0, x1] and [y0, y1] span at
+/// most `texels_per_axis` texels.
+unsigned test_level(const Footprint& f, const DepthPyramid& pyramid, std::uint32_t texels_per_axis);
+
+/// True when every pixel of the footprint holds a depth strictly nearer than any fragment of
+/// the volume can have: then none of its fragments passes the depth test and it owns no pixel.
+bool occluded(const Footprint& f, const DepthPyramid& pyramid, const OcclusionOptions& options = {});
+
+/// Throws std::invalid_argument naming what is wrong when `view` cannot be tested against
+/// `pyramid`: a viewport of another size or side past kMaxViewportSide, another depth
+/// direction, a non-finite matrix, or texels_per_axis not 2, 4, 8 or 16.
+void check_view(const OcclusionView& view, const DepthPyramid& pyramid, const OcclusionOptions& options = {});
+
+/// The frustum test's class (reference::classify), or Classification::Occluded for a volume
+/// the frustum keeps and the pyramid hides. Checks the view first (check_view).
+Classification classify(const Aabb& box, const Frustum& frustum, const OcclusionView& view, const DepthPyramid& pyramid,
+                        const OcclusionOptions& options = {});
+Classification classify(const Obb& box, const Frustum& frustum, const OcclusionView& view, const DepthPyramid& pyramid,
+                        const OcclusionOptions& options = {});
+Classification classify(const Sphere& sphere, const Frustum& frustum, const OcclusionView& view,
+                        const DepthPyramid& pyramid, const OcclusionOptions& options = {});
+
+}  // namespace cullpipe::occlusion

@@ -1,0 +1,338 @@
+// The depth pyramid and the scalar occlusion test: the pyramid against brute force for every
+// size, and the test against ray-cast ground truth (an object with a pixel whose depth passes
+// the depth test is never occluded), over random scenes, cameras and viewports.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <glm/mat4x4.hpp>
+#include <limits>
+#include <optional>
+#include <vector>
+
+#include "cull/depth_pyramid.hpp"
+#include "cull/occlusion.hpp"
+#include "scene/camera.hpp"
+#include "test_util.hpp"
+
+namespace cullpipe {
+namespace {
+
+using occlusion::DepthPyramid;
+using occlusion::Footprint;
+using occlusion::OcclusionOptions;
+using occlusion::OcclusionView;
+
+TEST(DepthPyramid, LevelsHalveDownToOnePixel) {
+  const auto levels = occlusion::pyramid_levels(960, 540);
+  ASSERT_EQ(levels.size(), 10u);  // 960x540, 480x270, 240x135, 120x67, 60x33, 30x16, 15x8, 7x4, 3x2, 1x1
+  EXPECT_EQ(levels[3], (occlusion::PyramidLevel{120, 67, 960 * 540 + 480 * 270 + 240 * 135}));
+  EXPECT_EQ(levels[8].width, 3u);
+  EXPECT_EQ(levels[8].height, 2u);
+  EXPECT_EQ(occlusion::pyramid_levels(1, 1).size(), 1u);
+  EXPECT_EQ(occlusion::pyramid_levels(1, 7).size(), 3u);  // 1x7, 1x3, 1x1
+  EXPECT_THROW(occlusion::pyramid_levels(0, 5), std::invalid_argument);
+  EXPECT_THROW(occlusion::build_depth_pyramid(std::vector<float>(6), 2, 2, false), std::invalid_argument);
+}
+
+// Every texel holds exactly the farthest depth of the pixels it covers (texel_of's rule), for
+// odd, even, thin and one-pixel sizes: conservative and no looser than it must be.
+TEST(DepthPyramid, EveryTexelIsTheFarthestOfThePixelsItCovers) {
+  test::Rng rng(7);
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> sizes = {{1, 1}, {1, 2}, {2, 1},  {3, 3},   {5, 1},  {1, 9},
+                                                                {7, 5}, {8, 8}, {17, 6}, {31, 33}, {64, 3}, {100, 67}};
+  for (int i = 0; i < 20; ++i)
+    sizes.push_back({1 + std::uint32_t(rng.next() % 70), 1 + std::uint32_t(rng.next() % 70)});
+  for (const bool reversed : {false, true})
+    for (const auto& [w, h] : sizes) {
+      std::vector<float> depth(std::size_t(w) * h);
+      for (float& d : depth) d = rng.uniform();
+      const DepthPyramid p = occlusion::build_depth_pyramid(depth, w, h, reversed);
+      for (unsigned k = 0; k < p.levels.size(); ++k) {
+        const auto& level = p.levels[k];
+        std::vector<float> expected(std::size_t(level.width) * level.height, reversed ? 2.0f : -1.0f);
+        for (std::uint32_t y = 0; y < h; ++y)
+          for (std::uint32_t x = 0; x < w; ++x) {
+            float& e = expected[std::size_t(occlusion::texel_of(y, k, level.height)) * level.width +
+                                occlusion::texel_of(x, k, level.width)];
+            const float d = depth[std::size_t(y) * w + x];
+            e = reversed ? std::min(e, d) : std::max(e, d);
+          }
+        for (std::uint32_t y = 0; y < level.height; ++y)
+          for (std::uint32_t x = 0; x < level.width; ++x)
+            ASSERT_EQ(p.at(k, x, y), expected[std::size_t(y) * level.width + x])
+                << w << "x" << h << (reversed ? " reversed" : "") << ", level " << k << ", texel " << x << "," << y;
+      }
+    }
+}
+
+// ---- Ground truth: ray casting in double ----
+
+using dvec3 = glm::dvec3;
+using dmat4 = glm::dmat4;
+
+/// The ray through a pixel's centre from the near plane, and the matrix to read depth with.
+struct Ray {
+  dvec3 origin, direction;
+};
+
+struct Caster {
+  dmat4 vp, inverse;
+  std::uint32_t width, height;
+  bool reversed;
+
+  Caster(const glm::mat4& view_proj, std::uint32_t w, std::uint32_t h, bool rev)
+      : vp(view_proj), inverse(glm::inverse(dmat4(view_proj))), width(w), height(h), reversed(rev) {}
+
+  dvec3 unproject(double x, double y, double z) const {
+    const glm::dvec4 p = inverse * glm::dvec4(x, y, z, 1.0);
+    return dvec3(p) / p.w;
+  }
+  Ray ray(std::uint32_t px, std::uint32_t py) const {
+    const double x = (px + 0.5) / width * 2.0 - 1.0, y = (py + 0.5) / height * 2.0 - 1.0;
+    const dvec3 a = unproject(x, y, reversed ? 1.0 : 0.0), b = unproject(x, y, 0.5);
+    return {a, b - a};
+  }
+  double depth(const dvec3& p) const {
+    const glm::dvec4 c = vp * glm::dvec4(p, 1.0);
+    return c.z / c.w;
+  }
+  /// The nearest depth of a hit interval [t0, t1] along `r` that lies in the depth range, or none.
+  std::optional<double> nearest(const Ray& r, double t0, double t1) const {
+    t0 = std::max(t0, 0.0);
+    if (t0 > t1) return std::nullopt;
+    const double d = depth(r.origin + t0 * r.direction);
+    if (reversed ? d < 0.0 : d > 1.0) return std::nullopt;  // beyond the far plane
+    return d;
+  }
+};
+
+/// Slab test of a ray against a box given by centre, axes and half extents.
+bool hit_box(const Ray& r, const dvec3& c, const dvec3 axes[3], const dvec3& h, double& t0, double& t1) {
+  t0 = -1e300, t1 = 1e300;
+  for (int i = 0; i < 3; ++i) {
+    const double o = glm::dot(r.origin - c, axes[i]), d = glm::dot(r.direction, axes[i]);
+    if (std::abs(d) < 1e-300) {
+      if (std::abs(o) > h[i]) return false;
+      continue;
+    }
+    double a = (-h[i] - o) / d, b = (h[i] - o) / d;
+    if (a > b) std::swap(a, b);
+    t0 = std::max(t0, a), t1 = std::min(t1, b);
+  }
+  return t0 <= t1;
+}
+
+std::optional<double> cast(const Caster& k, const Ray& r, const Aabb& b) {
+  const dvec3 axes[3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  double t0, t1;
+  const dvec3 c = (dvec3(b.min) + dvec3(b.max)) * 0.5, h = (dvec3(b.max) - dvec3(b.min)) * 0.5;
+  if (!hit_box(r, c, axes, h, t0, t1)) return std::nullopt;
+  return k.nearest(r, t0, t1);
+}
+
+std::optional<double> cast(const Caster& k, const Ray& r, const Obb& b) {
+  // (Axes normalised; the extents scaled to match, so non-unit axes give the same box.)
+  dvec3 axes[3];
+  dvec3 h;
+  for (int i = 0; i < 3; ++i) {
+    const dvec3 u(b.basis[i]);
+    axes[i] = glm::normalize(u);
+    h[i] = std::abs(double(b.half_extents[i])) * glm::length(u);
+  }
+  double t0, t1;
+  if (!hit_box(r, dvec3(b.center), axes, h, t0, t1)) return std::nullopt;
+  return k.nearest(r, t0, t1);
+}
+
+std::optional<double> cast(const Caster& k, const Ray& r, const Sphere& s) {
+  const dvec3 oc = r.origin - dvec3(s.center);
+  const double a = glm::dot(r.direction, r.direction), b = glm::dot(oc, r.direction);
+  const double c = glm::dot(oc, oc) - double(s.radius) * s.radius, disc = b * b - a * c;
+  if (disc < 0) return std::nullopt;
+  const double q = std::sqrt(disc);
+  return k.nearest(r, (-b - q) / a, (-b + q) / a);
+}
+
+/// A depth image of `occluders` as a renderer stores it: per pixel centre the nearest depth,
+/// rounded to float; the clear value where nothing is hit.
+template <class Volume>
+std::vector<float> render_depth(const Caster& k, const std::vector<Volume>& occluders) {
+  std::vector<float> depth(std::size_t(k.width) * k.height, k.reversed ? 0.0f : 1.0f);
+  for (std::uint32_t y = 0; y < k.height; ++y)
+    for (std::uint32_t x = 0; x < k.width; ++x) {
+      const Ray r = k.ray(x, y);
+      float& d = depth[std::size_t(y) * k.width + x];
+      for (const Volume& o : occluders)
+        if (const auto hit = cast(k, r, o)) {
+          const float f = float(*hit);
+          d = k.reversed ? std::max(d, f) : std::min(d, f);
+        }
+    }
+  return depth;
+}
+
+/// Whether some pixel's centre sees `v` at a depth that passes the test against `depth`
+/// (`owns`), and whether some pixel's centre sees it at all (`covers`).
+template <class Volume>
+void pixels_of(const Caster& k, const std::vector<float>& depth, const Volume& v, bool& owns, bool& covers) {
+  owns = covers = false;
+  for (std::uint32_t y = 0; y < k.height; ++y)
+    for (std::uint32_t x = 0; x < k.width; ++x)
+      if (const auto hit = cast(k, k.ray(x, y), v)) {
+        covers = true;
+        const double stored = depth[std::size_t(y) * k.width + x];
+        if (k.reversed ? *hit > stored : *hit < stored) {
+          owns = true;
+          return;
+        }
+      }
+}
+
+Camera random_camera(test::Rng& rng, int variant) {
+  Camera c;
+  c.eye = rng.vec3(-30.0f, 30.0f) + glm::vec3(0.0f, 0.0f, 40.0f);
+  c.target = rng.vec3(-5.0f, 5.0f);
+  c.fov_y_degrees = rng.uniform(30.0f, 90.0f);
+  c.aspect = rng.uniform(0.6f, 2.0f);
+  c.near_plane = rng.uniform(0.05f, 2.0f);
+  c.far_plane = rng.uniform(100.0f, 400.0f);
+  c.reversed_z = variant & 1;
+  c.infinite_far = (variant & 2) && !(variant & 4);
+  c.orthographic = variant & 4;
+  c.ortho_half_height = rng.uniform(10.0f, 40.0f);
+  return c;
+}
+
+template <class Volume>
+Volume random_volume(test::Rng& rng, float spread, float size);
+template <>
+Aabb random_volume<Aabb>(test::Rng& rng, float spread, float size) {
+  const glm::vec3 c = rng.vec3(-spread, spread), h = rng.vec3(0.05f * size, size);
+  return {c - h, c + h};
+}
+template <>
+Obb random_volume<Obb>(test::Rng& rng, float spread, float size) {
+  Obb b;
+  b.center = rng.vec3(-spread, spread);
+  b.basis = rng.rotation();
+  b.half_extents = rng.vec3(0.05f * size, size);
+  return b;
+}
+template <>
+Sphere random_volume<Sphere>(test::Rng& rng, float spread, float size) {
+  return {rng.vec3(-spread, spread), rng.uniform(0.05f * size, size)};
+}
+
+template <class Volume>
+void expect_conservative(std::uint64_t seed, int scenes, std::size_t& tested, std::size_t& hidden,
+                         std::size_t& culled) {
+  test::Rng rng(seed);
+  for (int s = 0; s < scenes; ++s) {
+    const Camera cam = random_camera(rng, s % 8);
+    const std::uint32_t w = 8 + std::uint32_t(rng.next() % 57), h = 8 + std::uint32_t(rng.next() % 41);
+    const glm::mat4 vp = cam.view_proj();
+    const Caster k(vp, w, h, cam.reversed_z);
+    std::vector<Volume> occluders;
+    for (int i = 0; i < 6; ++i) occluders.push_back(random_volume<Volume>(rng, 8.0f, 6.0f));
+    const std::vector<float> depth = render_depth(k, occluders);
+    const DepthPyramid pyramid = occlusion::build_depth_pyramid(depth, w, h, cam.reversed_z);
+    const OcclusionView view{vp, w, h, cam.reversed_z};
+    const Frustum frustum = Frustum::from_view_proj(vp);
+    for (int i = 0; i < 40; ++i) {
+      const Volume v = random_volume<Volume>(rng, 12.0f, 2.0f);
+      bool owns, covers;
+      pixels_of(k, depth, v, owns, covers);
+      for (const std::uint32_t texels : {2u, 4u, 8u, 16u}) {
+        const Classification c = occlusion::classify(v, frustum, view, pyramid, OcclusionOptions{texels});
+        ++tested;
+        hidden += covers && !owns;  // seen by some pixel centre, behind the depth at every one
+        culled += c == Classification::Occluded;
+        if (owns) {
+          ASSERT_NE(c, Classification::Occluded)
+              << "scene " << s << " (camera variant " << s % 8 << ", " << w << "x" << h << "), volume " << i << ", "
+              << texels << " texels per axis: owns a pixel but was found occluded";
+        }
+      }
+    }
+  }
+}
+
+// (Each also culls most of the volumes that some pixel centre sees and every one sees hidden: a
+// test that never culls would pass the first check.)
+TEST(Occlusion, BoxesThatOwnAPixelAreNeverOccluded) {
+  std::size_t tested = 0, hidden = 0, culled = 0;
+  expect_conservative<Aabb>(11, 96, tested, hidden, culled);
+  EXPECT_GT(culled, hidden / 2) << culled << " of " << hidden << " hidden";
+  std::printf("%zu volume tests, %zu seen and hidden, %zu occluded\n", tested, hidden, culled);
+}
+
+TEST(Occlusion, ObbsThatOwnAPixelAreNeverOccluded) {
+  std::size_t tested = 0, hidden = 0, culled = 0;
+  expect_conservative<Obb>(12, 96, tested, hidden, culled);
+  EXPECT_GT(culled, hidden / 2) << culled << " of " << hidden << " hidden";
+  std::printf("%zu volume tests, %zu seen and hidden, %zu occluded\n", tested, hidden, culled);
+}
+
+TEST(Occlusion, SpheresThatOwnAPixelAreNeverOccluded) {
+  std::size_t tested = 0, hidden = 0, culled = 0;
+  expect_conservative<Sphere>(13, 96, tested, hidden, culled);
+  EXPECT_GT(culled, hidden / 2) << culled << " of " << hidden << " hidden";
+  std::printf("%zu volume tests, %zu seen and hidden, %zu occluded\n", tested, hidden, culled);
+}
+
+// A wall filling the view hides a box behind it; a box in front of it, or level with its face,
+// is kept; a box crossing the near plane or behind the eye is kept.
+TEST(Occlusion, KnownAnswersBehindAWall) {
+  for (const bool reversed : {false, true}) {
+    Camera cam;
+    cam.eye = {0, 0, 10};
+    cam.target = {0, 0, 0};
+    cam.aspect = 1.0f;
+    cam.reversed_z = reversed;
+    const glm::mat4 vp = cam.view_proj();
+    const std::uint32_t w = 33, h = 17;
+    const Caster k(vp, w, h, reversed);
+    const std::vector<Aabb> wall = {{{-100, -100, -1}, {100, 100, 0}}};
+    const DepthPyramid pyramid = occlusion::build_depth_pyramid(render_depth(k, wall), w, h, reversed);
+    const OcclusionView view{vp, w, h, reversed};
+    const Frustum frustum = Frustum::from_view_proj(vp);
+    auto cls = [&](const Aabb& b, std::uint32_t texels) {
+      return occlusion::classify(b, frustum, view, pyramid, {texels});
+    };
+    for (const std::uint32_t texels : {2u, 4u, 8u, 16u}) {
+      EXPECT_EQ(cls({{-1, -1, -5}, {1, 1, -3}}, texels), Classification::Occluded) << texels;
+      EXPECT_EQ(cls({{-50, -50, -30}, {50, 50, -20}}, texels), Classification::Occluded) << texels;
+      EXPECT_NE(cls({{-1, -1, 1}, {1, 1, 3}}, texels), Classification::Occluded) << texels;   // in front
+      EXPECT_NE(cls({{-1, -1, -2}, {1, 1, 0}}, texels), Classification::Occluded) << texels;  // level with the face
+      EXPECT_NE(cls({{-1, -1, 9.95f}, {1, 1, 12}}, texels), Classification::Occluded)
+          << texels;  // through the near plane
+    }
+    // Behind the eye and still in the frustum's side planes: not projected, kept.
+    const Footprint behind = occlusion::footprint(Aabb{{-1, -1, 11}, {1, 1, 12}}, view);
+    EXPECT_FALSE(behind.projected);
+  }
+}
+
+TEST(Occlusion, BadViewsAreRefusedByName) {
+  const DepthPyramid pyramid = occlusion::build_depth_pyramid(std::vector<float>(12, 1.0f), 4, 3, false);
+  const Frustum frustum = Frustum::from_view_proj(test::test_view_proj());
+  const Aabb box{{-1, -1, -1}, {1, 1, 1}};
+  auto message = [&](const OcclusionView& v, const OcclusionOptions& o = {}) -> std::string {
+    try {
+      occlusion::classify(box, frustum, v, pyramid, o);
+    } catch (const std::invalid_argument& e) {
+      return e.what();
+    }
+    return "";
+  };
+  EXPECT_NE(message({test::test_view_proj(), 5, 3, false}).find("does not match"), std::string::npos);
+  EXPECT_NE(message({test::test_view_proj(), 4, 3, true}).find("reversed-Z view"), std::string::npos);
+  glm::mat4 nan_matrix = test::test_view_proj();
+  nan_matrix[2][1] = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_NE(message({nan_matrix, 4, 3, false}).find("non-finite"), std::string::npos);
+  EXPECT_NE(message({test::test_view_proj(), 4, 3, false}, {3}).find("texels_per_axis"), std::string::npos);
+  EXPECT_EQ(message({test::test_view_proj(), 4, 3, false}), "");
+}
+
+}  // namespace
+}  // namespace cullpipe
