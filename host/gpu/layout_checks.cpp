@@ -78,7 +78,13 @@ static_assert(offsetof(RenderObject, model) == 0);
 static_assert(offsetof(RenderObject, color) == 64);
 static_assert(sizeof(RenderParams) == 64);
 
-static_assert(CLASS_OUTSIDE == 0 && CLASS_INTERSECTING == 1 && CLASS_INSIDE == 2,
+static_assert(CLASS_OUTSIDE == 0 && CLASS_INTERSECTING == 1 && CLASS_INSIDE == 2 && CLASS_OCCLUDED == 3,
               "must match cullpipe::Classification");
+
+static_assert(sizeof(PyramidReduceParams) == 32);
+static_assert(offsetof(PyramidReduceParams, source_offset) == 0);
+static_assert(offsetof(PyramidReduceParams, reversed_z) == 12);
+static_assert(offsetof(PyramidReduceParams, offset) == 16);
+static_assert(offsetof(PyramidReduceParams, height) == 24);
 
 }  // namespace cullpipe::gpu

@@ -28,6 +28,7 @@ CP_CONST BV_KIND_SPHERE = 2u;
 CP_CONST CLASS_OUTSIDE = 0u;
 CP_CONST CLASS_INTERSECTING = 1u;
 CP_CONST CLASS_INSIDE = 2u;
+CP_CONST CLASS_OCCLUDED = 3u;
 
 // Invocations per workgroup of the flat culling shader.
 CP_CONST FLAT_CULL_GROUP_SIZE = 256u;
@@ -187,6 +188,24 @@ CP_CONST BVH_BINDING_CUTS = 9u;       // uint: the cut nodes, depth first
 CP_CONST BVH_BINDING_RECORDS = 10u;   // uvec2 scratch: a record per object and view (each cut subtree's slice)
 CP_CONST BVH_BINDING_CENTRES = 11u;   // AABBs: vec4 per object in tree order, xyz = centre, w = bound (as BINDING_CENTRES)
 CP_CONST BVH_BINDING_COUNT = 12u;
+
+// ---- occlusion: the depth pyramid (host/gpu/depth_pyramid_pass.hpp) ----
+
+// Invocations per workgroup side of depth_pyramid.comp (8 x 8 texels a workgroup).
+CP_CONST PYRAMID_GROUP_SIDE = 8u;
+
+// Push constants of depth_pyramid.comp: one level from the level below it, both in one float
+// array (occlusion::pyramid_levels gives the offsets, in floats).
+struct PyramidReduceParams {
+  uint source_offset;
+  uint source_width;
+  uint source_height;
+  uint reversed_z;  // 1: the farthest depth is the smallest
+  uint offset;
+  uint width;
+  uint height;
+  uint pad;
+};
 
 // ---- host/render: the headless rasteriser that draws the culled objects ----
 

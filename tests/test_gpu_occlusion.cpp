@@ -1,0 +1,176 @@
+// The depth pyramid on the GPU (lavapipe, validation on): bit for bit the CPU's pyramid of the
+// same depth image for every size, and clear refusals of depth images it cannot reduce.
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <vector>
+
+#include "cull/depth_pyramid.hpp"
+#include "gpu/depth_pyramid_pass.hpp"
+#include "gpu_test_env.hpp"
+#include "test_util.hpp"
+#include "vk/buffer.hpp"
+#include "vk/check.hpp"
+
+namespace cullpipe {
+namespace {
+
+using PyramidEnvironment = test::GpuTestEnvironment<gpu::DepthPyramidPass>;
+const auto* const kEnvironment = ::testing::AddGlobalTestEnvironment(new PyramidEnvironment);
+using GpuPyramid = test::GpuTest<gpu::DepthPyramidPass>;
+
+/// A depth image in device memory holding given values, left in `layout` as a renderer leaves
+/// its depth attachment.
+class DepthImage {
+ public:
+  DepthImage(const vk::Context& ctx, std::uint32_t width, std::uint32_t height, const std::vector<float>& depth,
+             VkFormat format = VK_FORMAT_D32_SFLOAT,
+             VkImageLayout layout = VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL)
+      : ctx_(ctx) {
+    VkImageCreateInfo info{VK_STRUCTURE_TYPE_IMAGE_CREATE_INFO};
+    info.imageType = VK_IMAGE_TYPE_2D;
+    info.format = format;
+    info.extent = {width, height, 1};
+    info.mipLevels = 1;
+    info.arrayLayers = 1;
+    info.samples = VK_SAMPLE_COUNT_1_BIT;
+    info.tiling = VK_IMAGE_TILING_OPTIMAL;
+    info.usage =
+        VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT | VK_IMAGE_USAGE_TRANSFER_DST_BIT;
+    CULLPIPE_VK_CHECK(vkCreateImage(ctx.device(), &info, nullptr, &image_));
+    VkMemoryRequirements req;
+    vkGetImageMemoryRequirements(ctx.device(), image_, &req);
+    VkMemoryAllocateInfo alloc{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
+    alloc.allocationSize = req.size;
+    alloc.memoryTypeIndex = ctx.find_memory_type(req.memoryTypeBits, 0, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+    CULLPIPE_VK_CHECK(vkAllocateMemory(ctx.device(), &alloc, nullptr, &memory_));
+    CULLPIPE_VK_CHECK(vkBindImageMemory(ctx.device(), image_, memory_, 0));
+    const bool stencil = format == VK_FORMAT_D32_SFLOAT_S8_UINT;
+    // Staging copy of the depth values into the image, then the layout a renderer leaves.
+    vk::Buffer staging(ctx, depth.size() * sizeof(float), VK_BUFFER_USAGE_TRANSFER_SRC_BIT, "depth staging");
+    std::memcpy(staging.data(), depth.data(), depth.size() * sizeof(float));
+    VkCommandBufferAllocateInfo cmd_info{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
+    cmd_info.commandPool = ctx.command_pool();
+    cmd_info.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+    cmd_info.commandBufferCount = 1;
+    VkCommandBuffer cmd;
+    CULLPIPE_VK_CHECK(vkAllocateCommandBuffers(ctx.device(), &cmd_info, &cmd));
+    VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+    begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+    CULLPIPE_VK_CHECK(vkBeginCommandBuffer(cmd, &begin));
+    VkImageMemoryBarrier barrier{VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER};
+    barrier.dstAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+    barrier.oldLayout = VK_IMAGE_LAYOUT_UNDEFINED;
+    barrier.newLayout = VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
+    barrier.srcQueueFamilyIndex = barrier.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+    barrier.image = image_;
+    barrier.subresourceRange = {
+        VkImageAspectFlags(VK_IMAGE_ASPECT_DEPTH_BIT | (stencil ? VK_IMAGE_ASPECT_STENCIL_BIT : 0)), 0, 1, 0, 1};
+    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 0, nullptr, 0,
+                         nullptr, 1, &barrier);
+    VkBufferImageCopy copy{};
+    copy.imageSubresource = {VK_IMAGE_ASPECT_DEPTH_BIT, 0, 0, 1};
+    copy.imageExtent = {width, height, 1};
+    vkCmdCopyBufferToImage(cmd, staging.handle(), image_, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1, &copy);
+    barrier.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+    barrier.dstAccessMask = VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_READ_BIT | VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT |
+                            VK_ACCESS_TRANSFER_READ_BIT;
+    barrier.oldLayout = VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
+    barrier.newLayout = layout;
+    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT,
+                         VK_PIPELINE_STAGE_EARLY_FRAGMENT_TESTS_BIT | VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT |
+                             VK_PIPELINE_STAGE_TRANSFER_BIT,
+                         0, 0, nullptr, 0, nullptr, 1, &barrier);
+    CULLPIPE_VK_CHECK(vkEndCommandBuffer(cmd));
+    ctx.submit_and_wait(cmd);
+    vkFreeCommandBuffers(ctx.device(), ctx.command_pool(), 1, &cmd);
+    source_ = {image_, layout, format, width, height};
+  }
+  ~DepthImage() {
+    vkDestroyImage(ctx_.device(), image_, nullptr);
+    vkFreeMemory(ctx_.device(), memory_, nullptr);
+  }
+  DepthImage(const DepthImage&) = delete;
+  DepthImage& operator=(const DepthImage&) = delete;
+  const gpu::DepthSource& source() const { return source_; }
+
+ private:
+  const vk::Context& ctx_;
+  VkImage image_ = VK_NULL_HANDLE;
+  VkDeviceMemory memory_ = VK_NULL_HANDLE;
+  gpu::DepthSource source_;
+};
+
+const vk::Context& context() { return *PyramidEnvironment::context; }
+
+void expect_same_pyramid(const occlusion::DepthPyramid& gpu, const occlusion::DepthPyramid& cpu,
+                         const std::string& what) {
+  ASSERT_EQ(gpu.levels, cpu.levels) << what;
+  ASSERT_EQ(gpu.texels.size(), cpu.texels.size()) << what;
+  for (unsigned k = 0; k < cpu.levels.size(); ++k) {
+    const auto& level = cpu.levels[k];
+    for (std::uint32_t y = 0; y < level.height; ++y)
+      for (std::uint32_t x = 0; x < level.width; ++x) {
+        const float g = gpu.at(k, x, y), c = cpu.at(k, x, y);
+        ASSERT_EQ(std::memcmp(&g, &c, sizeof g), 0)
+            << what << ": level " << k << " texel " << x << "," << y << ": gpu " << g << ", cpu " << c;
+      }
+  }
+}
+
+TEST_F(GpuPyramid, EqualsTheCpuPyramidForEverySize) {
+  test::Rng rng(5);
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> sizes = {
+      {1, 1}, {1, 2}, {2, 1}, {3, 3}, {7, 1}, {1, 9}, {5, 7}, {16, 16}, {17, 9}, {33, 64}, {960, 540}, {1023, 3}};
+  for (int i = 0; i < 8; ++i)
+    sizes.push_back({1 + std::uint32_t(rng.next() % 300), 1 + std::uint32_t(rng.next() % 300)});
+  for (const bool reversed : {false, true})
+    for (const auto& [w, h] : sizes) {
+      std::vector<float> depth(std::size_t(w) * h);
+      for (float& d : depth) {
+        const std::uint64_t pick = rng.next() % 16;
+        d = pick == 0 ? 0.0f : pick == 1 ? 1.0f : pick == 2 ? 1e-40f : rng.uniform();  // ties, the ends, a subnormal
+      }
+      const DepthImage image(context(), w, h, depth);
+      const occlusion::DepthPyramid gpu = culler().build(image.source(), reversed);
+      const occlusion::DepthPyramid cpu = occlusion::build_depth_pyramid(depth, w, h, reversed);
+      expect_same_pyramid(gpu, cpu, std::to_string(w) + "x" + std::to_string(h) + (reversed ? " reversed" : ""));
+    }
+}
+
+TEST_F(GpuPyramid, ReducesTheDepthOfACombinedDepthStencilImage) {
+  std::vector<float> depth(37 * 21);
+  test::Rng rng(9);
+  for (float& d : depth) d = rng.uniform();
+  const DepthImage image(context(), 37, 21, depth, VK_FORMAT_D32_SFLOAT_S8_UINT);
+  expect_same_pyramid(culler().build(image.source(), false), occlusion::build_depth_pyramid(depth, 37, 21, false),
+                      "D32S8");
+}
+
+TEST_F(GpuPyramid, RefusesWhatItCannotReduceByName) {
+  auto message = [&](const gpu::DepthSource& s) -> std::string {
+    try {
+      culler().build(s, false);
+    } catch (const std::invalid_argument& e) {
+      return e.what();
+    }
+    return "";
+  };
+  std::vector<float> depth(12, 0.5f);
+  const DepthImage image(context(), 4, 3, depth);
+  gpu::DepthSource s = image.source();
+  const std::uint32_t width_before = culler().width();
+  s.format = VK_FORMAT_D16_UNORM;
+  EXPECT_NE(message(s).find("VK_FORMAT_D16_UNORM is not supported"), std::string::npos);
+  s = image.source();
+  s.width = 0;
+  EXPECT_NE(message(s).find("0x3 depth image"), std::string::npos);
+  s = image.source();
+  s.layout = VK_IMAGE_LAYOUT_UNDEFINED;
+  EXPECT_NE(message(s).find("undefined"), std::string::npos);
+  EXPECT_EQ(culler().width(), width_before);  // nothing changed
+  EXPECT_EQ(message(image.source()), "");
+}
+
+}  // namespace
+}  // namespace cullpipe
