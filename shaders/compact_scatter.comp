@@ -22,6 +22,9 @@ layout(std430, set = 0, binding = BINDING_DRAWS) writeonly buffer Draws { DrawCo
 layout(std430, set = 0, binding = BINDING_GROUP_COUNTS) readonly buffer GroupCounts { uint group_offsets[]; };
 layout(push_constant, std430) uniform Push { FlatCullParams params; };
 
+// INSIDE or INTERSECTING: listed (OUTSIDE and OCCLUDED are not).
+bool is_kept(uint c) { return c == CLASS_INSIDE || c == CLASS_INTERSECTING; }
+
 // Bit p of the workgroup's run of objects: object group_first + p is visible; then, per word,
 // the visible objects of the words before it.
 shared uint flags[MAX_CULL_GROUP_SIZE * MAX_OBJECTS_PER_INVOCATION / 32];
@@ -44,7 +47,7 @@ void main() {
   uint visible_bits = 0u;
   [[unroll]] for (uint j = 0; j < OBJECTS_PER_INVOCATION; ++j) {
     uint p = j * group_size + t, i = group_first + p;
-    if (view_ok && i < params.object_count && classes[view * params.object_count + i] != CLASS_OUTSIDE) {
+    if (view_ok && i < params.object_count && is_kept(classes[view * params.object_count + i])) {
       visible_bits |= 1u << j;
       atomicOr(flags[p / 32u], 1u << (p % 32u));
     }

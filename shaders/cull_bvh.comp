@@ -143,7 +143,7 @@ void load_view(uint view) {
 // margin, the smallest centre distance s over the tested planes below -reach is OUTSIDE, at least
 // reach INSIDE on them, else CLASS_OPEN (the full test). Proof: docs/numerics.md, Settling bounds.
 // A NaN or infinite bound or margin settles nothing (decided on the bits).
-const uint CLASS_OPEN = 3u;
+const uint CLASS_OPEN = 4u;  // (not a class any pass writes)
 uint settle_box(uint slot, uint mask) {
   vec4 centre_bound = uintBitsToFloat(texelFetch(centres, int(slot)));
   bool usable = finite_bits(centre_bound.w) && finite_bits(view_settle_margin);

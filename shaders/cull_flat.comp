@@ -10,6 +10,8 @@
 // - ORDERED == 1: the same objects per invocation; writes the classes and each workgroup's
 //   visible and INSIDE counts; compact_scan.comp and compact_scatter.comp then write the lists
 //   in object order.
+// With OCCLUSION, the objects the frustum keeps are tested against the depth pyramid
+// (shared/occlusion.glsl) and the hidden ones are OCCLUDED: counted, neither listed nor drawn.
 //
 // The plane tests, and their bit-exact contract with the CPU reference, are in
 // shared/classify.glsl.
@@ -38,6 +40,7 @@ layout(constant_id = 4) const uint OBJECTS_PER_INVOCATION = 1;
 // lanes either way, so a class store switched off at run time would still cost its loop on
 // every pass. The ordered passes always write them.
 layout(constant_id = 5) const uint WRITE_CLASSES = 1;
+layout(constant_id = 6) const uint OCCLUSION = 0;  // 1: test the kept objects against the pyramid
 
 // The volumes' vec4 words, fetched as integer texels (exact bits) from a uniform texel buffer.
 layout(set = 0, binding = BINDING_BOUNDS) uniform usamplerBuffer bounds;
@@ -51,6 +54,8 @@ layout(std430, set = 0, binding = BINDING_DRAW_TEMPLATES) readonly buffer DrawTe
 layout(std430, set = 0, binding = BINDING_DRAWS) writeonly buffer Draws { DrawCommand draws[]; };
 // Ordered: per workgroup, [view][group] visible counts, then [view][group] INSIDE counts.
 layout(std430, set = 0, binding = BINDING_GROUP_COUNTS) buffer GroupCounts { uint group_counts[]; };
+layout(std430, set = 0, binding = BINDING_PYRAMID) readonly buffer Pyramid { float pyramid[]; };
+layout(set = 0, binding = BINDING_OCCLUSION_VIEWS) uniform usamplerBuffer occlusion_views;  // GpuOcclusionView per view
 
 layout(push_constant, std430) uniform Push { FlatCullParams params; };
 
@@ -58,8 +63,13 @@ uint view;             // this invocation's view (gl_WorkGroupID.y)
 uint view_plane_count;
 float view_settle_margin;  // GpuFrustum::settle_margin
 vec4 view_planes[MAX_FRUSTUM_PLANES];
+// The view's GpuOcclusionView (OCCLUSION).
+mat4 occ_view_proj;
+uint occ_width, occ_height, occ_reversed, occ_texels, occ_level_count;
+uvec4 occ_levels[PYRAMID_MAX_LEVELS];
 
 #include "shared/classify.glsl"
+#include "shared/occlusion.glsl"
 #include "shared/ordered_runs.glsl"
 
 vec4 bound(uint word) { return uintBitsToFloat(texelFetch(bounds, int(word))); }
@@ -80,6 +90,51 @@ void load_view() {
   view_plane_count = min(tail.x, MAX_FRUSTUM_PLANES);
   view_settle_margin = uintBitsToFloat(tail.y);
   [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = uintBitsToFloat(texelFetch(views, first + int(k)));
+  if (OCCLUSION != 0u) {
+    int o = int(OCCLUSION_VIEW_TEXELS * view);
+    [[unroll]] for (int c = 0; c < 4; ++c) occ_view_proj[c] = uintBitsToFloat(texelFetch(occlusion_views, o + c));
+    uvec4 sizes = texelFetch(occlusion_views, o + 4);
+    occ_width = sizes.x;
+    occ_height = sizes.y;
+    occ_reversed = sizes.z;
+    occ_texels = sizes.w;
+    occ_level_count = min(texelFetch(occlusion_views, o + 5).x, PYRAMID_MAX_LEVELS);
+    [[unroll]] for (uint l = 0; l < PYRAMID_MAX_LEVELS; ++l) occ_levels[l] = texelFetch(occlusion_views, o + 6 + int(l));
+  }
+}
+
+// Whether object i, which the frustum keeps, is hidden behind the pyramid: its corners as the
+// reference takes them (occlusion::footprint).
+bool occluded_object(uint i) {
+  vec3 p[8];
+  vec3 magnitude;
+  if (BV_KIND == BV_KIND_AABB) {
+    vec3 lo = bound(AABB_VEC4S * i).xyz, hi = bound(AABB_VEC4S * i + 1).xyz;
+    [[unroll]] for (uint k = 0; k < 8; ++k)
+      p[k] = vec3((k & 1u) != 0u ? hi.x : lo.x, (k & 2u) != 0u ? hi.y : lo.y, (k & 4u) != 0u ? hi.z : lo.z);
+    magnitude = max(abs(lo), abs(hi));
+  } else {
+    vec3 c, a0, a1, a2;
+    if (BV_KIND == BV_KIND_OBB) {
+      uint b = OBB_VEC4S * i;
+      vec4 u0 = bound(b + 1), u1 = bound(b + 2), u2 = bound(b + 3);
+      c = bound(b).xyz;
+      precise vec3 s0 = u0.xyz * u0.w, s1 = u1.xyz * u1.w, s2 = u2.xyz * u2.w;
+      a0 = s0, a1 = s1, a2 = s2;
+    } else {
+      vec4 s = bound(SPHERE_VEC4S * i);
+      float r = abs(s.w);
+      c = s.xyz;
+      a0 = vec3(r, 0.0, 0.0), a1 = vec3(0.0, r, 0.0), a2 = vec3(0.0, 0.0, r);
+    }
+    [[unroll]] for (uint k = 0; k < 8; ++k) {
+      precise vec3 q = ((c + ((k & 1u) != 0u ? a0 : -a0)) + ((k & 2u) != 0u ? a1 : -a1)) + ((k & 4u) != 0u ? a2 : -a2);
+      p[k] = q;
+    }
+    precise vec3 m = ((abs(c) + abs(a0)) + abs(a1)) + abs(a2);
+    magnitude = m;
+  }
+  return occ_occluded(p, magnitude);
 }
 
 // An AABB's or OBB's class from its centre and bound alone where they settle it, as the fast CPU
@@ -89,7 +144,7 @@ void load_view() {
 // past the last (no planes: everything INSIDE). A NaN or infinite bound or margin settles nothing,
 // decided on the bits (docs/numerics.md, GPU and CPU agreement). Spheres are tested in full at
 // once (one texel either way).
-const uint CLASS_OPEN = 3u;
+const uint CLASS_OPEN = 4u;  // (not a class any pass writes)
 uint settle_object(uint i) {
   if (BV_KIND == BV_KIND_SPHERE) return classify_object(i);
   vec4 centre_bound = BV_KIND == BV_KIND_AABB ? uintBitsToFloat(texelFetch(centres, int(i))) : bound(OBB_VEC4S * i);
@@ -103,9 +158,10 @@ uint settle_object(uint i) {
 }
 
 // Classifies this invocation's objects block + j * group size (j < OBJECTS_PER_INVOCATION):
-// bit j of outside_bits / inside_bits is set for OUTSIDE / INSIDE (neither: INTERSECTING);
-// objects past object_count (or of no view) are OUTSIDE.
-void classify_objects(uint block, bool view_ok, uint object_count, out uint outside_bits, out uint inside_bits) {
+// bit j of outside_bits / inside_bits / occluded_bits is set for OUTSIDE / INSIDE / OCCLUDED
+// (none: INTERSECTING); objects past object_count (or of no view) are OUTSIDE.
+void classify_objects(uint block, bool view_ok, uint object_count, out uint outside_bits, out uint inside_bits,
+                      out uint occluded_bits) {
   uint open = 0u;
   outside_bits = 0u;
   inside_bits = 0u;
@@ -130,10 +186,34 @@ void classify_objects(uint block, bool view_ok, uint object_count, out uint outs
       inside_bits |= c == CLASS_INSIDE ? 1u << j : 0u;
     }
   }
+  // The kept objects against the pyramid, one per invocation per round (few are kept).
+  occluded_bits = 0u;
+  if (OCCLUSION != 0u) {
+    uint all = OBJECTS_PER_INVOCATION >= 32u ? 0xffffffffu : (1u << OBJECTS_PER_INVOCATION) - 1u;
+    uint kept = ~outside_bits & all;
+    while (kept != 0u) {
+      uint j = findLSB(kept);
+      kept &= kept - 1u;
+      if (occluded_object(block + j * gl_WorkGroupSize.x)) occluded_bits |= 1u << j;
+    }
+    inside_bits &= ~occluded_bits;
+  }
 }
 
-uint class_of(uint j, uint outside_bits, uint inside_bits) {
-  return (outside_bits & 1u << j) != 0u ? CLASS_OUTSIDE : (inside_bits & 1u << j) != 0u ? CLASS_INSIDE : CLASS_INTERSECTING;
+uint class_of(uint j, uint outside_bits, uint inside_bits, uint occluded_bits) {
+  return (outside_bits & 1u << j) != 0u    ? CLASS_OUTSIDE
+         : (occluded_bits & 1u << j) != 0u ? CLASS_OCCLUDED
+         : (inside_bits & 1u << j) != 0u   ? CLASS_INSIDE
+                                           : CLASS_INTERSECTING;
+}
+
+bool is_kept(uint c) { return c == CLASS_INSIDE || c == CLASS_INTERSECTING; }
+
+// Adds the subgroup's occluded objects to the view's count (OCCLUSION).
+void count_occluded(bool view_ok, uint occluded_bits) {
+  if (OCCLUSION == 0u) return;
+  uint total = subgroupAdd(bitCount(occluded_bits));
+  if (subgroupElect() && view_ok && total > 0u) atomicAdd(counters[view].occluded_count, total);
 }
 
 // Object order: OBJECTS_PER_INVOCATION objects per invocation, each workgroup's contiguous run
@@ -146,17 +226,18 @@ void main_ordered() {
   bool view_ok = view < params.view_count;
   if (view_ok) load_view();
   uint block = this_run_first_object(params.first_object) + gl_LocalInvocationIndex;
-  uint outside_bits, inside_bits;
-  classify_objects(block, view_ok, object_count, outside_bits, inside_bits);
+  uint outside_bits, inside_bits, occluded_bits;
+  classify_objects(block, view_ok, object_count, outside_bits, inside_bits, occluded_bits);
   uint visible = 0u;
   [[unroll]] for (uint j = 0; j < OBJECTS_PER_INVOCATION; ++j) {
     uint i = block + j * gl_WorkGroupSize.x;
     if (view_ok && i < object_count) {
-      uint c = class_of(j, outside_bits, inside_bits);
+      uint c = class_of(j, outside_bits, inside_bits, occluded_bits);
       classes[view * object_count + i] = c;
-      visible += c != CLASS_OUTSIDE ? 1u : 0u;
+      visible += is_kept(c) ? 1u : 0u;
     }
   }
+  count_occluded(view_ok, occluded_bits);
   uint vis_total = subgroupAdd(visible);
   uint inside_total = subgroupAdd(bitCount(inside_bits));
   if (subgroupElect() && view_ok) {
@@ -216,8 +297,9 @@ void main_arrival() {
   if (view_ok) load_view();
   uint group_first = this_run_first_object(params.first_object);  // (the same runs as the ordered passes')
   uint block = group_first + gl_LocalInvocationIndex;
-  uint outside_bits, inside_bits;
-  classify_objects(block, view_ok, object_count, outside_bits, inside_bits);
+  uint outside_bits, inside_bits, occluded_bits;
+  classify_objects(block, view_ok, object_count, outside_bits, inside_bits, occluded_bits);
+  count_occluded(view_ok, occluded_bits);
   uvec4 ballots[OBJECTS_PER_INVOCATION];
   uint prefix[OBJECTS_PER_INVOCATION + 1];
   uint inside = bitCount(inside_bits);
@@ -225,9 +307,9 @@ void main_arrival() {
   [[unroll]] for (uint j = 0; j < OBJECTS_PER_INVOCATION; ++j) {
     uint i = block + j * gl_WorkGroupSize.x;
     bool in_range = view_ok && i < object_count;
-    uint c = class_of(j, outside_bits, inside_bits);
+    uint c = class_of(j, outside_bits, inside_bits, occluded_bits);
     if (WRITE_CLASSES != 0 && in_range) classes[view * object_count + i] = c;
-    ballots[j] = subgroupBallot(in_range && c != CLASS_OUTSIDE);
+    ballots[j] = subgroupBallot(in_range && is_kept(c));
     prefix[j + 1] = prefix[j] + subgroupBallotBitCount(ballots[j]);
   }
   uint vis_total = prefix[OBJECTS_PER_INVOCATION];

@@ -5,9 +5,13 @@
 #include <cstring>
 #include <vector>
 
+#include "cull/compare.hpp"
 #include "cull/depth_pyramid.hpp"
+#include "cull/occlusion.hpp"
 #include "gpu/depth_pyramid_pass.hpp"
+#include "gpu/gpu_culler.hpp"
 #include "gpu_test_env.hpp"
+#include "occlusion_test_util.hpp"
 #include "test_util.hpp"
 #include "vk/buffer.hpp"
 #include "vk/check.hpp"
@@ -170,6 +174,57 @@ TEST_F(GpuPyramid, RefusesWhatItCannotReduceByName) {
   EXPECT_NE(message(s).find("undefined"), std::string::npos);
   EXPECT_EQ(culler().width(), width_before);  // nothing changed
   EXPECT_EQ(message(image.source()), "");
+}
+
+// The flat pass with occlusion against occlusion::classify_all on the same pyramid: every
+// object's class, the counts and the visible list, over random scenes of every volume kind and
+// every kind of camera, in arrival and object order.
+template <class Volume>
+void expect_occlusion_agreement(gpu::DepthPyramidPass& pass, std::uint64_t seed) {
+  gpu::GpuCuller culler(context());
+  test::Rng rng(seed);
+  std::size_t occluded = 0;
+  for (int s = 0; s < 16; ++s) {
+    const Camera cam = test::random_camera(rng, s % 8);
+    const std::uint32_t w = 16 + std::uint32_t(rng.next() % 200), h = 16 + std::uint32_t(rng.next() % 120);
+    const glm::mat4 vp = cam.view_proj();
+    const test::Caster k(vp, w, h, cam.reversed_z);
+    std::vector<Volume> occluders;
+    for (int i = 0; i < 6; ++i) occluders.push_back(test::random_volume<Volume>(rng, 8.0f, 6.0f));
+    const std::vector<float> depth = test::render_depth(k, occluders);
+    const DepthImage image(context(), w, h, depth);
+    const occlusion::DepthPyramid pyramid = pass.build(image.source(), cam.reversed_z);
+    std::vector<Volume> volumes;
+    for (int i = 0; i < 3000; ++i) volumes.push_back(test::random_volume<Volume>(rng, 14.0f, 1.5f));
+    const Frustum frustum = Frustum::from_view_proj(vp);
+    const occlusion::OcclusionView view{vp, w, h, cam.reversed_z};
+    const std::uint32_t texels = 2u << (s % 4);
+    std::vector<Classification> cpu(volumes.size());
+    const reference::CullCounts cpu_counts =
+        occlusion::classify_all(std::span<const Volume>(volumes), frustum, view, pyramid, {texels}, cpu);
+    occluded += cpu_counts.occluded;
+    culler.upload(std::span<const Volume>(volumes));
+    for (const bool ordered : {false, true}) {
+      gpu::CullOptions options;
+      options.ordered = ordered;
+      options.pyramid = &pass;
+      options.occlusion_views = {view};
+      options.occlusion_options.texels_per_axis = texels;
+      const gpu::CullResult result = culler.cull(std::span(&frustum, 1), options);
+      const Agreement a = check_agreement<Volume>(volumes, frustum, cpu, cpu_counts, result.views[0].classes,
+                                                  result.views[0].counts, result.views[0].visible_ids, volumes.size());
+      ASSERT_EQ(a.mismatches, 0u) << "scene " << s << " (camera variant " << s % 8 << ", " << w << "x" << h << ", "
+                                  << texels << " texels per axis" << (ordered ? ", ordered" : "")
+                                  << "): " << (a.reports.empty() ? std::string() : a.reports.front());
+    }
+  }
+  EXPECT_GT(occluded, 1000u) << "too few occluded objects to test the agreement";
+}
+
+TEST_F(GpuPyramid, FlatPassWithOcclusionEqualsTheReferenceForBoxes) { expect_occlusion_agreement<Aabb>(culler(), 21); }
+TEST_F(GpuPyramid, FlatPassWithOcclusionEqualsTheReferenceForObbs) { expect_occlusion_agreement<Obb>(culler(), 22); }
+TEST_F(GpuPyramid, FlatPassWithOcclusionEqualsTheReferenceForSpheres) {
+  expect_occlusion_agreement<Sphere>(culler(), 23);
 }
 
 }  // namespace

@@ -68,8 +68,9 @@ Agreement check_agreement(std::span<const Volume> volumes, const Frustum& frustu
   if (!(cpu_counts == gpu_counts)) {
     ++a.mismatches;
     report("GPU counters (visible " + std::to_string(gpu_counts.visible) + ", inside " +
-           std::to_string(gpu_counts.inside) + ") differ from the CPU's (visible " +
-           std::to_string(cpu_counts.visible) + ", inside " + std::to_string(cpu_counts.inside) + ")");
+           std::to_string(gpu_counts.inside) + ", occluded " + std::to_string(gpu_counts.occluded) +
+           ") differ from the CPU's (visible " + std::to_string(cpu_counts.visible) + ", inside " +
+           std::to_string(cpu_counts.inside) + ", occluded " + std::to_string(cpu_counts.occluded) + ")");
   }
   std::vector<std::uint32_t> ids(gpu_visible_ids.begin(), gpu_visible_ids.end());
   std::sort(ids.begin(), ids.end());

@@ -99,6 +99,28 @@ Classification classify_volume(const Volume& v, const Frustum& frustum, const Oc
   return occluded(footprint(v, view), pyramid, options) ? Classification::Occluded : c;
 }
 
+template <class Volume>
+reference::CullCounts classify_all_volumes(std::span<const Volume> volumes, const Frustum& frustum,
+                                           const OcclusionView& view, const DepthPyramid& pyramid,
+                                           const OcclusionOptions& options, std::span<Classification> out) {
+  if (out.size() != volumes.size())
+    throw std::invalid_argument("occlusion::classify_all: " + std::to_string(out.size()) + " classes for " +
+                                std::to_string(volumes.size()) + " volumes");
+  check_view(view, pyramid, options);
+  reference::CullCounts counts;
+  for (std::size_t i = 0; i < volumes.size(); ++i) {
+    Classification c = reference::classify(volumes[i], frustum);
+    if (c != Classification::Outside && occluded(footprint(volumes[i], view), pyramid, options))
+      c = Classification::Occluded;
+    out[i] = c;
+    counts.inside += c == Classification::Inside;
+    counts.intersecting += c == Classification::Intersecting;
+    counts.occluded += c == Classification::Occluded;
+  }
+  counts.visible = counts.inside + counts.intersecting;
+  return counts;
+}
+
 }  // namespace
 
 Footprint footprint(const Aabb& box, const OcclusionView& view) {
@@ -144,17 +166,21 @@ bool occluded(const Footprint& f, const DepthPyramid& pyramid, const OcclusionOp
 }
 
 void check_view(const OcclusionView& view, const DepthPyramid& pyramid, const OcclusionOptions& options) {
+  check_view(view, pyramid.width, pyramid.height, pyramid.reversed_z, options);
+}
+
+void check_view(const OcclusionView& view, std::uint32_t width, std::uint32_t height, bool reversed_z,
+                const OcclusionOptions& options) {
   const auto size = [](std::uint32_t w, std::uint32_t h) { return std::to_string(w) + "x" + std::to_string(h); };
-  if (view.width != pyramid.width || view.height != pyramid.height)
+  if (view.width != width || view.height != height)
     throw std::invalid_argument("occlusion: a " + size(view.width, view.height) + " view does not match a " +
-                                size(pyramid.width, pyramid.height) + " depth pyramid");
+                                size(width, height) + " depth pyramid");
   if (view.width == 0 || view.height == 0 || view.width > kMaxViewportSide || view.height > kMaxViewportSide)
     throw std::invalid_argument("occlusion: a " + size(view.width, view.height) + " viewport (each side 1 to " +
                                 std::to_string(kMaxViewportSide) + ")");
-  if (view.reversed_z != pyramid.reversed_z)
+  if (view.reversed_z != reversed_z)
     throw std::invalid_argument(std::string("occlusion: a ") + (view.reversed_z ? "reversed-Z" : "standard-depth") +
-                                " view against a " + (pyramid.reversed_z ? "reversed-Z" : "standard-depth") +
-                                " pyramid");
+                                " view against a " + (reversed_z ? "reversed-Z" : "standard-depth") + " pyramid");
   for (int c = 0; c < 4; ++c)
     for (int r = 0; r < 4; ++r)
       if (!std::isfinite(view.view_proj[c][r]))
@@ -175,6 +201,22 @@ Classification classify(const Obb& box, const Frustum& frustum, const OcclusionV
 Classification classify(const Sphere& sphere, const Frustum& frustum, const OcclusionView& view,
                         const DepthPyramid& pyramid, const OcclusionOptions& options) {
   return classify_volume(sphere, frustum, view, pyramid, options);
+}
+
+reference::CullCounts classify_all(std::span<const Aabb> volumes, const Frustum& frustum, const OcclusionView& view,
+                                   const DepthPyramid& pyramid, const OcclusionOptions& options,
+                                   std::span<Classification> out) {
+  return classify_all_volumes(volumes, frustum, view, pyramid, options, out);
+}
+reference::CullCounts classify_all(std::span<const Obb> volumes, const Frustum& frustum, const OcclusionView& view,
+                                   const DepthPyramid& pyramid, const OcclusionOptions& options,
+                                   std::span<Classification> out) {
+  return classify_all_volumes(volumes, frustum, view, pyramid, options, out);
+}
+reference::CullCounts classify_all(std::span<const Sphere> volumes, const Frustum& frustum, const OcclusionView& view,
+                                   const DepthPyramid& pyramid, const OcclusionOptions& options,
+                                   std::span<Classification> out) {
+  return classify_all_volumes(volumes, frustum, view, pyramid, options, out);
 }
 
 }  // namespace cullpipe::occlusion

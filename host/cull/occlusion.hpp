@@ -4,8 +4,10 @@
 // clarity, one object at a time, in float with every operation in the order the shader takes.
 #include <cstdint>
 #include <glm/mat4x4.hpp>
+#include <span>
 
 #include "cull/depth_pyramid.hpp"
+#include "cull/reference.hpp"
 #include "geom/aabb.hpp"
 #include "geom/classification.hpp"
 #include "geom/frustum.hpp"
@@ -62,6 +64,9 @@ bool occluded(const Footprint& f, const DepthPyramid& pyramid, const OcclusionOp
 /// `pyramid`: a viewport of another size or side past kMaxViewportSide, another depth
 /// direction, a non-finite matrix, or texels_per_axis not 2, 4, 8 or 16.
 void check_view(const OcclusionView& view, const DepthPyramid& pyramid, const OcclusionOptions& options = {});
+/// The same checks against a pyramid of a width x height image and that depth direction.
+void check_view(const OcclusionView& view, std::uint32_t width, std::uint32_t height, bool reversed_z,
+                const OcclusionOptions& options = {});
 
 /// The frustum test's class (reference::classify), or Classification::Occluded for a volume
 /// the frustum keeps and the pyramid hides. Checks the view first (check_view).
@@ -71,5 +76,17 @@ Classification classify(const Obb& box, const Frustum& frustum, const OcclusionV
                         const OcclusionOptions& options = {});
 Classification classify(const Sphere& sphere, const Frustum& frustum, const OcclusionView& view,
                         const DepthPyramid& pyramid, const OcclusionOptions& options = {});
+
+/// Classifies every volume as classify does; `out` must have the same size as `volumes`. The
+/// counts: visible (INSIDE + INTERSECTING), inside, intersecting and occluded.
+reference::CullCounts classify_all(std::span<const Aabb> volumes, const Frustum& frustum, const OcclusionView& view,
+                                   const DepthPyramid& pyramid, const OcclusionOptions& options,
+                                   std::span<Classification> out);
+reference::CullCounts classify_all(std::span<const Obb> volumes, const Frustum& frustum, const OcclusionView& view,
+                                   const DepthPyramid& pyramid, const OcclusionOptions& options,
+                                   std::span<Classification> out);
+reference::CullCounts classify_all(std::span<const Sphere> volumes, const Frustum& frustum, const OcclusionView& view,
+                                   const DepthPyramid& pyramid, const OcclusionOptions& options,
+                                   std::span<Classification> out);
 
 }  // namespace cullpipe::occlusion

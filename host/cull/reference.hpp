@@ -42,6 +42,7 @@ struct CullCounts {
   std::size_t visible = 0;  ///< INSIDE + INTERSECTING
   std::size_t inside = 0;
   std::size_t intersecting = 0;
+  std::size_t occluded = 0;  ///< kept by the frustum, hidden by a depth pyramid (occlusion culling)
   bool operator==(const CullCounts&) const = default;
 };
 

@@ -214,6 +214,9 @@ void BvhCuller::update_descriptors() {
 }
 
 void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& options) {
+  if (options.pyramid)
+    throw std::invalid_argument(
+        "hierarchical culling does not test occlusion; CullOptions::pyramid is for the flat pass (GpuCuller)");
   if (options.ordered)
     throw std::invalid_argument(
         "hierarchical culling writes visible ids in arrival order; CullOptions::ordered is not supported");

@@ -92,6 +92,7 @@ void DepthPyramidPass::resize(std::uint32_t width, std::uint32_t height) {
   resources_->write(bound);
   texels_ = std::move(texels);
   levels_ = std::move(levels);
+  built_ = false;
   width_ = width;
   height_ = height;
 }
@@ -147,6 +148,8 @@ void DepthPyramidPass::record(VkCommandBuffer cmd, const DepthSource& source, bo
     detail::record_compute_to_compute(cmd);
   }
   detail::record_exit_barrier(ctx_, cmd);
+  reversed_z_ = reversed_z;
+  built_ = true;
 }
 
 occlusion::DepthPyramid DepthPyramidPass::build(const DepthSource& source, bool reversed_z) {

@@ -63,6 +63,10 @@ class DepthPyramidPass {
   std::span<const occlusion::PyramidLevel> levels() const { return levels_; }
   std::uint32_t width() const { return width_; }
   std::uint32_t height() const { return height_; }
+  /// The depth direction of the last record() (the pyramid's farthest is the smallest if true).
+  bool reversed_z() const { return reversed_z_; }
+  /// Whether record() has run since the last resize (texels() holds a pyramid).
+  bool built() const { return built_; }
   /// GPU time of the last build(), nanoseconds (0 without timestamps).
   double last_gpu_ns() const { return last_gpu_ns_; }
 
@@ -74,6 +78,8 @@ class DepthPyramidPass {
   std::vector<occlusion::PyramidLevel> levels_;
   std::uint32_t width_ = 0, height_ = 0;
   double last_gpu_ns_ = 0.0;
+  bool reversed_z_ = false;
+  bool built_ = false;
 };
 
 }  // namespace cullpipe::gpu

@@ -26,7 +26,8 @@ constexpr std::uint32_t kBindingCount = CULL_BINDING_COUNT;  // one descriptor s
 // 16-byte texel per lane, where a storage-buffer load is a bounds-checked branch per lane and
 // per component; on GPUs both are ordinary typed loads.
 // The views and the AABBs' centre bounds too (see GpuFrustum, BINDING_CENTRES).
-constexpr std::uint32_t kTexelBindings = 1u << BINDING_BOUNDS | 1u << BINDING_VIEWS | 1u << BINDING_CENTRES;
+constexpr std::uint32_t kTexelBindings =
+    1u << BINDING_BOUNDS | 1u << BINDING_VIEWS | 1u << BINDING_CENTRES | 1u << BINDING_OCCLUSION_VIEWS;
 constexpr VkBufferUsageFlags kBoundsUsage = VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT;
 constexpr std::size_t kUploadChunk = 16384;  // objects per upload task
 
@@ -59,7 +60,8 @@ GpuCuller::GpuCuller(const vk::Context& ctx, const GpuCullerConfig& config) : ct
 
 const vk::ComputePipeline& GpuCuller::pipeline(PipelineKey key) {
   using Shader = PipelineKey::Shader;
-  if (key.shader != Shader::Cull) key.kind = BvKind::Aabb, key.ordered = false, key.classes = false;
+  if (key.shader != Shader::Cull)
+    key.kind = BvKind::Aabb, key.ordered = false, key.classes = false, key.occlusion = false;
   if (key.ordered) key.classes = true;  // the scatter pass reads them
   return pipelines_.get(key, [&] {
     std::span<const std::uint32_t> spirv;
@@ -67,7 +69,8 @@ const vk::ComputePipeline& GpuCuller::pipeline(PipelineKey key) {
     if (key.shader == Shader::Cull) {
       spirv = cullpipe_cull_flat_spv;
       name = "flat cull (" + std::string(to_string(key.kind)) + (key.ordered ? ", ordered" : "") +
-             (key.draws ? ", draws" : "") + (key.classes ? ", classes" : "") + ")";
+             (key.draws ? ", draws" : "") + (key.classes ? ", classes" : "") + (key.occlusion ? ", occlusion" : "") +
+             ")";
     } else if (key.shader == Shader::CompactScan) {
       spirv = cullpipe_compact_scan_spv;
       name = "ordered compaction scan";
@@ -76,10 +79,11 @@ const vk::ComputePipeline& GpuCuller::pipeline(PipelineKey key) {
       name = std::string("ordered compaction scatter") + (key.draws ? " (draws)" : "");
     }
     // Specialization constants: 0 kind, 1 group size, 2 ordered, 3 draws, 4 objects per
-    // invocation (every pass: the ordered passes' unit is a workgroup's run of objects), 5 classes.
-    const std::uint32_t spec[6] = {kind_index(key.kind),    group_size_,
-                                   key.ordered ? 1u : 0u,   key.draws ? 1u : 0u,
-                                   objects_per_invocation_, key.classes ? 1u : 0u};
+    // invocation (every pass: the ordered passes' unit is a workgroup's run of objects), 5 classes,
+    // 6 occlusion.
+    const std::uint32_t spec[7] = {
+        kind_index(key.kind),    group_size_,           key.ordered ? 1u : 0u,  key.draws ? 1u : 0u,
+        objects_per_invocation_, key.classes ? 1u : 0u, key.occlusion ? 1u : 0u};
     return std::make_unique<vk::ComputePipeline>(
         ctx_,
         vk::ComputePipelineDesc{spirv, kBindingCount, sizeof(FlatCullParams), spec, name.c_str(), kTexelBindings});
@@ -232,11 +236,12 @@ GpuCuller::SegmentPlan GpuCuller::plan_segments(std::size_t view_count, bool ord
 
 void GpuCuller::update_descriptors() {
   if (!descriptors_dirty_ && written_segment_objects_ == segment_objects_ && written_view_count_ == last_view_count_ &&
-      resources_->set_count() >= segment_count_)
+      resources_->set_count() >= segment_count_ && written_pyramid_ == pyramid_->handle() &&
+      written_pyramid_size_ == pyramid_->size())
     return;
   static_assert(BINDING_BOUNDS == 0 && BINDING_CLASSES == 1 && BINDING_VISIBLE == 2 && BINDING_COUNTERS == 3 &&
                 BINDING_VIEWS == 4 && BINDING_DRAW_TEMPLATES == 5 && BINDING_DRAWS == 6 && BINDING_GROUP_COUNTS == 7 &&
-                BINDING_CENTRES == 8);
+                BINDING_CENTRES == 8 && BINDING_PYRAMID == 9 && BINDING_OCCLUSION_VIEWS == 10);
   resources_->ensure_sets(segment_count_);
   const std::size_t views = last_view_count_;
   for (std::size_t seg = 0; seg < segment_count_; ++seg) {
@@ -251,9 +256,9 @@ void GpuCuller::update_descriptors() {
           &b, 0,
           std::min<VkDeviceSize>(b.size(), detail::texel_range(ctx_)) / detail::kTexelBytes * detail::kTexelBytes};
     };
-    Range ranges[kBindingCount] = {texels(bounds_),  whole(classes_),      whole(visible_),
-                                   whole(counters_), texels(views_),       whole(templates_),
-                                   whole(draws_),    whole(group_counts_), texels(centres_)};
+    Range ranges[kBindingCount] = {texels(bounds_),  whole(classes_),   whole(visible_),         whole(counters_),
+                                   texels(views_),   whole(templates_), whole(draws_),           whole(group_counts_),
+                                   texels(centres_), whole(*pyramid_),  texels(occlusion_views_)};
     if (segment_count_ > 1) {  // one segment binds whole buffers
       const VkDeviceSize first = VkDeviceSize(seg) * segment_objects_;
       const VkDeviceSize n = std::min<VkDeviceSize>(segment_objects_, object_count_ - first);
@@ -268,6 +273,8 @@ void GpuCuller::update_descriptors() {
   }
   written_segment_objects_ = segment_objects_;
   written_view_count_ = views;
+  written_pyramid_ = pyramid_->handle();
+  written_pyramid_size_ = pyramid_->size();
   descriptors_dirty_ = false;
 }
 
@@ -280,15 +287,48 @@ void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   if (views.size() > ctx_.properties().limits.maxComputeWorkGroupCount[1])
     throw std::length_error(std::to_string(views.size()) + " views exceed the device's dispatch limit of " +
                             std::to_string(ctx_.properties().limits.maxComputeWorkGroupCount[1]));
+  if (options.pyramid) {
+    const DepthPyramidPass& p = *options.pyramid;
+    if (!p.built()) throw std::invalid_argument("occlusion culling: the depth pyramid has not been built");
+    if (options.occlusion_views.size() != views.size())
+      throw std::invalid_argument("occlusion culling: " + std::to_string(options.occlusion_views.size()) +
+                                  " occlusion views for " + std::to_string(views.size()) + " views");
+    for (const occlusion::OcclusionView& v : options.occlusion_views)
+      occlusion::check_view(v, p.width(), p.height(), p.reversed_z(), options.occlusion_options);
+  }
   detail::ensure_buffer(ctx_, bounds_, 0, kBoundsUsage, "bounds buffer", descriptors_dirty_);
   detail::ensure_buffer(ctx_, centres_, 0, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
+  detail::ensure_buffer(ctx_, no_pyramid_, 16, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "empty pyramid buffer",
+                        descriptors_dirty_);
+  detail::check_texel_range(ctx_, VkDeviceSize(views.size()) * sizeof(GpuOcclusionView),
+                            std::to_string(views.size()) + " occlusion views");
+  detail::ensure_buffer(ctx_, occlusion_views_, (options.pyramid ? views.size() : 1) * sizeof(GpuOcclusionView),
+                        kBoundsUsage, "occlusion view buffer", descriptors_dirty_);
   // Nothing of the pass's state changes until every check and allocation has passed.
   const SegmentPlan plan = plan_segments(views.size(), options.ordered);
   ensure_outputs(views.size(), capacity, options.draws, options.ordered);
   segment_objects_ = plan.objects;
   segment_count_ = plan.count;
   last_view_count_ = views.size();
+  pyramid_ = options.pyramid ? &options.pyramid->texels() : &no_pyramid_;
   update_descriptors();
+  if (options.pyramid) {
+    auto gpu_occlusion = occlusion_views_.as<GpuOcclusionView>();
+    const auto levels = options.pyramid->levels();
+    for (std::size_t v = 0; v < views.size(); ++v) {
+      const occlusion::OcclusionView& o = options.occlusion_views[v];
+      GpuOcclusionView g{};
+      g.view_proj = o.view_proj;
+      g.width = o.width;
+      g.height = o.height;
+      g.reversed_z = o.reversed_z ? 1u : 0u;
+      g.texels_per_axis = options.occlusion_options.texels_per_axis;
+      g.level_count = std::uint32_t(levels.size());
+      for (std::size_t l = 0; l < levels.size(); ++l)
+        g.levels[l] = glm::uvec4(std::uint32_t(levels[l].offset), levels[l].width, levels[l].height, 0u);
+      gpu_occlusion[v] = g;
+    }
+  }
   auto gpu_views = views_.as<GpuFrustum>();
   for (std::size_t v = 0; v < views.size(); ++v) {
     gpu_views[v] = pack(views[v]);
@@ -300,7 +340,7 @@ void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   if (!options.ordered) {
     pipeline(arrival_key(options));
   } else {
-    pipeline(ordered_key());
+    pipeline(ordered_key(options));
     pipeline({.shader = PipelineKey::Shader::CompactScan});
     pipeline(scatter_key(options));
   }
@@ -352,7 +392,7 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
     object_pass(pipeline(arrival_key(options)), objects_per_invocation_);
   } else if (object_count_ > 0) {
     // Count per workgroup, scan the counts per view, scatter in object order.
-    object_pass(pipeline(ordered_key()), objects_per_invocation_);
+    object_pass(pipeline(ordered_key(options)), objects_per_invocation_);
     compute_to_compute();
     const vk::ComputePipeline& scan = pipeline({.shader = PipelineKey::Shader::CompactScan});
     vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, scan.pipeline());

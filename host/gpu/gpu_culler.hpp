@@ -5,6 +5,7 @@
 #include <span>
 #include <vector>
 
+#include "cull/occlusion.hpp"
 #include "cull/reference.hpp"
 #include "geom/aabb.hpp"
 #include "geom/bv_kind.hpp"
@@ -12,6 +13,7 @@
 #include "geom/frustum.hpp"
 #include "geom/obb.hpp"
 #include "geom/sphere.hpp"
+#include "gpu/depth_pyramid_pass.hpp"
 #include "gpu/layout.hpp"
 #include "gpu/pipeline_cache.hpp"
 #include "vk/buffer.hpp"
@@ -71,6 +73,14 @@ struct CullOptions {
   bool ordered = false;
   /// Also write a DrawCommand per visible object (needs upload_draws) and read them back.
   bool draws = false;
+  /// Occlusion culling: with a pyramid, the objects the frustum keeps are tested against it as
+  /// each view's entry of occlusion_views says its depth was rendered (one per view), exactly as
+  /// occlusion::classify tests them; the hidden ones are Classification::Occluded, counted in
+  /// counts.occluded, neither listed nor drawn. The pyramid must have been built (its record()
+  /// earlier in the same command buffer, or its build()) and must outlive the pass.
+  const DepthPyramidPass* pyramid = nullptr;
+  std::vector<occlusion::OcclusionView> occlusion_views;
+  occlusion::OcclusionOptions occlusion_options;
 };
 
 /// How a GpuCuller is set up.
@@ -178,14 +188,17 @@ class GpuCuller {
     bool ordered = false;        // Cull: count per workgroup for the ordered passes
     bool draws = false;          // Cull, CompactScatter: write indirect draws
     bool classes = false;        // Cull: write the per-object classes
+    bool occlusion = false;      // Cull: test the kept objects against the depth pyramid
     auto operator<=>(const PipelineKey&) const = default;
   };
   const vk::ComputePipeline& pipeline(PipelineKey key);
   /// The cull pass in arrival order; the ordered passes' counting cull and their scatter.
   PipelineKey arrival_key(const CullOptions& o) const {
-    return {.kind = kind_, .draws = o.draws, .classes = o.classes};
+    return {.kind = kind_, .draws = o.draws, .classes = o.classes, .occlusion = o.pyramid != nullptr};
   }
-  PipelineKey ordered_key() const { return {.kind = kind_, .ordered = true, .classes = true}; }
+  PipelineKey ordered_key(const CullOptions& o) const {
+    return {.kind = kind_, .ordered = true, .classes = true, .occlusion = o.pyramid != nullptr};
+  }
   static PipelineKey scatter_key(const CullOptions& o) {
     return {.shader = PipelineKey::Shader::CompactScatter, .draws = o.draws};
   }
@@ -204,11 +217,16 @@ class GpuCuller {
   std::size_t segment_count_ = 1;
   // What the descriptor sets were last written for.
   std::size_t written_segment_objects_ = 0, written_view_count_ = 0;
+  VkBuffer written_pyramid_ = VK_NULL_HANDLE;
+  VkDeviceSize written_pyramid_size_ = 0;
   BvKind kind_ = BvKind::Aabb;
   std::size_t object_count_ = 0;
   detail::PipelineCache<PipelineKey> pipelines_;
   vk::Buffer bounds_, classes_, visible_, counters_, views_, templates_, draws_, group_counts_;
-  vk::Buffer centres_;  // AABBs: centre and bound per object (BINDING_CENTRES)
+  vk::Buffer occlusion_views_;           // GpuOcclusionView per view (BINDING_OCCLUSION_VIEWS)
+  vk::Buffer no_pyramid_;                // bound to BINDING_PYRAMID in passes without occlusion
+  const vk::Buffer* pyramid_ = nullptr;  // the buffer bound to BINDING_PYRAMID
+  vk::Buffer centres_;                   // AABBs: centre and bound per object (BINDING_CENTRES)
   std::size_t template_count_ = 0;
   std::size_t last_capacity_ = 0;
   std::size_t last_view_count_ = 0;

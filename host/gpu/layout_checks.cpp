@@ -44,7 +44,12 @@ static_assert(offsetof(FlatCullParams, view_count) == 8);
 static_assert(offsetof(FlatCullParams, visible_capacity) == 12);
 static_assert(offsetof(FlatCullParams, id_base) == 16);
 
-static_assert(sizeof(ViewCounters) == 16);
+static_assert(sizeof(ViewCounters) == 32);
+static_assert(offsetof(ViewCounters, occluded_count) == 16);
+static_assert(sizeof(GpuOcclusionView) == OCCLUSION_VIEW_TEXELS * 16);
+static_assert(offsetof(GpuOcclusionView, width) == 64);
+static_assert(offsetof(GpuOcclusionView, level_count) == 80);
+static_assert(offsetof(GpuOcclusionView, levels) == 96);
 static_assert(offsetof(ViewCounters, visible_count) == 0);
 static_assert(offsetof(ViewCounters, inside_count) == 4);
 static_assert(offsetof(ViewCounters, node_tests) == 8);

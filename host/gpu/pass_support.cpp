@@ -169,7 +169,7 @@ CullResult read_outputs(const OutputBuffers& buffers, std::size_t object_count, 
   for (std::size_t v = 0; v < view_count; ++v) {
     ViewResult& out = result.views[v];
     const ViewCounters& c = counters[v];
-    out.counts = {c.visible_count, c.inside_count, c.visible_count - c.inside_count};
+    out.counts = {c.visible_count, c.inside_count, c.visible_count - c.inside_count, c.occluded_count};
     out.overflow = c.visible_count > capacity;
     out.node_tests = c.node_tests;
     out.object_tests = c.object_tests;

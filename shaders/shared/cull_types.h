@@ -9,9 +9,11 @@
 #include <glm/mat4x4.hpp>
 #include <glm/vec3.hpp>
 #include <glm/vec4.hpp>
+#include <glm/ext/vector_uint4.hpp>
 namespace cullpipe::gpu {
 using vec3 = glm::vec3;
 using vec4 = glm::vec4;
+using uvec4 = glm::uvec4;
 using mat4 = glm::mat4;
 using uint = std::uint32_t;
 #define CP_CONST inline constexpr uint
@@ -102,8 +104,10 @@ CP_CONST BINDING_VIEWS = 4u;           // GpuFrustum per view
 CP_CONST BINDING_DRAW_TEMPLATES = 5u;  // DrawCommand per object (object_id ignored)
 CP_CONST BINDING_DRAWS = 6u;           // DrawCommand out: [view * visible_capacity + k]
 CP_CONST BINDING_GROUP_COUNTS = 7u;    // ordered mode: [view][group] visible counts (then offsets), then [view][group] INSIDE counts
+CP_CONST BINDING_PYRAMID = 9u;          // occlusion: the depth pyramid's floats (DepthPyramidPass)
+CP_CONST BINDING_OCCLUSION_VIEWS = 10u; // occlusion: GpuOcclusionView per view, OCCLUSION_VIEW_TEXELS texels each
 CP_CONST BINDING_CENTRES = 8u;         // AABBs: vec4 per object, xyz = centre, w = bound (host/geom/plane_bounds.hpp)
-CP_CONST CULL_BINDING_COUNT = 9u;
+CP_CONST CULL_BINDING_COUNT = 11u;
 
 // One indirect draw of a visible object: the first five fields are exactly
 // VkDrawIndexedIndirectCommand (so the array can be passed to vkCmdDrawIndexedIndirectCount
@@ -122,10 +126,14 @@ struct DrawCommand {
 // visible_count (offset 0 of each view's entry) is also the draw count for
 // vkCmdDrawIndexedIndirectCount; pass maxDrawCount = visible_capacity, since it may exceed it.
 struct ViewCounters {
-  uint visible_count;  // visible objects found; may exceed visible_capacity (overflow)
-  uint inside_count;   // of which INSIDE
-  uint node_tests;     // hierarchical pass: BVH node boxes tested (flat pass: 0)
-  uint object_tests;   // hierarchical pass: objects tested in INTERSECTING leaves (flat pass: 0)
+  uint visible_count;   // visible objects found; may exceed visible_capacity (overflow)
+  uint inside_count;    // of which INSIDE
+  uint node_tests;      // hierarchical pass: BVH node boxes tested (flat pass: 0)
+  uint object_tests;    // hierarchical pass: objects tested in INTERSECTING leaves (flat pass: 0)
+  uint occluded_count;  // occlusion culling: objects the frustum keeps and the depth pyramid hides
+  uint reserved1;
+  uint reserved2;
+  uint reserved3;
 };
 
 // ---- hierarchical culling (shaders/cull_bvh.comp) ----
@@ -193,6 +201,25 @@ CP_CONST BVH_BINDING_COUNT = 12u;
 
 // Invocations per workgroup side of depth_pyramid.comp (8 x 8 texels a workgroup).
 CP_CONST PYRAMID_GROUP_SIDE = 8u;
+
+// The most levels a pyramid has (a side of occlusion::kMaxViewportSide = 16384 pixels: 15).
+CP_CONST PYRAMID_MAX_LEVELS = 15u;
+
+// One view as the flat pass's occlusion test sees it (occlusion::OcclusionView and the
+// pyramid's levels), read as integer texels like GpuFrustum.
+struct GpuOcclusionView {
+  mat4 view_proj;        // the matrix the depth was rendered with
+  uint width;            // viewport = depth image size
+  uint height;
+  uint reversed_z;       // 1: depth 1 is nearest (GREATER test)
+  uint texels_per_axis;  // OcclusionOptions::texels_per_axis
+  uint level_count;
+  uint reserved1;
+  uint reserved2;
+  uint reserved3;
+  uvec4 levels[PYRAMID_MAX_LEVELS];  // x = offset in floats, y = width, z = height
+};
+CP_CONST OCCLUSION_VIEW_TEXELS = 21u;
 
 // Push constants of depth_pyramid.comp: one level from the level below it, both in one float
 // array (occlusion::pyramid_levels gives the offsets, in floats).
