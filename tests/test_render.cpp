@@ -7,11 +7,13 @@
 #include <filesystem>
 #include <memory>
 
+#include "cull/occlusion.hpp"
 #include "cull/reference.hpp"
 #include "render/image.hpp"
 #include "render/renderer.hpp"
 #include "scene/generators.hpp"
 #include "scene/gltf_scene.hpp"
+#include "scene/scene_io.hpp"
 
 namespace cullpipe {
 namespace {
@@ -142,6 +144,83 @@ TEST(Render, GltfScenesCulledEqualsUnculled) {
     expect_culling_invisible(g.scene, cameras, BvKind::Obb);
   }
   EXPECT_EQ(files, 5u);
+}
+
+// Occlusion frames along a camera path (two phases, the visibility carried frame to frame): each
+// image equals the unculled one pixel for pixel, and each frame's classes equal
+// occlusion::classify_all's on the pyramid the frame built. Returns the occluded total.
+std::size_t expect_occlusion_invisible(const Scene& scene, const std::vector<Camera>& cameras, BvKind bv,
+                                       std::uint32_t width = 320, std::uint32_t height = 200,
+                                       std::uint32_t texels_per_axis = 4) {
+  render::RendererConfig config;
+  config.width = width;
+  config.height = height;
+  config.bv = bv;
+  config.occlusion.texels_per_axis = texels_per_axis;
+  render::Renderer renderer(*RenderEnvironment::context, scene, config);
+  std::vector<Aabb> aabbs;
+  std::vector<Obb> obbs;
+  std::vector<Sphere> spheres;
+  if (bv == BvKind::Aabb) aabbs = world_aabbs(scene);
+  if (bv == BvKind::Obb) obbs = world_obbs(scene);
+  if (bv == BvKind::Sphere) spheres = world_spheres(scene);
+  std::size_t occluded_total = 0;
+  for (std::size_t v = 0; v < cameras.size(); ++v) {
+    SCOPED_TRACE("frame " + std::to_string(v));
+    render::FrameStats stats, all_stats;
+    const render::Image culled = renderer.render(cameras[v], render::CullMode::Occlusion, &stats);
+    EXPECT_NE(renderer.pyramid(), nullptr);
+    if (!renderer.pyramid()) return occluded_total;
+    const occlusion::DepthPyramid pyramid = renderer.pyramid()->read();
+    const render::Image all = renderer.render(cameras[v], render::CullMode::None, &all_stats);
+    EXPECT_EQ(render::count_different_pixels(culled, all), 0u) << stats.occluded << " occluded";
+    if (v == 0) {
+      EXPECT_EQ(stats.first_phase_draws, 0u);  // nothing visible before the first frame
+    }
+    const glm::mat4 vp = cameras[v].view_proj();
+    const Frustum f = Frustum::from_view_proj(vp);
+    const occlusion::OcclusionView view{vp, width, height, cameras[v].reversed_z};
+    std::vector<Classification> cpu(scene.objects.size());
+    reference::CullCounts counts;
+    if (bv == BvKind::Aabb)
+      counts = occlusion::classify_all(std::span<const Aabb>(aabbs), f, view, pyramid, config.occlusion, cpu);
+    if (bv == BvKind::Obb)
+      counts = occlusion::classify_all(std::span<const Obb>(obbs), f, view, pyramid, config.occlusion, cpu);
+    if (bv == BvKind::Sphere)
+      counts = occlusion::classify_all(std::span<const Sphere>(spheres), f, view, pyramid, config.occlusion, cpu);
+    EXPECT_EQ(stats.classes, cpu);
+    EXPECT_EQ(stats.draws, counts.visible);
+    EXPECT_EQ(stats.occluded, counts.occluded);
+    occluded_total += counts.occluded;
+    std::printf("  frame %zu: %zu drawn first, %zu kept by the frustum, %zu occluded, %zu drawn\n", v,
+                stats.first_phase_draws, counts.visible + counts.occluded, counts.occluded, stats.draws);
+  }
+  return occluded_total;
+}
+
+TEST(Render, OcclusionFramesEqualUnculledAlongAPath) {
+  const Scene city = load_scene(std::string(CULLPIPE_SOURCE_DIR) + "/scenes/default.json");
+  std::vector<Camera> path = camera_path(city.camera, city.bounds(), 6);
+  path.insert(path.begin(), city.camera);
+  for (BvKind bv : {BvKind::Aabb, BvKind::Obb, BvKind::Sphere}) {
+    SCOPED_TRACE(std::string(to_string(bv)));
+    EXPECT_GT(expect_occlusion_invisible(city, path, bv), 200u);  // the test is not trivial
+  }
+  // Reversed Z, an infinite far plane, an orthographic view, 2 and 16 texels per axis.
+  std::vector<Camera> cameras;
+  Camera c = city.camera;
+  c.reversed_z = true;
+  cameras.push_back(c);
+  c.infinite_far = true;
+  cameras.push_back(c);
+  c.reversed_z = false;
+  cameras.push_back(c);
+  Camera ortho = city.camera;
+  ortho.orthographic = true;
+  ortho.ortho_half_height = 60.0f;
+  cameras.push_back(ortho);
+  for (const std::uint32_t texels : {2u, 16u})
+    expect_occlusion_invisible(city, cameras, BvKind::Aabb, 333, 187, texels);
 }
 
 TEST(Render, TopDownImageAndPng) {

@@ -161,10 +161,15 @@ occlusion::DepthPyramid DepthPyramidPass::build(const DepthSource& source, bool 
     record(cmd, source, reversed_z);
     if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps, 1);
   });
+  return read();
+}
+
+occlusion::DepthPyramid DepthPyramidPass::read() const {
+  if (!built_) throw std::logic_error("depth pyramid: read() before any record()");
   occlusion::DepthPyramid p;
   p.width = width_;
   p.height = height_;
-  p.reversed_z = reversed_z;
+  p.reversed_z = reversed_z_;
   p.levels = levels_;
   p.texels.resize(levels_.back().offset + 1);
   std::memcpy(p.texels.data(), texels_.data(), p.texels.size() * sizeof(float));

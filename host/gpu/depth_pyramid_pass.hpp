@@ -58,6 +58,9 @@ class DepthPyramidPass {
   /// record() on the pass's own command buffer, submitted and waited for; the pyramid read back.
   occlusion::DepthPyramid build(const DepthSource& source, bool reversed_z);
 
+  /// The pyramid as the last completed record() left it, read back (the caller has waited).
+  occlusion::DepthPyramid read() const;
+
   /// Every level's texels, level k from levels()[k].offset floats in.
   const vk::Buffer& texels() const { return texels_; }
   std::span<const occlusion::PyramidLevel> levels() const { return levels_; }

@@ -197,8 +197,9 @@ void Renderer::create_targets() {
   };
   make_image(VK_FORMAT_R8G8B8A8_UNORM, VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT,
              VK_IMAGE_ASPECT_COLOR_BIT, color_, color_memory_, color_view_, "colour image");
-  make_image(VK_FORMAT_D32_SFLOAT, VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT, VK_IMAGE_ASPECT_DEPTH_BIT, depth_,
-             depth_memory_, depth_view_, "depth image");
+  // (Transfer source: occlusion frames copy the first phase's depth into the pyramid.)
+  make_image(VK_FORMAT_D32_SFLOAT, VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT,
+             VK_IMAGE_ASPECT_DEPTH_BIT, depth_, depth_memory_, depth_view_, "depth image");
 
   VkAttachmentDescription attachments[2]{};
   attachments[0].format = VK_FORMAT_R8G8B8A8_UNORM;
@@ -211,7 +212,7 @@ void Renderer::create_targets() {
   attachments[0].finalLayout = VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL;
   attachments[1] = attachments[0];
   attachments[1].format = VK_FORMAT_D32_SFLOAT;
-  attachments[1].storeOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
+  attachments[1].storeOp = VK_ATTACHMENT_STORE_OP_STORE;  // (the pyramid reads it)
   attachments[1].finalLayout = VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL;
   VkAttachmentReference color_ref{0, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL};
   VkAttachmentReference depth_ref{1, VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL};
@@ -225,8 +226,10 @@ void Renderer::create_targets() {
   VkSubpassDependency deps[2]{};
   deps[0].srcSubpass = VK_SUBPASS_EXTERNAL;
   deps[0].dstSubpass = 0;
-  deps[0].srcStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT;
-  deps[0].srcAccessMask = VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT;
+  // (Occlusion frames run the render pass twice: the first phase's colour writes finish too.)
+  deps[0].srcStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT |
+                         VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  deps[0].srcAccessMask = VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT | VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
   deps[0].dstStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT | VK_PIPELINE_STAGE_EARLY_FRAGMENT_TESTS_BIT |
                          VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT;
   deps[0].dstAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT | VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_READ_BIT |
@@ -399,51 +402,89 @@ void Renderer::release() {
   color_memory_ = depth_memory_ = VK_NULL_HANDLE;
 }
 
-Image Renderer::render(const Camera& camera, bool cull, FrameStats* stats) {
+Image Renderer::render(const Camera& camera, CullMode mode, FrameStats* stats) {
   const glm::mat4 view_proj = camera.view_proj();
   const Frustum frustum = Frustum::from_view_proj(view_proj);
   const std::size_t n = templates_.size();
-  const gpu::CullOptions options{/*classes=*/stats != nullptr, /*visible_ids=*/false, /*visible_capacity=*/0,
-                                 /*ordered=*/true, /*draws=*/true};
+  const bool cull = mode != CullMode::None, occlusion = mode == CullMode::Occlusion;
+  gpu::CullOptions options;
+  options.classes = stats != nullptr;
+  options.visible_ids = false;
+  options.ordered = true;  // the draws in object order, as the unculled frame issues them
+  options.draws = true;
+  if (occlusion) {
+    if (!pyramid_) pyramid_ = std::make_unique<gpu::DepthPyramidPass>(ctx_);
+    options.pyramid = pyramid_.get();
+    options.occlusion_views = {occlusion::OcclusionView{view_proj, config_.width, config_.height, camera.reversed_z}};
+    options.occlusion_options = config_.occlusion;
+  }
+  const bool first_phase = occlusion && has_visibility_;
 
   CULLPIPE_VK_CHECK(vkResetCommandBuffer(cmd_, 0));
   VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
   begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
   CULLPIPE_VK_CHECK(vkBeginCommandBuffer(cmd_, &begin));
-  if (cull) culler_->record(cmd_, std::span(&frustum, 1), options);
   if (stats_pool_) vkCmdResetQueryPool(cmd_, stats_pool_, 0, 1);
 
-  VkClearValue clears[2];
-  clears[0].color = {{0.085f, 0.09f, 0.11f, 1.0f}};
-  clears[1].depthStencil = {camera.reversed_z ? 0.0f : 1.0f, 0};
-  VkRenderPassBeginInfo rp{VK_STRUCTURE_TYPE_RENDER_PASS_BEGIN_INFO};
-  rp.renderPass = render_pass_;
-  rp.framebuffer = framebuffer_;
-  rp.renderArea = {{0, 0}, {config_.width, config_.height}};
-  rp.clearValueCount = 2;
-  rp.pClearValues = clears;
-  vkCmdBeginRenderPass(cmd_, &rp, VK_SUBPASS_CONTENTS_INLINE);
-  vkCmdBindPipeline(cmd_, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline_[camera.reversed_z ? 1 : 0]);
-  vkCmdBindDescriptorSets(cmd_, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline_layout_, 0, 1, &descriptor_set_, 0, nullptr);
-  const VkDeviceSize zero = 0;
-  VkBuffer vb = vertices_.handle();
-  vkCmdBindVertexBuffers(cmd_, 0, 1, &vb, &zero);
-  vkCmdBindIndexBuffer(cmd_, indices_.handle(), 0, VK_INDEX_TYPE_UINT32);
-  const gpu::RenderParams params{view_proj};
-  vkCmdPushConstants(cmd_, pipeline_layout_, VK_SHADER_STAGE_VERTEX_BIT, 0, sizeof(params), &params);
-  if (stats_pool_) vkCmdBeginQuery(cmd_, stats_pool_, 0, 0);
-  if (n > 0) {
-    // n <= maxDrawIndirectCount (checked at construction): one call either way. The culled
-    // count (view 0's visible_count) cannot exceed the capacity n: maxDrawCount = n.
-    if (cull) {
+  // One pass of the scene into the colour and depth targets, cleared; `draw` records the draws.
+  const auto scene_pass = [&](auto&& draw) {
+    VkClearValue clears[2];
+    clears[0].color = {{0.085f, 0.09f, 0.11f, 1.0f}};
+    clears[1].depthStencil = {camera.reversed_z ? 0.0f : 1.0f, 0};
+    VkRenderPassBeginInfo rp{VK_STRUCTURE_TYPE_RENDER_PASS_BEGIN_INFO};
+    rp.renderPass = render_pass_;
+    rp.framebuffer = framebuffer_;
+    rp.renderArea = {{0, 0}, {config_.width, config_.height}};
+    rp.clearValueCount = 2;
+    rp.pClearValues = clears;
+    vkCmdBeginRenderPass(cmd_, &rp, VK_SUBPASS_CONTENTS_INLINE);
+    vkCmdBindPipeline(cmd_, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline_[camera.reversed_z ? 1 : 0]);
+    vkCmdBindDescriptorSets(cmd_, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline_layout_, 0, 1, &descriptor_set_, 0,
+                            nullptr);
+    const VkDeviceSize zero = 0;
+    VkBuffer vb = vertices_.handle();
+    vkCmdBindVertexBuffers(cmd_, 0, 1, &vb, &zero);
+    vkCmdBindIndexBuffer(cmd_, indices_.handle(), 0, VK_INDEX_TYPE_UINT32);
+    const gpu::RenderParams params{view_proj};
+    vkCmdPushConstants(cmd_, pipeline_layout_, VK_SHADER_STAGE_VERTEX_BIT, 0, sizeof(params), &params);
+    draw();
+    vkCmdEndRenderPass(cmd_);
+  };
+  // n <= maxDrawIndirectCount (checked at construction): one call either way. The culled count
+  // (view 0's visible_count) cannot exceed the capacity n: maxDrawCount = n.
+  const auto culled_draws = [&] {
+    if (n > 0)
       vkCmdDrawIndexedIndirectCount(cmd_, culler_->draw_buffer().handle(), 0, culler_->counter_buffer().handle(), 0,
                                     std::uint32_t(n), sizeof(DrawCommand));
+  };
+
+  std::size_t first_phase_draws = 0;
+  if (occlusion) {
+    // First phase: the last occlusion frame's visible objects (its draws, still in the culler's
+    // buffers), for depth; then that depth as a pyramid.
+    if (first_phase) {
+      first_phase_draws =
+          std::min<std::size_t>(culler_->counter_buffer().as<const gpu::ViewCounters>()[0].visible_count, n);
+      scene_pass(culled_draws);
     } else {
+      scene_pass([] {});  // nothing drawn: a cleared depth occludes nothing
+    }
+    pyramid_->record(cmd_,
+                     gpu::DepthSource{depth_, VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL, VK_FORMAT_D32_SFLOAT,
+                                      config_.width, config_.height},
+                     camera.reversed_z);
+  }
+  if (cull) culler_->record(cmd_, std::span(&frustum, 1), options);
+  // The image: every object, or what the culling pass kept, in object order.
+  scene_pass([&] {
+    if (stats_pool_) vkCmdBeginQuery(cmd_, stats_pool_, 0, 0);
+    if (cull) {
+      culled_draws();
+    } else if (n > 0) {
       vkCmdDrawIndexedIndirect(cmd_, all_draws_.handle(), 0, std::uint32_t(n), sizeof(DrawCommand));
     }
-  }
-  if (stats_pool_) vkCmdEndQuery(cmd_, stats_pool_, 0);
-  vkCmdEndRenderPass(cmd_);
+    if (stats_pool_) vkCmdEndQuery(cmd_, stats_pool_, 0);
+  });
 
   VkBufferImageCopy copy{};
   copy.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
@@ -455,6 +496,9 @@ Image Renderer::render(const Camera& camera, bool cull, FrameStats* stats) {
                        nullptr);
   CULLPIPE_VK_CHECK(vkEndCommandBuffer(cmd_));
   ctx_.submit_and_wait(cmd_);
+  // The culler's draws are what this frame kept: the next occlusion frame's first phase (any
+  // set of objects would keep its image exact; last frame's visible ones make the pyramid tight).
+  if (cull) has_visibility_ = true;
 
   Image image;
   image.width = config_.width;
@@ -463,9 +507,12 @@ Image Renderer::render(const Camera& camera, bool cull, FrameStats* stats) {
   std::memcpy(image.rgba.data(), readback_.data(), image.rgba.size());
   if (stats) {
     stats->objects = n;
+    stats->first_phase_draws = first_phase_draws;
+    stats->occluded = 0;
     if (cull) {
       const gpu::CullResult r = culler_->read_results();
       stats->draws = std::min<std::size_t>(r.views[0].counts.visible, n);
+      stats->occluded = r.views[0].counts.occluded;
       stats->classes = r.views[0].classes;
     } else {
       stats->draws = n;

@@ -4,8 +4,10 @@
 #include <vector>
 
 #include "bounds/aabb_update.hpp"
+#include "cull/occlusion.hpp"
 #include "geom/bv_kind.hpp"
 #include "geom/classification.hpp"
+#include "gpu/depth_pyramid_pass.hpp"
 #include "gpu/gpu_culler.hpp"
 #include "render/image.hpp"
 #include "scene/camera.hpp"
@@ -18,15 +20,26 @@ namespace cullpipe::render {
 struct RendererConfig {
   std::uint32_t width = 960;
   std::uint32_t height = 540;
+  /// How the occlusion test of CullMode::Occlusion frames reads the depth pyramid.
+  occlusion::OcclusionOptions occlusion;
   BvKind bv = BvKind::Aabb;                                            ///< volume the culling pass tests
   bounds::AabbUpdate aabb_update = bounds::AabbUpdate::HullRecompute;  ///< world AABBs of mesh objects
 };
 
+/// How a frame culls: not at all, by the frustum, or by the frustum and then occlusion in two
+/// phases (CullMode::Occlusion: Renderer::render says how).
+enum class CullMode { None, Frustum, Occlusion };
+
 /// What one frame drew.
 struct FrameStats {
   std::size_t objects = 0;
-  /// Draws the GPU issued: the draw count the culling pass wrote (culled frames), else objects.
+  /// Draws the GPU issued for the image: the draw count the culling pass wrote (culled frames),
+  /// else objects. With occlusion, the second phase's draws.
   std::size_t draws = 0;
+  /// Occlusion frames: the first phase's draws (last frame's visible objects, depth for the
+  /// pyramid) and the objects the frustum kept that the pyramid hid.
+  std::size_t first_phase_draws = 0;
+  std::size_t occluded = 0;
   /// Triangles the input assembler received (pipeline statistics; 0 when the device has none).
   std::uint64_t primitives = 0;
   bool primitives_counted = false;
@@ -48,8 +61,21 @@ class Renderer {
   Renderer(const Renderer&) = delete;
   Renderer& operator=(const Renderer&) = delete;
 
-  /// Draws the scene seen by `camera`, culled or not; waits and reads the image back.
-  Image render(const Camera& camera, bool cull, FrameStats* stats = nullptr);
+  /// Draws the scene seen by `camera`; waits and reads the image back. With
+  /// CullMode::Occlusion, in two phases: the first draws the objects the last occlusion frame
+  /// found visible (none after construction or forget_visibility()) and reduces that depth to a
+  /// pyramid; the flat pass then culls by the frustum and that pyramid, and the second phase
+  /// clears and draws what it kept, in object order, so the image equals the unculled one pixel
+  /// for pixel (an occluded object is strictly behind every depth it could reach). What it kept
+  /// is the next frame's first phase.
+  Image render(const Camera& camera, CullMode mode, FrameStats* stats = nullptr);
+  Image render(const Camera& camera, bool cull, FrameStats* stats = nullptr) {
+    return render(camera, cull ? CullMode::Frustum : CullMode::None, stats);
+  }
+  /// The depth pyramid of the last occlusion frame (null before the first).
+  const gpu::DepthPyramidPass* pyramid() const { return pyramid_.get(); }
+  /// The next occlusion frame starts with no visible objects (a camera cut).
+  void forget_visibility() { has_visibility_ = false; }
 
   /// Triangles of object i (what a draw of it feeds the input assembler).
   std::uint64_t triangles(std::size_t object) const { return templates_[object].index_count / 3; }
@@ -64,6 +90,8 @@ class Renderer {
   RendererConfig config_;
   std::vector<gpu::DrawCommand> templates_;
   std::unique_ptr<gpu::GpuCuller> culler_;
+  std::unique_ptr<gpu::DepthPyramidPass> pyramid_;
+  bool has_visibility_ = false;  // the culler's draw buffer holds the last occlusion frame's draws
   vk::Buffer vertices_, indices_, objects_, all_draws_, readback_;
   VkImage color_ = VK_NULL_HANDLE, depth_ = VK_NULL_HANDLE;
   VkDeviceMemory color_memory_ = VK_NULL_HANDLE, depth_memory_ = VK_NULL_HANDLE;
