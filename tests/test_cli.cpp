@@ -461,6 +461,23 @@ TEST(Cli, RenderWritesImagesAndChecksCulledEqualsUnculled) {
   EXPECT_NE(bad.err.find("/nonexistent-dir/x.png: cannot write"), std::string::npos) << bad.err;
 }
 
+TEST(Cli, RenderWithOcclusionPrintsEachFrameAndKeepsTheImage) {
+  const fs::path png = temp_dir() / "occluded.png";
+  const Result r = cullpipe("render --occlusion --frames 3 --check --validate --width 240 --height 135 --out '" +
+                            png.string() + "'");
+  ASSERT_EQ(r.code, 0) << r.err;
+  for (const char* frame : {"frame 0:", "frame 1:", "frame 2:"})
+    EXPECT_NE(r.out.find(frame), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("260 kept by the frustum, 0 occluded, 0 drawn first"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("DIFFERS"), std::string::npos) << r.out;
+  // From the second frame on, the default camera's hidden buildings are culled.
+  const std::size_t second = r.out.find("frame 1:");
+  ASSERT_NE(second, std::string::npos);
+  EXPECT_EQ(r.out.find(" 0 occluded", second), std::string::npos) << r.out;
+  EXPECT_EQ(cullpipe("render --occlusion --no-cull --out '" + png.string() + "'").code, 2);
+  EXPECT_EQ(cullpipe("render --occlusion --texels 3 --out '" + png.string() + "'").code, 2);
+}
+
 TEST(Cli, DevicesListsAtLeastOne) {
   const Result r = cullpipe("devices");
   EXPECT_EQ(r.code, 0) << r.err;

@@ -100,6 +100,16 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::IsMember({"aabb", "obb", "sphere"}));
   render_cmd->add_flag("--no-cull", render.no_cull, "Draw every object (no culling pass)");
+  render_cmd->add_flag("--occlusion", render.occlusion,
+                       "Also cull occluded objects: two phases per frame, last frame's visible objects first");
+  render_cmd
+      ->add_option("--frames", render.frames,
+                   "Frames along the camera path from --view (visibility carries from frame to frame)")
+      ->capture_default_str()
+      ->check(CLI::Range(std::size_t(1), std::size_t(100000)));
+  render_cmd->add_option("--texels", render.texels, "--occlusion: texels per axis the test reads: 2 | 4 | 8 | 16")
+      ->capture_default_str()
+      ->check(CLI::IsMember({2u, 4u, 8u, 16u}));
   render_cmd->add_flag("--check", render.check,
                        "Also draw without culling and require the same image, pixel for pixel (exit 1 if not)");
   render_cmd->add_option("--views", render.views, "Camera path of this many views around the scene")

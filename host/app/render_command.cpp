@@ -17,9 +17,10 @@ int render_command(const RenderOptions& o, std::ostream& out, std::ostream& err)
     if (o.out_path.empty()) throw InputError("--out FILE.png is required");
     if (o.views == 0 || o.view >= o.views) throw InputError("--view must be below --views");
     if (o.no_cull && o.check) throw InputError("give --no-cull or --check, not both");
+    if (o.no_cull && o.occlusion) throw InputError("give --no-cull or --occlusion, not both");
     const LoadedScene loaded = load_scene_source(o);
     const Scene& scene = loaded.scene;
-    const Camera camera = camera_path(scene.camera, scene.bounds(), o.views)[o.view];
+    const std::vector<Camera> path = camera_path(scene.camera, scene.bounds(), o.views);
 
     vk::ContextOptions options;
     options.validation = o.device.validation;
@@ -31,39 +32,53 @@ int render_command(const RenderOptions& o, std::ostream& out, std::ostream& err)
     config.height = o.height;
     config.bv = *bv;
     config.aabb_update = loaded.aabb_update;
+    config.occlusion.texels_per_axis = o.texels;
     render::Renderer renderer(ctx, scene, config);
-
-    render::FrameStats stats;
-    const render::Image image = renderer.render(camera, !o.no_cull, &stats);
-    render::write_png(o.out_path, image);
+    const render::CullMode mode = o.no_cull     ? render::CullMode::None
+                                  : o.occlusion ? render::CullMode::Occlusion
+                                                : render::CullMode::Frustum;
     std::uint64_t all_triangles = 0;
     for (std::size_t i = 0; i < renderer.object_count(); ++i) all_triangles += renderer.triangles(i);
-
     out << "cullpipe render: " << loaded.source << ", " << scene.objects.size() << " objects, " << o.width << "x"
         << o.height << ", device " << ctx.info().name << "\n";
-    if (o.no_cull) {
-      out << "  no culling: " << stats.draws << " draws";
-    } else {
-      std::size_t inside = 0;
-      for (Classification c : stats.classes) inside += c == Classification::Inside;
-      out << "  culled with " << o.bv << ": " << stats.draws << " of " << scene.objects.size() << " objects drawn ("
-          << inside << " inside, " << stats.draws - inside << " intersecting)";
-    }
-    if (stats.primitives_counted) out << ", " << stats.primitives << " of " << all_triangles << " triangles";
-    out << "\n  wrote " << o.out_path << "\n";
 
+    // Every frame along the path (one frame by default); the last one is written.
     int code = kExitOk;
-    if (o.check) {
-      render::FrameStats all_stats;
-      const render::Image all = renderer.render(camera, false, &all_stats);
-      const std::size_t diff = render::count_different_pixels(image, all);
-      out << "  check: image without culling (" << all_stats.draws << " draws) "
-          << (diff == 0 ? "is identical, pixel for pixel\n" : "DIFFERS in " + std::to_string(diff) + " pixels\n");
-      if (diff) {
-        err << "error: culling changed the image (" << diff << " pixels differ)\n";
-        code = kExitMismatch;
+    render::FrameStats stats;
+    render::Image image;
+    Camera camera;
+    for (std::size_t f = 0; f < o.frames; ++f) {
+      camera = path[(o.view + f) % path.size()];
+      image = renderer.render(camera, mode, &stats);
+      if (o.frames > 1) out << "  frame " << f << ":";
+      if (o.no_cull) {
+        out << "  no culling: " << stats.draws << " draws";
+      } else {
+        std::size_t inside = 0;
+        for (Classification c : stats.classes) inside += c == Classification::Inside;
+        out << "  culled with " << o.bv << ": " << stats.draws << " of " << scene.objects.size() << " objects drawn ("
+            << inside << " inside, " << stats.draws - inside << " intersecting)";
+        if (o.occlusion)
+          out << "; " << stats.draws + stats.occluded << " kept by the frustum, " << stats.occluded << " occluded, "
+              << stats.first_phase_draws << " drawn first";
+      }
+      if (stats.primitives_counted) out << ", " << stats.primitives << " of " << all_triangles << " triangles";
+      out << "\n";
+      if (o.check) {
+        render::FrameStats all_stats;
+        const render::Image all = renderer.render(camera, render::CullMode::None, &all_stats);
+        const std::size_t diff = render::count_different_pixels(image, all);
+        out << "  check: image without culling (" << all_stats.draws << " draws) "
+            << (diff == 0 ? "is identical, pixel for pixel\n" : "DIFFERS in " + std::to_string(diff) + " pixels\n");
+        if (diff) {
+          err << "error: culling changed the image (" << diff << " pixels differ)\n";
+          code = kExitMismatch;
+        }
       }
     }
+    render::write_png(o.out_path, image);
+    out << "  wrote " << o.out_path << "\n";
+
     if (!o.top_down_path.empty()) {
       std::vector<Classification> classes = stats.classes;
       if (classes.empty()) {  // --no-cull: classify for the picture anyway
@@ -74,7 +89,7 @@ int render_command(const RenderOptions& o, std::ostream& out, std::ostream& err)
       render::write_png(o.top_down_path,
                         render::top_down_image(world_aabbs(scene, loaded.aabb_update), classes, camera, 900));
       out << "  wrote " << o.top_down_path
-          << " (top-down: green inside, amber intersecting, grey culled, white frustum)\n";
+          << " (top-down: green inside, amber intersecting, violet occluded, grey outside, white frustum)\n";
     }
     if (ctx.validation_message_count() > 0)
       throw vk::Error(std::to_string(ctx.validation_message_count()) + " Vulkan validation message(s) reported");

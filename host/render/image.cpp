@@ -119,11 +119,13 @@ Image top_down_image(const std::vector<Aabb>& world_boxes, const std::vector<Cla
   const auto px = [&](float x) { return int(std::floor((x - cx) * scale + 0.5f * float(img.width))); };
   const auto pz = [&](float z) { return int(std::floor((z - cz) * scale + 0.5f * float(img.height))); };
 
-  for (int pass = 0; pass < 3; ++pass) {  // outside, then intersecting, then inside on top
-    const Classification want = pass == 0   ? Classification::Outside
-                                : pass == 1 ? Classification::Intersecting
-                                            : Classification::Inside;
-    const std::uint32_t color = pass == 0 ? kColorOutside : pass == 1 ? kColorIntersecting : kColorInside;
+  // Outside, then occluded, intersecting and inside on top.
+  const Classification order[4] = {Classification::Outside, Classification::Occluded, Classification::Intersecting,
+                                   Classification::Inside};
+  const std::uint32_t colors[4] = {kColorOutside, kColorOccluded, kColorIntersecting, kColorInside};
+  for (int pass = 0; pass < 4; ++pass) {
+    const Classification want = order[pass];
+    const std::uint32_t color = colors[pass];
     for (std::size_t i = 0; i < world_boxes.size() && i < classes.size(); ++i) {
       if (classes[i] != want) continue;
       const Aabb& b = world_boxes[i];

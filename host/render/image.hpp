@@ -28,6 +28,7 @@ std::size_t count_different_pixels(const Image& a, const Image& b);
 inline constexpr std::uint32_t kColorInside = 0x3cb44bff;        ///< green
 inline constexpr std::uint32_t kColorIntersecting = 0xf0b400ff;  ///< amber
 inline constexpr std::uint32_t kColorOutside = 0x5a5f69ff;       ///< grey
+inline constexpr std::uint32_t kColorOccluded = 0x8c5ac8ff;      ///< violet
 
 /// A top-down (looking down -y) debug view drawn on the CPU: every object's world AABB
 /// footprint in the x-z plane, filled by its class (outside first, so visible objects stay on
