@@ -194,9 +194,18 @@ std::size_t expect_occlusion_invisible(const Scene& scene, const std::vector<Cam
     EXPECT_EQ(stats.classes, cpu);
     EXPECT_EQ(stats.draws, counts.visible);
     EXPECT_EQ(stats.occluded, counts.occluded);
+    // The contract itself: every object owning a pixel of the unculled image is drawn.
+    const std::vector<bool> owners = renderer.pixel_owners(cameras[v]);
+    std::size_t owning = 0;
+    for (std::size_t i = 0; i < owners.size(); ++i) {
+      if (!owners[i]) continue;
+      ++owning;
+      EXPECT_TRUE(is_visible(stats.classes[i]))
+          << "object " << i << " owns a pixel but is " << to_string(stats.classes[i]);
+    }
     occluded_total += counts.occluded;
-    std::printf("  frame %zu: %zu drawn first, %zu kept by the frustum, %zu occluded, %zu drawn\n", v,
-                stats.first_phase_draws, counts.visible + counts.occluded, counts.occluded, stats.draws);
+    std::printf("  frame %zu: %zu drawn first, %zu kept by the frustum, %zu occluded, %zu drawn, %zu own a pixel\n", v,
+                stats.first_phase_draws, counts.visible + counts.occluded, counts.occluded, stats.draws, owning);
   }
   return occluded_total;
 }

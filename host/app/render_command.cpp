@@ -74,6 +74,18 @@ int render_command(const RenderOptions& o, std::ostream& out, std::ostream& err)
           err << "error: culling changed the image (" << diff << " pixels differ)\n";
           code = kExitMismatch;
         }
+        {  // the objects owning a pixel of the unculled image, and any not drawn
+          const std::vector<bool> owners = renderer.pixel_owners(camera);
+          std::size_t owning = 0, dropped = 0;
+          for (std::size_t i = 0; i < owners.size(); ++i)
+            if (owners[i]) ++owning, dropped += !is_visible(stats.classes[i]);
+          out << "  check: " << owning << " objects own a pixel, " << (dropped ? std::to_string(dropped) : "none")
+              << " of them culled; drawn / owning " << (owning ? double(stats.draws) / double(owning) : 0.0) << "\n";
+          if (dropped) {
+            err << "error: " << dropped << " objects owning a pixel were culled\n";
+            code = kExitMismatch;
+          }
+        }
       }
     }
     render::write_png(o.out_path, image);

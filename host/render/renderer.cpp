@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <glm/ext/matrix_transform.hpp>
 #include <limits>
 #include <stdexcept>
@@ -12,6 +13,7 @@
 #include "vk/check.hpp"
 
 // SPIR-V compiled from shaders/render_mesh.{vert,frag} at build time.
+#include "render_id.frag.spv.h"
 #include "render_mesh.frag.spv.h"
 #include "render_mesh.vert.spv.h"
 
@@ -112,6 +114,16 @@ Renderer::Renderer(const vk::Context& ctx, const Scene& scene, const RendererCon
            "index buffer");
     upload(objects_, objects.data(), objects.size() * sizeof(RenderObject), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT,
            "render object buffer");
+    // The id pass's objects: the same, coloured by id + 1 in 24 bits (render_id.frag).
+    if (n >= (std::size_t(1) << 24) - 1)
+      throw std::length_error(std::to_string(n) + " objects: the id pass tells at most 2^24 - 2 apart");
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::uint32_t id = std::uint32_t(i + 1);
+      objects[i].color =
+          glm::vec4(float(id & 255u) / 255.0f, float(id >> 8 & 255u) / 255.0f, float(id >> 16) / 255.0f, 1.0f);
+    }
+    upload(id_objects_, objects.data(), objects.size() * sizeof(RenderObject), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT,
+           "id pass object buffer");
     upload(all_draws_, templates_.data(), templates_.size() * sizeof(DrawCommand), VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT,
            "unculled draw buffer");
     if (n > ctx_.properties().limits.maxDrawIndirectCount)
@@ -274,9 +286,9 @@ void Renderer::create_pipelines() {
   layout_info.pPushConstantRanges = &push;
   CULLPIPE_VK_CHECK(vkCreatePipelineLayout(dev, &layout_info, nullptr, &pipeline_layout_));
 
-  VkDescriptorPoolSize pool_size{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1};
+  VkDescriptorPoolSize pool_size{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 2};
   VkDescriptorPoolCreateInfo pool_info{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
-  pool_info.maxSets = 1;
+  pool_info.maxSets = 2;
   pool_info.poolSizeCount = 1;
   pool_info.pPoolSizes = &pool_size;
   CULLPIPE_VK_CHECK(vkCreateDescriptorPool(dev, &pool_info, nullptr, &descriptor_pool_));
@@ -293,11 +305,16 @@ void Renderer::create_pipelines() {
   write.descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
   write.pBufferInfo = &buffer_info;
   vkUpdateDescriptorSets(dev, 1, &write, 0, nullptr);
+  CULLPIPE_VK_CHECK(vkAllocateDescriptorSets(dev, &alloc, &id_descriptor_set_));
+  buffer_info.buffer = id_objects_.handle();
+  write.dstSet = id_descriptor_set_;
+  vkUpdateDescriptorSets(dev, 1, &write, 0, nullptr);
 
   VkShaderModule vert = shader_module(dev, cullpipe_render_mesh_vert_spv, sizeof(cullpipe_render_mesh_vert_spv));
-  VkShaderModule frag = VK_NULL_HANDLE;
+  VkShaderModule frag = VK_NULL_HANDLE, id_frag = VK_NULL_HANDLE;
   try {
     frag = shader_module(dev, cullpipe_render_mesh_frag_spv, sizeof(cullpipe_render_mesh_frag_spv));
+    id_frag = shader_module(dev, cullpipe_render_id_frag_spv, sizeof(cullpipe_render_id_frag_spv));
     VkPipelineShaderStageCreateInfo stages[2]{};
     stages[0] = {VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO,
                  nullptr,
@@ -360,15 +377,20 @@ void Renderer::create_pipelines() {
     info.subpass = 0;
     for (int reversed = 0; reversed < 2; ++reversed) {
       depth.depthCompareOp = reversed ? VK_COMPARE_OP_GREATER : VK_COMPARE_OP_LESS;
+      stages[1].module = frag;
       CULLPIPE_VK_CHECK(vkCreateGraphicsPipelines(dev, VK_NULL_HANDLE, 1, &info, nullptr, &pipeline_[reversed]));
+      stages[1].module = id_frag;
+      CULLPIPE_VK_CHECK(vkCreateGraphicsPipelines(dev, VK_NULL_HANDLE, 1, &info, nullptr, &id_pipeline_[reversed]));
     }
   } catch (...) {
     vkDestroyShaderModule(dev, vert, nullptr);
     if (frag) vkDestroyShaderModule(dev, frag, nullptr);
+    if (id_frag) vkDestroyShaderModule(dev, id_frag, nullptr);
     throw;
   }
   vkDestroyShaderModule(dev, vert, nullptr);
   vkDestroyShaderModule(dev, frag, nullptr);
+  vkDestroyShaderModule(dev, id_frag, nullptr);
 }
 
 void Renderer::release() {
@@ -378,6 +400,8 @@ void Renderer::release() {
   if (stats_pool_) vkDestroyQueryPool(dev, stats_pool_, nullptr);
   if (cmd_) vkFreeCommandBuffers(dev, ctx_.command_pool(), 1, &cmd_);
   for (VkPipeline& p : pipeline_)
+    if (p) vkDestroyPipeline(dev, p, nullptr), p = VK_NULL_HANDLE;
+  for (VkPipeline& p : id_pipeline_)
     if (p) vkDestroyPipeline(dev, p, nullptr), p = VK_NULL_HANDLE;
   if (descriptor_pool_) vkDestroyDescriptorPool(dev, descriptor_pool_, nullptr);
   if (pipeline_layout_) vkDestroyPipelineLayout(dev, pipeline_layout_, nullptr);
@@ -402,6 +426,73 @@ void Renderer::release() {
   color_memory_ = depth_memory_ = VK_NULL_HANDLE;
 }
 
+void Renderer::begin_frame() {
+  CULLPIPE_VK_CHECK(vkResetCommandBuffer(cmd_, 0));
+  VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+  begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+  CULLPIPE_VK_CHECK(vkBeginCommandBuffer(cmd_, &begin));
+}
+
+void Renderer::record_scene_pass(const Camera& camera, bool ids, const std::function<void()>& draw) {
+  VkClearValue clears[2];
+  clears[0].color = ids ? VkClearColorValue{{0.0f, 0.0f, 0.0f, 0.0f}} : VkClearColorValue{{0.085f, 0.09f, 0.11f, 1.0f}};
+  clears[1].depthStencil = {camera.reversed_z ? 0.0f : 1.0f, 0};
+  VkRenderPassBeginInfo rp{VK_STRUCTURE_TYPE_RENDER_PASS_BEGIN_INFO};
+  rp.renderPass = render_pass_;
+  rp.framebuffer = framebuffer_;
+  rp.renderArea = {{0, 0}, {config_.width, config_.height}};
+  rp.clearValueCount = 2;
+  rp.pClearValues = clears;
+  vkCmdBeginRenderPass(cmd_, &rp, VK_SUBPASS_CONTENTS_INLINE);
+  const int reversed = camera.reversed_z ? 1 : 0;
+  vkCmdBindPipeline(cmd_, VK_PIPELINE_BIND_POINT_GRAPHICS, ids ? id_pipeline_[reversed] : pipeline_[reversed]);
+  const VkDescriptorSet set = ids ? id_descriptor_set_ : descriptor_set_;
+  vkCmdBindDescriptorSets(cmd_, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline_layout_, 0, 1, &set, 0, nullptr);
+  const VkDeviceSize zero = 0;
+  VkBuffer vb = vertices_.handle();
+  vkCmdBindVertexBuffers(cmd_, 0, 1, &vb, &zero);
+  vkCmdBindIndexBuffer(cmd_, indices_.handle(), 0, VK_INDEX_TYPE_UINT32);
+  const gpu::RenderParams params{camera.view_proj()};
+  vkCmdPushConstants(cmd_, pipeline_layout_, VK_SHADER_STAGE_VERTEX_BIT, 0, sizeof(params), &params);
+  draw();
+  vkCmdEndRenderPass(cmd_);
+}
+
+Image Renderer::submit_and_read() {
+  VkBufferImageCopy copy{};
+  copy.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
+  copy.imageExtent = {config_.width, config_.height, 1};
+  vkCmdCopyImageToBuffer(cmd_, color_, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, readback_.handle(), 1, &copy);
+  VkMemoryBarrier to_host{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, VK_ACCESS_TRANSFER_WRITE_BIT,
+                          VK_ACCESS_HOST_READ_BIT};
+  vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &to_host, 0, nullptr, 0,
+                       nullptr);
+  CULLPIPE_VK_CHECK(vkEndCommandBuffer(cmd_));
+  ctx_.submit_and_wait(cmd_);
+  Image image;
+  image.width = config_.width;
+  image.height = config_.height;
+  image.rgba.resize(std::size_t(config_.width) * config_.height * 4);
+  std::memcpy(image.rgba.data(), readback_.data(), image.rgba.size());
+  return image;
+}
+
+std::vector<bool> Renderer::pixel_owners(const Camera& camera) {
+  const std::size_t n = templates_.size();
+  begin_frame();
+  record_scene_pass(camera, true, [&] {
+    if (n > 0) vkCmdDrawIndexedIndirect(cmd_, all_draws_.handle(), 0, std::uint32_t(n), sizeof(DrawCommand));
+  });
+  const Image image = submit_and_read();
+  std::vector<bool> owners(n, false);
+  for (std::size_t p = 0; p < image.rgba.size(); p += 4) {
+    const std::uint32_t id =
+        std::uint32_t(image.rgba[p]) | std::uint32_t(image.rgba[p + 1]) << 8 | std::uint32_t(image.rgba[p + 2]) << 16;
+    if (id != 0 && id <= n) owners[id - 1] = true;
+  }
+  return owners;
+}
+
 Image Renderer::render(const Camera& camera, CullMode mode, FrameStats* stats) {
   const glm::mat4 view_proj = camera.view_proj();
   const Frustum frustum = Frustum::from_view_proj(view_proj);
@@ -420,36 +511,10 @@ Image Renderer::render(const Camera& camera, CullMode mode, FrameStats* stats) {
   }
   const bool first_phase = occlusion && has_visibility_;
 
-  CULLPIPE_VK_CHECK(vkResetCommandBuffer(cmd_, 0));
-  VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
-  begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
-  CULLPIPE_VK_CHECK(vkBeginCommandBuffer(cmd_, &begin));
+  begin_frame();
   if (stats_pool_) vkCmdResetQueryPool(cmd_, stats_pool_, 0, 1);
 
-  // One pass of the scene into the colour and depth targets, cleared; `draw` records the draws.
-  const auto scene_pass = [&](auto&& draw) {
-    VkClearValue clears[2];
-    clears[0].color = {{0.085f, 0.09f, 0.11f, 1.0f}};
-    clears[1].depthStencil = {camera.reversed_z ? 0.0f : 1.0f, 0};
-    VkRenderPassBeginInfo rp{VK_STRUCTURE_TYPE_RENDER_PASS_BEGIN_INFO};
-    rp.renderPass = render_pass_;
-    rp.framebuffer = framebuffer_;
-    rp.renderArea = {{0, 0}, {config_.width, config_.height}};
-    rp.clearValueCount = 2;
-    rp.pClearValues = clears;
-    vkCmdBeginRenderPass(cmd_, &rp, VK_SUBPASS_CONTENTS_INLINE);
-    vkCmdBindPipeline(cmd_, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline_[camera.reversed_z ? 1 : 0]);
-    vkCmdBindDescriptorSets(cmd_, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline_layout_, 0, 1, &descriptor_set_, 0,
-                            nullptr);
-    const VkDeviceSize zero = 0;
-    VkBuffer vb = vertices_.handle();
-    vkCmdBindVertexBuffers(cmd_, 0, 1, &vb, &zero);
-    vkCmdBindIndexBuffer(cmd_, indices_.handle(), 0, VK_INDEX_TYPE_UINT32);
-    const gpu::RenderParams params{view_proj};
-    vkCmdPushConstants(cmd_, pipeline_layout_, VK_SHADER_STAGE_VERTEX_BIT, 0, sizeof(params), &params);
-    draw();
-    vkCmdEndRenderPass(cmd_);
-  };
+  const auto scene_pass = [&](const std::function<void()>& draw) { record_scene_pass(camera, false, draw); };
   // n <= maxDrawIndirectCount (checked at construction): one call either way. The culled count
   // (view 0's visible_count) cannot exceed the capacity n: maxDrawCount = n.
   const auto culled_draws = [&] {
@@ -486,25 +551,10 @@ Image Renderer::render(const Camera& camera, CullMode mode, FrameStats* stats) {
     if (stats_pool_) vkCmdEndQuery(cmd_, stats_pool_, 0);
   });
 
-  VkBufferImageCopy copy{};
-  copy.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
-  copy.imageExtent = {config_.width, config_.height, 1};
-  vkCmdCopyImageToBuffer(cmd_, color_, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, readback_.handle(), 1, &copy);
-  VkMemoryBarrier to_host{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, VK_ACCESS_TRANSFER_WRITE_BIT,
-                          VK_ACCESS_HOST_READ_BIT};
-  vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &to_host, 0, nullptr, 0,
-                       nullptr);
-  CULLPIPE_VK_CHECK(vkEndCommandBuffer(cmd_));
-  ctx_.submit_and_wait(cmd_);
+  const Image image = submit_and_read();
   // The culler's draws are what this frame kept: the next occlusion frame's first phase (any
   // set of objects would keep its image exact; last frame's visible ones make the pyramid tight).
   if (cull) has_visibility_ = true;
-
-  Image image;
-  image.width = config_.width;
-  image.height = config_.height;
-  image.rgba.resize(std::size_t(config_.width) * config_.height * 4);
-  std::memcpy(image.rgba.data(), readback_.data(), image.rgba.size());
   if (stats) {
     stats->objects = n;
     stats->first_phase_draws = first_phase_draws;

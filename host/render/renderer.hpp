@@ -1,5 +1,6 @@
 #pragma once
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -77,11 +78,22 @@ class Renderer {
   /// The next occlusion frame starts with no visible objects (a camera cut).
   void forget_visibility() { has_visibility_ = false; }
 
+  /// Which objects own at least one pixel of the unculled image seen by `camera`: every object
+  /// drawn in object order, as render(camera, CullMode::None) draws them, each writing its id;
+  /// the ids left in the image. What no culling may ever drop.
+  std::vector<bool> pixel_owners(const Camera& camera);
+
   /// Triangles of object i (what a draw of it feeds the input assembler).
   std::uint64_t triangles(std::size_t object) const { return templates_[object].index_count / 3; }
   std::size_t object_count() const { return templates_.size(); }
 
  private:
+  void begin_frame();
+  /// One pass of the scene into the colour and depth targets, cleared (the id pass's pipeline
+  /// and objects with `ids`); `draw` records the draws.
+  void record_scene_pass(const Camera& camera, bool ids, const std::function<void()>& draw);
+  /// Copies the colour image out, ends, submits and waits, and returns the image.
+  Image submit_and_read();
   void create_targets();
   void create_pipelines();
   void release();
@@ -92,7 +104,7 @@ class Renderer {
   std::unique_ptr<gpu::GpuCuller> culler_;
   std::unique_ptr<gpu::DepthPyramidPass> pyramid_;
   bool has_visibility_ = false;  // the culler's draw buffer holds the last occlusion frame's draws
-  vk::Buffer vertices_, indices_, objects_, all_draws_, readback_;
+  vk::Buffer vertices_, indices_, objects_, id_objects_, all_draws_, readback_;
   VkImage color_ = VK_NULL_HANDLE, depth_ = VK_NULL_HANDLE;
   VkDeviceMemory color_memory_ = VK_NULL_HANDLE, depth_memory_ = VK_NULL_HANDLE;
   VkImageView color_view_ = VK_NULL_HANDLE, depth_view_ = VK_NULL_HANDLE;
@@ -100,7 +112,9 @@ class Renderer {
   VkFramebuffer framebuffer_ = VK_NULL_HANDLE;
   VkDescriptorSetLayout set_layout_ = VK_NULL_HANDLE;
   VkPipelineLayout pipeline_layout_ = VK_NULL_HANDLE;
-  VkPipeline pipeline_[2] = {VK_NULL_HANDLE, VK_NULL_HANDLE};  // [reversed_z]: depth LESS or GREATER
+  VkPipeline pipeline_[2] = {VK_NULL_HANDLE, VK_NULL_HANDLE};     // [reversed_z]: depth LESS or GREATER
+  VkPipeline id_pipeline_[2] = {VK_NULL_HANDLE, VK_NULL_HANDLE};  // the id pass's, likewise
+  VkDescriptorSet id_descriptor_set_ = VK_NULL_HANDLE;            // its objects: id_objects_
   VkDescriptorPool descriptor_pool_ = VK_NULL_HANDLE;
   VkDescriptorSet descriptor_set_ = VK_NULL_HANDLE;
   VkCommandBuffer cmd_ = VK_NULL_HANDLE;
