@@ -36,6 +36,26 @@ const auto* const kEnv = ::testing::AddGlobalTestEnvironment(new RenderEnvironme
 
 const std::filesystem::path kScenes = std::filesystem::path(CULLPIPE_SHARED_DIR) / "scenes";
 
+// The scene's world volumes of the kind the renderer's culling pass tests.
+struct WorldVolumes {
+  std::vector<Aabb> aabbs;
+  std::vector<Obb> obbs;
+  std::vector<Sphere> spheres;
+  BvKind bv;
+  WorldVolumes(const Scene& scene, BvKind kind) : bv(kind) {
+    if (bv == BvKind::Aabb) aabbs = world_aabbs(scene);
+    if (bv == BvKind::Obb) obbs = world_obbs(scene);
+    if (bv == BvKind::Sphere) spheres = world_spheres(scene);
+  }
+  /// classify(span of the volumes), whatever their kind.
+  template <class Classify>
+  reference::CullCounts apply(Classify&& classify) const {
+    if (bv == BvKind::Obb) return classify(std::span<const Obb>(obbs));
+    if (bv == BvKind::Sphere) return classify(std::span<const Sphere>(spheres));
+    return classify(std::span<const Aabb>(aabbs));
+  }
+};
+
 // For each camera: culled image == unculled image; draws issued == visible objects by the CPU
 // reference; triangles drawn == the visible objects' triangles. Returns the total number of
 // (visible, culled) objects over the cameras, so callers can check the views were not trivial.
@@ -47,12 +67,7 @@ std::pair<std::size_t, std::size_t> expect_culling_invisible(const Scene& scene,
   config.height = height;
   config.bv = bv;
   render::Renderer renderer(*RenderEnvironment::context, scene, config);
-  std::vector<Aabb> aabbs;
-  std::vector<Obb> obbs;
-  std::vector<Sphere> spheres;
-  if (bv == BvKind::Aabb) aabbs = world_aabbs(scene);
-  if (bv == BvKind::Obb) obbs = world_obbs(scene);
-  if (bv == BvKind::Sphere) spheres = world_spheres(scene);
+  const WorldVolumes volumes(scene, bv);
   std::size_t visible_total = 0, culled_total = 0;
   for (std::size_t v = 0; v < cameras.size(); ++v) {
     SCOPED_TRACE("camera " + std::to_string(v));
@@ -63,10 +78,8 @@ std::pair<std::size_t, std::size_t> expect_culling_invisible(const Scene& scene,
     // The CPU reference's visible set.
     const Frustum f = Frustum::from_view_proj(cameras[v].view_proj());
     std::vector<Classification> cpu(scene.objects.size());
-    reference::CullCounts counts;
-    if (bv == BvKind::Aabb) counts = reference::classify_all(std::span<const Aabb>(aabbs), f, cpu);
-    if (bv == BvKind::Obb) counts = reference::classify_all(std::span<const Obb>(obbs), f, cpu);
-    if (bv == BvKind::Sphere) counts = reference::classify_all(std::span<const Sphere>(spheres), f, cpu);
+    const reference::CullCounts counts =
+        volumes.apply([&](auto span) { return reference::classify_all(span, f, cpu); });
     EXPECT_EQ(culled_stats.classes, cpu);
     EXPECT_EQ(culled_stats.draws, counts.visible);
     EXPECT_EQ(all_stats.draws, scene.objects.size());
@@ -103,21 +116,28 @@ TEST(Render, GeneratedCityCulledEqualsUnculledForEveryVolume) {
   }
 }
 
-TEST(Render, DepthConventionsAndCamerasInsideTheScene) {
-  const Scene scene = generate_scene(SceneKind::Uniform, 2000, 11);
+// `base` with reversed Z, then also an infinite far plane, then an infinite far plane alone,
+// and an orthographic view of the given half height.
+std::vector<Camera> depth_conventions(const Camera& base, float ortho_half_height) {
   std::vector<Camera> cameras;
-  Camera c = scene.camera;
-  cameras.push_back(c);
+  Camera c = base;
   c.reversed_z = true;
   cameras.push_back(c);
   c.infinite_far = true;
   cameras.push_back(c);
   c.reversed_z = false;
   cameras.push_back(c);
-  Camera ortho = scene.camera;
+  Camera ortho = base;
   ortho.orthographic = true;
-  ortho.ortho_half_height = 20.0f;
+  ortho.ortho_half_height = ortho_half_height;
   cameras.push_back(ortho);
+  return cameras;
+}
+
+TEST(Render, DepthConventionsAndCamerasInsideTheScene) {
+  const Scene scene = generate_scene(SceneKind::Uniform, 2000, 11);
+  std::vector<Camera> cameras = depth_conventions(scene.camera, 20.0f);
+  cameras.insert(cameras.begin(), scene.camera);
   expect_culling_invisible(scene, cameras, BvKind::Aabb);
 }
 
@@ -161,12 +181,7 @@ std::size_t expect_occlusion_invisible(const Scene& scene, const std::vector<Cam
   config.bv = bv;
   config.occlusion.texels_per_axis = texels_per_axis;
   render::Renderer renderer(*RenderEnvironment::context, scene, config);
-  std::vector<Aabb> aabbs;
-  std::vector<Obb> obbs;
-  std::vector<Sphere> spheres;
-  if (bv == BvKind::Aabb) aabbs = world_aabbs(scene);
-  if (bv == BvKind::Obb) obbs = world_obbs(scene);
-  if (bv == BvKind::Sphere) spheres = world_spheres(scene);
+  const WorldVolumes volumes(scene, bv);
   std::size_t occluded_total = 0;
   for (std::size_t v = 0; v < cameras.size(); ++v) {
     SCOPED_TRACE("frame " + std::to_string(v));
@@ -184,14 +199,8 @@ std::size_t expect_occlusion_invisible(const Scene& scene, const std::vector<Cam
     const Frustum f = Frustum::from_view_proj(vp);
     const occlusion::OcclusionView view{vp, width, height, cameras[v].reversed_z};
     std::vector<Classification> cpu(scene.objects.size());
-    reference::CullCounts counts;
-    if (bv == BvKind::Aabb)
-      counts = occlusion::classify_all(std::span<const Aabb>(aabbs), f, view, pyramid, config.occlusion, cpu);
-    if (bv == BvKind::Obb)
-      counts = occlusion::classify_all(std::span<const Obb>(obbs), f, view, pyramid, config.occlusion, cpu);
-    if (bv == BvKind::Sphere)
-      counts = occlusion::classify_all(std::span<const Sphere>(spheres), f, view, pyramid, config.occlusion, cpu);
-    EXPECT_EQ(stats.classes, cpu);
+    const reference::CullCounts counts = volumes.apply(
+        [&](auto span) { return occlusion::classify_all(span, f, view, pyramid, config.occlusion, cpu); });
     EXPECT_EQ(stats.draws, counts.visible);
     EXPECT_EQ(stats.occluded, counts.occluded);
     // The contract itself: every object owning a pixel of the unculled image is drawn.
@@ -219,18 +228,7 @@ TEST(Render, OcclusionFramesEqualUnculledAlongAPath) {
     EXPECT_GT(expect_occlusion_invisible(city, path, bv), 200u);  // the test is not trivial
   }
   // Reversed Z, an infinite far plane, an orthographic view, 2 and 16 texels per axis.
-  std::vector<Camera> cameras;
-  Camera c = city.camera;
-  c.reversed_z = true;
-  cameras.push_back(c);
-  c.infinite_far = true;
-  cameras.push_back(c);
-  c.reversed_z = false;
-  cameras.push_back(c);
-  Camera ortho = city.camera;
-  ortho.orthographic = true;
-  ortho.ortho_half_height = 60.0f;
-  cameras.push_back(ortho);
+  const std::vector<Camera> cameras = depth_conventions(city.camera, 60.0f);
   for (const std::uint32_t texels : {2u, 16u})
     expect_occlusion_invisible(city, cameras, BvKind::Aabb, 333, 187, texels);
 }

@@ -30,6 +30,12 @@ struct Corners {
 float quotient_lo(float x_lo, float w_lo, float w_hi) { return x_lo >= 0.0f ? x_lo / w_hi : x_lo / w_lo; }
 float quotient_hi(float x_hi, float w_lo, float w_hi) { return x_hi >= 0.0f ? x_hi / w_lo : x_hi / w_hi; }
 
+/// Widens [lo, hi] to hold x / w for x in [x_lo, x_hi] and w in [w_lo, w_hi], 0 < w_lo.
+void widen(float& lo, float& hi, float x_lo, float x_hi, float w_lo, float w_hi) {
+  lo = std::min(lo, quotient_lo(x_lo, w_lo, w_hi));
+  hi = std::max(hi, quotient_hi(x_hi, w_lo, w_hi));
+}
+
 /// The pixel range [first, last] of ndc range [lo, hi] on a viewport side of `size` pixels.
 void pixel_range(float lo, float hi, std::uint32_t size, std::uint32_t& first, std::uint32_t& last) {
   const float half = 0.5f * float(size);
@@ -59,12 +65,9 @@ Footprint project(const Corners& c, const OcclusionView& view) {
     for (int r = 0; r < 4; ++r) v[r] = ((m[0][r] * p.x + m[1][r] * p.y) + m[2][r] * p.z) + m[3][r];
     const float w_lo = v[3] - e[3], w_hi = v[3] + e[3];
     if (!(w_lo > 0.0f)) return f;  // at or behind the eye (or NaN): not projected
-    x_lo = std::min(x_lo, quotient_lo(v[0] - e[0], w_lo, w_hi));
-    x_hi = std::max(x_hi, quotient_hi(v[0] + e[0], w_lo, w_hi));
-    y_lo = std::min(y_lo, quotient_lo(v[1] - e[1], w_lo, w_hi));
-    y_hi = std::max(y_hi, quotient_hi(v[1] + e[1], w_lo, w_hi));
-    z_lo = std::min(z_lo, quotient_lo(v[2] - e[2], w_lo, w_hi));
-    z_hi = std::max(z_hi, quotient_hi(v[2] + e[2], w_lo, w_hi));
+    widen(x_lo, x_hi, v[0] - e[0], v[0] + e[0], w_lo, w_hi);
+    widen(y_lo, y_hi, v[1] - e[1], v[1] + e[1], w_lo, w_hi);
+    widen(z_lo, z_hi, v[2] - e[2], v[2] + e[2], w_lo, w_hi);
   }
   if (!std::isfinite(x_lo) || !std::isfinite(x_hi) || !std::isfinite(y_lo) || !std::isfinite(y_hi) ||
       !std::isfinite(z_lo) || !std::isfinite(z_hi))

@@ -24,6 +24,15 @@ float occ_quotient_hi(float x, float w_lo, float w_hi) {
   return q;
 }
 
+// Widens [lo, hi] to hold x / w for x in [x_lo, x_hi] and w in [w_lo, w_hi], 0 < w_lo (as
+// std::min and std::max do: the new bound replaces the old only when strictly beyond it).
+void occ_widen(inout float lo, inout float hi, float x_lo, float x_hi, float w_lo, float w_hi) {
+  float q = occ_quotient_lo(x_lo, w_lo, w_hi);
+  lo = q < lo ? q : lo;
+  q = occ_quotient_hi(x_hi, w_lo, w_hi);
+  hi = hi < q ? q : hi;
+}
+
 // The pixel range [first, last] of ndc range [lo, hi] on a side of `size` pixels.
 void occ_pixel_range(float lo, float hi, uint size, out uint first, out uint last) {
   precise float half_size = 0.5 * float(size);
@@ -60,19 +69,9 @@ bool occ_occluded(vec3 p[8], vec3 magnitude) {
     precise float w_hi = v[3] + e[3];
     if (!(w_lo > 0.0)) return false;  // at or behind the eye: not projected
     precise float x0 = v[0] - e[0], x1 = v[0] + e[0], y0 = v[1] - e[1], y1 = v[1] + e[1], z0 = v[2] - e[2], z1 = v[2] + e[2];
-    float q;
-    q = occ_quotient_lo(x0, w_lo, w_hi);
-    x_lo = q < x_lo ? q : x_lo;
-    q = occ_quotient_hi(x1, w_lo, w_hi);
-    x_hi = x_hi < q ? q : x_hi;
-    q = occ_quotient_lo(y0, w_lo, w_hi);
-    y_lo = q < y_lo ? q : y_lo;
-    q = occ_quotient_hi(y1, w_lo, w_hi);
-    y_hi = y_hi < q ? q : y_hi;
-    q = occ_quotient_lo(z0, w_lo, w_hi);
-    z_lo = q < z_lo ? q : z_lo;
-    q = occ_quotient_hi(z1, w_lo, w_hi);
-    z_hi = z_hi < q ? q : z_hi;
+    occ_widen(x_lo, x_hi, x0, x1, w_lo, w_hi);
+    occ_widen(y_lo, y_hi, y0, y1, w_lo, w_hi);
+    occ_widen(z_lo, z_hi, z0, z1, w_lo, w_hi);
   }
   if (!finite_bits(x_lo) || !finite_bits(x_hi) || !finite_bits(y_lo) || !finite_bits(y_hi) || !finite_bits(z_lo) ||
       !finite_bits(z_hi))
