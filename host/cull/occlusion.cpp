@@ -18,6 +18,7 @@ constexpr float kTiny = 0x1p-100f;          // subnormal roundings
 constexpr float kPixelMargin = 0.0625f;     // pixels: the rasteriser's snapping, our roundings
 constexpr float kPixelRelative = 0x1p-20f;  // of a pixel coordinate's magnitude
 constexpr float kDepthMargin = 0x1p-20f;    // depth: the rasteriser's interpolation, our roundings
+constexpr float kMinW = 0x1p-126f, kMaxW = 0x1p126f;  // w range of a projected corner
 
 /// A volume as the footprint sees it: its corners, and per world axis a bound on the magnitude
 /// of any of its points' coordinates (and of the error in the corners as computed).
@@ -43,8 +44,10 @@ void pixel_range(float lo, float hi, std::uint32_t size, std::uint32_t& first, s
   const float a = std::floor(from - (kPixelMargin + std::fabs(from) * kPixelRelative));
   const float b = std::floor(to + (kPixelMargin + std::fabs(to) * kPixelRelative));
   const float top = float(size - 1);
-  first = std::uint32_t(std::min(std::max(a, 0.0f), top));
-  last = std::uint32_t(std::min(std::max(b, 0.0f), top));
+  // (As the shader clamps: a NaN from an overflowed bound becomes 0, never a conversion of NaN.)
+  const float a0 = a > 0.0f ? a : 0.0f, b0 = b > 0.0f ? b : 0.0f;
+  first = std::uint32_t(top < a0 ? top : a0);
+  last = std::uint32_t(top < b0 ? top : b0);
 }
 
 Footprint project(const Corners& c, const OcclusionView& view) {
@@ -64,7 +67,9 @@ Footprint project(const Corners& c, const OcclusionView& view) {
     float v[4];
     for (int r = 0; r < 4; ++r) v[r] = ((m[0][r] * p.x + m[1][r] * p.y) + m[2][r] * p.z) + m[3][r];
     const float w_lo = v[3] - e[3], w_hi = v[3] + e[3];
-    if (!(w_lo > 0.0f)) return f;  // at or behind the eye (or NaN): not projected
+    // At or behind the eye (or NaN): not projected; nor where w leaves the range in which GLSL
+    // bounds the division's error (2^-126 to 2^126).
+    if (!(w_lo >= kMinW) || !(w_hi < kMaxW)) return f;
     widen(x_lo, x_hi, v[0] - e[0], v[0] + e[0], w_lo, w_hi);
     widen(y_lo, y_hi, v[1] - e[1], v[1] + e[1], w_lo, w_hi);
     widen(z_lo, z_hi, v[2] - e[2], v[2] + e[2], w_lo, w_hi);

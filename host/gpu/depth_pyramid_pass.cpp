@@ -1,5 +1,6 @@
 #include "gpu/depth_pyramid_pass.hpp"
 
+#include <atomic>
 #include <cstring>
 #include <stdexcept>
 
@@ -93,6 +94,8 @@ void DepthPyramidPass::resize(std::uint32_t width, std::uint32_t height) {
   texels_ = std::move(texels);
   levels_ = std::move(levels);
   built_ = false;
+  static std::atomic<std::uint64_t> next_generation{1};
+  generation_ = next_generation++;
   width_ = width;
   height_ = height;
 }

@@ -68,8 +68,12 @@ class DepthPyramidPass {
   std::uint32_t height() const { return height_; }
   /// The depth direction of the last record() (the pyramid's farthest is the smallest if true).
   bool reversed_z() const { return reversed_z_; }
-  /// Whether record() has run since the last resize (texels() holds a pyramid).
+  /// Whether record() has run since the last resize: texels() holds a pyramid once that
+  /// command buffer has executed (build() waits for it).
   bool built() const { return built_; }
+  /// Changes whenever texels() is a new buffer, and is never the same for two buffers of any
+  /// passes (descriptor sets holding the old one must be written again); never 0.
+  std::uint64_t generation() const { return generation_; }
   /// GPU time of the last build(), nanoseconds (0 without timestamps).
   double last_gpu_ns() const { return last_gpu_ns_; }
 
@@ -83,6 +87,7 @@ class DepthPyramidPass {
   double last_gpu_ns_ = 0.0;
   bool reversed_z_ = false;
   bool built_ = false;
+  std::uint64_t generation_ = 0;
 };
 
 }  // namespace cullpipe::gpu

@@ -236,8 +236,7 @@ GpuCuller::SegmentPlan GpuCuller::plan_segments(std::size_t view_count, bool ord
 
 void GpuCuller::update_descriptors() {
   if (!descriptors_dirty_ && written_segment_objects_ == segment_objects_ && written_view_count_ == last_view_count_ &&
-      resources_->set_count() >= segment_count_ && written_pyramid_ == pyramid_->handle() &&
-      written_pyramid_size_ == pyramid_->size())
+      resources_->set_count() >= segment_count_ && written_pyramid_ == pyramid_generation_)
     return;
   static_assert(BINDING_BOUNDS == 0 && BINDING_CLASSES == 1 && BINDING_VISIBLE == 2 && BINDING_COUNTERS == 3 &&
                 BINDING_VIEWS == 4 && BINDING_DRAW_TEMPLATES == 5 && BINDING_DRAWS == 6 && BINDING_GROUP_COUNTS == 7 &&
@@ -273,8 +272,7 @@ void GpuCuller::update_descriptors() {
   }
   written_segment_objects_ = segment_objects_;
   written_view_count_ = views;
-  written_pyramid_ = pyramid_->handle();
-  written_pyramid_size_ = pyramid_->size();
+  written_pyramid_ = pyramid_generation_;
   descriptors_dirty_ = false;
 }
 
@@ -300,8 +298,9 @@ void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   detail::ensure_buffer(ctx_, centres_, 0, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
   detail::ensure_buffer(ctx_, no_pyramid_, 16, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "empty pyramid buffer",
                         descriptors_dirty_);
-  detail::check_texel_range(ctx_, VkDeviceSize(views.size()) * sizeof(GpuOcclusionView),
-                            std::to_string(views.size()) + " occlusion views");
+  if (options.pyramid)
+    detail::check_texel_range(ctx_, VkDeviceSize(views.size()) * sizeof(GpuOcclusionView),
+                              std::to_string(views.size()) + " occlusion views");
   detail::ensure_buffer(ctx_, occlusion_views_, (options.pyramid ? views.size() : 1) * sizeof(GpuOcclusionView),
                         kBoundsUsage, "occlusion view buffer", descriptors_dirty_);
   // Nothing of the pass's state changes until every check and allocation has passed.
@@ -311,6 +310,7 @@ void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   segment_count_ = plan.count;
   last_view_count_ = views.size();
   pyramid_ = options.pyramid ? &options.pyramid->texels() : &no_pyramid_;
+  pyramid_generation_ = options.pyramid ? options.pyramid->generation() : 0;
   update_descriptors();
   if (options.pyramid) {
     auto gpu_occlusion = occlusion_views_.as<GpuOcclusionView>();

@@ -217,8 +217,9 @@ class GpuCuller {
   std::size_t segment_count_ = 1;
   // What the descriptor sets were last written for.
   std::size_t written_segment_objects_ = 0, written_view_count_ = 0;
-  VkBuffer written_pyramid_ = VK_NULL_HANDLE;
-  VkDeviceSize written_pyramid_size_ = 0;
+  // The pyramid buffer the descriptors hold, by DepthPyramidPass::generation() (0: none; a
+  // handle could be reused by a later buffer, a generation is not).
+  std::uint64_t written_pyramid_ = ~std::uint64_t{0}, pyramid_generation_ = 0;
   BvKind kind_ = BvKind::Aabb;
   std::size_t object_count_ = 0;
   detail::PipelineCache<PipelineKey> pipelines_;

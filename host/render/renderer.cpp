@@ -525,8 +525,8 @@ Image Renderer::render(const Camera& camera, CullMode mode, FrameStats* stats) {
 
   std::size_t first_phase_draws = 0;
   if (occlusion) {
-    // First phase: the last occlusion frame's visible objects (its draws, still in the culler's
-    // buffers), for depth; then that depth as a pyramid.
+    // First phase: what the last culled frame kept (its draws, still in the culler's buffers),
+    // for depth; then that depth as a pyramid.
     if (first_phase) {
       first_phase_draws =
           std::min<std::size_t>(culler_->counter_buffer().as<const gpu::ViewCounters>()[0].visible_count, n);

@@ -63,8 +63,8 @@ class Renderer {
   Renderer& operator=(const Renderer&) = delete;
 
   /// Draws the scene seen by `camera`; waits and reads the image back. With
-  /// CullMode::Occlusion, in two phases: the first draws the objects the last occlusion frame
-  /// found visible (none after construction or forget_visibility()) and reduces that depth to a
+  /// CullMode::Occlusion, in two phases: the first draws the objects the last culled frame
+  /// kept (none after construction or forget_visibility()) and reduces that depth to a
   /// pyramid; the flat pass then culls by the frustum and that pyramid, and the second phase
   /// clears and draws what it kept, in object order, so the image equals the unculled one pixel
   /// for pixel (an occluded object is strictly behind every depth it could reach). What it kept
@@ -80,7 +80,11 @@ class Renderer {
 
   /// Which objects own at least one pixel of the unculled image seen by `camera`: every object
   /// drawn in object order, as render(camera, CullMode::None) draws them, each writing its id;
-  /// the ids left in the image. What no culling may ever drop.
+  /// the ids left in the image. What no culling may ever drop. (Its pipeline differs from the
+  /// image's in the fragment shader only; Vulkan promises the same positions across pipelines
+  /// only for an `invariant` gl_Position, which Debian 12's validation layer rejects as a
+  /// decoration of gl_PerVertex, so on other drivers treat a disagreement with the image check
+  /// with care.)
   std::vector<bool> pixel_owners(const Camera& camera);
 
   /// Triangles of object i (what a draw of it feeds the input assembler).
@@ -103,7 +107,7 @@ class Renderer {
   std::vector<gpu::DrawCommand> templates_;
   std::unique_ptr<gpu::GpuCuller> culler_;
   std::unique_ptr<gpu::DepthPyramidPass> pyramid_;
-  bool has_visibility_ = false;  // the culler's draw buffer holds the last occlusion frame's draws
+  bool has_visibility_ = false;  // the culler's draw buffer holds the last culled frame's draws
   vk::Buffer vertices_, indices_, objects_, id_objects_, all_draws_, readback_;
   VkImage color_ = VK_NULL_HANDLE, depth_ = VK_NULL_HANDLE;
   VkDeviceMemory color_memory_ = VK_NULL_HANDLE, depth_memory_ = VK_NULL_HANDLE;

@@ -13,6 +13,8 @@ const float OCC_CLIP_ERROR = 1.0 / 262144.0;         // 2^-18
 const float OCC_TINY = 7.88860905221011805411728565283e-31;  // 2^-100 (exactly, as a float)
 const float OCC_PIXEL_MARGIN = 0.0625;
 const float OCC_PIXEL_RELATIVE = 1.0 / 1048576.0;  // 2^-20
+const float OCC_MIN_W = 1.17549435082228750796873653722e-38;  // 2^-126
+const float OCC_MAX_W = 8.50705917302346158658436518579e37;   // 2^126
 const float OCC_DEPTH_MARGIN = 1.0 / 1048576.0;    // 2^-20
 
 float occ_quotient_lo(float x, float w_lo, float w_hi) {
@@ -67,7 +69,9 @@ bool occ_occluded(vec3 p[8], vec3 magnitude) {
     }
     precise float w_lo = v[3] - e[3];
     precise float w_hi = v[3] + e[3];
-    if (!(w_lo > 0.0)) return false;  // at or behind the eye: not projected
+    // At or behind the eye: not projected; nor where w leaves the range in which GLSL bounds the
+    // division's error (2^-126 to 2^126).
+    if (!(w_lo >= OCC_MIN_W) || !(w_hi < OCC_MAX_W)) return false;
     precise float x0 = v[0] - e[0], x1 = v[0] + e[0], y0 = v[1] - e[1], y1 = v[1] + e[1], z0 = v[2] - e[2], z1 = v[2] + e[2];
     occ_widen(x_lo, x_hi, x0, x1, w_lo, w_hi);
     occ_widen(y_lo, y_hi, y0, y1, w_lo, w_hi);
