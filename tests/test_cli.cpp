@@ -368,6 +368,17 @@ TEST(Cli, GenerateWritesALoadableScene) {
   EXPECT_NE(r.out.find("300 objects"), std::string::npos) << r.out;
 }
 
+TEST(Cli, StreetsSceneFileKeepsItsPath) {
+  const fs::path scene = temp_dir() / "streets.json";
+  ASSERT_EQ(cullpipe("generate streets:500 --seed 3 --out '" + scene.string() + "'").code, 0);
+  const auto j = nlohmann::json::parse(slurp(scene));
+  ASSERT_TRUE(j.contains("path"));
+  EXPECT_EQ(j["path"][0], j["camera"]);
+  const Result r = cullpipe("run --scene '" + scene.string() + "' --views 5 --backend cpu");
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("500 objects"), std::string::npos) << r.out;
+}
+
 TEST(Cli, BoundsReportsEveryBuilder) {
   const fs::path pts = temp_dir() / "pts.txt", json = temp_dir() / "bounds.json";
   std::ofstream(pts)

@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -17,7 +18,8 @@ namespace cullpipe {
 namespace {
 
 bool same_scene(const Scene& a, const Scene& b) {
-  if (a.name != b.name || !(a.camera == b.camera) || a.objects.size() != b.objects.size()) return false;
+  if (a.name != b.name || !(a.camera == b.camera) || a.path != b.path || a.objects.size() != b.objects.size())
+    return false;
   for (std::size_t i = 0; i < a.objects.size(); ++i)
     if (!(a.objects[i].local_bounds == b.objects[i].local_bounds) || a.objects[i].world != b.objects[i].world)
       return false;
@@ -25,7 +27,7 @@ bool same_scene(const Scene& a, const Scene& b) {
 }
 
 TEST(Generators, DeterministicPerSeedAndSized) {
-  for (SceneKind kind : {SceneKind::Uniform, SceneKind::Clustered, SceneKind::City}) {
+  for (SceneKind kind : {SceneKind::Uniform, SceneKind::Clustered, SceneKind::City, SceneKind::Streets}) {
     for (std::size_t n : {0u, 1u, 7u, 1000u}) {
       const Scene a = generate_scene(kind, n, 9), b = generate_scene(kind, n, 9);
       EXPECT_EQ(a.objects.size(), n);
@@ -38,7 +40,7 @@ TEST(Generators, DeterministicPerSeedAndSized) {
 }
 
 TEST(Generators, DefaultCameraSeesPartOfTheScene) {
-  for (SceneKind kind : {SceneKind::Uniform, SceneKind::Clustered, SceneKind::City}) {
+  for (SceneKind kind : {SceneKind::Uniform, SceneKind::Clustered, SceneKind::City, SceneKind::Streets}) {
     const Scene s = generate_scene(kind, 2000, 1);
     const Frustum f = Frustum::from_view_proj(s.camera.view_proj());
     const auto boxes = world_aabbs(s);
@@ -59,6 +61,141 @@ TEST(Generators, ParseSpec) {
   EXPECT_THROW(parse_generate_spec("city:-1"), InputError);
   EXPECT_THROW(parse_generate_spec("city:1.5"), InputError);
   EXPECT_THROW(parse_generate_spec("city:abc"), InputError);
+  EXPECT_EQ(parse_generate_spec("streets:10000"), std::make_pair(SceneKind::Streets, std::size_t(10000)));
+}
+
+// Distance in x-z from `p` to the footprint of `box`.
+float ground_distance(const glm::vec3& p, const Aabb& box) {
+  const float dx = std::max({box.min.x - p.x, 0.0f, p.x - box.max.x});
+  const float dz = std::max({box.min.z - p.z, 0.0f, p.z - box.max.z});
+  return std::sqrt(dx * dx + dz * dz);
+}
+
+// Does the segment from `from` along unit `dir` for `length` enter `box`? (slab test)
+bool segment_hits(const glm::vec3& from, const glm::vec3& dir, float length, const Aabb& box) {
+  float t0 = 0.0f, t1 = length;
+  for (int k = 0; k < 3; ++k) {
+    if (dir[k] == 0.0f) {
+      if (from[k] < box.min[k] || from[k] > box.max[k]) return false;
+      continue;
+    }
+    float a = (box.min[k] - from[k]) / dir[k], b = (box.max[k] - from[k]) / dir[k];
+    if (a > b) std::swap(a, b);
+    t0 = std::max(t0, a);
+    t1 = std::min(t1, b);
+  }
+  return t0 <= t1;
+}
+
+TEST(Generators, StreetsHaveExactlyNBuildingsOnLots) {
+  for (std::size_t n : {0u, 1u, 2u, 7u, 8u, 9u, 100u, 1000u, 12345u}) {
+    const Scene s = generate_scene(SceneKind::Streets, n, 5);
+    EXPECT_EQ(s.objects.size(), n);
+    EXPECT_EQ(street_lots(n).size(), n);
+    EXPECT_FALSE(s.path.empty()) << n;
+  }
+  // The city is about as wide as deep and grows with N at constant density.
+  for (std::size_t n : {1000u, 100000u}) {
+    const glm::vec3 e = generate_scene(SceneKind::Streets, n, 1).bounds().extent();
+    EXPECT_GT(e.x / e.z, 0.75f) << n;
+    EXPECT_LT(e.x / e.z, 1.33f) << n;
+    EXPECT_NEAR(e.x * e.z / float(n), 300.0f, 60.0f) << n;
+  }
+}
+
+TEST(Generators, StreetBuildingsStayInTheirLotsWithoutOverlap) {
+  for (std::uint64_t seed : {1u, 2u}) {
+    const std::size_t n = 5000;
+    const Scene s = generate_scene(SceneKind::Streets, n, seed);
+    const std::vector<Aabb> boxes = world_aabbs(s), lots = street_lots(n);
+    std::size_t turned = 0, towers = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const Aabb& b = boxes[i];
+      EXPECT_GE(b.min.x, lots[i].min.x + 0.2f) << i;
+      EXPECT_LE(b.max.x, lots[i].max.x - 0.2f) << i;
+      EXPECT_GE(b.min.z, lots[i].min.z + 0.2f) << i;
+      EXPECT_LE(b.max.z, lots[i].max.z - 0.2f) << i;
+      EXPECT_EQ(b.min.y, 0.0f) << i;
+      EXPECT_GE(b.max.y, 8.0f) << i;
+      EXPECT_LE(b.max.y, 120.0f) << i;
+      turned += s.objects[i].world[0][2] != 0.0f;
+      towers += b.max.y > 40.0f;
+    }
+    EXPECT_GT(turned, n / 50);
+    EXPECT_LT(turned, n / 5);
+    EXPECT_GT(towers, n / 100);
+    EXPECT_LT(towers, n / 10);
+    // Footprints pairwise disjoint, lots too: sweep along x.
+    for (const std::vector<Aabb>* set : {&boxes, &lots}) {
+      std::vector<std::size_t> order(n);
+      for (std::size_t i = 0; i < n; ++i) order[i] = i;
+      std::sort(order.begin(), order.end(),
+                [&](std::size_t a, std::size_t b) { return (*set)[a].min.x < (*set)[b].min.x; });
+      std::size_t overlaps = 0;
+      for (std::size_t a = 0; a < n; ++a) {
+        const Aabb& p = (*set)[order[a]];
+        for (std::size_t b = a + 1; b < n && (*set)[order[b]].min.x < p.max.x; ++b) {
+          const Aabb& q = (*set)[order[b]];
+          overlaps += q.min.z < p.max.z && p.min.z < q.max.z;
+        }
+      }
+      EXPECT_EQ(overlaps, 0u) << (set == &boxes ? "buildings" : "lots");
+    }
+  }
+}
+
+TEST(Generators, StreetCamerasStandInTheStreets) {
+  for (std::size_t n : {0u, 1u, 30u, 5000u}) {
+    const Scene s = generate_scene(SceneKind::Streets, n, 3);
+    const std::vector<Aabb> boxes = world_aabbs(s), lots = street_lots(n);
+    ASSERT_GE(s.path.size(), 2u);
+    EXPECT_EQ(s.camera, s.path.front());
+    EXPECT_EQ(s.path.front(), s.path.back()) << "a closed loop";
+    EXPECT_LE(s.camera.near_plane, 0.1f);
+    EXPECT_GE(s.camera.far_plane, glm::length(glm::vec2(s.bounds().extent().x, s.bounds().extent().z)));
+    std::vector<Camera> cameras = s.path;
+    const std::vector<Camera> sampled = scene_camera_path(s, 50);
+    ASSERT_EQ(sampled.size(), 50u);
+    cameras.insert(cameras.end(), sampled.begin(), sampled.end());
+    for (const Camera& c : cameras) {
+      EXPECT_NEAR(c.eye.y, 1.8f, 1e-5f);
+      EXPECT_NEAR(c.target.y, 1.8f, 1e-5f);
+      for (std::size_t i = 0; i < lots.size(); ++i) {
+        ASSERT_GE(ground_distance(c.eye, lots[i]), 2.0f) << "lot " << i;
+        ASSERT_GE(ground_distance(c.eye, boxes[i]), 2.0f) << "building " << i;
+      }
+      // No wall right ahead.
+      const glm::vec3 dir = glm::normalize(c.target - c.eye);
+      for (const Aabb& b : boxes) ASSERT_FALSE(segment_hits(c.eye, dir, 8.0f, b));
+    }
+    // The default camera looks along an open street.
+    const glm::vec3 ahead = glm::normalize(s.camera.target - s.camera.eye);
+    EXPECT_TRUE(ahead.x == 0.0f || ahead.z == 0.0f) << "along x or z";
+    for (const Aabb& b : boxes) ASSERT_FALSE(segment_hits(s.camera.eye, ahead, 50.0f, b));
+  }
+}
+
+TEST(Generators, StreetPathTurnsThroughCorners) {
+  const Scene s = generate_scene(SceneKind::Streets, 10000, 1);
+  const std::vector<Camera> walk = scene_camera_path(s, 1000);
+  const float step = [&] {
+    double length = 0.0;
+    for (std::size_t k = 1; k < s.path.size(); ++k) length += glm::length(s.path[k].eye - s.path[k - 1].eye);
+    return float(length / 1000.0);
+  }();
+  float most_turn = 0.0f, total_turn = 0.0f;
+  for (std::size_t i = 0; i < walk.size(); ++i) {
+    const Camera& a = walk[i];
+    const Camera& b = walk[(i + 1) % walk.size()];
+    EXPECT_LE(glm::length(b.eye - a.eye), step * 1.001f) << i;
+    EXPECT_GE(glm::length(b.eye - a.eye), step * 0.7f) << i;
+    const glm::vec3 da = glm::normalize(a.target - a.eye), db = glm::normalize(b.target - b.eye);
+    const float turn = std::atan2(glm::length(glm::cross(da, db)), glm::dot(da, db));  // exact near 0
+    most_turn = std::max(most_turn, turn);
+    total_turn += turn;
+  }
+  EXPECT_LT(most_turn, glm::radians(6.0f)) << "the view turns gradually, never snaps";
+  EXPECT_NEAR(total_turn, glm::radians(360.0f), glm::radians(1.0f)) << "one loop";
 }
 
 TEST(Camera, PathCirclesTheSceneAndKeepsTheLens) {
@@ -100,6 +237,67 @@ void expect_world_volumes_enclose(const Scene& s) {
   }
 }
 
+TEST(Camera, ScenePathWithoutKeyframesOrbits) {
+  const Scene s = generate_scene(SceneKind::City, 300, 2);
+  ASSERT_TRUE(s.path.empty());
+  EXPECT_EQ(scene_camera_path(s, 7), camera_path(s.camera, s.bounds(), 7));
+  EXPECT_EQ(scene_camera_path(s, 1), std::vector<Camera>{s.camera});
+  EXPECT_TRUE(scene_camera_path(s, 0).empty());
+}
+
+TEST(Camera, ScenePathIsEvenByArcLength) {
+  Scene s;
+  s.camera.eye = {5, 5, 5};
+  Camera k;
+  k.eye = {0, 0, 0};
+  k.target = {1, 0, 0};
+  s.path = {k, k, k};
+  s.path[1].eye = {10, 0, 0};
+  s.path[1].target = {10, 0, 1};
+  s.path[1].fov_y_degrees = 40.0f;
+  s.path[2].eye = {10, 0, 30};
+  s.path[2].target = {10, 0, 31};
+  s.path[2].fov_y_degrees = 20.0f;
+  EXPECT_EQ(scene_camera_path(s, 1), std::vector<Camera>{s.camera});
+  // Open: 40 units in 4 steps of 10, ending on the last keyframe.
+  const std::vector<Camera> open = scene_camera_path(s, 5);
+  ASSERT_EQ(open.size(), 5u);
+  EXPECT_EQ(open[0], s.path[0]);
+  EXPECT_EQ(open[1].eye, glm::vec3(10, 0, 0));
+  EXPECT_EQ(open[1].fov_y_degrees, 40.0f);
+  EXPECT_EQ(open[2].eye, glm::vec3(10, 0, 10));
+  EXPECT_NEAR(open[2].target.z, 11.0f, 1e-5f);
+  EXPECT_EQ(open[2].fov_y_degrees, 40.0f) << "the lens of the keyframe before";
+  EXPECT_EQ(open[4], s.path[2]);
+  // Between keyframes, eye and target move linearly.
+  const std::vector<Camera> fine = scene_camera_path(s, 9);
+  EXPECT_EQ(fine[1].eye, glm::vec3(5, 0, 0));
+  EXPECT_EQ(fine[1].target, glm::vec3(5.5f, 0, 0.5f));
+  // Closed: back to the start, which is not repeated.
+  s.path.push_back(s.path[0]);
+  const std::vector<Camera> loop = scene_camera_path(s, 4);
+  const float length = 10.0f + 30.0f + glm::length(glm::vec3(10, 0, 30));
+  EXPECT_EQ(loop[0], s.path[0]);
+  for (std::size_t i = 1; i < 4; ++i) {
+    float along = 0.0f;  // the arc length of loop[i] from its segment's start
+    if (loop[i].eye.z == 0.0f)
+      along = loop[i].eye.x;
+    else if (loop[i].eye.x == 10.0f)
+      along = 10.0f + loop[i].eye.z;
+    else
+      along = 40.0f + glm::length(loop[i].eye - glm::vec3(10, 0, 30));
+    EXPECT_NEAR(along, length * float(i) / 4.0f, 1e-3f) << i;
+  }
+  // Keyframes at one eye (turning on the spot) are spaced by index.
+  Scene spot;
+  spot.path = {k, k, k};
+  spot.path[1].target = {0, 0, 1};
+  spot.path[2].target = {-1, 0, 0};
+  const std::vector<Camera> turn = scene_camera_path(spot, 5);
+  EXPECT_EQ(turn[2], spot.path[1]);
+  EXPECT_EQ(turn[4], spot.path[2]);
+}
+
 TEST(Camera, EveryDepthConventionGivesTheSameFrustumShape) {
   Camera base;
   base.eye = {0, 0, 10};
@@ -127,7 +325,7 @@ TEST(Camera, EveryDepthConventionGivesTheSameFrustumShape) {
 }
 
 TEST(World, VolumesEncloseTheTransformedBoxExactly) {
-  for (SceneKind kind : {SceneKind::Uniform, SceneKind::Clustered, SceneKind::City}) {
+  for (SceneKind kind : {SceneKind::Uniform, SceneKind::Clustered, SceneKind::City, SceneKind::Streets}) {
     Scene s = generate_scene(kind, 3000, 4);
     // Add translation far from the origin and non-uniform scale.
     for (std::size_t i = 0; i < s.objects.size(); i += 3) {
@@ -165,6 +363,23 @@ TEST(SceneIo, RoundTripsBitExact) {
   const Scene s = generate_scene(SceneKind::City, 50, 3);
   const Scene back = parse_scene(scene_to_json(s), "memory");
   EXPECT_TRUE(same_scene(s, back));
+  EXPECT_EQ(scene_to_json(s).find("\"path\""), std::string::npos) << "no path, no \"path\"";
+}
+
+TEST(SceneIo, KeepsTheCameraPath) {
+  const Scene s = generate_scene(SceneKind::Streets, 200, 3);
+  ASSERT_FALSE(s.path.empty());
+  const Scene back = parse_scene(scene_to_json(s), "memory");
+  EXPECT_EQ(back.path, s.path);
+  EXPECT_TRUE(same_scene(s, back));
+}
+
+TEST(Generators, ReplicatingDropsThePath) {
+  const Scene s = generate_scene(SceneKind::Streets, 100, 1);
+  EXPECT_EQ(replicate_scene(s, 1, InstanceLayout::Grid, 1).path, s.path);
+  const Scene many = replicate_scene(s, 4, InstanceLayout::Grid, 1);
+  EXPECT_TRUE(many.path.empty());
+  EXPECT_NE(many.camera, s.camera);
 }
 
 TEST(SceneIo, ErrorsNameTheFileAndElement) {
@@ -205,6 +420,21 @@ TEST(SceneIo, ErrorsNameTheFileAndElement) {
       error_of(
           R"({"format":"cullpipe-scene","version":1,"camera":{"eye":[0,0,1],"target":[0,0,0],"reversed_z":"yes"},"objects":[]})"),
       "bad.json: camera.reversed_z: expected true or false, got string");
+  const std::string camera = R"({"eye":[0,0,1],"target":[0,0,0]})";
+  EXPECT_EQ(error_of(R"({"format":"cullpipe-scene","version":1,"path":{},"objects":[]})"),
+            "bad.json: path: expected an array of cameras");
+  EXPECT_EQ(error_of(R"({"format":"cullpipe-scene","version":1,"path":[)" + camera +
+                     R"(,{"eye":[0,0],"target":[0,0,0]}],"objects":[]})"),
+            "bad.json: path[1].eye: expected 3 numbers, got 2");
+  EXPECT_EQ(error_of(R"({"format":"cullpipe-scene","version":1,"path":[)" + camera + "," + camera +
+                     R"(,{"eye":[0,"NaN",1],"target":[0,0,0]}],"objects":[]})"),
+            "bad.json: path[2].eye[1]: expected a number, got string");
+  EXPECT_EQ(error_of(R"({"format":"cullpipe-scene","version":1,"path":[{"eye":[0,0,1]}],"objects":[]})"),
+            "bad.json: path[0]: missing \"target\"");
+  EXPECT_EQ(
+      error_of(
+          R"({"format":"cullpipe-scene","version":1,"path":[{"eye":[0,0,1],"target":[0,0,0],"far":0.01}],"objects":[]})"),
+      "bad.json: path[0].far: must be greater than near");
   EXPECT_THROW(load_scene("/nonexistent/scene.json"), InputError);
 }
 

@@ -20,7 +20,7 @@ int render_command(const RenderOptions& o, std::ostream& out, std::ostream& err)
     if (o.no_cull && o.occlusion) throw InputError("give --no-cull or --occlusion, not both");
     const LoadedScene loaded = load_scene_source(o);
     const Scene& scene = loaded.scene;
-    const std::vector<Camera> path = camera_path(scene.camera, scene.bounds(), o.views);
+    const std::vector<Camera> path = scene_camera_path(scene, o.views);
 
     vk::ContextOptions options;
     options.validation = o.device.validation;

@@ -97,7 +97,7 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
     const std::size_t zero_scale = loaded.zero_scale_instances;
     const double load_ns = loaded.load_ns;
 
-    const std::vector<Camera> cameras = camera_path(scene.camera, scene.bounds(), o.views);
+    const std::vector<Camera> cameras = scene_camera_path(scene, o.views);
     std::vector<Frustum> frusta;
     for (std::size_t v = 0; v < cameras.size(); ++v) {
       try {

@@ -1,10 +1,14 @@
 #include "scene/camera.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <glm/common.hpp>
 #include <glm/ext/matrix_clip_space.hpp>
 #include <glm/ext/matrix_transform.hpp>
 #include <glm/geometric.hpp>
 #include <glm/trigonometric.hpp>
+
+#include "scene/scene.hpp"
 
 namespace cullpipe {
 
@@ -77,6 +81,39 @@ std::vector<Camera> camera_path(const Camera& base, const Aabb& bounds, std::siz
     path[i].eye = center + glm::vec3(radius * std::cos(angle), height, radius * std::sin(angle));
   }
   return path;
+}
+
+std::vector<Camera> scene_camera_path(const Scene& scene, std::size_t count) {
+  const std::vector<Camera>& keys = scene.path;
+  if (keys.empty()) return camera_path(scene.camera, scene.bounds(), count);
+  if (count <= 1) return std::vector<Camera>(count, scene.camera);
+  if (keys.size() == 1) return std::vector<Camera>(count, keys.front());
+  // Cumulative arc length of the eye polyline, in double so long paths keep their spacing.
+  // When every eye is the same, each keyframe step counts as one unit instead.
+  std::vector<double> at(keys.size(), 0.0);
+  for (std::size_t k = 1; k < keys.size(); ++k)
+    at[k] = at[k - 1] + glm::length(glm::dvec3(keys[k].eye) - glm::dvec3(keys[k - 1].eye));
+  if (!(at.back() > 0.0))
+    for (std::size_t k = 1; k < keys.size(); ++k) at[k] = double(k);
+  const double total = at.back();
+  // A closed path (ending where it starts) is a loop: spacing total / count, so cycling
+  // through the frames never shows the start twice.
+  const bool closed = keys.back().eye == keys.front().eye && keys.back().target == keys.front().target;
+  const double step = total / double(closed ? count : count - 1);
+  std::vector<Camera> out;
+  out.reserve(count);
+  std::size_t k = 0;  // segment keys[k] -> keys[k + 1]
+  for (std::size_t i = 0; i < count; ++i) {
+    const double s = std::min(step * double(i), total);
+    while (k + 2 < keys.size() && at[k + 1] <= s) ++k;
+    const double length = at[k + 1] - at[k];
+    const float t = length > 0.0 ? float(std::clamp((s - at[k]) / length, 0.0, 1.0)) : 1.0f;
+    Camera c = t < 1.0f ? keys[k] : keys[k + 1];
+    c.eye = glm::mix(keys[k].eye, keys[k + 1].eye, t);
+    c.target = glm::mix(keys[k].target, keys[k + 1].target, t);
+    out.push_back(c);
+  }
+  return out;
 }
 
 }  // namespace cullpipe

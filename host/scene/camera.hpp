@@ -7,6 +7,8 @@
 
 namespace cullpipe {
 
+struct Scene;
+
 /// A perspective (or orthographic) camera producing Vulkan clip space (y down, depth 0..1).
 struct Camera {
   glm::vec3 eye{0.0f, 10.0f, 30.0f};
@@ -38,5 +40,14 @@ Camera framing_camera(const Aabb& bounds);
 /// `base`'s height angle, evenly spaced in angle; each keeps `base`'s lens settings.
 /// For count == 1 the result is `base` itself.
 std::vector<Camera> camera_path(const Camera& base, const Aabb& bounds, std::size_t count);
+
+/// `count` cameras for `scene`. With a `scene.path`: evenly spaced by arc length along the
+/// polyline of the keyframe eyes, starting at the first keyframe, eye and target interpolated
+/// linearly between the two keyframes around each point, the other lens settings from the
+/// earlier one. An open path ends at the last keyframe; a closed one (last keyframe's eye and
+/// target equal to the first's) is sampled as a loop, spacing length / count, so the cameras
+/// repeat seamlessly. Keyframes all at one eye are spaced by index instead. count == 1 gives
+/// `scene.camera`. Without a path: the orbit `camera_path(scene.camera, scene.bounds(), count)`.
+std::vector<Camera> scene_camera_path(const Scene& scene, std::size_t count);
 
 }  // namespace cullpipe

@@ -60,6 +60,9 @@ struct Scene {
   std::string name;
   std::vector<SceneObject> objects;
   Camera camera;
+  /// A natural camera path through the scene, in order; empty when the scene has none (then
+  /// tools orbit: scene_camera_path).
+  std::vector<Camera> path;
 
   /// The world-space AABB around every object (empty box at the origin for no objects).
   Aabb bounds() const;

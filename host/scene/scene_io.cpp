@@ -32,6 +32,41 @@ void write_file_atomic(const std::string& path, std::string_view text) {
 
 using json_util::json;
 
+namespace {
+
+// `path` names the camera in errors: "camera", "path[2]".
+Camera read_camera(const json_util::Reader& r, const json& c, const std::string& path) {
+  Camera cam;
+  cam.eye = r.vec3(r.member(c, path, "eye"), path + ".eye");
+  cam.target = r.vec3(r.member(c, path, "target"), path + ".target");
+  if (c.contains("up")) cam.up = r.vec3(c["up"], path + ".up");
+  if (c.contains("fov_y_degrees")) cam.fov_y_degrees = r.number(c["fov_y_degrees"], path + ".fov_y_degrees");
+  if (c.contains("aspect")) cam.aspect = r.number(c["aspect"], path + ".aspect");
+  if (c.contains("near")) cam.near_plane = r.number(c["near"], path + ".near");
+  if (c.contains("far")) cam.far_plane = r.number(c["far"], path + ".far");
+  if (c.contains("reversed_z")) cam.reversed_z = r.boolean(c["reversed_z"], path + ".reversed_z");
+  if (c.contains("infinite_far")) cam.infinite_far = r.boolean(c["infinite_far"], path + ".infinite_far");
+  if (!(cam.fov_y_degrees > 0.0f && cam.fov_y_degrees < 180.0f)) r.fail(path + ".fov_y_degrees", "must be in (0, 180)");
+  if (!(cam.aspect > 0.0f)) r.fail(path + ".aspect", "must be positive");
+  if (!(cam.near_plane > 0.0f)) r.fail(path + ".near", "must be positive");
+  if (!cam.infinite_far && !(cam.far_plane > cam.near_plane)) r.fail(path + ".far", "must be greater than near");
+  return cam;
+}
+
+json camera_to_json(const Camera& c) {
+  return {{"eye", json_util::to_json(c.eye)},
+          {"target", json_util::to_json(c.target)},
+          {"up", json_util::to_json(c.up)},
+          {"fov_y_degrees", c.fov_y_degrees},
+          {"aspect", c.aspect},
+          {"near", c.near_plane},
+          {"far", c.far_plane},
+          {"reversed_z", c.reversed_z},
+          {"infinite_far", c.infinite_far}};
+}
+
+}  // namespace
+
 Scene parse_scene(const std::string& text, const std::string& source) {
   const json root = json_util::parse(text, source);
   const json_util::Reader r{source};
@@ -42,23 +77,12 @@ Scene parse_scene(const std::string& text, const std::string& source) {
 
   Scene scene;
   if (auto it = root.find("name"); it != root.end() && it->is_string()) scene.name = it->get<std::string>();
-  if (auto it = root.find("camera"); it != root.end()) {
-    const json& c = *it;
-    Camera& cam = scene.camera;
-    cam.eye = r.vec3(r.member(c, "camera", "eye"), "camera.eye");
-    cam.target = r.vec3(r.member(c, "camera", "target"), "camera.target");
-    if (c.contains("up")) cam.up = r.vec3(c["up"], "camera.up");
-    if (c.contains("fov_y_degrees")) cam.fov_y_degrees = r.number(c["fov_y_degrees"], "camera.fov_y_degrees");
-    if (c.contains("aspect")) cam.aspect = r.number(c["aspect"], "camera.aspect");
-    if (c.contains("near")) cam.near_plane = r.number(c["near"], "camera.near");
-    if (c.contains("far")) cam.far_plane = r.number(c["far"], "camera.far");
-    if (c.contains("reversed_z")) cam.reversed_z = r.boolean(c["reversed_z"], "camera.reversed_z");
-    if (c.contains("infinite_far")) cam.infinite_far = r.boolean(c["infinite_far"], "camera.infinite_far");
-    if (!(cam.fov_y_degrees > 0.0f && cam.fov_y_degrees < 180.0f))
-      r.fail("camera.fov_y_degrees", "must be in (0, 180)");
-    if (!(cam.aspect > 0.0f)) r.fail("camera.aspect", "must be positive");
-    if (!(cam.near_plane > 0.0f)) r.fail("camera.near", "must be positive");
-    if (!cam.infinite_far && !(cam.far_plane > cam.near_plane)) r.fail("camera.far", "must be greater than near");
+  if (auto it = root.find("camera"); it != root.end()) scene.camera = read_camera(r, *it, "camera");
+  if (auto it = root.find("path"); it != root.end()) {
+    if (!it->is_array()) r.fail("path", "expected an array of cameras");
+    scene.path.reserve(it->size());
+    for (std::size_t i = 0; i < it->size(); ++i)
+      scene.path.push_back(read_camera(r, (*it)[i], "path[" + std::to_string(i) + "]"));
   }
   const json& objects = r.member(root, "(root)", "objects");
   if (!objects.is_array()) r.fail("objects", "expected an array");
@@ -83,16 +107,12 @@ std::string scene_to_json(const Scene& scene) {
   root["format"] = "cullpipe-scene";
   root["version"] = 1;
   root["name"] = scene.name;
-  const Camera& c = scene.camera;
-  root["camera"] = {{"eye", json_util::to_json(c.eye)},
-                    {"target", json_util::to_json(c.target)},
-                    {"up", json_util::to_json(c.up)},
-                    {"fov_y_degrees", c.fov_y_degrees},
-                    {"aspect", c.aspect},
-                    {"near", c.near_plane},
-                    {"far", c.far_plane},
-                    {"reversed_z", c.reversed_z},
-                    {"infinite_far", c.infinite_far}};
+  root["camera"] = camera_to_json(scene.camera);
+  if (!scene.path.empty()) {
+    json path = json::array();
+    for (const Camera& c : scene.path) path.push_back(camera_to_json(c));
+    root["path"] = std::move(path);
+  }
   json objects = json::array();
   for (const SceneObject& o : scene.objects) {
     json j = {{"min", json_util::to_json(o.local_bounds.min)}, {"max", json_util::to_json(o.local_bounds.max)}};

@@ -9,6 +9,7 @@ namespace cullpipe {
 ///   {"format": "cullpipe-scene", "version": 1, "name": "...",
 ///    "camera": {"eye": [x,y,z], "target": [..], "up": [..], "fov_y_degrees": 60,
 ///               "aspect": 1.78, "near": 0.1, "far": 1000, "reversed_z": false, "infinite_far": false},
+///    "path": [cameras in the format of "camera", optional: Scene::path],
 ///    "objects": [{"min": [..], "max": [..], "world": [16 numbers, column-major, optional]}]}
 /// Throws InputError naming the file and the bad element.
 Scene load_scene(const std::string& path);
