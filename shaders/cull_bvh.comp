@@ -30,9 +30,15 @@
 // load or store of a storage buffer or shared memory is a loop over the lanes, and a load or a
 // scan builds its result lane by lane through the stack (see exclusive_count), which is why a
 // leaf is listed as chunks, not objects: a record per chunk, not one per object.)
-// The result equals host/bvh cull_hierarchical bit for bit: same p/n-vertex test, distances as
-// ((n.x*p.x + n.y*p.y) + n.z*p.z) + d marked `precise`, same masks, and the same counts of
-// node and object tests.
+// With OCCLUSION, every node the frustum keeps is also tested against the depth pyramid
+// (shared/occlusion.glsl, with a node's wider margins): below an occluded node nothing more is
+// tested for occlusion, and what the frustum keeps there is OCCLUDED (an INSIDE node's range
+// as one record, flagged); an INSIDE node that is not occluded is walked on with no planes, so
+// that its objects get their own occlusion test, as do the kept objects of listed chunks.
+// The result equals host/bvh cull_hierarchical bit for bit (with OCCLUSION,
+// occlusion::cull_hierarchical): same p/n-vertex test, distances as
+// ((n.x*p.x + n.y*p.y) + n.z*p.z) + d marked `precise`, same masks, the same occlusion tests,
+// and the same counts of node and object tests.
 #extension GL_GOOGLE_include_directive : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_ballot : require
@@ -45,10 +51,14 @@
 layout(local_size_x_id = 1) in;  // the device's subgroup size, at most BVH_CULL_GROUP_SIZE, set by the host
 
 // A listed leaf's objects go to records in chunks of at most BVH_CHUNK_OBJECTS (16): (first
-// slot, planes to test | (objects - 1) << CHUNK_SIZE_SHIFT), then, once tested, (first slot,
-// visible bits | INSIDE bits << BVH_CHUNK_OBJECTS). A chunk's record is read and rewritten by
-// one lane only (the same lane in steps 3 and 4), so no lane reads another's record there.
+// slot, planes to test | CHUNK_HIDDEN if an ancestor is occluded | (objects - 1) <<
+// CHUNK_SIZE_SHIFT), then, once tested, (first slot, visible bits | (INSIDE or OCCLUDED) bits <<
+// BVH_CHUNK_OBJECTS: an OCCLUDED object has its second bit without its first). A chunk's record
+// is read and rewritten by one lane only (the same lane in steps 3 and 4), so no lane reads
+// another's record there. An accepted range's record is (first slot, count | RANGE_HIDDEN for a
+// range of OCCLUDED objects).
 const uint BVH_CHUNK_OBJECTS = 16u, CHUNK_SIZE_SHIFT = 8u, CHUNK_BITS = (1u << BVH_CHUNK_OBJECTS) - 1u;
+const uint CHUNK_HIDDEN = 1u << 6u, RANGE_HIDDEN = 1u << 31u;
 layout(constant_id = 2) const uint BV_KIND = BV_KIND_AABB;  // the node margin and the object test
 layout(constant_id = 3) const uint WRITE_DRAWS = 0;  // also write draw commands
 // 1: write each visible object's class. A specialization constant, since on lavapipe a store
@@ -60,6 +70,7 @@ layout(constant_id = 4) const uint WRITE_CLASSES = 1;
 // word through the stack (a stall per lane), where an image load gathers. GPUs keep shared
 // memory.
 layout(constant_id = 5) const uint STACK_IN_RECORDS = 0;
+layout(constant_id = 6) const uint OCCLUSION = 0;  // 1: test the kept nodes and objects against the pyramid
 
 // The object volumes (GpuAabb, GpuObb or GpuSphere by BV_KIND, in tree order) and the nodes
 // (GpuBvhNode) are read as integer texels (exact bits) from uniform texel buffers: on lavapipe
@@ -84,6 +95,8 @@ void set_record(uint at, uvec2 record) { imageStore(records, int(at), uvec4(reco
 // AABBs: per object in tree order xyz = centre, w = bound (host/geom/plane_bounds.hpp), as the
 // flat pass's BINDING_CENTRES.
 layout(set = 0, binding = BVH_BINDING_CENTRES) uniform usamplerBuffer centres;
+layout(std430, set = 0, binding = BVH_BINDING_PYRAMID) readonly buffer Pyramid { float pyramid[]; };
+layout(set = 0, binding = BVH_BINDING_OCCLUSION_VIEWS) uniform usamplerBuffer occlusion_views;  // GpuOcclusionView per view
 
 layout(push_constant, std430) uniform Push { BvhCullParams params; };
 
@@ -114,6 +127,11 @@ GpuBvhNode load_node(uint index) {
 }
 
 vec4 volume_word(uint word) { return uintBitsToFloat(texelFetch(boxes, int(word))); }
+vec4 occ_volume_word(uint word) { return volume_word(word); }
+// The first word of the volume at tree-order slot `slot`.
+uint volume_first_word(uint slot) {
+  return BV_KIND == BV_KIND_AABB ? AABB_VEC4S * slot : BV_KIND == BV_KIND_OBB ? OBB_VEC4S * slot : SPHERE_VEC4S * slot;
+}
 
 // The id of the object at tree-order slot `slot`.
 uint object_at(uint slot) {
@@ -129,6 +147,7 @@ float view_settle_margin;  // GpuFrustum::settle_margin
 vec4 view_planes[MAX_FRUSTUM_PLANES];
 
 #include "shared/classify.glsl"
+#include "shared/occlusion.glsl"
 
 void load_view(uint view) {
   int first = int(FRUSTUM_TEXELS * view);
@@ -136,6 +155,7 @@ void load_view(uint view) {
   view_plane_count = min(tail.x, MAX_FRUSTUM_PLANES);
   view_settle_margin = uintBitsToFloat(tail.y);
   [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = uintBitsToFloat(texelFetch(views, first + int(k)));
+  if (OCCLUSION != 0u) occ_load_view(view);
 }
 
 // A box's class on the planes in `mask` from its centre and bound alone where they settle it
@@ -148,7 +168,7 @@ uint settle_box(uint slot, uint mask) {
   vec4 centre_bound = uintBitsToFloat(texelFetch(centres, int(slot)));
   bool usable = finite_bits(centre_bound.w) && finite_bits(view_settle_margin);
   float reach = centre_bound.w + view_settle_margin;
-  float m = uintBitsToFloat(0x7f7fffffu);  // the largest float: no tested plane (never here: a listed leaf straddles one)
+  float m = uintBitsToFloat(0x7f7fffffu);  // the largest float: no tested plane (a leaf listed only for occlusion)
   [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k)
     m = plane_tested(k, mask) ? min(m, plane_distance(view_planes[k], centre_bound.xyz)) : m;
   return !usable ? CLASS_OPEN : m < -reach ? CLASS_OUTSIDE : m >= reach ? CLASS_INSIDE : CLASS_OPEN;
@@ -213,11 +233,12 @@ void emit_visible(uint view, uint object, uint slot, uint c) {
 
 // The walk's stack (in shared memory, or with STACK_IN_RECORDS in the records image),
 // BVH_STACK_PER_INVOCATION entries per invocation: (node - the workgroup's
-// first cut node) << BVH_STACK_MASK_BITS | planes to test, one word (the host checks that a
-// workgroup's nodes span fewer than 2^26: BvhCuller::upload). One word, not a pair: lavapipe
-// inserts each lane's loaded word into the result through the stack (a stall per lane and word),
-// so a second word per entry would add a stall per lane.
-const uint BVH_STACK_MASK_BITS = 6u;
+// first cut node) << BVH_STACK_MASK_BITS | STACK_HIDDEN if an ancestor is occluded | planes to
+// test, one word (the host checks that a workgroup's nodes span fewer than 2^25:
+// BvhCuller::upload). One word, not a pair: lavapipe inserts each lane's loaded word into the
+// result through the stack (a stall per lane and word), so a second word per entry would add a
+// stall per lane.
+const uint BVH_STACK_MASK_BITS = 7u, STACK_HIDDEN = 1u << 6u;
 shared uint walk_stack[gl_WorkGroupSize.x * BVH_STACK_PER_INVOCATION];
 uint stack_base;  // STACK_IN_RECORDS: this workgroup's stack in the records image
 uint stack_load(uint i) { return STACK_IN_RECORDS != 0 ? imageLoad(records, int(stack_base + i)).x : walk_stack[i]; }
@@ -247,13 +268,16 @@ void main() {
 
   // 1. From the root down to the cut node.
   bool walk = has_cut, accept_all = false, descending = has_cut && cut != 0u;
+  bool hidden = false;  // OCCLUSION: a node on the way down is occluded
   uint node = 0u;
   while (descending) {
     GpuBvhNode n = load_node(node);
     uint straddled;
     uint c = classify_node(n.box_min, n.box_max, mask, straddled);
     if (cut - node == cut_depth - n.depth) tests.x += 1u;  // the cut node is its first-child descendant
-    if (c != CLASS_INTERSECTING) {
+    if (OCCLUSION != 0u && c != CLASS_OUTSIDE && !hidden) hidden = occ_node_occluded(n.box_min, n.box_max);
+    // OUTSIDE ends the walk, as does INSIDE unless its objects still need an occlusion test.
+    if (c == CLASS_OUTSIDE || (c == CLASS_INSIDE && (OCCLUSION == 0u || hidden))) {
       walk = false;
       accept_all = c == CLASS_INSIDE;
       descending = false;
@@ -273,13 +297,15 @@ void main() {
   uint base = view * object_count + slice_first, back = view * object_count + slice_end - 1u;
   uint ranges = 0u, listed = 0u;  // records at the front and back, subgroup-wide
   uint accepted = 0u;             // objects in this invocation's accepted ranges
-  // A cut INSIDE by an ancestor is accepted whole.
+  uint hidden_accepted = 0u;      // objects in its ranges of OCCLUDED objects
+  // A cut INSIDE by an ancestor is accepted whole (OCCLUDED when an ancestor is occluded).
   uint take_all = accept_all && cut_count != 0u ? 1u : 0u;
   uint take_all_count;
   uint take_all_at = exclusive_count(take_all != 0u, take_all_count);
-  if (take_all != 0u) set_record(base + take_all_at, uvec2(cut_first, cut_count));
+  if (take_all != 0u) set_record(base + take_all_at, uvec2(cut_first, cut_count | (hidden ? RANGE_HIDDEN : 0u)));
   ranges += take_all_count;
-  accepted += take_all != 0u ? cut_count : 0u;
+  accepted += take_all != 0u && !hidden ? cut_count : 0u;
+  hidden_accepted += take_all != 0u && hidden ? cut_count : 0u;
   // The walk. The stack holds at most BVH_STACK_PER_INVOCATION entries per lane: it stays
   // sorted by depth below the cut (each round takes its top entries, in order, and pushes their
   // children in that order, one level deeper than any entry left), and a round that takes an
@@ -290,7 +316,7 @@ void main() {
   uint top;
   uint push0_at = exclusive_count(walk, top);
   stack_base = params.object_count * params.view_count + group * gl_WorkGroupSize.x * BVH_STACK_PER_INVOCATION;
-  if (walk) stack_store(push0_at, (cut - node_base) << BVH_STACK_MASK_BITS | mask);
+  if (walk) stack_store(push0_at, (cut - node_base) << BVH_STACK_MASK_BITS | (hidden ? STACK_HIDDEN : 0u) | mask);
   subgroupMemoryBarrierShared();
   subgroupMemoryBarrierImage();
   subgroupBarrier();
@@ -299,6 +325,7 @@ void main() {
     bool live = rank < take;
     uint word = stack_load(top - take + min(rank, take - 1u));
     uvec2 entry = uvec2(node_base + (word >> BVH_STACK_MASK_BITS), word & ALL_PLANES);
+    bool entry_hidden = (word & STACK_HIDDEN) != 0u;
     top -= take;
     subgroupMemoryBarrierShared();  // every lane has read its entry before any lane pushes
     subgroupMemoryBarrierImage();
@@ -308,28 +335,34 @@ void main() {
     uint c = classify_node(n.box_min, n.box_max, entry.y, straddled);
     c = live ? c : CLASS_OUTSIDE;
     tests.x += live ? 1u : 0u;
-    bool intersecting = c == CLASS_INTERSECTING;
-    bool push = intersecting && n.leaf == 0u;
+    bool node_hidden = entry_hidden;
+    if (OCCLUSION != 0u && c != CLASS_OUTSIDE && !entry_hidden) node_hidden = occ_node_occluded(n.box_min, n.box_max);
+    // INTERSECTING opens a node, and so does INSIDE when its objects still need an occlusion
+    // test (then straddled is empty).
+    bool open = c == CLASS_INTERSECTING || (OCCLUSION != 0u && c == CLASS_INSIDE && !node_hidden);
+    uint carried = straddled | (node_hidden ? STACK_HIDDEN : 0u);  // (CHUNK_HIDDEN is the same bit)
+    bool push = open && n.leaf == 0u;
     uint pushers;
     uint at = top + 2u * exclusive_count(push, pushers);
     if (push) {
-      stack_store(at, (entry.x + 1u - node_base) << BVH_STACK_MASK_BITS | straddled);
-      stack_store(at + 1u, (n.second_child - node_base) << BVH_STACK_MASK_BITS | straddled);
+      stack_store(at, (entry.x + 1u - node_base) << BVH_STACK_MASK_BITS | carried);
+      stack_store(at + 1u, (n.second_child - node_base) << BVH_STACK_MASK_BITS | carried);
     }
     top += 2u * pushers;
-    bool range = c == CLASS_INSIDE && n.count != 0u;
+    bool range = c == CLASS_INSIDE && !open && n.count != 0u;
     uint range_count;
     uint range_at = ranges + exclusive_count(range, range_count);
-    if (range) set_record(base + range_at, uvec2(n.first, n.count));
+    if (range) set_record(base + range_at, uvec2(n.first, n.count | (node_hidden ? RANGE_HIDDEN : 0u)));
     ranges += range_count;
-    accepted += range ? n.count : 0u;
-    uint list = intersecting && n.leaf != 0u ? n.count : 0u;
+    accepted += range && !node_hidden ? n.count : 0u;
+    hidden_accepted += range && node_hidden ? n.count : 0u;
+    uint list = open && n.leaf != 0u ? n.count : 0u;
     uint chunks = (list + BVH_CHUNK_OBJECTS - 1u) / BVH_CHUNK_OBJECTS;
     uint chunk_total;
     uint chunk_at = listed + exclusive_sum(chunks, chunk_total);
     for (uint j = 0u; j < chunks; ++j) {
       uint size = min(BVH_CHUNK_OBJECTS, list - BVH_CHUNK_OBJECTS * j);
-      set_record(back - (chunk_at + j), uvec2(n.first + BVH_CHUNK_OBJECTS * j, straddled | (size - 1u) << CHUNK_SIZE_SHIFT));
+      set_record(back - (chunk_at + j), uvec2(n.first + BVH_CHUNK_OBJECTS * j, carried | (size - 1u) << CHUNK_SIZE_SHIFT));
     }
     listed += chunk_total;
     tests.y += list;
@@ -344,7 +377,7 @@ void main() {
   // tests the slice's first object, and the answer is dropped.
   subgroupMemoryBarrierImage();
   subgroupBarrier();
-  uint tested_visible = 0u, tested_inside = 0u;  // this lane's
+  uint tested_visible = 0u, tested_inside = 0u, tested_occluded = 0u;  // this lane's
   for (uint first = 0u; first < listed; first += lanes) {
     bool live = first + rank < listed;
     uint at = back - (first + rank);
@@ -379,9 +412,25 @@ void main() {
         if (k < size && object_class == CLASS_INSIDE) inside_bits |= 1u << k;
       }
     }
+    // The kept objects against the pyramid, one per lane per round; all of them OCCLUDED below
+    // an occluded node.
+    uint occluded_bits = 0u;
+    if (OCCLUSION != 0u) {
+      bool chunk_hidden = (chunk.y & CHUNK_HIDDEN) != 0u;
+      occluded_bits = chunk_hidden ? visible_bits : 0u;
+      uint pending = chunk_hidden ? 0u : visible_bits;
+      while (pending != 0u) {
+        uint k = uint(findLSB(pending));
+        pending &= pending - 1u;
+        if (occ_volume_occluded(volume_first_word(chunk.x + k))) occluded_bits |= 1u << k;
+      }
+      visible_bits &= ~occluded_bits;
+      inside_bits &= ~occluded_bits;
+    }
     tested_visible += bitCount(visible_bits);
     tested_inside += bitCount(inside_bits);
-    if (live) set_record(at, uvec2(chunk.x, visible_bits | inside_bits << BVH_CHUNK_OBJECTS));
+    tested_occluded += bitCount(occluded_bits);
+    if (live) set_record(at, uvec2(chunk.x, visible_bits | (inside_bits | occluded_bits) << BVH_CHUNK_OBJECTS));
   }
 
   // 4. The list slots and the counts: one global atomic per subgroup and counter, no
@@ -390,6 +439,7 @@ void main() {
   uint subgroup_accepted = subgroupAdd(accepted);
   uint subgroup_visible = subgroup_accepted + subgroupAdd(tested_visible), subgroup_inside = subgroup_accepted + subgroupAdd(tested_inside);
   uint node_tests = subgroupAdd(tests.x), object_tests = subgroupAdd(tests.y);
+  uint subgroup_occluded = OCCLUSION != 0u ? subgroupAdd(hidden_accepted + tested_occluded) : 0u;
   uint subgroup_base = 0u;
   if (subgroupElect()) {
     if (subgroup_visible != 0u) {
@@ -398,11 +448,18 @@ void main() {
     }
     if (node_tests != 0u) atomicAdd(counters[view].node_tests, node_tests);
     if (object_tests != 0u) atomicAdd(counters[view].object_tests, object_tests);
+    if (subgroup_occluded != 0u) atomicAdd(counters[view].occluded_count, subgroup_occluded);
   }
   uint slot = subgroupBroadcastFirst(subgroup_base);
-  // The accepted ranges (every object INSIDE), then the tested visible objects.
+  // The accepted ranges (every object INSIDE, or OCCLUDED: a class each and no slot), then the
+  // tested visible objects.
   for (uint r = 0u; r < ranges; ++r) {
     uvec2 range = record_at(base + r);
+    if ((range.y & RANGE_HIDDEN) != 0u) {
+      if (WRITE_CLASSES != 0u)
+        for (uint k = rank; k < (range.y & ~RANGE_HIDDEN); k += lanes) classes[view * object_count + object_at(range.x + k)] = CLASS_OCCLUDED;
+      continue;
+    }
     for (uint k = rank; k < range.y; k += lanes) emit_visible(view, object_at(range.x + k), slot + k, CLASS_INSIDE);
     slot += range.y;
   }
@@ -422,6 +479,14 @@ void main() {
         emit_visible(view, object_at(chunk.x + k), lane_slot, ((chunk.y >> (BVH_CHUNK_OBJECTS + k)) & 1u) != 0u ? CLASS_INSIDE : CLASS_INTERSECTING);
         lane_slot += 1u;
         bits &= bits - 1u;
+      }
+    }
+    if (OCCLUSION != 0u && WRITE_CLASSES != 0u) {  // the chunk's OCCLUDED objects: their class
+      uint occluded_bits = (chunk.y >> BVH_CHUNK_OBJECTS) & ~chunk.y & CHUNK_BITS;
+      while (occluded_bits != 0u) {
+        uint k = uint(findLSB(occluded_bits));
+        occluded_bits &= occluded_bits - 1u;
+        classes[view * object_count + object_at(chunk.x + k)] = CLASS_OCCLUDED;
       }
     }
   }

@@ -63,16 +63,12 @@ uint view;             // this invocation's view (gl_WorkGroupID.y)
 uint view_plane_count;
 float view_settle_margin;  // GpuFrustum::settle_margin
 vec4 view_planes[MAX_FRUSTUM_PLANES];
-// The view's GpuOcclusionView (OCCLUSION).
-mat4 occ_view_proj;
-uint occ_width, occ_height, occ_reversed, occ_texels, occ_level_count;
-uvec4 occ_levels[PYRAMID_MAX_LEVELS];
+vec4 bound(uint word) { return uintBitsToFloat(texelFetch(bounds, int(word))); }
+vec4 occ_volume_word(uint word) { return bound(word); }
 
 #include "shared/classify.glsl"
 #include "shared/occlusion.glsl"
 #include "shared/ordered_runs.glsl"
-
-vec4 bound(uint word) { return uintBitsToFloat(texelFetch(bounds, int(word))); }
 
 uint classify_object(uint i) {
   uint unused;
@@ -90,51 +86,12 @@ void load_view() {
   view_plane_count = min(tail.x, MAX_FRUSTUM_PLANES);
   view_settle_margin = uintBitsToFloat(tail.y);
   [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = uintBitsToFloat(texelFetch(views, first + int(k)));
-  if (OCCLUSION != 0u) {
-    int o = int(OCCLUSION_VIEW_TEXELS * view);
-    [[unroll]] for (int c = 0; c < 4; ++c) occ_view_proj[c] = uintBitsToFloat(texelFetch(occlusion_views, o + c));
-    uvec4 sizes = texelFetch(occlusion_views, o + 4);
-    occ_width = sizes.x;
-    occ_height = sizes.y;
-    occ_reversed = sizes.z;
-    occ_texels = sizes.w;
-    occ_level_count = min(texelFetch(occlusion_views, o + 5).x, PYRAMID_MAX_LEVELS);
-    [[unroll]] for (uint l = 0; l < PYRAMID_MAX_LEVELS; ++l) occ_levels[l] = texelFetch(occlusion_views, o + 6 + int(l));
-  }
+  if (OCCLUSION != 0u) occ_load_view(view);
 }
 
-// Whether object i, which the frustum keeps, is hidden behind the pyramid: its corners as the
-// reference takes them (occlusion::footprint).
+// Whether object i, which the frustum keeps, is hidden behind the pyramid (occlusion::footprint).
 bool occluded_object(uint i) {
-  vec3 p[8];
-  vec3 magnitude;
-  if (BV_KIND == BV_KIND_AABB) {
-    vec3 lo = bound(AABB_VEC4S * i).xyz, hi = bound(AABB_VEC4S * i + 1).xyz;
-    [[unroll]] for (uint k = 0; k < 8; ++k)
-      p[k] = vec3((k & 1u) != 0u ? hi.x : lo.x, (k & 2u) != 0u ? hi.y : lo.y, (k & 4u) != 0u ? hi.z : lo.z);
-    magnitude = max(abs(lo), abs(hi));
-  } else {
-    vec3 c, a0, a1, a2;
-    if (BV_KIND == BV_KIND_OBB) {
-      uint b = OBB_VEC4S * i;
-      vec4 u0 = bound(b + 1), u1 = bound(b + 2), u2 = bound(b + 3);
-      c = bound(b).xyz;
-      precise vec3 s0 = u0.xyz * u0.w, s1 = u1.xyz * u1.w, s2 = u2.xyz * u2.w;
-      a0 = s0, a1 = s1, a2 = s2;
-    } else {
-      vec4 s = bound(SPHERE_VEC4S * i);
-      float r = abs(s.w);
-      c = s.xyz;
-      a0 = vec3(r, 0.0, 0.0), a1 = vec3(0.0, r, 0.0), a2 = vec3(0.0, 0.0, r);
-    }
-    [[unroll]] for (uint k = 0; k < 8; ++k) {
-      precise vec3 q = ((c + ((k & 1u) != 0u ? a0 : -a0)) + ((k & 2u) != 0u ? a1 : -a1)) + ((k & 4u) != 0u ? a2 : -a2);
-      p[k] = q;
-    }
-    precise vec3 m = ((abs(c) + abs(a0)) + abs(a1)) + abs(a2);
-    magnitude = m;
-  }
-  return occ_occluded(p, magnitude);
+  return occ_volume_occluded(BV_KIND == BV_KIND_AABB ? AABB_VEC4S * i : BV_KIND == BV_KIND_OBB ? OBB_VEC4S * i : SPHERE_VEC4S * i);
 }
 
 // An AABB's or OBB's class from its centre and bound alone where they settle it, as the fast CPU

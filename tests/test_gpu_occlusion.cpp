@@ -2,12 +2,15 @@
 // same depth image for every size, and clear refusals of depth images it cannot reduce.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstring>
 #include <vector>
 
+#include "bvh/builders.hpp"
 #include "cull/compare.hpp"
 #include "cull/depth_pyramid.hpp"
 #include "cull/occlusion.hpp"
+#include "gpu/bvh_culler.hpp"
 #include "gpu/depth_pyramid_pass.hpp"
 #include "gpu/gpu_culler.hpp"
 #include "gpu_test_env.hpp"
@@ -225,6 +228,76 @@ TEST_F(GpuPyramid, FlatPassWithOcclusionEqualsTheReferenceForBoxes) { expect_occ
 TEST_F(GpuPyramid, FlatPassWithOcclusionEqualsTheReferenceForObbs) { expect_occlusion_agreement<Obb>(culler(), 22); }
 TEST_F(GpuPyramid, FlatPassWithOcclusionEqualsTheReferenceForSpheres) {
   expect_occlusion_agreement<Sphere>(culler(), 23);
+}
+
+// The hierarchical pass with occlusion against occlusion::cull_hierarchical on the same pyramid
+// and tree: every object's class, the counts and the node and object tests, with the walk's
+// stacks in shared memory and in the records, with small cut subtrees (many walks from the root)
+// and the default ones; and its visible list against the classes.
+template <class Volume>
+void expect_hierarchical_occlusion_agreement(gpu::DepthPyramidPass& pass, std::uint64_t seed) {
+  gpu::BvhCuller culler(context());
+  test::Rng rng(seed);
+  std::size_t occluded = 0;
+  for (int s = 0; s < 12; ++s) {
+    const Camera cam = test::random_camera(rng, s % 8);
+    const std::uint32_t w = 16 + std::uint32_t(rng.next() % 200), h = 16 + std::uint32_t(rng.next() % 120);
+    const glm::mat4 vp = cam.view_proj();
+    const test::Caster k(vp, w, h, cam.reversed_z);
+    std::vector<Volume> volumes;
+    for (int i = 0; i < 6; ++i) volumes.push_back(test::random_volume<Volume>(rng, 8.0f, 6.0f));
+    const DepthImage image(context(), w, h, test::render_depth(k, volumes));
+    const occlusion::DepthPyramid pyramid = pass.build(image.source(), cam.reversed_z);
+    for (int i = 0; i < 3000; ++i) volumes.push_back(test::random_volume<Volume>(rng, 14.0f, 1.5f));
+    const std::vector<Aabb> boxes = bvh::enclosing_boxes(std::span<const Volume>(volumes));
+    const bvh::FlatTree tree = bvh::flatten(bvh::build_binned_sah(boxes, {s % 2 ? 1u : 4u, 16}));
+    const Frustum frustum = Frustum::from_view_proj(vp);
+    const occlusion::OcclusionView view{vp, w, h, cam.reversed_z};
+    const std::uint32_t texels = 2u << (s % 4);
+    const bvh::HierarchicalResult cpu =
+        occlusion::cull_hierarchical(tree, std::span<const Volume>(volumes), frustum, view, pyramid, {texels});
+    occluded += cpu.occluded;
+    for (const bool in_records : {false, true})
+      for (const std::uint32_t subtree : {64u, gpu::BvhCuller::kCpuSubtreeObjects}) {
+        culler.set_walk_stack_in_records(in_records);
+        culler.set_subtree_objects(subtree);
+        culler.upload(tree, std::span<const Volume>(volumes));
+        gpu::CullOptions options;
+        options.pyramid = &pass;
+        options.occlusion_views = {view};
+        options.occlusion_options.texels_per_axis = texels;
+        const gpu::CullResult result = culler.cull(std::span(&frustum, 1), options);
+        const gpu::ViewResult& g = result.views[0];
+        const std::string where = "scene " + std::to_string(s) + " (camera variant " + std::to_string(s % 8) + ", " +
+                                  std::to_string(w) + "x" + std::to_string(h) + ", " + std::to_string(texels) +
+                                  " texels per axis, subtrees of " + std::to_string(subtree) +
+                                  (in_records ? ", stacks in records" : "") + ")";
+        for (std::size_t i = 0; i < volumes.size(); ++i)
+          ASSERT_EQ(g.classes[i], cpu.classes[i])
+              << where << ": " << describe_mismatch(i, volumes[i], frustum, cpu.classes[i], g.classes[i]);
+        EXPECT_EQ(g.counts.visible, cpu.visible) << where;
+        EXPECT_EQ(g.counts.inside, cpu.inside) << where;
+        EXPECT_EQ(g.counts.occluded, cpu.occluded) << where;
+        EXPECT_EQ(g.node_tests, cpu.node_tests) << where;
+        EXPECT_EQ(g.object_tests, cpu.object_tests) << where;
+        std::vector<std::uint32_t> ids = g.visible_ids, expected;
+        std::sort(ids.begin(), ids.end());
+        for (std::size_t i = 0; i < volumes.size(); ++i)
+          if (is_visible(cpu.classes[i])) expected.push_back(std::uint32_t(i));
+        EXPECT_EQ(ids, expected) << where;
+      }
+  }
+  EXPECT_GT(occluded, 1000u) << "too few occluded objects to test the agreement";
+}
+
+TEST_F(GpuPyramid, HierarchicalPassWithOcclusionEqualsTheReferenceForBoxes) {
+  expect_hierarchical_occlusion_agreement<Aabb>(culler(), 31);
+}
+TEST_F(GpuPyramid, HierarchicalPassWithOcclusionEqualsTheReferenceForObbs) {
+  expect_hierarchical_occlusion_agreement<Obb>(culler(), 32);
+}
+TEST_F(GpuPyramid, HierarchicalPassWithOcclusionEqualsTheReferenceForSpheres) {
+  expect_hierarchical_occlusion_agreement<Sphere>(culler(), 33);
 }
 
 }  // namespace

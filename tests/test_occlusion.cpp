@@ -9,6 +9,8 @@
 #include <optional>
 #include <vector>
 
+#include "bvh/builders.hpp"
+#include "cull/compare.hpp"
 #include "cull/depth_pyramid.hpp"
 #include "cull/occlusion.hpp"
 #include "occlusion_test_util.hpp"
@@ -125,6 +127,92 @@ void expect_conservative(std::uint64_t seed, int scenes) {
   // test that never culls would pass the check above.)
   EXPECT_GT(culled, hidden / 2) << culled << " of " << hidden << " hidden";
   std::printf("%zu volume tests, %zu seen and hidden, %zu occluded\n", tested, hidden, culled);
+}
+
+// Hierarchical occlusion against the flat test: the same class for every object, whatever the
+// leaf size, texel count and traversal; and nodes found occluded spare their objects' tests.
+template <class Volume>
+void expect_hierarchy_equals_flat(std::uint64_t seed, int scenes) {
+  test::Rng rng(seed);
+  std::size_t kept = 0, tests = 0, occluded = 0;
+  for (int s = 0; s < scenes; ++s) {
+    const Camera cam = random_camera(rng, s % 8);
+    const std::uint32_t w = 16 + std::uint32_t(rng.next() % 81), h = 16 + std::uint32_t(rng.next() % 61);
+    const glm::mat4 vp = cam.view_proj();
+    const Caster k(vp, w, h, cam.reversed_z);
+    std::vector<Volume> objects;
+    for (int i = 0; i < 6; ++i) objects.push_back(random_volume<Volume>(rng, 8.0f, 6.0f));
+    const std::vector<float> depth = render_depth(k, objects);  // the first six occlude
+    for (int i = 0; i < 400; ++i) objects.push_back(random_volume<Volume>(rng, 12.0f, 1.0f));
+    const DepthPyramid pyramid = occlusion::build_depth_pyramid(depth, w, h, cam.reversed_z);
+    const OcclusionView view{vp, w, h, cam.reversed_z};
+    const Frustum frustum = Frustum::from_view_proj(vp);
+    const std::vector<Aabb> boxes = bvh::enclosing_boxes(std::span<const Volume>(objects));
+    for (const std::uint32_t leaf : {1u, 4u}) {
+      const bvh::FlatTree tree = bvh::flatten(bvh::build_binned_sah(boxes, {leaf, 16}));
+      for (const std::uint32_t texels : {2u, 4u, 8u, 16u}) {
+        std::vector<Classification> flat(objects.size());
+        const reference::CullCounts counts =
+            occlusion::classify_all(std::span<const Volume>(objects), frustum, view, pyramid, {texels}, flat);
+        for (const std::uint32_t range : {0u, 8u}) {
+          const bvh::HierarchicalResult r = occlusion::cull_hierarchical(
+              tree, std::span<const Volume>(objects), frustum, view, pyramid, {texels}, bvh::TraversalOptions{range});
+          for (std::size_t i = 0; i < objects.size(); ++i)
+            ASSERT_EQ(r.classes[i], flat[i])
+                << "scene " << s << " (camera variant " << s % 8 << ", " << w << "x" << h << "), leaves of " << leaf
+                << ", " << texels << " texels per axis, range_objects " << range << ": object " << i << " "
+                << describe(objects[i]) << ", view-projection row 0 " << vp[0][0] << " " << vp[1][0] << " " << vp[2][0]
+                << " " << vp[3][0] << "; hierarchy says " << to_string(r.classes[i]) << ", flat says "
+                << to_string(flat[i]);
+          EXPECT_EQ(r.occluded, counts.occluded);
+          EXPECT_EQ(r.visible, counts.visible);
+          kept += counts.visible + counts.occluded;
+          occluded += counts.occluded;
+          tests += r.occlusion_tests;
+        }
+      }
+    }
+  }
+  EXPECT_GT(occluded, kept / 10) << occluded << " of " << kept << " kept by the frusta";
+  std::printf("%zu objects kept by the frusta, %zu occluded, %zu occlusion tests in the hierarchy\n", kept, occluded,
+              tests);
+}
+
+TEST(HierarchicalOcclusion, BoxClassesEqualTheFlatTest) { expect_hierarchy_equals_flat<Aabb>(21, 24); }
+TEST(HierarchicalOcclusion, ObbClassesEqualTheFlatTest) { expect_hierarchy_equals_flat<Obb>(22, 24); }
+TEST(HierarchicalOcclusion, SphereClassesEqualTheFlatTest) { expect_hierarchy_equals_flat<Sphere>(23, 24); }
+
+// Behind a wall filling the view, a grid of boxes is hidden by a few node tests: the hierarchy
+// makes far fewer occlusion tests than there are boxes, and the classes still equal the flat's.
+TEST(HierarchicalOcclusion, OccludedNodesSpareTheirObjectsTests) {
+  Camera cam;
+  cam.eye = {0, 0, 10};
+  cam.target = {0, 0, 0};
+  cam.aspect = 1.0f;
+  const glm::mat4 vp = cam.view_proj();
+  const std::uint32_t w = 64, h = 64;
+  const Caster k(vp, w, h, false);
+  const std::vector<Aabb> wall = {{{-100, -100, -1}, {100, 100, 0}}};
+  const DepthPyramid pyramid = occlusion::build_depth_pyramid(render_depth(k, wall), w, h, false);
+  const OcclusionView view{vp, w, h, false};
+  const Frustum frustum = Frustum::from_view_proj(vp);
+  std::vector<Aabb> boxes;
+  for (int x = 0; x < 20; ++x)
+    for (int y = 0; y < 20; ++y)
+      for (int z = 0; z < 5; ++z) {
+        const glm::vec3 c(float(x) - 9.5f, float(y) - 9.5f, -3.0f - 2.0f * float(z));
+        boxes.push_back({c - 0.3f, c + 0.3f});
+      }
+  const bvh::FlatTree tree = bvh::flatten(bvh::build_binned_sah(boxes, {4, 16}));
+  std::vector<Classification> flat(boxes.size());
+  const reference::CullCounts counts =
+      occlusion::classify_all(std::span<const Aabb>(boxes), frustum, view, pyramid, {}, flat);
+  const bvh::HierarchicalResult r =
+      occlusion::cull_hierarchical(tree, std::span<const Aabb>(boxes), frustum, view, pyramid);
+  EXPECT_EQ(r.classes, flat);
+  EXPECT_EQ(counts.visible, 0u);
+  EXPECT_GT(counts.occluded, boxes.size() / 2);
+  EXPECT_LT(r.occlusion_tests, boxes.size() / 20) << r.occlusion_tests << " occlusion tests";
 }
 
 TEST(Occlusion, BoxesThatOwnAPixelAreNeverOccluded) { expect_conservative<Aabb>(11, 96); }

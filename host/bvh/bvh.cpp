@@ -342,7 +342,7 @@ HierarchicalResult cull_hierarchical_impl(const FlatTree& tree, std::span<const 
     stack.push_back({first_child, straddled});
   }
   for (Classification c : r.classes) {
-    r.visible += c != Classification::Outside;
+    r.visible += is_visible(c);
     r.inside += c == Classification::Inside;
   }
   return r;

@@ -229,6 +229,9 @@ struct HierarchicalResult {
   std::size_t node_tests = 0;
   std::size_t object_tests = 0;
   std::size_t visible = 0, inside = 0;
+  /// occlusion::cull_hierarchical: objects the frustum keeps and the pyramid hides, and the
+  /// occlusion tests made (of nodes and objects)
+  std::size_t occluded = 0, occlusion_tests = 0;
   bool operator==(const HierarchicalResult&) const = default;
 };
 /// How cull_hierarchical walks a tree.

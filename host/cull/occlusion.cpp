@@ -2,10 +2,12 @@
 
 #include <algorithm>
 #include <bit>
+#include <cfloat>
 #include <cmath>
 #include <stdexcept>
 #include <string>
 
+#include "bvh/bvh.hpp"
 #include "cull/reference.hpp"
 
 namespace cullpipe::occlusion {
@@ -19,6 +21,27 @@ constexpr float kPixelMargin = 0.0625f;     // pixels: the rasteriser's snapping
 constexpr float kPixelRelative = 0x1p-20f;  // of a pixel coordinate's magnitude
 constexpr float kDepthMargin = 0x1p-20f;    // depth: the rasteriser's interpolation, our roundings
 constexpr float kMinW = 0x1p-126f, kMaxW = 0x1p126f;  // w range of a projected corner
+
+/// The margins of one footprint: an object's, or a hierarchy node's, each kNodeMarginScale
+/// times as wide (products of constants by a power of two, exact; the shader takes the same).
+/// `limit` bounds the magnitude of its ndc bounds: past it the volume is not projected (an
+/// object's: any finite value; a node's: 2^120, so that the bounds of the volumes inside it,
+/// a few roundings larger, stay finite).
+struct Margins {
+  float clip, tiny, pixel, pixel_relative, depth, limit;
+};
+constexpr Margins kObjectMargins{.clip = kClipError,
+                                 .tiny = kTiny,
+                                 .pixel = kPixelMargin,
+                                 .pixel_relative = kPixelRelative,
+                                 .depth = kDepthMargin,
+                                 .limit = FLT_MAX};
+constexpr Margins kNodeMargins{.clip = kClipError * kNodeMarginScale,
+                               .tiny = kTiny * kNodeMarginScale,
+                               .pixel = kPixelMargin * kNodeMarginScale,
+                               .pixel_relative = kPixelRelative * kNodeMarginScale,
+                               .depth = kDepthMargin * kNodeMarginScale,
+                               .limit = 0x1p120f};
 
 /// A volume as the footprint sees it: its corners, and per world axis a bound on the magnitude
 /// of any of its points' coordinates (and of the error in the corners as computed).
@@ -38,11 +61,12 @@ void widen(float& lo, float& hi, float x_lo, float x_hi, float w_lo, float w_hi)
 }
 
 /// The pixel range [first, last] of ndc range [lo, hi] on a viewport side of `size` pixels.
-void pixel_range(float lo, float hi, std::uint32_t size, std::uint32_t& first, std::uint32_t& last) {
+void pixel_range(float lo, float hi, std::uint32_t size, const Margins& margins, std::uint32_t& first,
+                 std::uint32_t& last) {
   const float half = 0.5f * float(size);
   const float from = (lo + 1.0f) * half, to = (hi + 1.0f) * half;
-  const float a = std::floor(from - (kPixelMargin + std::fabs(from) * kPixelRelative));
-  const float b = std::floor(to + (kPixelMargin + std::fabs(to) * kPixelRelative));
+  const float a = std::floor(from - (margins.pixel + std::fabs(from) * margins.pixel_relative));
+  const float b = std::floor(to + (margins.pixel + std::fabs(to) * margins.pixel_relative));
   const float top = float(size - 1);
   // (As the shader clamps: a NaN from an overflowed bound becomes 0, never a conversion of NaN.)
   const float a0 = a > 0.0f ? a : 0.0f, b0 = b > 0.0f ? b : 0.0f;
@@ -50,7 +74,7 @@ void pixel_range(float lo, float hi, std::uint32_t size, std::uint32_t& first, s
   last = std::uint32_t(top < b0 ? top : b0);
 }
 
-Footprint project(const Corners& c, const OcclusionView& view) {
+Footprint project(const Corners& c, const OcclusionView& view, const Margins& margins = kObjectMargins) {
   const glm::mat4& m = view.view_proj;
   // Per clip row r, the error allowed in any point's clip coordinate: kClipError times a bound
   // on sum_j |m[j][r]| |p_j| + |m[3][r]| over the volume's points.
@@ -59,7 +83,7 @@ Footprint project(const Corners& c, const OcclusionView& view) {
     const float a = ((std::fabs(m[0][r]) * c.magnitude.x + std::fabs(m[1][r]) * c.magnitude.y) +
                      std::fabs(m[2][r]) * c.magnitude.z) +
                     std::fabs(m[3][r]);
-    e[r] = a * kClipError + kTiny;
+    e[r] = a * margins.clip + margins.tiny;
   }
   float x_lo = INFINITY, x_hi = -INFINITY, y_lo = INFINITY, y_hi = -INFINITY, z_lo = INFINITY, z_hi = -INFINITY;
   Footprint f;
@@ -74,13 +98,15 @@ Footprint project(const Corners& c, const OcclusionView& view) {
     widen(y_lo, y_hi, v[1] - e[1], v[1] + e[1], w_lo, w_hi);
     widen(z_lo, z_hi, v[2] - e[2], v[2] + e[2], w_lo, w_hi);
   }
-  if (!std::isfinite(x_lo) || !std::isfinite(x_hi) || !std::isfinite(y_lo) || !std::isfinite(y_hi) ||
-      !std::isfinite(z_lo) || !std::isfinite(z_hi))
+  // (NaN compares false: not projected.)
+  const float limit = margins.limit;
+  if (!(std::fabs(x_lo) <= limit) || !(std::fabs(x_hi) <= limit) || !(std::fabs(y_lo) <= limit) ||
+      !(std::fabs(y_hi) <= limit) || !(std::fabs(z_lo) <= limit) || !(std::fabs(z_hi) <= limit))
     return f;
-  pixel_range(x_lo, x_hi, view.width, f.x0, f.x1);
-  pixel_range(y_lo, y_hi, view.height, f.y0, f.y1);
-  f.nearest = view.reversed_z ? z_hi + (kDepthMargin + std::fabs(z_hi) * kDepthMargin)
-                              : z_lo - (kDepthMargin + std::fabs(z_lo) * kDepthMargin);
+  pixel_range(x_lo, x_hi, view.width, margins, f.x0, f.x1);
+  pixel_range(y_lo, y_hi, view.height, margins, f.y0, f.y1);
+  f.nearest = view.reversed_z ? z_hi + (margins.depth + std::fabs(z_hi) * margins.depth)
+                              : z_lo - (margins.depth + std::fabs(z_lo) * margins.depth);
   f.projected = true;
   return f;
 }
@@ -95,6 +121,13 @@ Corners box_corners(const glm::vec3& c, const glm::vec3& a0, const glm::vec3& a1
     k.p[i] = ((c + s0) + s1) + s2;
   }
   k.magnitude = ((glm::abs(c) + glm::abs(a0)) + glm::abs(a1)) + glm::abs(a2);
+  return k;
+}
+
+Corners aabb_corners(const Aabb& box) {
+  Corners k;
+  for (int i = 0; i < 8; ++i) k.p[i] = box.corner(i);  // exact
+  k.magnitude = glm::max(glm::abs(box.min), glm::abs(box.max));
   return k;
 }
 
@@ -129,13 +162,70 @@ reference::CullCounts classify_all_volumes(std::span<const Volume> volumes, cons
   return counts;
 }
 
+template <class Volume>
+bvh::HierarchicalResult cull_hierarchical_volumes(const bvh::FlatTree& tree, std::span<const Volume> volumes,
+                                                  const Frustum& frustum, const OcclusionView& view,
+                                                  const DepthPyramid& pyramid, const OcclusionOptions& options,
+                                                  const bvh::TraversalOptions& traversal) {
+  if constexpr (!std::is_same_v<Volume, Aabb>) bvh::require_unit_normals(frustum, "occlusion::cull_hierarchical");
+  check_view(view, pyramid, options);
+  bvh::HierarchicalResult r;
+  r.classes.assign(volumes.size(), Classification::Outside);
+  if (tree.nodes.empty()) return r;
+  struct Entry {
+    std::uint32_t node, mask;
+    bool hidden;  // an ancestor is occluded: what the frustum keeps below is OCCLUDED, untested
+  };
+  const std::uint32_t all = (1u << frustum.active().size()) - 1u;
+  std::vector<Entry> stack{{0, all, false}};
+  while (!stack.empty()) {
+    const Entry e = stack.back();
+    stack.pop_back();
+    const bvh::FlatNode& node = tree.nodes[e.node];
+    ++r.node_tests;
+    std::uint32_t straddled = 0;
+    const Classification c = bvh::classify_node<Volume>(node.box, frustum, e.mask, straddled);
+    if (c == Classification::Outside) continue;
+    r.occlusion_tests += !e.hidden;
+    const bool hidden = e.hidden || node_occluded(node.box, view, pyramid, options);
+    if (c == Classification::Inside && hidden) {  // the whole range, no further tests
+      for (std::uint32_t k = node.first; k < node.first + node.count; ++k)
+        r.classes[tree.objects[k]] = Classification::Occluded;
+      continue;
+    }
+    // INTERSECTING, or INSIDE and not hidden (straddled is empty): the objects need their own
+    // occlusion test, so the walk goes on below an INSIDE node.
+    if (traversal.tests_objects_of(node)) {
+      for (std::uint32_t k = node.first; k < node.first + node.count; ++k) {
+        const std::uint32_t id = tree.objects[k];
+        Classification oc = bvh::classify_object(volumes[id], frustum, straddled);
+        ++r.object_tests;
+        const bool tests = oc != Classification::Outside && !hidden;
+        r.occlusion_tests += tests;
+        if (oc != Classification::Outside &&
+            (hidden || (tests && occluded(footprint(volumes[id], view), pyramid, options))))
+          oc = Classification::Occluded;
+        r.classes[id] = oc;
+      }
+      continue;
+    }
+    stack.push_back({tree.nodes[e.node + 1].skip, straddled, hidden});
+    stack.push_back({e.node + 1, straddled, hidden});
+  }
+  for (Classification c : r.classes) {
+    r.visible += is_visible(c);
+    r.inside += c == Classification::Inside;
+    r.occluded += c == Classification::Occluded;
+  }
+  return r;
+}
+
 }  // namespace
 
-Footprint footprint(const Aabb& box, const OcclusionView& view) {
-  Corners k;
-  for (int i = 0; i < 8; ++i) k.p[i] = box.corner(i);  // exact
-  k.magnitude = glm::max(glm::abs(box.min), glm::abs(box.max));
-  return project(k, view);
+Footprint footprint(const Aabb& box, const OcclusionView& view) { return project(aabb_corners(box), view); }
+
+Footprint node_footprint(const Aabb& node, const OcclusionView& view) {
+  return project(aabb_corners(node), view, kNodeMargins);
 }
 
 Footprint footprint(const Obb& box, const OcclusionView& view) {
@@ -148,6 +238,11 @@ Footprint footprint(const Sphere& s, const OcclusionView& view) {
   const float r = std::fabs(s.radius);
   return project(box_corners(s.center, glm::vec3(r, 0.0f, 0.0f), glm::vec3(0.0f, r, 0.0f), glm::vec3(0.0f, 0.0f, r)),
                  view);
+}
+
+bool node_occluded(const Aabb& node, const OcclusionView& view, const DepthPyramid& pyramid,
+                   const OcclusionOptions& options) {
+  return occluded(node_footprint(node, view), pyramid, {std::min(options.texels_per_axis, kNodeTexelsPerAxis)});
 }
 
 unsigned test_level(const Footprint& f, const DepthPyramid& pyramid, std::uint32_t texels_per_axis) {
@@ -225,6 +320,25 @@ reference::CullCounts classify_all(std::span<const Sphere> volumes, const Frustu
                                    const DepthPyramid& pyramid, const OcclusionOptions& options,
                                    std::span<Classification> out) {
   return classify_all_volumes(volumes, frustum, view, pyramid, options, out);
+}
+
+bvh::HierarchicalResult cull_hierarchical(const bvh::FlatTree& tree, std::span<const Aabb> volumes,
+                                          const Frustum& frustum, const OcclusionView& view,
+                                          const DepthPyramid& pyramid, const OcclusionOptions& options,
+                                          const bvh::TraversalOptions& traversal) {
+  return cull_hierarchical_volumes(tree, volumes, frustum, view, pyramid, options, traversal);
+}
+bvh::HierarchicalResult cull_hierarchical(const bvh::FlatTree& tree, std::span<const Obb> volumes,
+                                          const Frustum& frustum, const OcclusionView& view,
+                                          const DepthPyramid& pyramid, const OcclusionOptions& options,
+                                          const bvh::TraversalOptions& traversal) {
+  return cull_hierarchical_volumes(tree, volumes, frustum, view, pyramid, options, traversal);
+}
+bvh::HierarchicalResult cull_hierarchical(const bvh::FlatTree& tree, std::span<const Sphere> volumes,
+                                          const Frustum& frustum, const OcclusionView& view,
+                                          const DepthPyramid& pyramid, const OcclusionOptions& options,
+                                          const bvh::TraversalOptions& traversal) {
+  return cull_hierarchical_volumes(tree, volumes, frustum, view, pyramid, options, traversal);
 }
 
 }  // namespace cullpipe::occlusion

@@ -6,6 +6,7 @@
 #include <glm/mat4x4.hpp>
 #include <span>
 
+#include "bvh/bvh.hpp"
 #include "cull/depth_pyramid.hpp"
 #include "cull/reference.hpp"
 #include "geom/aabb.hpp"
@@ -52,6 +53,21 @@ Footprint footprint(const Aabb& box, const OcclusionView& view);
 Footprint footprint(const Obb& box, const OcclusionView& view);
 Footprint footprint(const Sphere& sphere, const OcclusionView& view);
 
+/// A hierarchy node's footprint: its box's, with every margin kNodeMarginScale times an object's.
+/// It holds the computed footprint of every volume inside the box (AABBs, and OBBs and spheres
+/// whose enclosing boxes it contains), so a node found occluded hides every one of them as their
+/// own test finds it (docs/numerics.md, "Hierarchical occlusion").
+inline constexpr float kNodeMarginScale = 4.0f;
+Footprint node_footprint(const Aabb& node, const OcclusionView& view);
+/// A node is tested reading at most min(texels_per_axis, kNodeTexelsPerAxis) texels per axis: a
+/// cheap filter (the objects of a node it keeps get their own, finer test). Any level at least as
+/// coarse as its objects' keeps the node's answer conservative for them.
+inline constexpr std::uint32_t kNodeTexelsPerAxis = 4;
+/// Whether a hierarchy node is hidden: node_footprint read at min(texels_per_axis,
+/// kNodeTexelsPerAxis) texels per axis.
+bool node_occluded(const Aabb& node, const OcclusionView& view, const DepthPyramid& pyramid,
+                   const OcclusionOptions& options);
+
 /// The pyramid level the test reads for `f`: the finest at which [x0, x1] and [y0, y1] span at
 /// most `texels_per_axis` texels.
 unsigned test_level(const Footprint& f, const DepthPyramid& pyramid, std::uint32_t texels_per_axis);
@@ -88,5 +104,27 @@ reference::CullCounts classify_all(std::span<const Obb> volumes, const Frustum& 
 reference::CullCounts classify_all(std::span<const Sphere> volumes, const Frustum& frustum, const OcclusionView& view,
                                    const DepthPyramid& pyramid, const OcclusionOptions& options,
                                    std::span<Classification> out);
+
+/// Hierarchical occlusion culling, the reference for the GPU's (gpu::BvhCuller with a pyramid):
+/// bvh::cull_hierarchical's walk, where every node the frustum keeps is also tested against the
+/// pyramid by its node_footprint. Below an occluded node nothing more is tested for occlusion:
+/// what the frustum keeps there is OCCLUDED (an INSIDE node's whole range at once), and OUTSIDE
+/// stays OUTSIDE. Below an INSIDE node that is not occluded the walk goes on (with no planes
+/// left) so that its objects get their own occlusion test. Every object's class equals
+/// classify_all's. node_tests and object_tests count frustum tests as cull_hierarchical does;
+/// `occluded` counts the OCCLUDED objects. Checks the view first (check_view); over OBBs or
+/// spheres the frustum needs unit normals (bvh::require_unit_normals).
+bvh::HierarchicalResult cull_hierarchical(const bvh::FlatTree& tree, std::span<const Aabb> volumes,
+                                          const Frustum& frustum, const OcclusionView& view,
+                                          const DepthPyramid& pyramid, const OcclusionOptions& options = {},
+                                          const bvh::TraversalOptions& traversal = {});
+bvh::HierarchicalResult cull_hierarchical(const bvh::FlatTree& tree, std::span<const Obb> volumes,
+                                          const Frustum& frustum, const OcclusionView& view,
+                                          const DepthPyramid& pyramid, const OcclusionOptions& options = {},
+                                          const bvh::TraversalOptions& traversal = {});
+bvh::HierarchicalResult cull_hierarchical(const bvh::FlatTree& tree, std::span<const Sphere> volumes,
+                                          const Frustum& frustum, const OcclusionView& view,
+                                          const DepthPyramid& pyramid, const OcclusionOptions& options = {},
+                                          const bvh::TraversalOptions& traversal = {});
 
 }  // namespace cullpipe::occlusion

@@ -26,7 +26,8 @@ constexpr VkBufferUsageFlags kTexel = VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT;
 // Object volumes, views, nodes, the object order and the centre bounds are read through uniform
 // texel buffers (see cull_bvh.comp).
 constexpr std::uint32_t kTexelBindings = 1u << BINDING_BOUNDS | 1u << BINDING_VIEWS | 1u << BVH_BINDING_NODES |
-                                         1u << BVH_BINDING_OBJECTS | 1u << BVH_BINDING_CENTRES;
+                                         1u << BVH_BINDING_OBJECTS | 1u << BVH_BINDING_CENTRES |
+                                         1u << BVH_BINDING_OCCLUSION_VIEWS;
 // The traversal records are written and read back within the pass through a storage texel
 // buffer: on lavapipe an image load gathers the lanes' records into a vector, where a
 // storage-buffer load inserts each lane's words through the stack (a stall per lane and word).
@@ -66,26 +67,33 @@ BvhCuller::BvhCuller(const vk::Context& ctx)
                                     VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT |
                                         VK_SUBGROUP_FEATURE_BALLOT_BIT | VK_SUBGROUP_FEATURE_SHUFFLE_BIT,
                                     "hierarchical culling");
-  resources_ = std::make_unique<detail::PassResources>(ctx_, pipeline(false, true).set_layout(), BVH_BINDING_COUNT,
+  resources_ = std::make_unique<detail::PassResources>(ctx_, pipeline(CullOptions{}).set_layout(), BVH_BINDING_COUNT,
                                                        kTexelBindings, kRecordBindings);
 }
 
 BvhCuller::~BvhCuller() = default;
 
-const vk::ComputePipeline& BvhCuller::pipeline(bool draws, bool classes) {
-  const PipelineKey key{.kind = kind_, .draws = draws, .classes = classes, .stack_in_records = stack_in_records_};
+const vk::ComputePipeline& BvhCuller::pipeline(const CullOptions& options) {
+  const PipelineKey key{.kind = kind_,
+                        .draws = options.draws,
+                        .classes = options.classes,
+                        .stack_in_records = stack_in_records_,
+                        .occlusion_texels = detail::occlusion_texels(options)};
   return pipelines_.get(key, [&] {
     const std::string name = "hierarchical cull (" + std::string(to_string(key.kind)) + (key.draws ? ", draws" : "") +
                              (key.classes ? ", classes" : "") + (key.stack_in_records ? ", stacks in records" : "") +
-                             ")";
-    // Specialization constants: 1 group size, 2 volume kind, 3 draws, 4 classes, 5 stacks in the records.
+                             (key.occlusion_texels ? ", occlusion" : "") + ")";
+    // Specialization constants: 1 group size, 2 volume kind, 3 draws, 4 classes, 5 stacks in the
+    // records, 6 occlusion, 7 texels per axis of the occlusion test.
     static_assert(BV_KIND_AABB == 0 && BV_KIND_OBB == 1 && BV_KIND_SPHERE == 2, "BvKind order must match the shader");
-    const std::uint32_t spec[6] = {0u,
+    const std::uint32_t spec[8] = {0u,
                                    group_size_,
                                    std::uint32_t(key.kind),
                                    key.draws ? 1u : 0u,
                                    key.classes ? 1u : 0u,
-                                   key.stack_in_records ? 1u : 0u};
+                                   key.stack_in_records ? 1u : 0u,
+                                   key.occlusion_texels ? 1u : 0u,
+                                   key.occlusion_texels ? key.occlusion_texels : 4u};
     return std::make_unique<vk::ComputePipeline>(
         ctx_, vk::ComputePipelineDesc{std::span<const std::uint32_t>(cullpipe_cull_bvh_spv), BVH_BINDING_COUNT,
                                       sizeof(BvhCullParams), spec, name.c_str(), kTexelBindings, kRecordBindings});
@@ -101,8 +109,10 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
   const std::size_t n = boxes.size(), nodes = tree.nodes.size();
   const std::string kind(to_string(kind_of<Volume>()));
   auto bad = [&](const std::string& what) { throw std::invalid_argument("BvhCuller::upload: " + what); };
-  if (nodes >= std::size_t(UINT32_MAX) || n >= std::size_t(UINT32_MAX))
-    bad("too many nodes or objects for 32-bit indices");
+  // (An accepted range's record flags OCCLUDED ranges in its count's top bit: cull_bvh.comp.)
+  if (nodes >= std::size_t(UINT32_MAX) || n >= (std::size_t(1) << 31))
+    bad("too many nodes or objects (" + std::to_string(nodes) + " nodes, " + std::to_string(n) +
+        " objects) for the traversal's 31-bit counts and 32-bit indices");
   // The layout flatten() gives, which the traversal relies on (skip links, nested ranges).
   std::vector<std::uint32_t> depth;
   if (const std::string why = bvh::check_flat_tree(tree, boxes, &depth); !why.empty()) bad(why);
@@ -201,22 +211,21 @@ void BvhCuller::upload_draws(std::span<const DrawCommand> templates) {
 }
 
 void BvhCuller::update_descriptors() {
-  if (!descriptors_dirty_) return;
+  if (!descriptors_dirty_ && written_pyramid_ == pyramid_generation_) return;
   static_assert(BINDING_BOUNDS == 0 && BINDING_CLASSES == 1 && BINDING_VISIBLE == 2 && BINDING_COUNTERS == 3 &&
                 BINDING_VIEWS == 4 && BINDING_DRAW_TEMPLATES == 5 && BINDING_DRAWS == 6 && BVH_BINDING_NODES == 7 &&
                 BVH_BINDING_OBJECTS == 8 && BVH_BINDING_CUTS == 9 && BVH_BINDING_RECORDS == 10 &&
-                BVH_BINDING_CENTRES == 11 && BVH_BINDING_COUNT == 12);
-  const vk::Buffer* const buffers[BVH_BINDING_COUNT] = {&bounds_,  &classes_,   &visible_, &counters_,
-                                                        &views_,   &templates_, &draws_,   &nodes_,
-                                                        &objects_, &cuts_,      &records_, &centres_};
+                BVH_BINDING_CENTRES == 11 && BVH_BINDING_PYRAMID == 12 && BVH_BINDING_OCCLUSION_VIEWS == 13 &&
+                BVH_BINDING_COUNT == 14);
+  const vk::Buffer* const buffers[BVH_BINDING_COUNT] = {&bounds_,    &classes_, &visible_, &counters_,       &views_,
+                                                        &templates_, &draws_,   &nodes_,   &objects_,        &cuts_,
+                                                        &records_,   &centres_, pyramid_,  &occlusion_views_};
   resources_->write(buffers);
+  written_pyramid_ = pyramid_generation_;
   descriptors_dirty_ = false;
 }
 
 void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& options) {
-  if (options.pyramid)
-    throw std::invalid_argument(
-        "hierarchical culling does not test occlusion; CullOptions::pyramid is for the flat pass (GpuCuller)");
   if (options.ordered)
     throw std::invalid_argument(
         "hierarchical culling writes visible ids in arrival order; CullOptions::ordered is not supported");
@@ -225,6 +234,7 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
                                 " draw templates were uploaded for " + std::to_string(object_count_) +
                                 " objects (call upload_draws)");
   const std::size_t v = views.size();
+  detail::check_occlusion(ctx_, options, v);
   for (const Frustum& f : views) {
     if (f.plane_count > MAX_FRUSTUM_PLANES) throw std::invalid_argument("a frustum has more than 6 planes");
     if (kind_ != BvKind::Aabb) bvh::require_unit_normals(f, "BvhCuller");
@@ -275,7 +285,13 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   detail::ensure_buffer(ctx_, views_, v * sizeof(GpuFrustum), kTexel, "view buffer", dirty);
   detail::ensure_buffer(ctx_, draws_, draw_bytes, kStorage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "draw buffer", dirty);
   detail::ensure_buffer(ctx_, records_, record_bytes, kRecordUsage, "BVH traversal record buffer", dirty);
+  detail::ensure_buffer(ctx_, no_pyramid_, 16, kStorage, "empty pyramid buffer", dirty);
+  detail::ensure_buffer(ctx_, occlusion_views_, (options.pyramid ? v : 1) * sizeof(GpuOcclusionView), kTexel,
+                        "occlusion view buffer", dirty);
+  pyramid_ = options.pyramid ? &options.pyramid->texels() : &no_pyramid_;
+  pyramid_generation_ = options.pyramid ? options.pyramid->generation() : 0;
   update_descriptors();
+  if (options.pyramid) detail::write_occlusion_views(options, occlusion_views_.as<GpuOcclusionView>());
   auto gpu_views = views_.as<GpuFrustum>();
   for (std::size_t i = 0; i < v; ++i) {
     gpu_views[i] = pack(views[i]);
@@ -284,7 +300,7 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   last_capacity_ = capacity;
   last_view_count_ = v;
   last_options_ = options;
-  pipeline(options.draws, options.classes);
+  pipeline(options);
 }
 
 void BvhCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
@@ -304,7 +320,7 @@ void BvhCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
     params.visible_capacity = std::uint32_t(last_capacity_);
     params.cut_count = std::uint32_t(cut_count_);
     params.groups_per_view = std::uint32_t(groups_per_view_);
-    const vk::ComputePipeline& pipe = pipeline(last_options_.draws, last_options_.classes);
+    const vk::ComputePipeline& pipe = pipeline(last_options_);
     VkDescriptorSet set = resources_->set();
     vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.pipeline());
     vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.layout(), 0, 1, &set, 0, nullptr);

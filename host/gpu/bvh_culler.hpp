@@ -28,7 +28,10 @@ namespace cullpipe::gpu {
 /// pass, each with its own outputs. Classes and test counts equal bvh::cull_hierarchical bit
 /// for bit; the visible set equals flat culling's. Objects are AABBs, OBBs or spheres (a tree
 /// over OBBs or spheres is built over bvh::enclosing_boxes; its nodes are tested with
-/// bvh::classify_masked_margin, so every class equals flat culling's). Visible ids and draws
+/// bvh::classify_masked_margin, so every class equals flat culling's). With a depth pyramid
+/// (CullOptions::pyramid) nodes and objects are also tested for occlusion in the same dispatch,
+/// and an occluded node skips its subtree's occlusion tests: classes and counts equal
+/// occlusion::cull_hierarchical's, so every class equals the flat pass's. Visible ids and draws
 /// come in GPU arrival order (CullOptions::ordered is not supported). Not thread-safe.
 class BvhCuller {
  public:
@@ -43,7 +46,8 @@ class BvhCuller {
   /// as flatten nests them, boxes invalid or not enclosing), std::length_error when a buffer
   /// would exceed one texel buffer view (maxTexelBufferElements) or, for the cut's list of
   /// subtrees, one storage buffer, or when one workgroup's cut subtrees span 2^26 nodes or more
-  /// (BVH_WORKGROUP_NODE_SPAN; far past any default cut). Boxes also get a centre bound each
+  /// (BVH_WORKGROUP_NODE_SPAN; far past any default cut), and std::invalid_argument for 2^31
+  /// objects or more. Boxes also get a centre bound each
   /// (16 bytes, in tree order), which settles most of a straddling leaf's boxes with one texel
   /// (as the flat pass does). O(nodes + objects).
   void upload(const bvh::FlatTree& tree, std::span<const Aabb> boxes);
@@ -103,9 +107,12 @@ class BvhCuller {
     bool draws = false;             // write indirect draws
     bool classes = false;           // write the per-object classes
     bool stack_in_records = false;  // the walk's stack in the records image, not shared memory
+    // Test the kept nodes and objects against the depth pyramid, reading at most this many texels
+    // per axis (0: no occlusion test).
+    std::uint32_t occlusion_texels = 0;
     auto operator<=>(const PipelineKey&) const = default;
   };
-  const vk::ComputePipeline& pipeline(bool draws, bool classes);  // for kind_ and stack_in_records_
+  const vk::ComputePipeline& pipeline(const CullOptions& options);  // for kind_ and stack_in_records_
   template <class Volume>
   void upload_impl(const bvh::FlatTree& tree, std::span<const Volume> volumes);
   void update_descriptors();
@@ -121,7 +128,12 @@ class BvhCuller {
   BvKind kind_ = BvKind::Aabb;
   vk::Buffer bounds_, classes_, visible_, counters_, views_, templates_, draws_;
   vk::Buffer nodes_, objects_, cuts_, records_;
-  vk::Buffer centres_;  // AABBs: centre and bound per object in tree order (BVH_BINDING_CENTRES)
+  vk::Buffer centres_;                   // AABBs: centre and bound per object in tree order (BVH_BINDING_CENTRES)
+  vk::Buffer occlusion_views_;           // GpuOcclusionView per view (BVH_BINDING_OCCLUSION_VIEWS)
+  vk::Buffer no_pyramid_;                // bound to BVH_BINDING_PYRAMID in passes without occlusion
+  const vk::Buffer* pyramid_ = nullptr;  // the buffer bound to BVH_BINDING_PYRAMID
+  // The pyramid the descriptors hold, by DepthPyramidPass::generation() (0: none).
+  std::uint64_t written_pyramid_ = ~std::uint64_t{0}, pyramid_generation_ = 0;
   // After the buffers: destroyed first, it waits for the device (own devices) before they go.
   std::unique_ptr<detail::PassResources> resources_;
   std::size_t object_count_ = 0, node_count_ = 0, template_count_ = 0;

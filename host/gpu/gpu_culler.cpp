@@ -61,7 +61,7 @@ GpuCuller::GpuCuller(const vk::Context& ctx, const GpuCullerConfig& config) : ct
 const vk::ComputePipeline& GpuCuller::pipeline(PipelineKey key) {
   using Shader = PipelineKey::Shader;
   if (key.shader != Shader::Cull)
-    key.kind = BvKind::Aabb, key.ordered = false, key.classes = false, key.occlusion = false;
+    key.kind = BvKind::Aabb, key.ordered = false, key.classes = false, key.occlusion_texels = 0;
   if (key.ordered) key.classes = true;  // the scatter pass reads them
   return pipelines_.get(key, [&] {
     std::span<const std::uint32_t> spirv;
@@ -69,8 +69,8 @@ const vk::ComputePipeline& GpuCuller::pipeline(PipelineKey key) {
     if (key.shader == Shader::Cull) {
       spirv = cullpipe_cull_flat_spv;
       name = "flat cull (" + std::string(to_string(key.kind)) + (key.ordered ? ", ordered" : "") +
-             (key.draws ? ", draws" : "") + (key.classes ? ", classes" : "") + (key.occlusion ? ", occlusion" : "") +
-             ")";
+             (key.draws ? ", draws" : "") + (key.classes ? ", classes" : "") +
+             (key.occlusion_texels ? ", occlusion" : "") + ")";
     } else if (key.shader == Shader::CompactScan) {
       spirv = cullpipe_compact_scan_spv;
       name = "ordered compaction scan";
@@ -80,10 +80,11 @@ const vk::ComputePipeline& GpuCuller::pipeline(PipelineKey key) {
     }
     // Specialization constants: 0 kind, 1 group size, 2 ordered, 3 draws, 4 objects per
     // invocation (every pass: the ordered passes' unit is a workgroup's run of objects), 5 classes,
-    // 6 occlusion.
-    const std::uint32_t spec[7] = {
-        kind_index(key.kind),    group_size_,           key.ordered ? 1u : 0u,  key.draws ? 1u : 0u,
-        objects_per_invocation_, key.classes ? 1u : 0u, key.occlusion ? 1u : 0u};
+    // 6 occlusion, 7 texels per axis of the occlusion test.
+    const std::uint32_t spec[8] = {kind_index(key.kind),           group_size_,
+                                   key.ordered ? 1u : 0u,          key.draws ? 1u : 0u,
+                                   objects_per_invocation_,        key.classes ? 1u : 0u,
+                                   key.occlusion_texels ? 1u : 0u, key.occlusion_texels ? key.occlusion_texels : 4u};
     return std::make_unique<vk::ComputePipeline>(
         ctx_,
         vk::ComputePipelineDesc{spirv, kBindingCount, sizeof(FlatCullParams), spec, name.c_str(), kTexelBindings});
@@ -285,22 +286,11 @@ void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   if (views.size() > ctx_.properties().limits.maxComputeWorkGroupCount[1])
     throw std::length_error(std::to_string(views.size()) + " views exceed the device's dispatch limit of " +
                             std::to_string(ctx_.properties().limits.maxComputeWorkGroupCount[1]));
-  if (options.pyramid) {
-    const DepthPyramidPass& p = *options.pyramid;
-    if (!p.built()) throw std::invalid_argument("occlusion culling: the depth pyramid has not been built");
-    if (options.occlusion_views.size() != views.size())
-      throw std::invalid_argument("occlusion culling: " + std::to_string(options.occlusion_views.size()) +
-                                  " occlusion views for " + std::to_string(views.size()) + " views");
-    for (const occlusion::OcclusionView& v : options.occlusion_views)
-      occlusion::check_view(v, p.width(), p.height(), p.reversed_z(), options.occlusion_options);
-  }
+  detail::check_occlusion(ctx_, options, views.size());
   detail::ensure_buffer(ctx_, bounds_, 0, kBoundsUsage, "bounds buffer", descriptors_dirty_);
   detail::ensure_buffer(ctx_, centres_, 0, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
   detail::ensure_buffer(ctx_, no_pyramid_, 16, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "empty pyramid buffer",
                         descriptors_dirty_);
-  if (options.pyramid)
-    detail::check_texel_range(ctx_, VkDeviceSize(views.size()) * sizeof(GpuOcclusionView),
-                              std::to_string(views.size()) + " occlusion views");
   detail::ensure_buffer(ctx_, occlusion_views_, (options.pyramid ? views.size() : 1) * sizeof(GpuOcclusionView),
                         kBoundsUsage, "occlusion view buffer", descriptors_dirty_);
   // Nothing of the pass's state changes until every check and allocation has passed.
@@ -312,23 +302,7 @@ void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   pyramid_ = options.pyramid ? &options.pyramid->texels() : &no_pyramid_;
   pyramid_generation_ = options.pyramid ? options.pyramid->generation() : 0;
   update_descriptors();
-  if (options.pyramid) {
-    auto gpu_occlusion = occlusion_views_.as<GpuOcclusionView>();
-    const auto levels = options.pyramid->levels();
-    for (std::size_t v = 0; v < views.size(); ++v) {
-      const occlusion::OcclusionView& o = options.occlusion_views[v];
-      GpuOcclusionView g{};
-      g.view_proj = o.view_proj;
-      g.width = o.width;
-      g.height = o.height;
-      g.reversed_z = o.reversed_z ? 1u : 0u;
-      g.texels_per_axis = options.occlusion_options.texels_per_axis;
-      g.level_count = std::uint32_t(levels.size());
-      for (std::size_t l = 0; l < levels.size(); ++l)
-        g.levels[l] = glm::uvec4(std::uint32_t(levels[l].offset), levels[l].width, levels[l].height, 0u);
-      gpu_occlusion[v] = g;
-    }
-  }
+  if (options.pyramid) detail::write_occlusion_views(options, occlusion_views_.as<GpuOcclusionView>());
   auto gpu_views = views_.as<GpuFrustum>();
   for (std::size_t v = 0; v < views.size(); ++v) {
     gpu_views[v] = pack(views[v]);

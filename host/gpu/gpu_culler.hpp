@@ -83,6 +83,14 @@ struct CullOptions {
   occlusion::OcclusionOptions occlusion_options;
 };
 
+namespace detail {
+/// The texels per axis the occlusion test of a pass with `options` reads (a specialization
+/// constant of the cull shaders), 0 without a pyramid.
+inline std::uint32_t occlusion_texels(const CullOptions& options) {
+  return options.pyramid ? options.occlusion_options.texels_per_axis : 0u;
+}
+}  // namespace detail
+
 /// How a GpuCuller is set up.
 struct GpuCullerConfig {
   /// Invocations per workgroup; lowered to the device's limits when larger.
@@ -188,16 +196,18 @@ class GpuCuller {
     bool ordered = false;        // Cull: count per workgroup for the ordered passes
     bool draws = false;          // Cull, CompactScatter: write indirect draws
     bool classes = false;        // Cull: write the per-object classes
-    bool occlusion = false;      // Cull: test the kept objects against the depth pyramid
+    // Cull: test the kept objects against the depth pyramid, reading at most this many texels per
+    // axis (0: no occlusion test).
+    std::uint32_t occlusion_texels = 0;
     auto operator<=>(const PipelineKey&) const = default;
   };
   const vk::ComputePipeline& pipeline(PipelineKey key);
   /// The cull pass in arrival order; the ordered passes' counting cull and their scatter.
   PipelineKey arrival_key(const CullOptions& o) const {
-    return {.kind = kind_, .draws = o.draws, .classes = o.classes, .occlusion = o.pyramid != nullptr};
+    return {.kind = kind_, .draws = o.draws, .classes = o.classes, .occlusion_texels = detail::occlusion_texels(o)};
   }
   PipelineKey ordered_key(const CullOptions& o) const {
-    return {.kind = kind_, .ordered = true, .classes = true, .occlusion = o.pyramid != nullptr};
+    return {.kind = kind_, .ordered = true, .classes = true, .occlusion_texels = detail::occlusion_texels(o)};
   }
   static PipelineKey scatter_key(const CullOptions& o) {
     return {.shader = PipelineKey::Shader::CompactScatter, .draws = o.draws};

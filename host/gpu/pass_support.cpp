@@ -353,4 +353,34 @@ double PassResources::run(const std::function<void(VkCommandBuffer, VkQueryPool)
   return double((stamps[1] - stamps[0]) & mask) * ctx_.timestamp_period_ns();
 }
 
+void check_occlusion(const vk::Context& ctx, const CullOptions& options, std::size_t view_count) {
+  if (!options.pyramid) return;
+  const DepthPyramidPass& p = *options.pyramid;
+  if (!p.built()) throw std::invalid_argument("occlusion culling: the depth pyramid has not been built");
+  if (options.occlusion_views.size() != view_count)
+    throw std::invalid_argument("occlusion culling: " + std::to_string(options.occlusion_views.size()) +
+                                " occlusion views for " + std::to_string(view_count) + " views");
+  for (const occlusion::OcclusionView& v : options.occlusion_views)
+    occlusion::check_view(v, p.width(), p.height(), p.reversed_z(), options.occlusion_options);
+  check_texel_range(ctx, VkDeviceSize(view_count) * sizeof(GpuOcclusionView),
+                    std::to_string(view_count) + " occlusion views");
+}
+
+void write_occlusion_views(const CullOptions& options, std::span<GpuOcclusionView> out) {
+  const auto levels = options.pyramid->levels();
+  for (std::size_t v = 0; v < options.occlusion_views.size(); ++v) {
+    const occlusion::OcclusionView& o = options.occlusion_views[v];
+    GpuOcclusionView g{};
+    g.view_proj = o.view_proj;
+    g.width = o.width;
+    g.height = o.height;
+    g.reversed_z = o.reversed_z ? 1u : 0u;
+    g.texels_per_axis = options.occlusion_options.texels_per_axis;
+    g.level_count = std::uint32_t(levels.size());
+    for (std::size_t l = 0; l < levels.size(); ++l)
+      g.levels[l] = glm::uvec4(std::uint32_t(levels[l].offset), levels[l].width, levels[l].height, 0u);
+    out[v] = g;
+  }
+}
+
 }  // namespace cullpipe::gpu::detail

@@ -69,6 +69,14 @@ void record_transfer_to_compute(VkCommandBuffer cmd);
 /// dispatch arguments are read.
 void record_compute_to_compute(VkCommandBuffer cmd, bool indirect = false);
 
+/// Occlusion culling's inputs (CullOptions::pyramid): throws std::invalid_argument naming what is
+/// wrong unless the pyramid is built and every one of `view_count` views has an occlusion view
+/// that matches it (occlusion::check_view), and std::length_error when the occlusion views
+/// exceed one texel buffer view. Nothing without a pyramid.
+void check_occlusion(const vk::Context& ctx, const CullOptions& options, std::size_t view_count);
+/// Each view's GpuOcclusionView from options.occlusion_views and the pyramid's levels.
+void write_occlusion_views(const CullOptions& options, std::span<GpuOcclusionView> out);
+
 /// The output buffers of a pass, as both culling shaders write them (see cull_types.h).
 struct OutputBuffers {
   const vk::Buffer& counters;  ///< ViewCounters per view

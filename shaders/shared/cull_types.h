@@ -149,8 +149,9 @@ CP_CONST BVH_CULL_GROUP_SIZE = 64u;
 // below (see cull_bvh.comp).
 CP_CONST BVH_STACK_PER_INVOCATION = 40u;
 // A stack entry holds a node's offset from its workgroup's first cut node in the bits above the
-// 6 plane bits: a workgroup's cut subtrees must span fewer nodes than this (checked on upload).
-CP_CONST BVH_WORKGROUP_NODE_SPAN = 1u << 26u;
+// 6 plane bits and the occluded-ancestor bit: a workgroup's cut subtrees must span fewer nodes
+// than this (checked on upload).
+CP_CONST BVH_WORKGROUP_NODE_SPAN = 1u << 25u;
 
 // The host cuts the tree into the highest subtrees of at most so many objects (a BvhCuller
 // setting) and at most BVH_CUT_MAX_HEIGHT levels below their root (20 levels in all), or
@@ -195,7 +196,9 @@ CP_CONST BVH_BINDING_OBJECTS = 8u;    // object ids in tree order, four per texe
 CP_CONST BVH_BINDING_CUTS = 9u;       // uint: the cut nodes, depth first
 CP_CONST BVH_BINDING_RECORDS = 10u;   // uvec2 scratch: a record per object and view (each cut subtree's slice)
 CP_CONST BVH_BINDING_CENTRES = 11u;   // AABBs: vec4 per object in tree order, xyz = centre, w = bound (as BINDING_CENTRES)
-CP_CONST BVH_BINDING_COUNT = 12u;
+CP_CONST BVH_BINDING_PYRAMID = 12u;   // occlusion: the depth pyramid's floats (as BINDING_PYRAMID)
+CP_CONST BVH_BINDING_OCCLUSION_VIEWS = 13u;  // occlusion: GpuOcclusionView per view (as BINDING_OCCLUSION_VIEWS)
+CP_CONST BVH_BINDING_COUNT = 14u;
 
 // ---- occlusion: the depth pyramid (host/gpu/depth_pyramid_pass.hpp) ----
 

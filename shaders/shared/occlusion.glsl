@@ -3,9 +3,12 @@
 // footprint from its eight corners (a pixel rectangle and a bound on its nearest fragment depth),
 // read against the depth pyramid at the finest level spanning at most texels_per_axis texels.
 // Proof that it is conservative: docs/numerics.md, Occlusion footprints.
-// Included after the includer declares `float pyramid[]` (BINDING_PYRAMID), `mat4 occ_view_proj`,
-// `uint occ_width, occ_height, occ_reversed, occ_texels, occ_level_count` and
-// `uvec4 occ_levels[PYRAMID_MAX_LEVELS]` (x = offset, y = width, z = height).
+// Hierarchy nodes take every margin OCC_NODE_MARGIN_SCALE times an object's (a power of two:
+// the products are exact), so that an occluded node hides every volume inside it as the volume's
+// own test finds it (docs/numerics.md, Hierarchical occlusion).
+// Included after the includer declares `float pyramid[]` (the pyramid's floats), the uniform
+// texel buffer `occlusion_views` (GpuOcclusionView per view), the volume kind BV_KIND, and
+// `vec4 occ_volume_word(uint word)` (the vec4 words of the volumes, as the includer stores them).
 #ifndef CULLPIPE_SHADERS_SHARED_OCCLUSION_GLSL
 #define CULLPIPE_SHADERS_SHARED_OCCLUSION_GLSL
 
@@ -16,6 +19,31 @@ const float OCC_PIXEL_RELATIVE = 1.0 / 1048576.0;  // 2^-20
 const float OCC_MIN_W = 1.17549435082228750796873653722e-38;  // 2^-126
 const float OCC_MAX_W = 8.50705917302346158658436518579e37;   // 2^126
 const float OCC_DEPTH_MARGIN = 1.0 / 1048576.0;    // 2^-20
+const float OCC_NODE_MARGIN_SCALE = 4.0;           // occlusion::kNodeMarginScale
+
+// OcclusionOptions::texels_per_axis, a specialization constant: a row of texels is read unrolled
+// and only the rows loop. lavapipe ends every loop of an invocation once the loops of that
+// invocation together have run 65535 iterations (gallivm's loop limiter, shared by all loops):
+// a hierarchical walk that read every texel in a loop ran past it and stopped early.
+layout(constant_id = 7) const uint OCC_TEXELS = 4;
+// Hierarchy nodes read at most occlusion::kNodeTexelsPerAxis texels per axis.
+const uint OCC_NODE_TEXELS = OCC_TEXELS < 4u ? OCC_TEXELS : 4u;
+
+// The view's GpuOcclusionView, loaded by occ_load_view.
+mat4 occ_view_proj;
+uint occ_width, occ_height, occ_reversed, occ_level_count;
+int occ_view_first;  // the view's first texel in occlusion_views
+
+void occ_load_view(uint view) {
+  int o = int(OCCLUSION_VIEW_TEXELS * view);
+  [[unroll]] for (int c = 0; c < 4; ++c) occ_view_proj[c] = uintBitsToFloat(texelFetch(occlusion_views, o + c));
+  uvec4 sizes = texelFetch(occlusion_views, o + 4);
+  occ_width = sizes.x;
+  occ_height = sizes.y;
+  occ_reversed = sizes.z;
+  occ_level_count = min(texelFetch(occlusion_views, o + 5).x, PYRAMID_MAX_LEVELS);
+  occ_view_first = o;
+}
 
 float occ_quotient_lo(float x, float w_lo, float w_hi) {
   precise float q = x >= 0.0 ? x / w_hi : x / w_lo;
@@ -36,12 +64,13 @@ void occ_widen(inout float lo, inout float hi, float x_lo, float x_hi, float w_l
 }
 
 // The pixel range [first, last] of ndc range [lo, hi] on a side of `size` pixels.
-void occ_pixel_range(float lo, float hi, uint size, out uint first, out uint last) {
+void occ_pixel_range(float lo, float hi, uint size, float scale, out uint first, out uint last) {
   precise float half_size = 0.5 * float(size);
   precise float from = (lo + 1.0) * half_size;
   precise float to = (hi + 1.0) * half_size;
-  precise float a = floor(from - (OCC_PIXEL_MARGIN + abs(from) * OCC_PIXEL_RELATIVE));
-  precise float b = floor(to + (OCC_PIXEL_MARGIN + abs(to) * OCC_PIXEL_RELATIVE));
+  float margin = OCC_PIXEL_MARGIN * scale, relative = OCC_PIXEL_RELATIVE * scale;
+  precise float a = floor(from - (margin + abs(from) * relative));
+  precise float b = floor(to + (margin + abs(to) * relative));
   float top = float(size - 1u);
   a = a > 0.0 ? a : 0.0;
   b = b > 0.0 ? b : 0.0;
@@ -51,14 +80,19 @@ void occ_pixel_range(float lo, float hi, uint size, out uint first, out uint las
 
 // Whether the volume with corners p[8], every point's coordinates bounded by `magnitude`, is
 // hidden: every pyramid texel over its footprint strictly nearer than its nearest fragment.
-bool occ_occluded(vec3 p[8], vec3 magnitude) {
+// `scale`: 1 for an object, OCC_NODE_MARGIN_SCALE for a hierarchy node; `texels` its texels per
+// axis (OCC_TEXELS or OCC_NODE_TEXELS).
+bool occ_occluded(vec3 p[8], vec3 magnitude, float scale, uint texels) {
   mat4 m = occ_view_proj;
   float e[4];
+  float clip_error = OCC_CLIP_ERROR * scale, tiny = OCC_TINY * scale;
   [[unroll]] for (uint r = 0; r < 4; ++r) {
     precise float a = ((abs(m[0][r]) * magnitude.x + abs(m[1][r]) * magnitude.y) + abs(m[2][r]) * magnitude.z) + abs(m[3][r]);
-    precise float er = a * OCC_CLIP_ERROR + OCC_TINY;
+    precise float er = a * clip_error + tiny;
     e[r] = er;
   }
+  // One exit, at the end: a lane that is not projected reads no texel.
+  bool projected = true;
   float inf = uintBitsToFloat(0x7f800000u);
   float x_lo = inf, x_hi = -inf, y_lo = inf, y_hi = -inf, z_lo = inf, z_hi = -inf;
   [[unroll]] for (uint k = 0; k < 8; ++k) {
@@ -70,35 +104,92 @@ bool occ_occluded(vec3 p[8], vec3 magnitude) {
     precise float w_lo = v[3] - e[3];
     precise float w_hi = v[3] + e[3];
     // At or behind the eye: not projected; nor where w leaves the range in which GLSL bounds the
-    // division's error (2^-126 to 2^126).
-    if (!(w_lo >= OCC_MIN_W) || !(w_hi < OCC_MAX_W)) return false;
+    // division's error (2^-126 to 2^126). (The bounds below are then not used.)
+    projected = projected && w_lo >= OCC_MIN_W && w_hi < OCC_MAX_W;
     precise float x0 = v[0] - e[0], x1 = v[0] + e[0], y0 = v[1] - e[1], y1 = v[1] + e[1], z0 = v[2] - e[2], z1 = v[2] + e[2];
     occ_widen(x_lo, x_hi, x0, x1, w_lo, w_hi);
     occ_widen(y_lo, y_hi, y0, y1, w_lo, w_hi);
     occ_widen(z_lo, z_hi, z0, z1, w_lo, w_hi);
   }
-  if (!finite_bits(x_lo) || !finite_bits(x_hi) || !finite_bits(y_lo) || !finite_bits(y_hi) || !finite_bits(z_lo) ||
-      !finite_bits(z_hi))
-    return false;
+  // An object's bounds must be finite, a node's at most 2^120 (NaN compares false).
+  float limit = scale == 1.0 ? uintBitsToFloat(0x7f7fffffu) : uintBitsToFloat(0x7b800000u);
+  projected = projected && abs(x_lo) <= limit && abs(x_hi) <= limit && abs(y_lo) <= limit && abs(y_hi) <= limit &&
+              abs(z_lo) <= limit && abs(z_hi) <= limit;
   uint px0, px1, py0, py1;
-  occ_pixel_range(x_lo, x_hi, occ_width, px0, px1);
-  occ_pixel_range(y_lo, y_hi, occ_height, py0, py1);
-  precise float nearest = occ_reversed != 0u ? z_hi + (OCC_DEPTH_MARGIN + abs(z_hi) * OCC_DEPTH_MARGIN)
-                                             : z_lo - (OCC_DEPTH_MARGIN + abs(z_lo) * OCC_DEPTH_MARGIN);
-  // The finest level at which the rectangle spans at most occ_texels texels per axis.
+  occ_pixel_range(x_lo, x_hi, occ_width, scale, px0, px1);
+  occ_pixel_range(y_lo, y_hi, occ_height, scale, py0, py1);
+  float depth_margin = OCC_DEPTH_MARGIN * scale;
+  precise float nearest = occ_reversed != 0u ? z_hi + (depth_margin + abs(z_hi) * depth_margin)
+                                             : z_lo - (depth_margin + abs(z_lo) * depth_margin);
+  // The finest level at which the rectangle spans at most `texels` texels per axis.
   uint k = 0;
-  while (k + 1u < occ_level_count && ((px1 >> k) - (px0 >> k) >= occ_texels || (py1 >> k) - (py0 >> k) >= occ_texels)) ++k;
-  uvec4 level = occ_levels[k];
+  [[unroll]] for (uint i = 0; i + 1u < PYRAMID_MAX_LEVELS; ++i)
+    k += projected && k == i && k + 1u < occ_level_count &&
+                 ((px1 >> k) - (px0 >> k) >= texels || (py1 >> k) - (py0 >> k) >= texels)
+             ? 1u
+             : 0u;
+  uvec4 level = texelFetch(occlusion_views, occ_view_first + 6 + int(k));  // x = offset, y = width, z = height
   uint tx0 = min(px0 >> k, level.y - 1u), tx1 = min(px1 >> k, level.y - 1u);
   uint ty0 = min(py0 >> k, level.z - 1u), ty1 = min(py1 >> k, level.z - 1u);
-  bool hidden = true;
-  for (uint y = ty0; y <= ty1; ++y) {
-    for (uint x = tx0; x <= tx1; ++x) {
-      float farthest = pyramid[level.x + y * level.y + x];
-      hidden = hidden && (occ_reversed != 0u ? nearest < farthest : nearest > farthest);
+  // At most `texels` texels per axis from (tx0, ty0): hidden when every one is strictly nearer.
+  bool hidden = projected;
+  ty1 = projected ? ty1 : 0u;
+  ty0 = projected ? ty0 : 1u;  // (no rows)
+  for (uint y = ty0; y <= ty1 && hidden; ++y) {  // (a row found nearer settles it)
+    [[unroll]] for (uint dx = 0; dx < texels; ++dx) {
+      uint x = tx0 + dx;
+      bool read = x <= tx1;
+      float farthest = 0.0;
+      if (read) farthest = pyramid[level.x + y * level.y + x];
+      hidden = hidden && (!read || (occ_reversed != 0u ? nearest < farthest : nearest > farthest));
     }
   }
   return hidden;
+}
+
+// The corners of box [lo, hi] (exact) and its magnitude bound.
+void occ_box_corners(vec3 lo, vec3 hi, out vec3 p[8], out vec3 magnitude) {
+  [[unroll]] for (uint k = 0; k < 8; ++k)
+    p[k] = vec3((k & 1u) != 0u ? hi.x : lo.x, (k & 2u) != 0u ? hi.y : lo.y, (k & 4u) != 0u ? hi.z : lo.z);
+  magnitude = max(abs(lo), abs(hi));
+}
+
+// Whether a hierarchy node's box [lo, hi] is hidden (occlusion::node_footprint).
+bool occ_node_occluded(vec3 lo, vec3 hi) {
+  vec3 p[8];
+  vec3 magnitude;
+  occ_box_corners(lo, hi, p, magnitude);
+  return occ_occluded(p, magnitude, OCC_NODE_MARGIN_SCALE, OCC_NODE_TEXELS);
+}
+
+// Whether the volume whose words start at occ_volume_word(first) is hidden: its corners as
+// occlusion::footprint takes them (a sphere's by its box).
+bool occ_volume_occluded(uint first) {
+  vec3 p[8];
+  vec3 magnitude;
+  if (BV_KIND == BV_KIND_AABB) {
+    occ_box_corners(occ_volume_word(first).xyz, occ_volume_word(first + 1u).xyz, p, magnitude);
+  } else {
+    vec3 c, a0, a1, a2;
+    if (BV_KIND == BV_KIND_OBB) {
+      vec4 u0 = occ_volume_word(first + 1u), u1 = occ_volume_word(first + 2u), u2 = occ_volume_word(first + 3u);
+      c = occ_volume_word(first).xyz;
+      precise vec3 s0 = u0.xyz * u0.w, s1 = u1.xyz * u1.w, s2 = u2.xyz * u2.w;
+      a0 = s0, a1 = s1, a2 = s2;
+    } else {
+      vec4 s = occ_volume_word(first);
+      float r = abs(s.w);
+      c = s.xyz;
+      a0 = vec3(r, 0.0, 0.0), a1 = vec3(0.0, r, 0.0), a2 = vec3(0.0, 0.0, r);
+    }
+    [[unroll]] for (uint k = 0; k < 8; ++k) {
+      precise vec3 q = ((c + ((k & 1u) != 0u ? a0 : -a0)) + ((k & 2u) != 0u ? a1 : -a1)) + ((k & 4u) != 0u ? a2 : -a2);
+      p[k] = q;
+    }
+    precise vec3 m = ((abs(c) + abs(a0)) + abs(a1)) + abs(a2);
+    magnitude = m;
+  }
+  return occ_occluded(p, magnitude, 1.0, OCC_TEXELS);
 }
 
 #endif
