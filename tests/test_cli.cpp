@@ -489,6 +489,38 @@ TEST(Cli, RenderWithOcclusionPrintsEachFrameAndKeepsTheImage) {
   EXPECT_EQ(cullpipe("render --occlusion --texels 3 --out '" + png.string() + "'").code, 2);
 }
 
+// run --occlusion walks the streets' path with both passes checked against the reference on
+// every frame's pyramid; the JSON and the dump carry each frame, OCCLUDED included.
+TEST(Cli, RunWithOcclusionChecksEveryFrameAgainstTheReference) {
+  const fs::path json = temp_dir() / "occlusion.json", dump = temp_dir() / "occlusion_dump.json";
+  const Result r = cullpipe(
+      "run --occlusion --generate streets:3000 --views 20 --frames 4 --cull bvh --validate "
+      "--width 240 --height 135 --json '" +
+      json.string() + "' --dump '" + dump.string() + "'");
+  ASSERT_EQ(r.code, 0) << r.out << r.err;
+  EXPECT_NE(r.out.find("flat pass == hierarchical pass == reference"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("every object owning a pixel was drawn"), std::string::npos) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(slurp(json));
+  EXPECT_EQ(j["agree"], true);
+  EXPECT_EQ(j["missed"], 0);
+  ASSERT_EQ(j["per_frame"].size(), 4u);
+  EXPECT_EQ(j["per_frame"][0]["occluded"], 0);  // the first frame knows no visible objects
+  for (std::size_t f = 1; f < 4; ++f) {
+    const auto& frame = j["per_frame"][f];
+    EXPECT_GT(frame["occluded"].get<std::size_t>(), frame["drawn"].get<std::size_t>()) << f;
+    EXPECT_GE(frame["drawn"].get<std::size_t>(), frame["owning"].get<std::size_t>()) << f;
+    EXPECT_EQ(frame["frustum"].get<std::size_t>(),
+              frame["drawn"].get<std::size_t>() + frame["occluded"].get<std::size_t>());
+  }
+  const nlohmann::json d = nlohmann::json::parse(slurp(dump));
+  EXPECT_NE(d.dump().find("\"occluded\""), std::string::npos);
+  // What it cannot do is refused by name.
+  const Result cpu = cullpipe("run --occlusion --backend cpu");
+  EXPECT_EQ(cpu.code, 2);
+  EXPECT_NE(cpu.err.find("--backend gpu or both"), std::string::npos) << cpu.err;
+  EXPECT_EQ(cullpipe("run --occlusion --texels 5").code, 2);
+}
+
 TEST(Cli, DevicesListsAtLeastOne) {
   const Result r = cullpipe("devices");
   EXPECT_EQ(r.code, 0) << r.err;

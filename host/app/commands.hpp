@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "bvh/builders.hpp"
+#include "geom/bv_kind.hpp"
 
 namespace cullpipe::app {
 
@@ -57,6 +58,12 @@ struct RunOptions : SceneOptions {
   std::string json_path;  ///< summary as JSON
   std::string dump_path;  ///< planes, volumes and classes (classify schema)
   DeviceOptions device;
+  /// Two-phase occlusion frames through the renderer (run_occlusion), `frames` of them along the
+  /// path of `views` cameras, at width x height, the test reading `texels` texels per axis.
+  bool occlusion = false;
+  std::size_t frames = 1;
+  std::uint32_t texels = 4;
+  std::uint32_t width = 960, height = 540;
 };
 
 struct RenderOptions : SceneOptions {
@@ -102,6 +109,10 @@ struct BoundsOptions {
 /// Each command writes its report to `out`, errors to `err`, and returns an exit code.
 /// Exceptions do not escape: they are reported on `err` with the matching exit code.
 int run_command(const RunOptions& options, std::ostream& out, std::ostream& err);
+struct LoadedScene;
+/// `run --occlusion` on a loaded scene (run_command's checks done; `bv` parsed).
+int run_occlusion(const RunOptions& options, const LoadedScene& loaded, BvKind bv, std::ostream& out,
+                  std::ostream& err);
 int classify_command(const ClassifyOptions& options, std::ostream& out, std::ostream& err);
 int generate_command(const GenerateOptions& options, std::ostream& out, std::ostream& err);
 int devices_command(std::ostream& out, std::ostream& err);

@@ -85,6 +85,21 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--views", run.views, "Number of views on a camera path around the scene")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
+  run_cmd->add_flag("--occlusion", run.occlusion,
+                    "Two-phase occlusion frames through the renderer, each checked against the reference on its "
+                    "depth pyramid and against the objects owning a pixel");
+  run_cmd->add_option("--frames", run.frames, "--occlusion: frames along the path of --views cameras")
+      ->capture_default_str()
+      ->check(CLI::Range(std::size_t(1), std::size_t(100000)));
+  run_cmd->add_option("--texels", run.texels, "--occlusion: texels per axis the test reads: 2 | 4 | 8 | 16")
+      ->capture_default_str()
+      ->check(CLI::IsMember({2u, 4u, 8u, 16u}));
+  run_cmd->add_option("--width", run.width, "--occlusion: depth image width")
+      ->capture_default_str()
+      ->check(CLI::Range(1u, 16384u));
+  run_cmd->add_option("--height", run.height, "--occlusion: depth image height")
+      ->capture_default_str()
+      ->check(CLI::Range(1u, 16384u));
   run_cmd->add_option("--json", run.json_path, "Write a summary as JSON");
   run_cmd->add_option("--dump", run.dump_path, "Write planes, volumes and classes (the classify schema)");
   add_device_options(run_cmd, run.device);
