@@ -259,7 +259,7 @@ void main() {
   bool has_cut = i < params.cut_count;
   load_view(view);
 
-  uint cut = has_cut ? cuts[i] : 0u;
+  uint cut = has_cut ? cuts[params.cut_offset + i] : 0u;
   uvec4 cut_lo = texelFetch(nodes, int(3u * cut)), cut_hi = texelFetch(nodes, int(3u * cut + 1u));
   uvec4 cut_links = texelFetch(nodes, int(3u * cut + 2u));  // skip, second child, leaf, depth
   uint cut_first = cut_lo.w, cut_count = has_cut ? cut_hi.w : 0u, cut_depth = cut_links.w;

@@ -215,6 +215,44 @@ TEST(HierarchicalOcclusion, OccludedNodesSpareTheirObjectsTests) {
   EXPECT_LT(r.occlusion_tests, boxes.size() / 20) << r.occlusion_tests << " occlusion tests";
 }
 
+// A NaN depth occludes nothing, at any level: every texel above it is NaN, so a node over it is
+// not hidden where an object reading it is kept, and the two walks still agree.
+TEST(HierarchicalOcclusion, ANanTexelHidesNothingAtAnyLevel) {
+  const std::uint32_t w = 64, h = 64;
+  std::vector<float> depth(std::size_t(w) * h, 0.0f);  // the nearest depth everywhere
+  depth[31 * w + 31] = std::numeric_limits<float>::quiet_NaN();
+  const DepthPyramid pyramid = occlusion::build_depth_pyramid(depth, w, h, false);
+  for (unsigned k = 0; k < pyramid.levels.size(); ++k) {
+    const auto& level = pyramid.levels[k];
+    EXPECT_TRUE(
+        std::isnan(pyramid.at(k, occlusion::texel_of(31, k, level.width), occlusion::texel_of(31, k, level.height))))
+        << "level " << k;
+  }
+  Camera cam;
+  cam.eye = {0, 0, 10};
+  cam.target = {0, 0, 0};
+  cam.aspect = 1.0f;
+  const glm::mat4 vp = cam.view_proj();
+  const OcclusionView view{vp, w, h, false};
+  const Frustum frustum = Frustum::from_view_proj(vp);
+  std::vector<Aabb> boxes;
+  for (int x = 0; x < 16; ++x)
+    for (int y = 0; y < 16; ++y) {
+      const glm::vec3 c(float(x) - 8.0f, float(y) - 8.0f, -2.0f);
+      boxes.push_back({c - 0.2f, c + 0.2f});
+    }
+  std::vector<Classification> flat(boxes.size());
+  const reference::CullCounts counts =
+      occlusion::classify_all(std::span<const Aabb>(boxes), frustum, view, pyramid, {}, flat);
+  EXPECT_GT(counts.visible, 0u);  // the boxes over the NaN pixel
+  EXPECT_GT(counts.occluded, counts.visible);
+  for (const std::uint32_t leaf : {1u, 4u}) {
+    const bvh::FlatTree tree = bvh::flatten(bvh::build_binned_sah(boxes, {leaf, 16}));
+    EXPECT_EQ(occlusion::cull_hierarchical(tree, std::span<const Aabb>(boxes), frustum, view, pyramid).classes, flat)
+        << "leaves of " << leaf;
+  }
+}
+
 TEST(Occlusion, BoxesThatOwnAPixelAreNeverOccluded) { expect_conservative<Aabb>(11, 96); }
 TEST(Occlusion, ObbsThatOwnAPixelAreNeverOccluded) { expect_conservative<Obb>(12, 96); }
 TEST(Occlusion, SpheresThatOwnAPixelAreNeverOccluded) { expect_conservative<Sphere>(13, 96); }

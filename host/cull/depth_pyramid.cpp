@@ -1,5 +1,6 @@
 #include "cull/depth_pyramid.hpp"
 
+#include <cmath>
 #include <stdexcept>
 #include <string>
 
@@ -57,7 +58,8 @@ DepthPyramid build_depth_pyramid(std::span<const float> depth, std::uint32_t wid
         for (std::uint32_t sy = y0; sy <= y1; ++sy)
           for (std::uint32_t sx = x0; sx <= x1; ++sx) {
             const float d = p.texels[src.offset + std::size_t(sy) * src.width + sx];
-            if (reversed_z ? d < farthest : d > farthest) farthest = d;
+            // A NaN wins and stays: it occludes nothing, nor may any texel above it.
+            if (!std::isnan(farthest) && (std::isnan(d) || (reversed_z ? d < farthest : d > farthest))) farthest = d;
           }
         p.texels[dst.offset + std::size_t(y) * dst.width + x] = farthest;
       }

@@ -116,31 +116,42 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
   // The layout flatten() gives, which the traversal relies on (skip links, nested ranges).
   std::vector<std::uint32_t> depth;
   if (const std::string why = bvh::check_flat_tree(tree, boxes, &depth); !why.empty()) bad(why);
-  // The cut: the highest subtrees of at most subtree_objects_ objects and BVH_CUT_MAX_HEIGHT
-  // levels below their root, and the leaves above them (see cull_bvh.comp).
+  // The cuts: the highest subtrees of at most `limit` objects and BVH_CUT_MAX_HEIGHT levels
+  // below their root, and the leaves above them (see cull_bvh.comp); one for frustum passes,
+  // then one of smaller subtrees for occlusion passes, in one buffer.
   std::vector<std::uint32_t> height(nodes, 0), cuts;
   for (std::size_t i = nodes; i-- > 0;)
     if (!tree.nodes[i].leaf) height[i] = 1 + std::max(height[i + 1], height[tree.nodes[i + 1].skip]);
-  for (std::size_t i = 0; i < nodes;) {
-    const bvh::FlatNode& node = tree.nodes[i];
-    if (node.leaf || (node.count <= subtree_objects_ && height[i] <= BVH_CUT_MAX_HEIGHT)) {
-      cuts.push_back(std::uint32_t(i));
-      i = node.skip;
-    } else {
-      ++i;
+  auto cut = [&](std::uint32_t limit) {
+    for (std::size_t i = 0; i < nodes;) {
+      const bvh::FlatNode& node = tree.nodes[i];
+      if (node.leaf || (node.count <= limit && height[i] <= BVH_CUT_MAX_HEIGHT)) {
+        cuts.push_back(std::uint32_t(i));
+        i = node.skip;
+      } else {
+        ++i;
+      }
     }
-  }
+  };
+  cut(subtree_objects_);
+  const std::size_t frustum_cuts = cuts.size();
+  cut(std::min(subtree_objects_, kOcclusionSubtreeObjects));
   const std::uint32_t levels = depth.empty() ? 0 : *std::max_element(depth.begin(), depth.end());
   // A workgroup's walk stack holds nodes as offsets from its first cut node (cull_bvh.comp).
-  for (std::size_t g = 0; g < cuts.size(); g += group_size_) {
-    const std::uint32_t last = cuts[std::min(cuts.size(), g + group_size_) - 1];
-    const std::size_t span = std::size_t(tree.nodes[last].skip) - cuts[g];
-    if (span >= BVH_WORKGROUP_NODE_SPAN)
-      throw std::length_error("BvhCuller::upload: the subtrees of one workgroup (" + std::to_string(group_size_) +
-                              " cut subtrees from node " + std::to_string(cuts[g]) + ") span " + std::to_string(span) +
-                              " nodes; at most " + std::to_string(BVH_WORKGROUP_NODE_SPAN - 1) +
-                              " are supported (use smaller subtrees: set_subtree_objects)");
-  }
+  auto check_spans = [&](std::size_t first, std::size_t end) {
+    for (std::size_t g = first; g < end; g += group_size_) {
+      const std::uint32_t last = cuts[std::min(end, g + group_size_) - 1];
+      const std::size_t span = std::size_t(tree.nodes[last].skip) - cuts[g];
+      if (span >= BVH_WORKGROUP_NODE_SPAN)
+        throw std::length_error("BvhCuller::upload: the subtrees of one workgroup (" + std::to_string(group_size_) +
+                                " cut subtrees from node " + std::to_string(cuts[g]) + ") span " +
+                                std::to_string(span) + " nodes; at most " +
+                                std::to_string(BVH_WORKGROUP_NODE_SPAN - 1) +
+                                " are supported (use smaller subtrees: set_subtree_objects)");
+    }
+  };
+  check_spans(0, frustum_cuts);
+  check_spans(frustum_cuts, cuts.size());
 
   using Packed = decltype(pack(boxes[0]));
   const VkDeviceSize box_bytes = VkDeviceSize(n) * sizeof(Packed),
@@ -155,7 +166,7 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
   const VkDeviceSize centre_bytes = kBoxes ? VkDeviceSize(n) * sizeof(glm::vec4) : 0;
   detail::check_texel_range(ctx_, centre_bytes, std::to_string(n) + " centre bounds");
   detail::check_storage_range(ctx_, cut_bytes, std::to_string(cuts.size()) + " BVH subtrees");
-  object_count_ = node_count_ = cut_count_ = 0;  // stay 0 if an allocation below fails
+  object_count_ = node_count_ = cut_count_ = occlusion_cut_count_ = 0;  // stay 0 if an allocation below fails
   bool& dirty = descriptors_dirty_;
   detail::ensure_buffer(ctx_, bounds_, box_bytes, kTexel, "object volume buffer", dirty);
   detail::ensure_buffer(ctx_, nodes_, node_bytes, kTexel, "BVH node buffer", dirty);
@@ -191,7 +202,8 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
   if (!cuts.empty()) std::memcpy(cuts_.data(), cuts.data(), cuts.size() * sizeof(std::uint32_t));
   object_count_ = n;
   node_count_ = nodes;
-  cut_count_ = cuts.size();
+  cut_count_ = frustum_cuts;
+  occlusion_cut_count_ = cuts.size() - frustum_cuts;
   levels_ = levels;
   kind_ = kind_of<Volume>();
 }
@@ -242,14 +254,15 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   const std::size_t capacity = options.visible_capacity ? options.visible_capacity : object_count_;
   // Workgroups never straddle views; the dispatch folds into y past maxComputeWorkGroupCount[0].
   const VkPhysicalDeviceLimits& limits = ctx_.properties().limits;
-  groups_per_view_ = (cut_count_ + group_size_ - 1) / group_size_;
+  const std::size_t pass_cuts = options.pyramid ? occlusion_cut_count_ : cut_count_;
+  groups_per_view_ = (pass_cuts + group_size_ - 1) / group_size_;
   const std::size_t groups = groups_per_view_ * v;
   const std::size_t max_x =
       max_groups_x_ ? std::min(max_groups_x_, limits.maxComputeWorkGroupCount[0]) : limits.maxComputeWorkGroupCount[0];
   group_x_ = std::min<std::size_t>(std::max<std::size_t>(groups, 1), max_x);
   group_y_ = (groups + group_x_ - 1) / group_x_;
   if (group_y_ > limits.maxComputeWorkGroupCount[1])
-    throw std::length_error(std::to_string(v) + " views of " + std::to_string(cut_count_) + " BVH subtrees need " +
+    throw std::length_error(std::to_string(v) + " views of " + std::to_string(pass_cuts) + " BVH subtrees need " +
                             std::to_string(groups) + " workgroups; " + ctx_.info().name + " dispatches at most " +
                             std::to_string(max_x) + " x " + std::to_string(limits.maxComputeWorkGroupCount[1]));
   const std::string views_x = std::to_string(v) + " views x ";
@@ -313,13 +326,16 @@ void BvhCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
   detail::record_transfer_to_compute(cmd);
   if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, timestamps, 0);
 
-  if (cut_count_ != 0) {
+  const bool occlusion = last_options_.pyramid != nullptr;
+  const std::size_t pass_cuts = occlusion ? occlusion_cut_count_ : cut_count_;
+  if (pass_cuts != 0) {
     BvhCullParams params{};
     params.object_count = std::uint32_t(object_count_);
     params.view_count = std::uint32_t(view_count);
     params.visible_capacity = std::uint32_t(last_capacity_);
-    params.cut_count = std::uint32_t(cut_count_);
+    params.cut_count = std::uint32_t(pass_cuts);
     params.groups_per_view = std::uint32_t(groups_per_view_);
+    params.cut_offset = occlusion ? std::uint32_t(cut_count_) : 0u;
     const vk::ComputePipeline& pipe = pipeline(last_options_);
     VkDescriptorSet set = resources_->set();
     vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.pipeline());

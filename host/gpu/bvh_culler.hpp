@@ -45,7 +45,7 @@ class BvhCuller {
   /// not one over these boxes (ids out of range or repeated, links or object ranges not nested
   /// as flatten nests them, boxes invalid or not enclosing), std::length_error when a buffer
   /// would exceed one texel buffer view (maxTexelBufferElements) or, for the cut's list of
-  /// subtrees, one storage buffer, or when one workgroup's cut subtrees span 2^26 nodes or more
+  /// subtrees, one storage buffer, or when one workgroup's cut subtrees span 2^25 nodes or more
   /// (BVH_WORKGROUP_NODE_SPAN; far past any default cut), and std::invalid_argument for 2^31
   /// objects or more. Boxes also get a centre bound each
   /// (16 bytes, in tree order), which settles most of a straddling leaf's boxes with one texel
@@ -61,6 +61,12 @@ class BvhCuller {
   /// fewer, larger subtrees serve it best), else kGpuSubtreeObjects (more invocations for a wide
   /// GPU; not tuned on one). Takes effect at the next upload; throws std::invalid_argument for 0.
   static constexpr std::uint32_t kCpuSubtreeObjects = 4096, kGpuSubtreeObjects = 128;
+  /// Passes with occlusion take their own cut, of subtrees of at most this many objects (and
+  /// subtree_objects()): lavapipe ends every loop of an invocation once its loops together have
+  /// run 65535 iterations, and each object tested for occlusion costs up to 1 + texels_per_axis
+  /// of them, so a workgroup's objects are kept to a few thousand (bench/NOTES.md, The GPU passes
+  /// on lavapipe).
+  static constexpr std::uint32_t kOcclusionSubtreeObjects = 512;
   void set_subtree_objects(std::uint32_t objects);
   std::uint32_t subtree_objects() const { return subtree_objects_; }
   /// Where the walk keeps its per-workgroup stacks: in the records image (default on a CPU
@@ -95,8 +101,9 @@ class BvhCuller {
   std::size_t node_count() const { return node_count_; }
   /// Levels of the tree.
   std::uint32_t levels() const { return levels_; }
-  /// Subtrees of the cut, one invocation each per view.
+  /// Subtrees of the cut, one invocation each per view; of the occlusion passes' cut.
   std::size_t cut_count() const { return cut_count_; }
+  std::size_t occlusion_cut_count() const { return occlusion_cut_count_; }
 
  private:
   void prepare(std::span<const Frustum> views, const CullOptions& options);
@@ -138,7 +145,7 @@ class BvhCuller {
   std::unique_ptr<detail::PassResources> resources_;
   std::size_t object_count_ = 0, node_count_ = 0, template_count_ = 0;
   std::uint32_t levels_ = 0;
-  std::size_t cut_count_ = 0, groups_per_view_ = 0, group_x_ = 0, group_y_ = 0;
+  std::size_t cut_count_ = 0, occlusion_cut_count_ = 0, groups_per_view_ = 0, group_x_ = 0, group_y_ = 0;
   std::size_t last_capacity_ = 0, last_view_count_ = 0;
   CullOptions last_options_;
   bool descriptors_dirty_ = true;

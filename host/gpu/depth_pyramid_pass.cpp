@@ -16,6 +16,8 @@ namespace cullpipe::gpu {
 
 namespace {
 
+constexpr std::uint32_t kTexelBinding = 1u << 1;  // the level below, read as texels
+
 std::string format_name(VkFormat f) {
   switch (f) {
     case VK_FORMAT_D16_UNORM:
@@ -70,9 +72,12 @@ std::string depth_source_problem(const DepthSource& s) {
 }
 
 DepthPyramidPass::DepthPyramidPass(const vk::Context& ctx) : ctx_(ctx) {
+  // Binding 0 writes a level, binding 1 reads the one below as texels (the same buffer).
+  detail::check_texel_format(ctx_, "the depth pyramid");
   pipeline_ = std::make_unique<vk::ComputePipeline>(
-      ctx_, vk::ComputePipelineDesc{cullpipe_depth_pyramid_spv, 1, sizeof(PyramidReduceParams), {}, "depth pyramid"});
-  resources_ = std::make_unique<detail::PassResources>(ctx_, pipeline_->set_layout(), 1);
+      ctx_, vk::ComputePipelineDesc{
+                cullpipe_depth_pyramid_spv, 2, sizeof(PyramidReduceParams), {}, "depth pyramid", kTexelBinding});
+  resources_ = std::make_unique<detail::PassResources>(ctx_, pipeline_->set_layout(), 2, kTexelBinding);
 }
 
 DepthPyramidPass::~DepthPyramidPass() = default;
@@ -83,13 +88,17 @@ void DepthPyramidPass::resize(std::uint32_t width, std::uint32_t height) {
     throw std::invalid_argument("depth pyramid: a " + std::to_string(width) + "x" + std::to_string(height) +
                                 " depth image (each side 1 to " + std::to_string(occlusion::kMaxViewportSide) + ")");
   std::vector<occlusion::PyramidLevel> levels = occlusion::pyramid_levels(width, height);  // (throws for 0)
-  const VkDeviceSize bytes = (levels.back().offset + 1) * sizeof(float);
+  // Whole texels of four floats, for the texel view the reduction reads.
+  const VkDeviceSize floats = (levels.back().offset + 1 + 3) / 4 * 4, bytes = floats * sizeof(float);
   const std::string what = "depth pyramid of a " + std::to_string(width) + "x" + std::to_string(height) + " image";
   detail::check_storage_range(ctx_, bytes, what);
+  detail::check_texel_range(ctx_, bytes, what);
   detail::check_allocation_size(ctx_, bytes, what);
-  vk::Buffer texels(ctx_, bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
-                    "depth pyramid");
-  const vk::Buffer* bound[1] = {&texels};
+  vk::Buffer texels(
+      ctx_, bytes,
+      VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+      "depth pyramid");
+  const vk::Buffer* bound[2] = {&texels, &texels};
   resources_->write(bound);
   texels_ = std::move(texels);
   levels_ = std::move(levels);

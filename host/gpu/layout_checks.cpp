@@ -63,8 +63,9 @@ static_assert(offsetof(GpuBvhNode, count) == 28);
 static_assert(offsetof(GpuBvhNode, skip) == 32);
 static_assert(offsetof(GpuBvhNode, second_child) == 36);
 static_assert(offsetof(GpuBvhNode, leaf) == 40);
-static_assert(sizeof(BvhCullParams) == 20);
-static_assert(offsetof(BvhCullParams, cut_count) == 12 && offsetof(BvhCullParams, groups_per_view) == 16);
+static_assert(sizeof(BvhCullParams) == 24);
+static_assert(offsetof(BvhCullParams, cut_count) == 12 && offsetof(BvhCullParams, groups_per_view) == 16 &&
+              offsetof(BvhCullParams, cut_offset) == 20);
 static_assert(BVH_STACK_PER_INVOCATION >= 1 + 2 * BVH_CUT_MAX_HEIGHT,
               "the walk stack holds a cut node and two nodes per level below it, per lane");
 

@@ -381,6 +381,13 @@ void Renderer::create_pipelines() {
       CULLPIPE_VK_CHECK(vkCreateGraphicsPipelines(dev, VK_NULL_HANDLE, 1, &info, nullptr, &pipeline_[reversed]));
       stages[1].module = id_frag;
       CULLPIPE_VK_CHECK(vkCreateGraphicsPipelines(dev, VK_NULL_HANDLE, 1, &info, nullptr, &id_pipeline_[reversed]));
+      // Depth only (the first phase of an occlusion frame): no fragment shader, no colour.
+      info.stageCount = 1;
+      blend_attachment.colorWriteMask = 0;
+      CULLPIPE_VK_CHECK(vkCreateGraphicsPipelines(dev, VK_NULL_HANDLE, 1, &info, nullptr, &depth_pipeline_[reversed]));
+      info.stageCount = 2;
+      blend_attachment.colorWriteMask =
+          VK_COLOR_COMPONENT_R_BIT | VK_COLOR_COMPONENT_G_BIT | VK_COLOR_COMPONENT_B_BIT | VK_COLOR_COMPONENT_A_BIT;
     }
   } catch (...) {
     vkDestroyShaderModule(dev, vert, nullptr);
@@ -400,6 +407,8 @@ void Renderer::release() {
   if (stats_pool_) vkDestroyQueryPool(dev, stats_pool_, nullptr);
   if (cmd_) vkFreeCommandBuffers(dev, ctx_.command_pool(), 1, &cmd_);
   for (VkPipeline& p : pipeline_)
+    if (p) vkDestroyPipeline(dev, p, nullptr), p = VK_NULL_HANDLE;
+  for (VkPipeline& p : depth_pipeline_)
     if (p) vkDestroyPipeline(dev, p, nullptr), p = VK_NULL_HANDLE;
   for (VkPipeline& p : id_pipeline_)
     if (p) vkDestroyPipeline(dev, p, nullptr), p = VK_NULL_HANDLE;
@@ -433,7 +442,8 @@ void Renderer::begin_frame() {
   CULLPIPE_VK_CHECK(vkBeginCommandBuffer(cmd_, &begin));
 }
 
-void Renderer::record_scene_pass(const Camera& camera, bool ids, const std::function<void()>& draw) {
+void Renderer::record_scene_pass(const Camera& camera, ScenePass pass, const std::function<void()>& draw) {
+  const bool ids = pass == ScenePass::Ids;
   VkClearValue clears[2];
   clears[0].color = ids ? VkClearColorValue{{0.0f, 0.0f, 0.0f, 0.0f}} : VkClearColorValue{{0.085f, 0.09f, 0.11f, 1.0f}};
   clears[1].depthStencil = {camera.reversed_z ? 0.0f : 1.0f, 0};
@@ -445,7 +455,10 @@ void Renderer::record_scene_pass(const Camera& camera, bool ids, const std::func
   rp.pClearValues = clears;
   vkCmdBeginRenderPass(cmd_, &rp, VK_SUBPASS_CONTENTS_INLINE);
   const int reversed = camera.reversed_z ? 1 : 0;
-  vkCmdBindPipeline(cmd_, VK_PIPELINE_BIND_POINT_GRAPHICS, ids ? id_pipeline_[reversed] : pipeline_[reversed]);
+  const VkPipeline pipeline = ids                        ? id_pipeline_[reversed]
+                              : pass == ScenePass::Depth ? depth_pipeline_[reversed]
+                                                         : pipeline_[reversed];
+  vkCmdBindPipeline(cmd_, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline);
   const VkDescriptorSet set = ids ? id_descriptor_set_ : descriptor_set_;
   vkCmdBindDescriptorSets(cmd_, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline_layout_, 0, 1, &set, 0, nullptr);
   const VkDeviceSize zero = 0;
@@ -480,7 +493,7 @@ Image Renderer::submit_and_read() {
 std::vector<bool> Renderer::pixel_owners(const Camera& camera) {
   const std::size_t n = templates_.size();
   begin_frame();
-  record_scene_pass(camera, true, [&] {
+  record_scene_pass(camera, ScenePass::Ids, [&] {
     if (n > 0) vkCmdDrawIndexedIndirect(cmd_, all_draws_.handle(), 0, std::uint32_t(n), sizeof(DrawCommand));
   });
   const Image image = submit_and_read();
@@ -514,7 +527,7 @@ Image Renderer::render(const Camera& camera, CullMode mode, FrameStats* stats) {
   begin_frame();
   if (stats_pool_) vkCmdResetQueryPool(cmd_, stats_pool_, 0, 1);
 
-  const auto scene_pass = [&](const std::function<void()>& draw) { record_scene_pass(camera, false, draw); };
+  const auto scene_pass = [&](const std::function<void()>& draw) { record_scene_pass(camera, ScenePass::Image, draw); };
   // n <= maxDrawIndirectCount (checked at construction): one call either way. The culled count
   // (view 0's visible_count) cannot exceed the capacity n: maxDrawCount = n.
   const auto culled_draws = [&] {
@@ -530,14 +543,11 @@ Image Renderer::render(const Camera& camera, CullMode mode, FrameStats* stats) {
     if (first_phase) {
       first_phase_draws =
           std::min<std::size_t>(culler_->counter_buffer().as<const gpu::ViewCounters>()[0].visible_count, n);
-      scene_pass(culled_draws);
+      record_scene_pass(camera, ScenePass::Depth, culled_draws);  // (its colour is cleared below)
     } else {
-      scene_pass([] {});  // nothing drawn: a cleared depth occludes nothing
+      record_scene_pass(camera, ScenePass::Depth, [] {});  // nothing drawn: a cleared depth occludes nothing
     }
-    pyramid_->record(cmd_,
-                     gpu::DepthSource{depth_, VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL, VK_FORMAT_D32_SFLOAT,
-                                      config_.width, config_.height},
-                     camera.reversed_z);
+    pyramid_->record(cmd_, depth_source(), camera.reversed_z);
   }
   if (cull) culler_->record(cmd_, std::span(&frustum, 1), options);
   // The image: every object, or what the culling pass kept, in object order.

@@ -75,6 +75,13 @@ class Renderer {
   }
   /// The depth pyramid of the last occlusion frame (null before the first).
   const gpu::DepthPyramidPass* pyramid() const { return pyramid_.get(); }
+  /// The depth attachment as a pyramid source: the depth of the last pass drawn (render or
+  /// pixel_owners), in the layout every pass leaves it (the caller waits for nothing: every
+  /// pass has completed when it returns).
+  gpu::DepthSource depth_source() const {
+    return {depth_, VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL, VK_FORMAT_D32_SFLOAT, config_.width,
+            config_.height};
+  }
   /// The next occlusion frame starts with no visible objects (a camera cut).
   void forget_visibility() { has_visibility_ = false; }
 
@@ -93,9 +100,10 @@ class Renderer {
 
  private:
   void begin_frame();
-  /// One pass of the scene into the colour and depth targets, cleared (the id pass's pipeline
-  /// and objects with `ids`); `draw` records the draws.
-  void record_scene_pass(const Camera& camera, bool ids, const std::function<void()>& draw);
+  /// One pass of the scene into the colour and depth targets, cleared: the image, the objects'
+  /// ids (the id pass's pipeline and objects), or depth alone; `draw` records the draws.
+  enum class ScenePass { Image, Ids, Depth };
+  void record_scene_pass(const Camera& camera, ScenePass pass, const std::function<void()>& draw);
   /// Copies the colour image out, ends, submits and waits, and returns the image.
   Image submit_and_read();
   void create_targets();
@@ -116,9 +124,10 @@ class Renderer {
   VkFramebuffer framebuffer_ = VK_NULL_HANDLE;
   VkDescriptorSetLayout set_layout_ = VK_NULL_HANDLE;
   VkPipelineLayout pipeline_layout_ = VK_NULL_HANDLE;
-  VkPipeline pipeline_[2] = {VK_NULL_HANDLE, VK_NULL_HANDLE};     // [reversed_z]: depth LESS or GREATER
-  VkPipeline id_pipeline_[2] = {VK_NULL_HANDLE, VK_NULL_HANDLE};  // the id pass's, likewise
-  VkDescriptorSet id_descriptor_set_ = VK_NULL_HANDLE;            // its objects: id_objects_
+  VkPipeline pipeline_[2] = {VK_NULL_HANDLE, VK_NULL_HANDLE};        // [reversed_z]: depth LESS or GREATER
+  VkPipeline id_pipeline_[2] = {VK_NULL_HANDLE, VK_NULL_HANDLE};     // the id pass's, likewise
+  VkPipeline depth_pipeline_[2] = {VK_NULL_HANDLE, VK_NULL_HANDLE};  // depth only, likewise
+  VkDescriptorSet id_descriptor_set_ = VK_NULL_HANDLE;               // its objects: id_objects_
   VkDescriptorPool descriptor_pool_ = VK_NULL_HANDLE;
   VkDescriptorSet descriptor_set_ = VK_NULL_HANDLE;
   VkCommandBuffer cmd_ = VK_NULL_HANDLE;

@@ -184,6 +184,7 @@ struct BvhCullParams {
   uint visible_capacity;  // per view
   uint cut_count;         // cut subtrees (one invocation each, per view)
   uint groups_per_view;   // workgroups per view: cut_count / BVH_CULL_GROUP_SIZE rounded up
+  uint cut_offset;        // the pass's cut starts at cuts[cut_offset] (occlusion passes take their own)
 };
 
 // Bindings of the hierarchical pass (set 0). 0..6 mean what they mean for the flat pass,

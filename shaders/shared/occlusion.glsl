@@ -111,10 +111,13 @@ bool occ_occluded(vec3 p[8], vec3 magnitude, float scale, uint texels) {
     occ_widen(y_lo, y_hi, y0, y1, w_lo, w_hi);
     occ_widen(z_lo, z_hi, z0, z1, w_lo, w_hi);
   }
-  // An object's bounds must be finite, a node's at most 2^120 (NaN compares false).
-  float limit = scale == 1.0 ? uintBitsToFloat(0x7f7fffffu) : uintBitsToFloat(0x7b800000u);
-  projected = projected && abs(x_lo) <= limit && abs(x_hi) <= limit && abs(y_lo) <= limit && abs(y_hi) <= limit &&
-              abs(z_lo) <= limit && abs(z_hi) <= limit;
+  // An object's bounds must be finite, a node's at most 2^120 in magnitude; compared on the bits
+  // (a NaN's exceed both), as a device need not compare with NaN or infinity exactly.
+  uint limit = scale == 1.0 ? 0x7f7fffffu : 0x7b800000u;
+  projected = projected && (floatBitsToUint(x_lo) & 0x7fffffffu) <= limit &&
+              (floatBitsToUint(x_hi) & 0x7fffffffu) <= limit && (floatBitsToUint(y_lo) & 0x7fffffffu) <= limit &&
+              (floatBitsToUint(y_hi) & 0x7fffffffu) <= limit && (floatBitsToUint(z_lo) & 0x7fffffffu) <= limit &&
+              (floatBitsToUint(z_hi) & 0x7fffffffu) <= limit;
   uint px0, px1, py0, py1;
   occ_pixel_range(x_lo, x_hi, occ_width, scale, px0, px1);
   occ_pixel_range(y_lo, y_hi, occ_height, scale, py0, py1);
