@@ -22,7 +22,9 @@
 
 #include "bench_util.hpp"
 #include "bvh/builders.hpp"
+#include "core/thread_pool.hpp"
 #include "cull/occlusion.hpp"
+#include "cull/software_depth.hpp"
 #include "gpu/bvh_culler.hpp"
 #include "gpu/gpu_culler.hpp"
 #include "render/renderer.hpp"
@@ -50,6 +52,8 @@ struct Row {
   double frustum_drawn = 0, occlusion_drawn = 0, owning = 0;  // means over the frames after the first
   std::size_t missed = 0;
   double flat_ns = 0, flat_occlusion_ns = 0, bvh_ns = 0, bvh_occlusion_ns = 0, pyramid_ns = 0;
+  double cpu_path_ns = 0;                          // the CPU path per frame (median): rasterise, pyramid, classify
+  std::size_t gpu_occluded = 0, cpu_occluded = 0;  // over the frames after the first
   std::size_t pass_frustum_kept = 0, pass_occluded = 0;
   bool agree = true;
 };
@@ -125,6 +129,11 @@ Row measure(const vk::Context& ctx, std::size_t n, const Config& config) {
   rc.height = config.height;
   rc.occlusion.texels_per_axis = config.texels;
   render::Renderer frustum_renderer(ctx, scene, rc), occlusion_renderer(ctx, scene, rc);
+  // The CPU path: every building a box occluder, a buffer of a quarter of the viewport's sides.
+  const std::vector<Obb> occluders = world_obbs(scene);
+  const std::vector<Aabb> boxes = world_aabbs(scene);
+  ThreadPool pool;
+  std::vector<double> cpu_ns;
 
   // Frames: the two renderers interleaved, each on its own frames along the path; at the middle
   // frame, the passes on that frame's pyramid.
@@ -141,9 +150,20 @@ Row measure(const vk::Context& ctx, std::size_t n, const Config& config) {
     if (f == mid) measure_passes(ctx, scene, path[f], occlusion_renderer, config, row);
     const std::vector<bool> owners = occlusion_renderer.pixel_owners(path[f]);
     for (std::size_t i = 0; i < owners.size(); ++i) row.missed += owners[i] && !is_visible(os.classes[i]);
+    std::vector<Classification> cpu(boxes.size());
+    t0 = Clock::now();
+    const reference::CullCounts cpu_counts = occlusion::cull_with_software_depth(
+        std::span<const Aabb>(boxes), std::span<const Obb>(occluders), Frustum::from_view_proj(path[f].view_proj()),
+        {path[f].view_proj(), config.width, config.height, path[f].reversed_z}, std::max(1u, config.width / 4),
+        std::max(1u, config.height / 4), rc.occlusion, std::span<Classification>(cpu), &pool);
+    const double tc = since(t0);
+    for (std::size_t i = 0; i < owners.size(); ++i) row.missed += owners[i] && !is_visible(cpu[i]);
     if (f == 0) continue;  // the first occlusion frame knows nothing visible
     frustum_ns.push_back(tf);
     occlusion_ns.push_back(to);
+    cpu_ns.push_back(tc);
+    row.gpu_occluded += os.occluded;
+    row.cpu_occluded += cpu_counts.occluded;
     row.frustum_drawn += double(fs.draws);
     row.occlusion_drawn += double(os.draws);
     for (bool o : owners) row.owning += o;
@@ -151,6 +171,7 @@ Row measure(const vk::Context& ctx, std::size_t n, const Config& config) {
   row.frames = frustum_ns.size();
   row.frustum_frame_ns = median(frustum_ns);
   row.occlusion_frame_ns = median(occlusion_ns);
+  row.cpu_path_ns = median(cpu_ns);
   row.frustum_drawn /= double(row.frames);
   row.occlusion_drawn /= double(row.frames);
   row.owning /= double(row.frames);
@@ -185,9 +206,10 @@ int main(int argc, char** argv) {
   const vk::Context ctx(options);
   std::printf("bench_occlusion: streets along their path, %ux%u, %u texels per axis, %s; %s\n", config.width,
               config.height, config.texels, ctx.info().name.c_str(), cpu_model().c_str());
-  std::printf("\n%9s %6s | %10s %10s %6s | %8s %8s %7s %7s %6s | %9s %9s %6s %9s %9s %6s %8s %9s | %s\n", "objects",
-              "frames", "frustum ms", "occl. ms", "speed", "drawn f", "drawn o", "owning", "d/own", "missed", "flat ms",
-              "flat+o ms", "ratio", "bvh ms", "bvh+o ms", "ratio", "bvh/flat", "pyramid", "agree");
+  std::printf("\n%9s %6s | %10s %10s %6s | %8s %8s %7s %7s %6s | %9s %9s %6s %9s %9s %6s %8s %9s | %7s %8s | %s\n",
+              "objects", "frames", "frustum ms", "occl. ms", "speed", "drawn f", "drawn o", "owning", "d/own", "missed",
+              "flat ms", "flat+o ms", "ratio", "bvh ms", "bvh+o ms", "ratio", "bvh/flat", "pyramid", "cpu ms",
+              "cpu/gpu", "agree");
   nlohmann::json rows = nlohmann::json::array();
   bool ok = true;
   for (const std::size_t n : config.sizes) {
@@ -195,13 +217,13 @@ int main(int argc, char** argv) {
     ok = ok && r.agree && r.missed == 0;
     std::printf(
         "%9zu %6zu | %10.2f %10.2f %5.2fx | %8.1f %8.1f %7.1f %7.2f %6zu | %9.3f %9.3f %5.2fx %9.3f %9.3f %5.2fx "
-        "%7.2fx "
-        "%7.3fms | %s\n",
+        "%7.2fx %7.3fms | %7.2f %7.1f%% | %s\n",
         r.n, r.frames, r.frustum_frame_ns / 1e6, r.occlusion_frame_ns / 1e6, r.frustum_frame_ns / r.occlusion_frame_ns,
         r.frustum_drawn, r.occlusion_drawn, r.owning, r.owning > 0 ? r.occlusion_drawn / r.owning : 0.0, r.missed,
         r.flat_ns / 1e6, r.flat_occlusion_ns / 1e6, r.flat_occlusion_ns / r.flat_ns, r.bvh_ns / 1e6,
         r.bvh_occlusion_ns / 1e6, r.bvh_occlusion_ns / r.bvh_ns, r.bvh_occlusion_ns / r.flat_occlusion_ns,
-        r.pyramid_ns / 1e6, r.agree ? "yes" : "NO");
+        r.pyramid_ns / 1e6, r.cpu_path_ns / 1e6,
+        r.gpu_occluded ? 100.0 * double(r.cpu_occluded) / double(r.gpu_occluded) : 0.0, r.agree ? "yes" : "NO");
     std::fflush(stdout);
     rows.push_back({{"objects", r.n},
                     {"frames", r.frames},
@@ -218,6 +240,9 @@ int main(int argc, char** argv) {
                     {"bvh_ns", r.bvh_ns},
                     {"bvh_occlusion_ns", r.bvh_occlusion_ns},
                     {"pyramid_ns", r.pyramid_ns},
+                    {"cpu_path_ns", r.cpu_path_ns},
+                    {"gpu_occluded", r.gpu_occluded},
+                    {"cpu_occluded", r.cpu_occluded},
                     {"agree", r.agree}});
   }
   if (!config.json.empty()) {

@@ -13,6 +13,7 @@
 #include "cull/compare.hpp"
 #include "cull/depth_pyramid.hpp"
 #include "cull/occlusion.hpp"
+#include "cull/software_depth.hpp"
 #include "occlusion_test_util.hpp"
 #include "scene/camera.hpp"
 #include "test_util.hpp"
@@ -251,6 +252,45 @@ TEST(HierarchicalOcclusion, ANanTexelHidesNothingAtAnyLevel) {
     EXPECT_EQ(occlusion::cull_hierarchical(tree, std::span<const Aabb>(boxes), frustum, view, pyramid).classes, flat)
         << "leaves of " << leaf;
   }
+}
+
+// The software depth against ray-cast ground truth: at every pixel centre the ray-cast depth of
+// the occluder boxes is no farther than the software depth of the buffer pixel covering it, for
+// buffers of the viewport's size and smaller, every kind of camera; and it covers something.
+TEST(SoftwareDepth, NeverNearerThanTheRayCastDepth) {
+  test::Rng rng(41);
+  std::size_t covered = 0;
+  for (int s = 0; s < 48; ++s) {
+    const Camera cam = random_camera(rng, s % 8);
+    const std::uint32_t w = 16 + std::uint32_t(rng.next() % 81), h = 16 + std::uint32_t(rng.next() % 61);
+    const glm::mat4 vp = cam.view_proj();
+    const Caster k(vp, w, h, cam.reversed_z);
+    std::vector<Obb> occluders;
+    for (int i = 0; i < 6; ++i) occluders.push_back(random_volume<Obb>(rng, 8.0f, 6.0f));
+    const std::vector<float> truth = render_depth(k, occluders);
+    const OcclusionView view{vp, w, h, cam.reversed_z};
+    for (const std::uint32_t divisor : {1u, 3u, 4u}) {
+      const std::uint32_t sw = std::max(1u, w / divisor), sh = std::max(1u, h / divisor);
+      const occlusion::SoftwareDepth soft = occlusion::rasterise_occluders(occluders, view, sw, sh);
+      for (std::uint32_t y = 0; y < h; ++y)
+        for (std::uint32_t x = 0; x < w; ++x) {
+          const std::uint32_t px = std::uint32_t((x + 0.5) * sw / w), py = std::uint32_t((y + 0.5) * sh / h);
+          const float cpu = soft.depth[std::size_t(py) * sw + px], ray = truth[std::size_t(y) * w + x];
+          ASSERT_TRUE(cam.reversed_z ? cpu <= ray : cpu >= ray)
+              << "scene " << s << " (camera variant " << s % 8 << ", " << w << "x" << h << "), " << sw << "x" << sh
+              << " buffer: pixel " << x << "," << y << " ray-cast depth " << ray << ", software depth " << cpu;
+        }
+      for (float d : soft.depth) covered += d != (cam.reversed_z ? 0.0f : 1.0f);
+    }
+  }
+  EXPECT_GT(covered, 1000u);
+}
+
+TEST(SoftwareDepth, RefusesABufferLargerThanTheViewport) {
+  const OcclusionView view{test::test_view_proj(), 8, 8, false};
+  EXPECT_THROW(occlusion::rasterise_occluders({}, view, 9, 8), std::invalid_argument);
+  EXPECT_THROW(occlusion::rasterise_occluders({}, view, 0, 8), std::invalid_argument);
+  EXPECT_EQ(occlusion::rasterise_occluders({}, view, 4, 2).depth, std::vector<float>(8, 1.0f));
 }
 
 TEST(Occlusion, BoxesThatOwnAPixelAreNeverOccluded) { expect_conservative<Aabb>(11, 96); }

@@ -9,8 +9,11 @@
 #include <glm/ext/matrix_transform.hpp>
 #include <memory>
 
+#include "core/thread_pool.hpp"
 #include "cull/occlusion.hpp"
 #include "cull/reference.hpp"
+#include "cull/software_depth.hpp"
+#include "gpu/depth_pyramid_pass.hpp"
 #include "render/image.hpp"
 #include "render/renderer.hpp"
 #include "scene/generators.hpp"
@@ -271,6 +274,71 @@ TEST(Render, OcclusionKeepsBoxesFlushWithTheWallsBehindThem) {
     SCOPED_TRACE(std::string(to_string(bv)));
     expect_occlusion_invisible(scene, cameras, bv, 480, 300);
   }
+}
+
+// The CPU occlusion path against the GPU's render: every pixel of a software depth buffer (at the
+// viewport's size and smaller) holds a depth no nearer than the render's depth at every pixel
+// centre it covers, with the scene's boxes as occluders; objects it finds occluded own no pixel
+// of the unculled image; and it culls a good part of what the GPU path culls on the same frame.
+void expect_software_depth_conservative(const Scene& scene, const std::vector<Camera>& cameras, std::uint32_t width,
+                                        std::uint32_t height) {
+  render::RendererConfig config;
+  config.width = width;
+  config.height = height;
+  render::Renderer renderer(*RenderEnvironment::context, scene, config);
+  gpu::DepthPyramidPass pass(*RenderEnvironment::context);
+  ThreadPool pool(2);
+  const std::vector<Obb> occluders = world_obbs(scene);
+  const std::vector<Aabb> boxes = world_aabbs(scene);
+  std::size_t covered = 0, occluded = 0, gpu_occluded = 0;
+  for (std::size_t v = 0; v < cameras.size(); ++v) {
+    const Camera& camera = cameras[v];
+    const occlusion::OcclusionView view{camera.view_proj(), width, height, camera.reversed_z};
+    const Frustum frustum = Frustum::from_view_proj(camera.view_proj());
+    renderer.render(camera, render::CullMode::None);
+    const occlusion::DepthPyramid full = pass.build(renderer.depth_source(), camera.reversed_z);
+    for (const auto& [w, h] :
+         {std::pair{width, height}, std::pair{width / 4, height / 4}, std::pair{width / 3 + 1, height / 5 + 1}}) {
+      const occlusion::SoftwareDepth soft = occlusion::rasterise_occluders(occluders, view, w, h, &pool);
+      const float clear = camera.reversed_z ? 0.0f : 1.0f;
+      for (std::uint32_t y = 0; y < height; ++y)
+        for (std::uint32_t x = 0; x < width; ++x) {
+          const std::uint32_t px = std::uint32_t((x + 0.5) * w / width), py = std::uint32_t((y + 0.5) * h / height);
+          const float cpu = soft.depth[std::size_t(py) * w + px], gpu = full.at(0, x, y);
+          ASSERT_TRUE(camera.reversed_z ? cpu <= gpu : cpu >= gpu)
+              << "camera " << v << (camera.reversed_z ? " (reversed Z)" : "") << ", " << w << "x" << h
+              << " buffer: pixel " << x << "," << y << " (buffer pixel " << px << "," << py << ") rendered at depth "
+              << gpu << ", software depth " << cpu;
+        }
+      for (float d : soft.depth) covered += d != clear;
+    }
+    // End to end at a quarter of the size, against the objects owning a pixel.
+    std::vector<Classification> classes(boxes.size());
+    const reference::CullCounts counts =
+        occlusion::cull_with_software_depth(std::span<const Aabb>(boxes), std::span<const Obb>(occluders), frustum,
+                                            view, width / 4, height / 4, {}, std::span<Classification>(classes), &pool);
+    const std::vector<bool> owners = renderer.pixel_owners(camera);
+    for (std::size_t i = 0; i < boxes.size(); ++i)
+      ASSERT_FALSE(owners[i] && classes[i] == Classification::Occluded)
+          << "camera " << v << ": object " << i << " owns a pixel, the software depth hid it";
+    occluded += counts.occluded;
+    // The GPU path on the render's full depth, for comparison.
+    std::vector<Classification> gpu_classes(boxes.size());
+    gpu_occluded +=
+        occlusion::classify_all(std::span<const Aabb>(boxes), frustum, view, full, {}, gpu_classes).occluded;
+  }
+  EXPECT_GT(covered, 0u);
+  EXPECT_GT(occluded, gpu_occluded / 4) << "software depth " << occluded << ", full depth " << gpu_occluded;
+  std::printf("software depth: %zu occluded, the render's own depth: %zu\n", occluded, gpu_occluded);
+}
+
+TEST(Render, SoftwareDepthIsNeverNearerThanTheRender) {
+  const Scene city = load_scene(std::string(CULLPIPE_SOURCE_DIR) + "/scenes/default.json");
+  std::vector<Camera> cameras = depth_conventions(city.camera, 60.0f);
+  cameras.insert(cameras.begin(), city.camera);
+  expect_software_depth_conservative(city, cameras, 320, 180);
+  const Scene streets = generate_scene(SceneKind::Streets, 3000, 2);
+  expect_software_depth_conservative(streets, scene_camera_path(streets, 5), 333, 187);
 }
 
 TEST(Render, TopDownImageAndPng) {

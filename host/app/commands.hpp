@@ -64,6 +64,7 @@ struct RunOptions : SceneOptions {
   std::size_t frames = 1;
   std::uint32_t texels = 4;
   std::uint32_t width = 960, height = 540;
+  std::uint32_t software_divisor = 4;  ///< the CPU path's depth buffer: each side of the viewport over this
 };
 
 struct RenderOptions : SceneOptions {

@@ -100,6 +100,11 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--height", run.height, "--occlusion: depth image height")
       ->capture_default_str()
       ->check(CLI::Range(1u, 16384u));
+  run_cmd
+      ->add_option("--software-divisor", run.software_divisor,
+                   "--occlusion: the CPU path's depth buffer is the viewport divided by this on each side")
+      ->capture_default_str()
+      ->check(CLI::Range(1u, 64u));
   run_cmd->add_option("--json", run.json_path, "Write a summary as JSON");
   run_cmd->add_option("--dump", run.dump_path, "Write planes, volumes and classes (the classify schema)");
   add_device_options(run_cmd, run.device);

@@ -10,8 +10,10 @@
 #include "app/backends.hpp"
 #include "app/commands.hpp"
 #include "app/scene_source.hpp"
+#include "core/thread_pool.hpp"
 #include "cull/compare.hpp"
 #include "cull/occlusion.hpp"
+#include "cull/software_depth.hpp"
 #include "gpu/bvh_culler.hpp"
 #include "render/renderer.hpp"
 #include "scene/cull_case_io.hpp"
@@ -40,6 +42,8 @@ struct FrameReport {
   std::size_t false_positives = 0;  // drawn, but own no pixel
   std::size_t missed = 0;           // own a pixel, but culled: must be 0
   std::size_t mismatches = 0;       // classes differing from the reference's
+  std::size_t cpu_occluded = 0;     // the CPU path's occluded (software depth of the box objects)
+  std::size_t cpu_missed = 0;       // own a pixel, but the CPU path hid them: must be 0
 };
 
 /// The checks of one frame for one kind of volume: the renderer's classes against the
@@ -120,6 +124,17 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
     }
   }
 
+  // The CPU path's occluders: the objects drawn as boxes (a mesh's box is not inside the mesh).
+  std::vector<Obb> occluders;
+  {
+    const std::vector<Obb> all_obbs = bv == BvKind::Obb ? obbs : world_obbs(scene);
+    for (std::size_t i = 0; i < scene.objects.size(); ++i)
+      if (!scene.objects[i].triangles) occluders.push_back(all_obbs[i]);
+  }
+  const std::uint32_t cpu_width = std::max(1u, o.width / o.software_divisor),
+                      cpu_height = std::max(1u, o.height / o.software_divisor);
+  ThreadPool pool;
+
   const std::size_t n = scene.objects.size();
   out << "cullpipe run --occlusion: " << (scene.name.empty() ? loaded.source : scene.name) << " (" << loaded.source
       << "), " << n << " objects, bv " << o.bv << ", " << o.width << "x" << o.height << ", " << o.texels
@@ -127,7 +142,10 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
   if (hierarchical)
     out << "  bvh: " << o.builder << ", leaves of <= " << o.leaf_size << ", " << built.metrics.nodes
         << " nodes; its pass is checked against the flat pass and the reference on each frame's pyramid\n";
-  out << "\n  frame  objects  frustum  first phase  drawn  occluded  owning  false positives  drawn/owning\n";
+  out << "  cpu path: " << occluders.size() << " box occluders rasterised at " << cpu_width << "x" << cpu_height
+      << " on " << pool.size() << " threads\n";
+  out << "\n  frame  objects  frustum  first phase  drawn  occluded  owning  false positives  drawn/owning  cpu "
+         "occluded\n";
 
   std::vector<FrameReport> frames;
   std::vector<Frustum> frusta;
@@ -168,13 +186,25 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
       r.false_positives += drawn && !owners[i];
       r.missed += owners[i] && !drawn;
     }
+    {  // The CPU path on the same frame, against the same owners.
+      std::vector<Classification> cpu(n);
+      auto cull = [&](auto volumes) {
+        return occlusion::cull_with_software_depth(volumes, std::span<const Obb>(occluders), frustum, view, cpu_width,
+                                                   cpu_height, config.occlusion, std::span<Classification>(cpu), &pool);
+      };
+      r.cpu_occluded = bv == BvKind::Obb      ? cull(std::span<const Obb>(obbs)).occluded
+                       : bv == BvKind::Sphere ? cull(std::span<const Sphere>(spheres)).occluded
+                                              : cull(std::span<const Aabb>(aabbs)).occluded;
+      for (std::size_t i = 0; i < n; ++i) r.cpu_missed += owners[i] && !is_visible(cpu[i]);
+    }
     mismatches += r.mismatches;
-    missed += r.missed;
+    missed += r.missed + r.cpu_missed;
     out << pad(std::to_string(f), 7) << pad(std::to_string(n), 9) << pad(std::to_string(r.frustum), 9)
         << pad(std::to_string(r.first_phase), 13) << pad(std::to_string(r.drawn), 7)
         << pad(std::to_string(r.occluded), 10) << pad(std::to_string(r.owning), 8)
         << pad(std::to_string(r.false_positives), 17)
-        << pad(r.owning ? format_ratio(double(r.drawn) / double(r.owning)) : "-", 14) << "\n";
+        << pad(r.owning ? format_ratio(double(r.drawn) / double(r.owning)) : "-", 14)
+        << pad(std::to_string(r.cpu_occluded), 14) << "\n";
     frames.push_back(r);
     if (!o.dump_path.empty()) {
       frusta.push_back(frustum);
@@ -188,8 +218,8 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
   else
     out << "  agreement:     " << mismatches << " MISMATCHES with the reference\n";
   out << "  pixels:        "
-      << (missed ? std::to_string(missed) + " objects owning a pixel were CULLED"
-                 : std::string("every object owning a pixel was drawn"))
+      << (missed ? std::to_string(missed) + " objects owning a pixel were CULLED (GPU and CPU paths)"
+                 : std::string("every object owning a pixel was drawn, and kept by the CPU path"))
       << "\n";
 
   if (!o.json_path.empty()) {
@@ -217,7 +247,9 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
                            {"owning", r.owning},
                            {"false_positives", r.false_positives},
                            {"missed", r.missed},
-                           {"mismatches", r.mismatches}});
+                           {"mismatches", r.mismatches},
+                           {"cpu_occluded", r.cpu_occluded},
+                           {"cpu_missed", r.cpu_missed}});
     j["per_frame"] = per_frame;
     json_util::write_file_atomic(o.json_path, j.dump(2) + "\n");
   }
