@@ -28,6 +28,7 @@ constexpr double kVertexError = 0x1p-17;
 constexpr double kSnap = 1.0 / 128.0;
 constexpr double kInterpolation = 0x1p-21;
 constexpr double kSlack = 1e-9;
+constexpr std::uint32_t kMaxRow = 256;  // pixels of a row evaluated at once
 
 /// One occluder box, ready to rasterise: its silhouette (the convex hull of its projected
 /// corners, counter-clockwise in pixel coordinates), its front planes' depths as affine
@@ -62,7 +63,10 @@ int convex_hull(std::array<dvec2, 8> p, std::array<dvec2, 9>& hull) {
   return k - 1;  // the last point repeats the first
 }
 
-bool prepare(const Obb& box, const glm::dmat4& m, double width, double height, bool reversed, Shape& s) {
+/// Prepares `box` for a viewport of width x height pixels whose buffer pixels are cell_x x cell_y
+/// of them; false when the box occludes nothing here (also when it cannot cover a whole pixel).
+bool prepare(const Obb& box, const glm::dmat4& m, double width, double height, double cell_x, double cell_y,
+             bool reversed, Shape& s) {
   const dvec3 c(box.center);
   dvec3 a[3];
   for (int k = 0; k < 3; ++k) a[k] = dvec3(box.basis[k]) * double(box.half_extents[k]);
@@ -96,6 +100,12 @@ bool prepare(const Obb& box, const glm::dmat4& m, double width, double height, b
   s.e = e * (1.0 + kSlack) + kSnap + kSlack * (1.0 + largest);
   s.eps = eps * (1.0 + kSlack) + kInterpolation * (1.0 + largest_depth) + kSlack * (1.0 + largest_depth);
   if (!std::isfinite(s.e) || !std::isfinite(s.eps) || !std::isfinite(largest)) return false;
+  // Too small to hold a whole buffer pixel widened by e: nothing to write (most distant boxes).
+  double x_lo = screen[0].x, x_hi = x_lo, y_lo = screen[0].y, y_hi = y_lo;
+  for (const dvec2& p : screen)
+    x_lo = std::min(x_lo, p.x), x_hi = std::max(x_hi, p.x), y_lo = std::min(y_lo, p.y), y_hi = std::max(y_hi, p.y);
+  if (x_hi - x_lo < cell_x + 2.0 * s.e || y_hi - y_lo < cell_y + 2.0 * s.e) return false;
+  if (x_hi < 0.0 || y_hi < 0.0 || x_lo > width || y_lo > height) return false;  // off screen
   s.hull_size = convex_hull(screen, s.hull);
   if (s.hull_size < 3) return false;  // seen edge on: covers no pixel whole
   s.x_lo = s.x_hi = s.hull[0].x;
@@ -141,26 +151,6 @@ bool inside(const Shape& s, const dvec2& q) {
   return true;
 }
 
-/// The front's depth at `q`: the farthest of its front planes there (the entry point of the
-/// ray through q), standard depth; with reversed Z the nearest value is the farthest depth.
-double front_depth(const Shape& s, const dvec2& q, bool reversed) {
-  double d = reversed ? std::numeric_limits<double>::infinity() : -std::numeric_limits<double>::infinity();
-  for (int i = 0; i < s.plane_count; ++i) {
-    const dvec3& p = s.planes[std::size_t(i)];
-    const double z = p.x * q.x + p.y * q.y + p.z;
-    d = reversed ? std::min(d, z) : std::max(d, z);
-  }
-  return d;
-}
-
-/// `v` as a float no nearer than it (standard depth: rounded up; reversed: down).
-float farther_float(double v, bool reversed) {
-  float f = float(v);
-  if (reversed ? double(f) > v : double(f) < v)
-    f = std::nextafter(f, reversed ? -std::numeric_limits<float>::infinity() : std::numeric_limits<float>::infinity());
-  return f;
-}
-
 }  // namespace
 
 SoftwareDepth rasterise_occluders(std::span<const Obb> occluders, const OcclusionView& view, std::uint32_t width,
@@ -178,20 +168,40 @@ SoftwareDepth rasterise_occluders(std::span<const Obb> occluders, const Occlusio
   out.depth.assign(std::size_t(width) * height, reversed ? 0.0f : 1.0f);
   const glm::dmat4 m(view.view_proj);
   const double full_w = view.width, full_h = view.height;
-  std::vector<Shape> shapes;
-  shapes.reserve(occluders.size());
-  for (const Obb& box : occluders) {
-    Shape s;
-    if (prepare(box, m, full_w, full_h, reversed, s)) shapes.push_back(s);
-  }
   // A buffer pixel (px, py) covers full-resolution pixels [px sx, (px + 1) sx) x [py sy, (py + 1) sy).
   const double sx = full_w / width, sy = full_h / height;
+  // The boxes prepared in parallel, each task keeping the few that can cover a pixel (order does
+  // not matter: a pixel keeps the nearest value).
+  constexpr std::size_t kBoxesPerTask = 2048;
+  const std::size_t box_tasks = (occluders.size() + kBoxesPerTask - 1) / kBoxesPerTask;
+  std::vector<std::vector<Shape>> prepared(box_tasks);
+  auto prepare_boxes = [&](std::size_t task) {
+    const std::size_t first = task * kBoxesPerTask, end = std::min(occluders.size(), first + kBoxesPerTask);
+    Shape s;
+    for (std::size_t i = first; i < end; ++i)
+      if (prepare(occluders[i], m, full_w, full_h, sx, sy, reversed, s)) prepared[task].push_back(s);
+  };
+  if (pool)
+    pool->parallel_for(box_tasks, prepare_boxes);
+  else
+    for (std::size_t t = 0; t < box_tasks; ++t) prepare_boxes(t);
+  std::vector<Shape> shapes;
+  for (const std::vector<Shape>& part : prepared) shapes.insert(shapes.end(), part.begin(), part.end());
+  // Each band of rows gets the boxes that reach it.
   constexpr std::uint32_t kRowsPerTask = 8;
   const std::size_t tasks = (height + kRowsPerTask - 1) / kRowsPerTask;
+  std::vector<std::vector<std::uint32_t>> in_band(tasks);
+  for (std::size_t i = 0; i < shapes.size(); ++i) {
+    const double top = std::clamp(std::floor(shapes[i].y_lo / sy), 0.0, double(height));
+    const double bottom = std::clamp(std::ceil(shapes[i].y_hi / sy), 0.0, double(height));
+    for (std::size_t b = std::size_t(top) / kRowsPerTask; b < tasks && double(b * kRowsPerTask) < bottom; ++b)
+      in_band[b].push_back(std::uint32_t(i));
+  }
   auto band = [&](std::size_t task) {
     const std::uint32_t row_first = std::uint32_t(task) * kRowsPerTask,
                         row_end = std::min(height, row_first + kRowsPerTask);
-    for (const Shape& s : shapes) {
+    for (const std::uint32_t index : in_band[task]) {
+      const Shape& s = shapes[index];
       // Pixels whose rectangle, widened by e, may lie inside the silhouette.
       const double first_y = std::ceil((s.y_lo + s.e) / sy), last_y = std::floor((s.y_hi - s.e) / sy) - 1.0;
       const double first_x = std::ceil((s.x_lo + s.e) / sx), last_x = std::floor((s.x_hi - s.e) / sx) - 1.0;
@@ -199,23 +209,51 @@ SoftwareDepth rasterise_occluders(std::span<const Obb> occluders, const Occlusio
       const std::uint32_t y1 = std::uint32_t(std::clamp(last_y + 1.0, double(row_first), double(row_end)));
       const std::uint32_t x0 = std::uint32_t(std::clamp(first_x, 0.0, double(width)));
       const std::uint32_t x1 = std::uint32_t(std::clamp(last_x + 1.0, 0.0, double(width)));
+      // Each plane's depth at the rectangle's extreme corner is a x + (b y + c) with x = px sx +
+      // offset: the row part and the offset once per row, the rest per pixel in a loop the
+      // compiler vectorises. `bound` covers the evaluation's roundings (the terms may be much
+      // larger than the depth).
+      const double x_reach = std::max(std::abs(s.x_lo), std::abs(s.x_hi)) + s.e + sx,
+                   y_reach = std::max(std::abs(s.y_lo), std::abs(s.y_hi)) + s.e + sy;
       for (std::uint32_t py = y0; py < y1; ++py) {
         const double ya = py * sy - s.e, yb = (py + 1) * sy + s.e;
-        for (std::uint32_t px = x0; px < x1; ++px) {
+        auto covered = [&](std::uint32_t px) {
           const double xa = px * sx - s.e, xb = (px + 1) * sx + s.e;
-          const dvec2 corners[4] = {{xa, ya}, {xb, ya}, {xa, yb}, {xb, yb}};
-          if (!inside(s, corners[0]) || !inside(s, corners[1]) || !inside(s, corners[2]) || !inside(s, corners[3]))
-            continue;
-          double d = front_depth(s, corners[0], reversed);
-          for (int k = 1; k < 4; ++k) {
-            const double z = front_depth(s, corners[k], reversed);
-            d = reversed ? std::min(d, z) : std::max(d, z);
+          return inside(s, {xa, ya}) && inside(s, {xb, ya}) && inside(s, {xa, yb}) && inside(s, {xb, yb});
+        };
+        // The covered pixels of a row are an interval (the silhouette is convex): its ends.
+        std::uint32_t first = x0, last = x1;
+        while (first < x1 && !covered(first)) ++first;
+        if (first == x1) continue;
+        while (last > first + 1 && !covered(last - 1)) --last;
+        double row[kMaxRow];
+        for (std::uint32_t block = first; block < last; block += kMaxRow) {
+          const std::uint32_t n = std::min<std::uint32_t>(kMaxRow, last - block);
+          for (std::uint32_t k = 0; k < n; ++k)
+            row[k] = reversed ? std::numeric_limits<double>::infinity() : -std::numeric_limits<double>::infinity();
+          for (int i = 0; i < s.plane_count; ++i) {
+            const dvec3& p = s.planes[std::size_t(i)];
+            const double bound = 0x1p-50 * (std::abs(p.x) * x_reach + std::abs(p.y) * y_reach + std::abs(p.z));
+            // The corner where the plane is farthest (reversed: smallest): x at the right end if a > 0.
+            const bool right = reversed ? p.x < 0.0 : p.x > 0.0;
+            const double offset = right ? sx + s.e : -s.e;
+            const double row_part = (reversed ? std::min(p.y * ya, p.y * yb) : std::max(p.y * ya, p.y * yb)) + p.z +
+                                    (reversed ? -bound : bound);
+            const double step = p.x * sx, start = p.x * (double(block) * sx + offset) + row_part;
+            if (reversed)
+              for (std::uint32_t k = 0; k < n; ++k) row[k] = std::min(row[k], start + step * double(k));
+            else
+              for (std::uint32_t k = 0; k < n; ++k) row[k] = std::max(row[k], start + step * double(k));
           }
-          d = reversed ? d - s.eps : d + s.eps;
-          if (!std::isfinite(d)) continue;
-          float& stored = out.depth[std::size_t(py) * width + px];
-          const float f = farther_float(d, reversed);
-          stored = reversed ? std::max(stored, f) : std::min(stored, f);  // the nearest occluder's
+          float* stored = out.depth.data() + std::size_t(py) * width + block;
+          for (std::uint32_t k = 0; k < n; ++k) {
+            // Farther by eps, then rounded to a float no nearer (a step of 2^-23 |v| covers
+            // round-to-nearest; 2^-126 the subnormals).
+            const double v = reversed ? row[k] - s.eps - (std::abs(row[k]) * 0x1p-23 + 0x1p-126)
+                                      : row[k] + s.eps + (std::abs(row[k]) * 0x1p-23 + 0x1p-126);
+            const float f = float(v);
+            stored[k] = reversed ? std::max(stored[k], f) : std::min(stored[k], f);  // the nearest occluder's
+          }
         }
       }
     }
