@@ -130,7 +130,9 @@ Row measure(const vk::Context& ctx, std::size_t n, const Config& config) {
   rc.occlusion.texels_per_axis = config.texels;
   render::Renderer frustum_renderer(ctx, scene, rc), occlusion_renderer(ctx, scene, rc);
   // The CPU path: every building a box occluder, a buffer of a quarter of the viewport's sides.
-  const std::vector<Obb> occluders = world_obbs(scene);
+  std::vector<occlusion::OccluderBox> occluders;
+  for (const SceneObject& object : scene.objects)
+    if (!object.triangles) occluders.push_back(occlusion::occluder_box(object.local_bounds, object.world));
   const std::vector<Aabb> boxes = world_aabbs(scene);
   ThreadPool pool;
   std::vector<double> cpu_ns;
@@ -153,7 +155,8 @@ Row measure(const vk::Context& ctx, std::size_t n, const Config& config) {
     std::vector<Classification> cpu(boxes.size());
     t0 = Clock::now();
     const reference::CullCounts cpu_counts = occlusion::cull_with_software_depth(
-        std::span<const Aabb>(boxes), std::span<const Obb>(occluders), Frustum::from_view_proj(path[f].view_proj()),
+        std::span<const Aabb>(boxes), std::span<const occlusion::OccluderBox>(occluders),
+        Frustum::from_view_proj(path[f].view_proj()),
         {path[f].view_proj(), config.width, config.height, path[f].reversed_z}, std::max(1u, config.width / 4),
         std::max(1u, config.height / 4), rc.occlusion, std::span<Classification>(cpu), &pool);
     const double tc = since(t0);

@@ -288,7 +288,9 @@ void expect_software_depth_conservative(const Scene& scene, const std::vector<Ca
   render::Renderer renderer(*RenderEnvironment::context, scene, config);
   gpu::DepthPyramidPass pass(*RenderEnvironment::context);
   ThreadPool pool(2);
-  const std::vector<Obb> occluders = world_obbs(scene);
+  std::vector<occlusion::OccluderBox> occluders;
+  for (const SceneObject& object : scene.objects)
+    occluders.push_back(occlusion::occluder_box(object.local_bounds, object.world));
   const std::vector<Aabb> boxes = world_aabbs(scene);
   std::size_t covered = 0, occluded = 0, gpu_occluded = 0;
   for (std::size_t v = 0; v < cameras.size(); ++v) {
@@ -310,13 +312,16 @@ void expect_software_depth_conservative(const Scene& scene, const std::vector<Ca
               << " buffer: pixel " << x << "," << y << " (buffer pixel " << px << "," << py << ") rendered at depth "
               << gpu << ", software depth " << cpu;
         }
-      for (float d : soft.depth) covered += d != clear;
+      std::size_t written = 0;
+      for (float d : soft.depth) written += d != clear;
+      EXPECT_GT(written, 0u) << "camera " << v << ", " << w << "x" << h << " buffer: nothing written";
+      covered += written;
     }
     // End to end at a quarter of the size, against the objects owning a pixel.
     std::vector<Classification> classes(boxes.size());
-    const reference::CullCounts counts =
-        occlusion::cull_with_software_depth(std::span<const Aabb>(boxes), std::span<const Obb>(occluders), frustum,
-                                            view, width / 4, height / 4, {}, std::span<Classification>(classes), &pool);
+    const reference::CullCounts counts = occlusion::cull_with_software_depth(
+        std::span<const Aabb>(boxes), std::span<const occlusion::OccluderBox>(occluders), frustum, view, width / 4,
+        height / 4, {}, std::span<Classification>(classes), &pool);
     const std::vector<bool> owners = renderer.pixel_owners(camera);
     for (std::size_t i = 0; i < boxes.size(); ++i)
       ASSERT_FALSE(owners[i] && classes[i] == Classification::Occluded)

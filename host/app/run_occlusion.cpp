@@ -124,13 +124,11 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
     }
   }
 
-  // The CPU path's occluders: the objects drawn as boxes (a mesh's box is not inside the mesh).
-  std::vector<Obb> occluders;
-  {
-    const std::vector<Obb> all_obbs = bv == BvKind::Obb ? obbs : world_obbs(scene);
-    for (std::size_t i = 0; i < scene.objects.size(); ++i)
-      if (!scene.objects[i].triangles) occluders.push_back(all_obbs[i]);
-  }
+  // The CPU path's occluders: the objects drawn as boxes, as drawn (a mesh's box is not inside
+  // the mesh).
+  std::vector<occlusion::OccluderBox> occluders;
+  for (const SceneObject& object : scene.objects)
+    if (!object.triangles) occluders.push_back(occlusion::occluder_box(object.local_bounds, object.world));
   const std::uint32_t cpu_width = std::max(1u, o.width / o.software_divisor),
                       cpu_height = std::max(1u, o.height / o.software_divisor);
   ThreadPool pool;
@@ -189,8 +187,9 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
     {  // The CPU path on the same frame, against the same owners.
       std::vector<Classification> cpu(n);
       auto cull = [&](auto volumes) {
-        return occlusion::cull_with_software_depth(volumes, std::span<const Obb>(occluders), frustum, view, cpu_width,
-                                                   cpu_height, config.occlusion, std::span<Classification>(cpu), &pool);
+        return occlusion::cull_with_software_depth(volumes, std::span<const occlusion::OccluderBox>(occluders), frustum,
+                                                   view, cpu_width, cpu_height, config.occlusion,
+                                                   std::span<Classification>(cpu), &pool);
       };
       r.cpu_occluded = bv == BvKind::Obb      ? cull(std::span<const Obb>(obbs)).occluded
                        : bv == BvKind::Sphere ? cull(std::span<const Sphere>(spheres)).occluded

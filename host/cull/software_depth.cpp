@@ -35,7 +35,7 @@ constexpr std::uint32_t kMaxRow = 256;  // pixels of a row evaluated at once
 /// functions a x + b y + c of the full-resolution pixel position (unused planes never win),
 /// and its margins in pixels and depth.
 struct Shape {
-  std::array<dvec2, 9> hull{};
+  std::array<dvec2, 17> hull{};  // (8 points; room for what near-collinear roundings may add)
   int hull_size = 0;
   std::array<dvec3, 6> planes{};
   int plane_count = 0;
@@ -49,27 +49,27 @@ double cross(const dvec2& o, const dvec2& a, const dvec2& b) {
 
 /// Andrew's monotone chain: the convex hull of `p`, counter-clockwise (in a y-down frame:
 /// every cross product of consecutive edges positive), collinear points dropped.
-int convex_hull(std::array<dvec2, 8> p, std::array<dvec2, 9>& hull) {
+int convex_hull(std::array<dvec2, 8> p, std::array<dvec2, 17>& hull) {
   std::sort(p.begin(), p.end(), [](const dvec2& a, const dvec2& b) { return a.x < b.x || (a.x == b.x && a.y < b.y); });
   int k = 0;
   for (int i = 0; i < 8; ++i) {
     while (k >= 2 && cross(hull[k - 2], hull[k - 1], p[i]) <= 0) --k;
-    hull[k++] = p[i];
+    hull[std::size_t(k++)] = p[i];
   }
   for (int i = 6, t = k + 1; i >= 0; --i) {
     while (k >= t && cross(hull[k - 2], hull[k - 1], p[i]) <= 0) --k;
-    hull[k++] = p[i];
+    hull[std::size_t(k++)] = p[i];  // (at most 16: each point pushed once per chain)
   }
   return k - 1;  // the last point repeats the first
 }
 
 /// Prepares `box` for a viewport of width x height pixels whose buffer pixels are cell_x x cell_y
 /// of them; false when the box occludes nothing here (also when it cannot cover a whole pixel).
-bool prepare(const Obb& box, const glm::dmat4& m, double width, double height, double cell_x, double cell_y,
+bool prepare(const OccluderBox& box, const glm::dmat4& m, double width, double height, double cell_x, double cell_y,
              bool reversed, Shape& s) {
   const dvec3 c(box.center);
   dvec3 a[3];
-  for (int k = 0; k < 3; ++k) a[k] = dvec3(box.basis[k]) * double(box.half_extents[k]);
+  for (int k = 0; k < 3; ++k) a[k] = dvec3(box.half_axes[k]);
   const dvec3 magnitude = glm::abs(c) + glm::abs(a[0]) + glm::abs(a[1]) + glm::abs(a[2]);
   double delta[4];
   for (int r = 0; r < 4; ++r)
@@ -133,8 +133,17 @@ bool prepare(const Obb& box, const glm::dmat4& m, double width, double height, d
       const double pc = z0 - pa * p0.x - pb * p0.y;
       if (!std::isfinite(pa) || !std::isfinite(pb) || !std::isfinite(pc)) return false;  // edge on
       const double at_centre = pa * qc.x + pb * qc.y + pc;
-      const bool behind = reversed ? at_centre < zc : at_centre > zc;
-      if (!behind) s.planes[std::size_t(s.plane_count++)] = dvec3(pa, pb, pc);
+      // Dropped only when clearly beyond the centre (the comparison's roundings are far below
+      // 2^-40 of its terms); a plane kept needlessly only moves the bound farther.
+      const double clear = 0x1p-40 * (std::abs(pa * qc.x) + std::abs(pb * qc.y) + std::abs(pc) + std::abs(zc));
+      const bool behind = reversed ? at_centre < zc - clear : at_centre > zc + clear;
+      if (behind) continue;
+      // A kept face seen (nearly) edge on: its plane's coefficients come from a near-singular
+      // solve, so the box is left out (occluding nothing is always safe).
+      const double e1 = std::abs(p1.x - p0.x) + std::abs(p1.y - p0.y),
+                   e2 = std::abs(p2.x - p0.x) + std::abs(p2.y - p0.y);
+      if (!(std::abs(det) > 0x1p-20 * e1 * e2)) return false;
+      s.planes[std::size_t(s.plane_count++)] = dvec3(pa, pb, pc);
     }
   return s.plane_count > 0 && std::isfinite(zc) && std::isfinite(qc.x) && std::isfinite(qc.y);
 }
@@ -153,8 +162,23 @@ bool inside(const Shape& s, const dvec2& q) {
 
 }  // namespace
 
-SoftwareDepth rasterise_occluders(std::span<const Obb> occluders, const OcclusionView& view, std::uint32_t width,
-                                  std::uint32_t height, ThreadPool* pool) {
+OccluderBox occluder_box(const Aabb& local, const glm::mat4& world) {
+  const glm::vec3 centre = 0.5f * (local.min + local.max), half = 0.5f * (local.max - local.min);
+  OccluderBox b;
+  b.center = glm::vec3(world * glm::vec4(centre, 1.0f));
+  for (int k = 0; k < 3; ++k) b.half_axes[k] = glm::vec3(world[k]) * half[k];
+  return b;
+}
+
+OccluderBox occluder_box(const Obb& box) {
+  OccluderBox b;
+  b.center = box.center;
+  for (int k = 0; k < 3; ++k) b.half_axes[k] = box.basis[k] * box.half_extents[k];
+  return b;
+}
+
+SoftwareDepth rasterise_occluders(std::span<const OccluderBox> occluders, const OcclusionView& view,
+                                  std::uint32_t width, std::uint32_t height, ThreadPool* pool) {
   check_view(view, view.width, view.height, view.reversed_z);
   if (width == 0 || height == 0 || width > view.width || height > view.height)
     throw std::invalid_argument("software depth: a " + std::to_string(width) + "x" + std::to_string(height) +
@@ -266,7 +290,7 @@ SoftwareDepth rasterise_occluders(std::span<const Obb> occluders, const Occlusio
 }
 
 template <class Volume>
-reference::CullCounts cull_with_software_depth(std::span<const Volume> volumes, std::span<const Obb> occluders,
+reference::CullCounts cull_with_software_depth(std::span<const Volume> volumes, std::span<const OccluderBox> occluders,
                                                const Frustum& frustum, const OcclusionView& view, std::uint32_t width,
                                                std::uint32_t height, const OcclusionOptions& options,
                                                std::span<Classification> out, ThreadPool* pool) {
@@ -298,15 +322,15 @@ reference::CullCounts cull_with_software_depth(std::span<const Volume> volumes, 
   return counts;
 }
 
-template reference::CullCounts cull_with_software_depth<Aabb>(std::span<const Aabb>, std::span<const Obb>,
+template reference::CullCounts cull_with_software_depth<Aabb>(std::span<const Aabb>, std::span<const OccluderBox>,
                                                               const Frustum&, const OcclusionView&, std::uint32_t,
                                                               std::uint32_t, const OcclusionOptions&,
                                                               std::span<Classification>, ThreadPool*);
-template reference::CullCounts cull_with_software_depth<Obb>(std::span<const Obb>, std::span<const Obb>, const Frustum&,
-                                                             const OcclusionView&, std::uint32_t, std::uint32_t,
-                                                             const OcclusionOptions&, std::span<Classification>,
-                                                             ThreadPool*);
-template reference::CullCounts cull_with_software_depth<Sphere>(std::span<const Sphere>, std::span<const Obb>,
+template reference::CullCounts cull_with_software_depth<Obb>(std::span<const Obb>, std::span<const OccluderBox>,
+                                                             const Frustum&, const OcclusionView&, std::uint32_t,
+                                                             std::uint32_t, const OcclusionOptions&,
+                                                             std::span<Classification>, ThreadPool*);
+template reference::CullCounts cull_with_software_depth<Sphere>(std::span<const Sphere>, std::span<const OccluderBox>,
                                                                 const Frustum&, const OcclusionView&, std::uint32_t,
                                                                 std::uint32_t, const OcclusionOptions&,
                                                                 std::span<Classification>, ThreadPool*);

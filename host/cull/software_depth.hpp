@@ -5,12 +5,16 @@
 // covers, so the occlusion test (occlusion.hpp) against its pyramid never hides an object
 // owning a pixel. Proof: docs/numerics.md, "Software depth".
 #include <cstdint>
+#include <glm/mat3x3.hpp>
+#include <glm/mat4x4.hpp>
+#include <glm/vec3.hpp>
 #include <span>
 #include <vector>
 
 #include "cull/depth_pyramid.hpp"
 #include "cull/occlusion.hpp"
 #include "cull/reference.hpp"
+#include "geom/aabb.hpp"
 #include "geom/frustum.hpp"
 #include "geom/obb.hpp"
 
@@ -20,21 +24,35 @@ class ThreadPool;
 
 namespace cullpipe::occlusion {
 
+/// An occluder as the GPU draws it: a parallelepiped, centre +- the three half-axis columns (any
+/// independent vectors: a sheared box is drawn sheared).
+struct OccluderBox {
+  glm::vec3 center{0.0f};
+  glm::mat3 half_axes{0.0f};
+};
+/// The box `local` drawn with the affine transform `world` (a scene's box object): exactly what
+/// the GPU draws, shear included, unlike the object's world OBB, which encloses it.
+OccluderBox occluder_box(const Aabb& local, const glm::mat4& world);
+/// An OBB drawn as itself.
+OccluderBox occluder_box(const Obb& box);
+
 /// A depth buffer of width x height pixels over the viewport of `view` (each pixel covering
 /// view.width / width by view.height / height of its pixels), cleared to the far depth, in
 /// which every occluder box drawn as a box by the GPU (its eight corners its vertices, in the
 /// vertex pipeline and rasteriser of numerics.md's model) leaves, in each pixel it covers whole,
 /// the farthest depth its front can have there, plus the margins for the GPU's roundings; a pixel
 /// keeps the nearest of its occluders' depths. A box with a corner at or behind the eye, or a
-/// non-finite value, is skipped (it occludes nothing). Rows are rasterised in parallel on `pool`
-/// (every core) when given.
+/// non-finite value, is skipped (it occludes nothing); so is one with a face seen edge on (to
+/// 2^-20 of its edges' lengths, e.g. an orthographic view straight along a box's axis), whose
+/// plane's depths this version does not trust. Rows are rasterised in parallel on `pool` (every
+/// core) when given.
 struct SoftwareDepth {
   std::uint32_t width = 0, height = 0;
   bool reversed_z = false;
   std::vector<float> depth;  ///< row-major, row 0 the top (as the GPU's depth image)
 };
-SoftwareDepth rasterise_occluders(std::span<const Obb> occluders, const OcclusionView& view, std::uint32_t width,
-                                  std::uint32_t height, ThreadPool* pool = nullptr);
+SoftwareDepth rasterise_occluders(std::span<const OccluderBox> occluders, const OcclusionView& view,
+                                  std::uint32_t width, std::uint32_t height, ThreadPool* pool = nullptr);
 
 /// The view to test objects with against a software depth's pyramid: `view`'s matrix on the
 /// buffer's own, smaller viewport.
@@ -47,7 +65,7 @@ inline OcclusionView software_view(const OcclusionView& view, const SoftwareDept
 /// does, on the buffer's viewport), in parallel on `pool` when given. `out` gets a class per
 /// volume; returns the counts.
 template <class Volume>
-reference::CullCounts cull_with_software_depth(std::span<const Volume> volumes, std::span<const Obb> occluders,
+reference::CullCounts cull_with_software_depth(std::span<const Volume> volumes, std::span<const OccluderBox> occluders,
                                                const Frustum& frustum, const OcclusionView& view, std::uint32_t width,
                                                std::uint32_t height, const OcclusionOptions& options,
                                                std::span<Classification> out, ThreadPool* pool = nullptr);
