@@ -70,27 +70,26 @@ double median_wall_ns(int repeats, const std::function<gpu::CullResult()>& pass)
 
 /// The flat and hierarchical passes with and without the pyramid of the frame `renderer` drew
 /// last, seen by `camera`; their answers against the reference's; the pyramid's build time.
-void measure_passes(const vk::Context& ctx, const Scene& scene, const Camera& camera, const render::Renderer& renderer,
-                    const Config& config, Row& row) {
-  const std::size_t n = scene.objects.size();
+void measure_passes(const vk::Context& ctx, std::span<const Aabb> boxes, const Camera& camera,
+                    const render::Renderer& renderer, const Config& config, Row& row) {
+  const std::size_t n = boxes.size();
   const occlusion::OcclusionOptions occlusion_options{config.texels};
   const Frustum frustum = Frustum::from_view_proj(camera.view_proj());
   const gpu::DepthPyramidPass& pass = *renderer.pyramid();
   const occlusion::DepthPyramid pyramid = pass.read();
   const occlusion::OcclusionView view{camera.view_proj(), config.width, config.height, camera.reversed_z};
-  const std::vector<Aabb> boxes = world_aabbs(scene);
   std::vector<Classification> expected(n);
   const reference::CullCounts counts =
-      occlusion::classify_all(std::span<const Aabb>(boxes), frustum, view, pyramid, occlusion_options, expected);
+      occlusion::classify_all(boxes, frustum, view, pyramid, occlusion_options, expected);
   row.pass_frustum_kept = counts.visible + counts.occluded;
   row.pass_occluded = counts.occluded;
   const bvh::FlatTree tree = bvh::flatten(bvh::build("binned-sah", boxes, {.max_leaf_size = bvh::kCullingLeafSize}));
   const bvh::HierarchicalResult hierarchical =
-      occlusion::cull_hierarchical(tree, std::span<const Aabb>(boxes), frustum, view, pyramid, occlusion_options);
+      occlusion::cull_hierarchical(tree, boxes, frustum, view, pyramid, occlusion_options);
   gpu::GpuCuller flat(ctx);
   gpu::BvhCuller bvh(ctx);
-  flat.upload(std::span<const Aabb>(boxes));
-  bvh.upload(tree, std::span<const Aabb>(boxes));
+  flat.upload(boxes);
+  bvh.upload(tree, boxes);
   gpu::CullOptions frustum_only;
   frustum_only.classes = false;
   frustum_only.visible_ids = false;
@@ -130,9 +129,7 @@ Row measure(const vk::Context& ctx, std::size_t n, const Config& config) {
   rc.occlusion.texels_per_axis = config.texels;
   render::Renderer frustum_renderer(ctx, scene, rc), occlusion_renderer(ctx, scene, rc);
   // The CPU path: every building a box occluder, a buffer of a quarter of the viewport's sides.
-  std::vector<occlusion::OccluderBox> occluders;
-  for (const SceneObject& object : scene.objects)
-    if (!object.triangles) occluders.push_back(occlusion::occluder_box(object.local_bounds, object.world));
+  const std::vector<occlusion::OccluderBox> occluders = render::box_occluders(scene);
   const std::vector<Aabb> boxes = world_aabbs(scene);
   ThreadPool pool;
   std::vector<double> cpu_ns;
@@ -149,7 +146,7 @@ Row measure(const vk::Context& ctx, std::size_t n, const Config& config) {
     t0 = Clock::now();
     occlusion_renderer.render(path[f], render::CullMode::Occlusion, &os);
     const double to = since(t0);
-    if (f == mid) measure_passes(ctx, scene, path[f], occlusion_renderer, config, row);
+    if (f == mid) measure_passes(ctx, boxes, path[f], occlusion_renderer, config, row);
     const std::vector<bool> owners = occlusion_renderer.pixel_owners(path[f]);
     for (std::size_t i = 0; i < owners.size(); ++i) row.missed += owners[i] && !is_visible(os.classes[i]);
     std::vector<Classification> cpu(boxes.size());

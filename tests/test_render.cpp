@@ -288,9 +288,7 @@ void expect_software_depth_conservative(const Scene& scene, const std::vector<Ca
   render::Renderer renderer(*RenderEnvironment::context, scene, config);
   gpu::DepthPyramidPass pass(*RenderEnvironment::context);
   ThreadPool pool(2);
-  std::vector<occlusion::OccluderBox> occluders;
-  for (const SceneObject& object : scene.objects)
-    occluders.push_back(occlusion::occluder_box(object.local_bounds, object.world));
+  const std::vector<occlusion::OccluderBox> occluders = render::box_occluders(scene);
   const std::vector<Aabb> boxes = world_aabbs(scene);
   std::size_t covered = 0, occluded = 0, gpu_occluded = 0;
   for (std::size_t v = 0; v < cameras.size(); ++v) {

@@ -1,6 +1,7 @@
 #include <cstdio>
 #include <ostream>
 
+#include "app/backends.hpp"
 #include "app/commands.hpp"
 #include "app/guard.hpp"
 #include "app/scene_source.hpp"
@@ -22,11 +23,8 @@ int render_command(const RenderOptions& o, std::ostream& out, std::ostream& err)
     const Scene& scene = loaded.scene;
     const std::vector<Camera> path = scene_camera_path(scene, o.views);
 
-    vk::ContextOptions options;
-    options.validation = o.device.validation;
-    options.device_filter = o.device.device;
-    options.memory_budget = VkDeviceSize(o.device.gpu_memory_mib * 1024.0 * 1024.0);
-    const vk::Context ctx(options);
+    GpuBackend gpu{o.device, nullptr, nullptr, nullptr};
+    const vk::Context& ctx = gpu.device();
     render::RendererConfig config;
     config.width = o.width;
     config.height = o.height;
@@ -103,8 +101,7 @@ int render_command(const RenderOptions& o, std::ostream& out, std::ostream& err)
       out << "  wrote " << o.top_down_path
           << " (top-down: green inside, amber intersecting, violet occluded, grey outside, white frustum)\n";
     }
-    if (ctx.validation_message_count() > 0)
-      throw vk::Error(std::to_string(ctx.validation_message_count()) + " Vulkan validation message(s) reported");
+    gpu.check_validation();
     return code;
   });
 }

@@ -89,11 +89,8 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
   if (o.frames == 0) throw InputError("--frames must be at least 1");
   const Scene& scene = loaded.scene;
   const std::vector<Camera> path = scene_camera_path(scene, o.views);
-  vk::ContextOptions context_options;
-  context_options.validation = o.device.validation;
-  context_options.device_filter = o.device.device;
-  context_options.memory_budget = VkDeviceSize(o.device.gpu_memory_mib * 1024.0 * 1024.0);
-  const vk::Context ctx(context_options);
+  GpuBackend gpu{o.device, nullptr, nullptr, nullptr};
+  const vk::Context& ctx = gpu.device();
   render::RendererConfig config;
   config.width = o.width;
   config.height = o.height;
@@ -124,11 +121,7 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
     }
   }
 
-  // The CPU path's occluders: the objects drawn as boxes, as drawn (a mesh's box is not inside
-  // the mesh).
-  std::vector<occlusion::OccluderBox> occluders;
-  for (const SceneObject& object : scene.objects)
-    if (!object.triangles) occluders.push_back(occlusion::occluder_box(object.local_bounds, object.world));
+  const std::vector<occlusion::OccluderBox> occluders = render::box_occluders(scene);
   const std::uint32_t cpu_width = std::max(1u, o.width / o.software_divisor),
                       cpu_height = std::max(1u, o.height / o.software_divisor);
   ThreadPool pool;
@@ -260,8 +253,7 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
     CullCase c{frusta, frusta.size() > 1, std::move(volumes), {}, {}};
     json_util::write_file_atomic(o.dump_path, cull_case_to_json(c, &dumped));
   }
-  if (ctx.validation_message_count() > 0)
-    throw vk::Error(std::to_string(ctx.validation_message_count()) + " Vulkan validation message(s) reported");
+  gpu.check_validation();
   if (mismatches || missed) {
     err << "error: ";
     if (mismatches) err << mismatches << " classes differ from the reference's" << (missed ? "; " : "");

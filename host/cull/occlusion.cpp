@@ -148,18 +148,13 @@ reference::CullCounts classify_all_volumes(std::span<const Volume> volumes, cons
     throw std::invalid_argument("occlusion::classify_all: " + std::to_string(out.size()) + " classes for " +
                                 std::to_string(volumes.size()) + " volumes");
   check_view(view, pyramid, options);
-  reference::CullCounts counts;
   for (std::size_t i = 0; i < volumes.size(); ++i) {
     Classification c = reference::classify(volumes[i], frustum);
     if (c != Classification::Outside && occluded(footprint(volumes[i], view), pyramid, options))
       c = Classification::Occluded;
     out[i] = c;
-    counts.inside += c == Classification::Inside;
-    counts.intersecting += c == Classification::Intersecting;
-    counts.occluded += c == Classification::Occluded;
   }
-  counts.visible = counts.inside + counts.intersecting;
-  return counts;
+  return reference::count_classes(out);
 }
 
 template <class Volume>
@@ -212,11 +207,10 @@ bvh::HierarchicalResult cull_hierarchical_volumes(const bvh::FlatTree& tree, std
     stack.push_back({tree.nodes[e.node + 1].skip, straddled, hidden});
     stack.push_back({e.node + 1, straddled, hidden});
   }
-  for (Classification c : r.classes) {
-    r.visible += is_visible(c);
-    r.inside += c == Classification::Inside;
-    r.occluded += c == Classification::Occluded;
-  }
+  const reference::CullCounts counts = reference::count_classes(r.classes);
+  r.visible = counts.visible;
+  r.inside = counts.inside;
+  r.occluded = counts.occluded;
   return r;
 }
 

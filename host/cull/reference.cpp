@@ -54,6 +54,17 @@ CullCounts classify_all_impl(std::span<const Volume> volumes, const Frustum& fru
 
 }  // namespace
 
+CullCounts count_classes(std::span<const Classification> classes) {
+  CullCounts counts;
+  for (const Classification c : classes) {
+    counts.inside += c == Classification::Inside;
+    counts.intersecting += c == Classification::Intersecting;
+    counts.occluded += c == Classification::Occluded;
+  }
+  counts.visible = counts.inside + counts.intersecting;
+  return counts;
+}
+
 CullCounts classify_all(std::span<const Aabb> v, const Frustum& f, std::span<Classification> out) {
   return classify_all_impl(v, f, out);
 }

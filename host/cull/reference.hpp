@@ -45,6 +45,8 @@ struct CullCounts {
   std::size_t occluded = 0;  ///< kept by the frustum, hidden by a depth pyramid (occlusion culling)
   bool operator==(const CullCounts&) const = default;
 };
+/// The counts of a list of classes.
+CullCounts count_classes(std::span<const Classification> classes);
 
 /// Classifies every volume; `out` must have the same size as `volumes`.
 CullCounts classify_all(std::span<const Aabb> volumes, const Frustum& frustum, std::span<Classification> out);

@@ -312,14 +312,7 @@ reference::CullCounts cull_with_software_depth(std::span<const Volume> volumes, 
     pool->parallel_for(chunks, classify_chunk);
   else
     for (std::size_t c = 0; c < chunks; ++c) classify_chunk(c);
-  reference::CullCounts counts;
-  for (Classification c : out) {
-    counts.inside += c == Classification::Inside;
-    counts.intersecting += c == Classification::Intersecting;
-    counts.occluded += c == Classification::Occluded;
-  }
-  counts.visible = counts.inside + counts.intersecting;
-  return counts;
+  return reference::count_classes(out);
 }
 
 template reference::CullCounts cull_with_software_depth<Aabb>(std::span<const Aabb>, std::span<const OccluderBox>,

@@ -591,4 +591,11 @@ Image Renderer::render(const Camera& camera, CullMode mode, FrameStats* stats) {
   return image;
 }
 
+std::vector<occlusion::OccluderBox> box_occluders(const Scene& scene) {
+  std::vector<occlusion::OccluderBox> occluders;
+  for (const SceneObject& object : scene.objects)
+    if (!object.triangles) occluders.push_back(occlusion::occluder_box(object.local_bounds, object.world));
+  return occluders;
+}
+
 }  // namespace cullpipe::render

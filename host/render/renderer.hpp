@@ -6,6 +6,7 @@
 
 #include "bounds/aabb_update.hpp"
 #include "cull/occlusion.hpp"
+#include "cull/software_depth.hpp"
 #include "geom/bv_kind.hpp"
 #include "geom/classification.hpp"
 #include "gpu/depth_pyramid_pass.hpp"
@@ -133,5 +134,10 @@ class Renderer {
   VkCommandBuffer cmd_ = VK_NULL_HANDLE;
   VkQueryPool stats_pool_ = VK_NULL_HANDLE;
 };
+
+/// The CPU occlusion path's occluders for `scene`: its objects the renderer draws as boxes (those
+/// without triangles), as it draws them (occlusion::occluder_box of the local box and the world
+/// transform). Mesh objects are left out: their boxes are not inside them.
+std::vector<occlusion::OccluderBox> box_occluders(const Scene& scene);
 
 }  // namespace cullpipe::render

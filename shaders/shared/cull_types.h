@@ -216,7 +216,7 @@ struct GpuOcclusionView {
   uint width;            // viewport = depth image size
   uint height;
   uint reversed_z;       // 1: depth 1 is nearest (GREATER test)
-  uint texels_per_axis;  // OcclusionOptions::texels_per_axis
+  uint texels_per_axis;  // OcclusionOptions::texels_per_axis (the shaders take it as specialization constant 7)
   uint level_count;
   uint reserved1;
   uint reserved2;
