@@ -106,8 +106,48 @@ int main(int argc, char** argv) {
     std::printf("\n");
   }
   const std::size_t exact_box = 4, ritter = 5, exact = 7;
-  std::printf("exact sphere / Ritter time at %zu points: %.2fx (target <= 10x)\n", sizes.back(),
+  std::printf("exact sphere / Ritter time at %zu points: %.2fx (target <= 10x)\n\n", sizes.back(),
               ms[exact].back() / ms[ritter].back());
+  {
+    // The exact sphere against Ritter on the sets where exact solvers differ most: many points
+    // inside (a cube), every point on the boundary up to rounding (a sphere's surface), and a
+    // thin set with few support candidates (a flat ellipsoid). Ritter and exact alternate.
+    std::printf("Exact sphere against Ritter (median ms of repeats, same run)\n");
+    std::printf("%-24s %10s %10s %10s %10s %8s\n", "set", "points", "ritter", "exact", "exact/rit", "target");
+    struct Case {
+      const char* name;
+      std::size_t n;
+      double target;
+      Points points;
+    };
+    const std::size_t big = std::min<std::size_t>(max_points, 1000000), small = std::max<std::size_t>(big / 10, 1);
+    SplitMix64 rng{11};
+    Case cases[] = {
+        {"cube", big, 1.5, {}}, {"sphere surface", big, 4.0, {}}, {"thin ellipsoid 1:0.1:0.01", small, 1.5, {}}};
+    for (Case& c : cases) {
+      c.points.reserve(c.n);
+      while (c.points.size() < c.n) {
+        const glm::vec3 v(rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-1, 1));
+        const float len = glm::length(v);
+        if (c.name[0] == 'c')
+          c.points.push_back(v);
+        else if (c.name[0] == 's' && len > 0.1f && len <= 1.0f)
+          c.points.push_back(v / len);
+        else if (c.name[0] == 't' && len <= 1.0f)
+          c.points.push_back(v * glm::vec3(1.0f, 0.1f, 0.01f));
+      }
+      std::vector<double> t_ritter, t_exact;
+      for (int r = 0; r < 7; ++r) {
+        t_ritter.push_back(time_ms([&] { bounds::ritter_sphere(c.points); }));
+        t_exact.push_back(time_ms([&] { bounds::exact_sphere(c.points); }));
+      }
+      const double tr = median(t_ritter), te = median(t_exact);
+      std::printf("%-24s %10zu %10.2f %10.2f %9.2fx %7.1fx\n", c.name, c.n, tr, te, te / tr, c.target);
+      report["exact_sphere"].push_back(
+          {{"set", c.name}, {"n", c.n}, {"ritter_ms", tr}, {"exact_ms", te}, {"target_ratio", c.target}});
+    }
+    std::printf("\n");
+  }
   {
     // The exact OBB on a hull of 2,500 vertices: points on an ellipsoid are all hull vertices.
     SplitMix64 rng{7};

@@ -116,6 +116,60 @@ TEST(Spheres, ExactEqualsBruteForceOnSmallSets) {
   }
 }
 
+// exact_sphere works on a core set grown by scans; Welzl over every point is the oracle. The
+// sets cover many interior points, points all on the boundary up to rounding, thin and flat
+// sets, far clusters, heavy duplication, extreme scales, and sizes on both sides of the core
+// set's fallback to Welzl over everything.
+TEST(Spheres, ExactEqualsWelzlOverEveryPoint) {
+  test::Rng rng{21};
+  for (int trial = 0; trial < 60; ++trial) {
+    const std::size_t sizes[] = {129, 400, 3000, 40000};
+    const std::size_t n = sizes[trial % 4];
+    const std::uint64_t seed = 500 + std::uint64_t(trial);
+    Points p;
+    switch (trial / 4 % 6) {
+      case 0:
+        p = random_cube(n, seed, rng.uniform(0.1f, 10.0f));
+        break;
+      case 1:
+        p = random_on_sphere(n, seed, 3.0f);
+        break;
+      case 2:
+        p = random_on_sphere(n, seed);
+        for (auto& q : p) q *= glm::vec3(1.0f, 0.1f, 0.01f) * rng.uniform(0.5f, 1.0f);
+        break;
+      case 3:
+        p = random_cube(n, seed, 0.01f);
+        for (std::size_t i = 0; i < n; i += 2) p[i] += glm::vec3(5, -3, 2);
+        break;
+      case 4:
+        for (std::size_t i = 0; i < n; ++i) p.push_back(random_cube(7, seed)[i % 7]);
+        break;
+      default:
+        p = random_cube(n, seed);
+        for (auto& q : p) q *= trial % 2 ? 1e30f : 1e-30f;
+        break;
+    }
+    SCOPED_TRACE("trial " + std::to_string(trial) + ", " + std::to_string(n) + " points");
+    const Sphere exact = exact_sphere(p), oracle = welzl_sphere(p);
+    expect_encloses(exact, p, "exact");
+    ASSERT_NEAR(exact.radius, oracle.radius, 1e-6f * oracle.radius);
+    ASSERT_LE(glm::length(glm::dvec3(exact.center) - glm::dvec3(oracle.center)), 1e-3 * double(oracle.radius));
+  }
+}
+
+// A regular tetrahedron's circumsphere is the minimum sphere of any set inside it that holds
+// its corners; 10^5 interior points make the scans find the corners among them.
+TEST(Spheres, ExactFindsTheSupportAmongManyPoints) {
+  const glm::vec3 corners[] = {{1, 1, 1}, {1, -1, -1}, {-1, 1, -1}, {-1, -1, 1}};
+  Points p = random_on_sphere(100000, 3, 1.0f);
+  for (auto& q : p) q *= 0.999f;
+  for (std::size_t i = 0; i < 4; ++i) p[i * 20011 + 7] = corners[i] / std::sqrt(3.0f);
+  const Sphere s = exact_sphere(p);
+  EXPECT_NEAR(s.radius, 1.0f, 2e-7f);
+  EXPECT_LE(glm::length(s.center), 1e-6f);
+}
+
 TEST(Spheres, KnownAnswers) {
   // Regular tetrahedron with edge 2*sqrt(2): circumradius = edge * sqrt(6) / 4 = sqrt(3).
   const Points tetra = {{1, 1, 1}, {1, -1, -1}, {-1, 1, -1}, {-1, -1, 1}};

@@ -121,11 +121,92 @@ Ball ball4(const dvec3& a, const dvec3& b, const dvec3& c, const dvec3& d, const
   return {a + offset, glm::dot(offset, offset)};
 }
 
-Tolerance tolerance_for(const std::vector<dvec3>& pts) {
-  double scale = 0.0;
-  for (const dvec3& p : pts) scale = std::max({scale, std::abs(p.x), std::abs(p.y), std::abs(p.z)});
-  const double abs = scale * 1e-14;
+Tolerance tolerance_for(std::span<const glm::vec3> pts) {
+  float scale = 0.0f;
+  for (const glm::vec3& p : pts) scale = std::max({scale, std::abs(p.x), std::abs(p.y), std::abs(p.z)});
+  const double abs = double(scale) * 1e-14;
   return {abs * abs};
+}
+
+// Welzl's algorithm, loop form, over `p` in a fixed pseudo-random order (it shuffles `p`):
+// expected O(n) ball-in-ball tests.
+Ball welzl(std::vector<dvec3>& p, const Tolerance& tol) {
+  shuffle(p, 0x5EED);
+  Ball b = ball1(p[0]);
+  for (std::size_t i = 1; i < p.size(); ++i) {
+    if (tol.contains(b, p[i])) continue;
+    b = ball1(p[i]);
+    for (std::size_t j = 0; j < i; ++j) {
+      if (tol.contains(b, p[j])) continue;
+      b = ball2(p[i], p[j]);
+      for (std::size_t k = 0; k < j; ++k) {
+        if (tol.contains(b, p[k])) continue;
+        b = ball3(p[i], p[j], p[k], tol);
+        for (std::size_t l = 0; l < k; ++l) {
+          if (tol.contains(b, p[l])) continue;
+          b = ball4(p[i], p[j], p[k], p[l], tol);
+        }
+      }
+    }
+  }
+  return b;
+}
+
+// The points farthest outside a ball, found in one pass: a buffer of candidates above an
+// admission distance that rises to the k-th largest seen whenever the buffer fills, so the
+// pass stays linear however many points lie outside.
+class FarthestOutside {
+ public:
+  explicit FarthestOutside(std::size_t k) : k_(k) { buffer_.reserve(4 * k); }
+
+  void start(double limit) {
+    buffer_.clear();
+    admit_ = limit;
+  }
+  void offer(double d2, std::uint32_t index) {
+    if (d2 <= admit_) return;
+    buffer_.push_back({d2, index});
+    if (buffer_.size() == buffer_.capacity()) keep_largest();
+  }
+  // The indices of the (at most k) farthest points offered, in no order.
+  std::span<const std::pair<double, std::uint32_t>> finish() {
+    if (buffer_.size() > k_) keep_largest();
+    return buffer_;
+  }
+  double admit() const { return admit_; }
+
+ private:
+  void keep_largest() {
+    std::nth_element(buffer_.begin(), buffer_.begin() + std::ptrdiff_t(k_ - 1), buffer_.end(),
+                     [](const auto& a, const auto& b) { return a.first > b.first; });
+    buffer_.resize(k_);
+    admit_ = std::max(admit_, buffer_[k_ - 1].first);
+  }
+
+  std::size_t k_;
+  double admit_ = 0.0;
+  std::vector<std::pair<double, std::uint32_t>> buffer_;
+};
+
+// Offers every point outside `b` (by the tolerance of Tolerance::contains) to `far`. The
+// distances of a block are computed first, in a loop the compiler vectorises, and the block
+// is searched only when its largest distance is outside.
+void scan_outside(std::span<const glm::vec3> points, const Ball& b, const Tolerance& tol, FarthestOutside& far) {
+  far.start(b.r2 * (1.0 + 1e-12) + tol.abs2);
+  constexpr std::size_t kBlock = 256;
+  double d2[kBlock];
+  for (std::size_t base = 0; base < points.size(); base += kBlock) {
+    const std::size_t m = std::min(kBlock, points.size() - base);
+    const glm::vec3* p = points.data() + base;
+    double largest = 0.0;
+    for (std::size_t i = 0; i < m; ++i) {
+      const double dx = double(p[i].x) - b.c.x, dy = double(p[i].y) - b.c.y, dz = double(p[i].z) - b.c.z;
+      d2[i] = dx * dx + dy * dy + dz * dz;
+      largest = std::max(largest, d2[i]);
+    }
+    if (largest <= far.admit()) continue;
+    for (std::size_t i = 0; i < m; ++i) far.offer(d2[i], std::uint32_t(base + i));
+  }
 }
 
 // The float sphere about `center` that encloses every point: radius = the largest distance,
@@ -197,34 +278,45 @@ Sphere refined_sphere(std::span<const glm::vec3> points, int iterations, std::ui
 
 Sphere exact_sphere(std::span<const glm::vec3> points) {
   check_points(points);
-  std::vector<dvec3> p = to_double(points);
-  shuffle(p, 0x5EED);
-  const Tolerance tol = tolerance_for(p);
-  Ball b = ball1(p[0]);
-  for (std::size_t i = 1; i < p.size(); ++i) {
-    if (tol.contains(b, p[i])) continue;
-    b = ball1(p[i]);
-    for (std::size_t j = 0; j < i; ++j) {
-      if (tol.contains(b, p[j])) continue;
-      b = ball2(p[i], p[j]);
-      for (std::size_t k = 0; k < j; ++k) {
-        if (tol.contains(b, p[k])) continue;
-        b = ball3(p[i], p[j], p[k], tol);
-        for (std::size_t l = 0; l < k; ++l) {
-          if (tol.contains(b, p[l])) continue;
-          b = ball4(p[i], p[j], p[k], p[l], tol);
-        }
-      }
-    }
+  const Tolerance tol = tolerance_for(points);
+  // The minimum ball of a subset that encloses every point is the minimum ball of them all
+  // (no ball smaller than the subset's encloses the subset). So: take the exact ball of a
+  // small core set, scan for the points outside it, add the farthest of them to the core,
+  // and repeat until none is outside. Each round grows the core's ball, and the core stays
+  // small (the support of the answer is at most 4 points), so a few linear scans, done in
+  // the cheapest form, cost about what Ritter's single pass does.
+  constexpr std::size_t kSample = 32, kAddPerScan = 32;
+  if (points.size() <= 4 * kSample) return welzl_sphere(points);
+  std::vector<dvec3> core, shuffled;
+  const std::size_t stride = points.size() / kSample;
+  for (std::size_t i = 0; i < kSample; ++i) core.push_back(dvec3(points[i * stride]));
+  shuffled = core;
+  Ball b = welzl(shuffled, tol);
+  FarthestOutside far(kAddPerScan);
+  // A core past n/4 points (a set where every scan finds many points barely outside) means
+  // the scans no longer pay for themselves; Welzl over everything ends it.
+  while (core.size() < points.size() / 4) {
+    scan_outside(points, b, tol, far);
+    const auto outside = far.finish();
+    if (outside.empty()) return enclosing_sphere(b.c, points);
+    for (const auto& [d2, index] : outside) core.push_back(dvec3(points[index]));
+    shuffled = core;
+    b = welzl(shuffled, tol);
   }
-  return enclosing_sphere(b.c, points);
+  return welzl_sphere(points);
+}
+
+Sphere welzl_sphere(std::span<const glm::vec3> points) {
+  check_points(points);
+  std::vector<dvec3> all = to_double(points);
+  return enclosing_sphere(welzl(all, tolerance_for(points)).c, points);
 }
 
 Sphere brute_force_sphere(std::span<const glm::vec3> points) {
   check_points(points);
   if (points.size() > 64) throw std::invalid_argument("brute_force_sphere: at most 64 points");
   const std::vector<dvec3> p = to_double(points);
-  const Tolerance tol = tolerance_for(p);
+  const Tolerance tol = tolerance_for(points);
   const std::size_t n = p.size();
   Ball best;
   auto consider = [&](const Ball& b) {
