@@ -11,7 +11,9 @@
 // traversal (classes or list, and test counts; the fast CPU hierarchy's counts against the
 // scalar traversal with its range_objects, whose node and object tests get their own columns).
 //
-// usage: bench_bvh [--part build|cull|all] [--sizes 1000,...] [--builders a,b|all]
+// Part "build" also times the binned SAH build on every core against one thread, interleaved.
+//
+// usage: bench_bvh [--part build|cull|all] [--sizes 1000,...] [--builders a,b|all] [--threads T]
 //                  [--cull-size N] [--leaf-size L] [--fractions 0.01,0.1,0.5] [--repeats R] [--device NAME]
 //                  [--json FILE]
 #include <algorithm>
@@ -28,6 +30,7 @@
 #include "bench_util.hpp"
 #include "bvh/builders.hpp"
 #include "bvh/bvh.hpp"
+#include "core/thread_pool.hpp"
 #include "cull/cpu_bvh_culler.hpp"
 #include "cull/cpu_culler.hpp"
 #include "cull/reference.hpp"
@@ -114,6 +117,93 @@ nlohmann::json bench_builders(const std::vector<std::size_t>& sizes, std::vector
     }
     std::printf("\n");
   }
+  return cells;
+}
+
+// The binned SAH build on one thread against the same build on `threads`, interleaved (so
+// drift in the machine's memory state hits both), fresh and through a kept BinnedSahBuilder,
+// with leaves of at most 4 and of 1. The trees must be equal, node for node.
+// What `pool`'s threads can do together on this machine: the throughput of a loop of dependent
+// arithmetic (no memory traffic) on every thread at once, relative to one thread. On a virtual
+// machine whose cores share physical ones with other work, this is well below the thread
+// count, and no build can scale past it; median of repeats.
+double machine_scaling(ThreadPool& pool) {
+  auto spin = [](std::size_t) {
+    volatile double x = 1.0;
+    for (int i = 0; i < 20'000'000; ++i) x = x * 1.0000001 + 1e-9;
+  };
+  std::vector<double> ratios;
+  for (int r = 0; r < 5; ++r) {
+    auto t0 = Clock::now();
+    spin(0);
+    const double one = since(t0);
+    t0 = Clock::now();
+    pool.parallel_for(pool.size(), spin);
+    ratios.push_back(double(pool.size()) * one / since(t0));
+  }
+  return median(ratios);
+}
+
+nlohmann::json bench_threaded(const std::vector<std::size_t>& sizes, unsigned threads, int repeats_override) {
+  ThreadPool pool(threads);
+  std::printf("Binned SAH on %u threads against one, uniform random scene, median build time (interleaved)\n\n",
+              pool.size());
+  const double ceiling = machine_scaling(pool);
+  std::printf("The machine's own scaling (dependent arithmetic on every thread against one): %.2fx\n\n", ceiling);
+  std::printf("%9s %5s %9s %12s %12s %8s %10s %s\n", "N", "leaf", "builder", "1 thread ms", "threads ms", "speedup",
+              "SAH cost", "same tree");
+  nlohmann::json cells = nlohmann::json::array();
+  for (std::size_t n : sizes) {
+    const std::vector<Aabb> boxes = world_aabbs(generate_scene(SceneKind::Uniform, n, 7));
+    const int reps = repeats_override > 0
+                         ? repeats_override
+                         : int(std::clamp<std::size_t>(2'000'000 / std::max<std::size_t>(n, 1), 5, 25));
+    for (std::uint32_t leaf : {4u, 1u})
+      for (const bool reused : {false, true}) {
+        const bvh::TopDownOptions options{leaf, 16};
+        bvh::BinnedSahBuilder one_builder, many_builder;
+        bvh::Tree one, many;
+        const auto build_one = [&] {
+          if (reused)
+            one_builder.build(boxes, options, one);
+          else
+            one = bvh::build_binned_sah(boxes, options);
+        };
+        const auto build_many = [&] {
+          if (reused)
+            many_builder.build(boxes, options, many, &pool);
+          else
+            many = bvh::build_binned_sah(boxes, options, &pool);
+        };
+        build_one();  // untimed: the first build faults in its memory
+        build_many();
+        std::vector<double> t1, tn;
+        for (int r = 0; r < reps; ++r) {
+          auto t0 = Clock::now();
+          build_one();
+          t1.push_back(since(t0));
+          t0 = Clock::now();
+          build_many();
+          tn.push_back(since(t0));
+        }
+        const bool same = one == many;
+        const double a = median(t1), b = median(tn), cost = bvh::metrics(one).sah_cost;
+        std::printf("%9zu %5u %9s %12.2f %12.2f %7.2fx %10.2f %s\n", n, leaf, reused ? "reused" : "fresh", a / 1e6,
+                    b / 1e6, a / b, cost, same ? "yes" : "NO");
+        std::fflush(stdout);
+        if (!same) throw std::runtime_error("the threaded build gave another tree at n = " + std::to_string(n));
+        cells.push_back({{"n", n},
+                         {"max_leaf_size", leaf},
+                         {"reused_builder", reused},
+                         {"threads", pool.size()},
+                         {"machine_scaling", ceiling},
+                         {"one_thread_ns", a},
+                         {"threaded_ns", b},
+                         {"speedup", a / b},
+                         {"sah_cost", cost}});
+      }
+  }
+  std::printf("\n");
   return cells;
 }
 
@@ -228,6 +318,7 @@ int main(int argc, char** argv) {
   std::size_t cull_size = 1000000;
   std::uint32_t leaf_size = bvh::kCullingLeafSize;  // (the cull part's tree)
   int repeats = 0;
+  unsigned threads = 0;
   CLI::App app{"bench_bvh: every BVH builder's time and quality, and hierarchical against flat culling"};
   app.add_option("--part", part, "build | cull | all")
       ->capture_default_str()
@@ -250,6 +341,9 @@ int main(int argc, char** argv) {
   app.add_option("--repeats", repeats, "Repeats per cell (0: chosen by size)")
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
+  app.add_option("--threads", threads, "Threads of the threaded build table (0: every core)")
+      ->capture_default_str()
+      ->check(CLI::Range(0u, 256u));
   app.add_option("--device", device, "Vulkan device name substring");
   app.add_option("--json", json_path, "Write the results as JSON");
   bench::parse_command_line(app, argc, argv);
@@ -257,6 +351,7 @@ int main(int argc, char** argv) {
   bool all_agree = true;
   try {
     if (part != "cull") j["build"] = bench_builders(sizes, builders, repeats);
+    if (part != "cull") j["threaded_build"] = bench_threaded(sizes, threads, repeats);
     if (part != "build") j["cull"] = bench_cull(cull_size, leaf_size, fractions, repeats, device, all_agree);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_bvh: %s\n", e.what());

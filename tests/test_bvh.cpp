@@ -14,6 +14,7 @@
 #include "bvh/binned_sah.hpp"
 #include "bvh/bvh.hpp"
 #include "bvh_test_util.hpp"
+#include "core/thread_pool.hpp"
 #include "cull/reference.hpp"
 #include "scene/generators.hpp"
 #include "scene/gltf_scene.hpp"
@@ -266,6 +267,79 @@ TEST(Bvh, BinnedBuilderVariantsBuildTheSameTree) {
         ASSERT_EQ(bvh::check_tree(base, set), "") << set.size() << " objects, leaf " << leaf << ", bins " << bins;
         ASSERT_TRUE(same_bits(wide, base)) << set.size() << " objects, leaf " << leaf << ", bins " << bins;
       }
+}
+
+// Sets large enough to be built on several threads (past the 4,096-object cut), taking every
+// path of the shared passes at the top: boxes, duplicated points, a line, equal boxes (split
+// by id from the root), subnormal spreads, huge coordinates and boxes reaching to infinity,
+// zeros of both signs; and one set past 65,536 objects, where the cut is n / 16.
+std::vector<std::vector<Aabb>> threaded_sets() {
+  std::vector<std::vector<Aabb>> sets;
+  test::Rng rng{93};
+  std::vector<Aabb> boxes(30000), points(9000), line, tiny, huge, infinite(12000), zeros, big(150000);
+  for (Aabb& b : boxes) b = test::random_aabb(rng, 60.0f, 4.0f);
+  for (Aabb& b : points) {
+    const glm::vec3 p = rng.vec3(-20.0f, 20.0f);
+    b = {p, p};
+  }
+  for (std::size_t i = 0; i < 3000; ++i) points[i] = points[i + 4000];
+  for (int i = 0; i < 9000; ++i)
+    line.push_back({glm::vec3(float(i % 37), 0, 0), glm::vec3(float(i % 37) + 0.5f, 0, 0)});
+  for (int i = 0; i < 6000; ++i)
+    tiny.push_back({glm::vec3(float(i % 300) * 1e-44f), glm::vec3(float(i % 300) * 1e-44f)});
+  for (int i = 0; i < 8000; ++i) {
+    const glm::vec3 c = rng.vec3(-1.0f, 1.0f) * 1e37f;
+    huge.push_back({c - glm::vec3(1e36f), c + glm::vec3(1e36f)});
+  }
+  for (Aabb& b : infinite) b = test::random_aabb(rng, 30.0f, 2.0f);
+  for (std::size_t i = 0; i < 200; ++i) infinite[i * 37].max.x = INFINITY;
+  for (std::size_t i = 0; i < 100; ++i) infinite[i * 53 + 3].min.y = -INFINITY;
+  infinite[100] = {glm::vec3(INFINITY), glm::vec3(INFINITY)};
+  infinite[101] = {glm::vec3(-INFINITY, 0, 0), glm::vec3(INFINITY, 0, 0)};
+  for (int i = 0; i < 7000; ++i) {
+    const float z = i % 3 == 0 ? -0.0f : 0.0f;
+    const glm::vec3 p(float(i % 5) - 2.0f, z, i % 2 ? z : 0.0f);
+    zeros.push_back({p, p + glm::vec3(i % 7 == 0 ? 0.0f : 1.0f)});
+  }
+  for (Aabb& b : big) b = test::random_aabb(rng, 1000.0f, 1.0f);
+  sets = {boxes, points, line, tiny, huge, infinite, zeros, std::vector<Aabb>(9000, Aabb{glm::vec3(-1), glm::vec3(2)}),
+          big};
+  return sets;
+}
+
+// On a pool of 2, 3 or 4 threads, the binned builder (either variant) gives the one-thread
+// tree, bit for bit, for several leaf sizes and bin counts; a reused builder too.
+TEST(Bvh, BinnedBuildOnSeveralThreadsIsTheOneThreadTree) {
+  ThreadPool pools[] = {ThreadPool(2), ThreadPool(3), ThreadPool(4)};
+  const std::vector<std::vector<Aabb>> sets = threaded_sets();
+  for (std::size_t k = 0; k < sets.size(); ++k) {
+    const std::vector<Aabb>& set = sets[k];
+    const bool big = set.size() > 100000;
+    for (std::uint32_t leaf : {1u, 4u, 7u})
+      for (std::uint32_t bins : {5u, 16u, 256u}) {
+        if (big && (bins != 16u || leaf == 7u)) continue;
+        SCOPED_TRACE("set " + std::to_string(k) + " (" + std::to_string(set.size()) + " objects), leaf " +
+                     std::to_string(leaf) + ", bins " + std::to_string(bins));
+        const bvh::Tree one = bvh::build_binned_sah(set, {leaf, bins});
+        ASSERT_EQ(bvh::check_tree(one, set), "");
+        for (ThreadPool& pool : pools) {
+          if (big && pool.size() == 3) continue;
+          ASSERT_TRUE(same_bits(bvh::build_binned_sah(set, {leaf, bins}, &pool), one)) << pool.size() << " threads";
+          bvh::detail::BinnedScratch scratch;
+          bvh::Tree base;
+          bvh::detail::baseline::build(set, {leaf, bins}, scratch, base, &pool);
+          ASSERT_TRUE(same_bits(base, one)) << "baseline variant, " << pool.size() << " threads";
+        }
+      }
+  }
+  bvh::BinnedSahBuilder builder;
+  bvh::Tree tree;
+  for (int round = 0; round < 2; ++round)
+    for (std::size_t k : {0u, 6u, 1u}) {
+      builder.build(sets[k], {}, tree, &pools[0]);
+      ASSERT_TRUE(same_bits(tree, bvh::build_binned_sah(sets[k])))
+          << "reused builder, set " << k << ", round " << round;
+    }
 }
 
 // A builder kept between builds (growing, shrinking, other options) gives build_binned_sah's

@@ -11,6 +11,7 @@
 #include "app/guard.hpp"
 #include "app/scene_source.hpp"
 #include "bvh/builders.hpp"
+#include "core/thread_pool.hpp"
 #include "scene/json_util.hpp"
 
 namespace cullpipe::app {
@@ -63,15 +64,18 @@ int bvh_command(const BvhOptions& o, std::ostream& out, std::ostream& err) {
       if (!from_all && n > builder_size_limit(name))
         throw InputError("--builder " + name + " is an exact oracle for at most " +
                          std::to_string(builder_size_limit(name)) + " objects; this scene has " + std::to_string(n));
+    ThreadPool pool(o.threads);
     out << "cullpipe bvh: " << (loaded.scene.name.empty() ? loaded.source : loaded.scene.name) << " (" << loaded.source
         << "), " << n << " objects, leaves of <= " << o.leaf_size << ", median of " << o.repeats
-        << (o.repeats == 1 ? " build\n\n" : " builds\n\n");
+        << (o.repeats == 1 ? " build" : " builds") << "; binned-sah on " << pool.size()
+        << (pool.size() == 1 ? " thread\n\n" : " threads\n\n");
     out << "  " << left("builder", 26)
         << "  build ms  Mobj/s   SAH cost     nodes    leaves  depth  leaf depth  balance  volume  overlap\n";
 
     nlohmann::json report = nlohmann::json::array();
     bvh::BuildOptions options;
     options.max_leaf_size = o.leaf_size;
+    options.pool = &pool;
     for (const auto& [name, from_all] : names) {
       if (n > builder_size_limit(name)) {  // only from "all": named ones were checked above
         out << "  " << left(name, 26) << "  skipped: an exact oracle, for at most " << builder_size_limit(name)

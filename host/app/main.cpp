@@ -155,6 +155,12 @@ int main(int argc, char** argv) {
   bvh_cmd->add_option("--repeats", bvh.repeats, "Builds per builder; the median time is reported")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
+  bvh_cmd
+      ->add_option("--threads", bvh.threads,
+                   "Threads of the builders that run on several (binned-sah, the same tree on any number); 0: "
+                   "every core")
+      ->capture_default_str()
+      ->check(CLI::Range(0u, 256u));
   bvh_cmd->add_option("--json", bvh.json_path, "Write every builder's metrics as JSON");
   bvh_cmd->add_flag("--list", list_builders, "List the builders and exit");
 

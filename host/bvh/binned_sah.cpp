@@ -47,6 +47,18 @@ void BinnedScratch::reserve(std::size_t n) {
   capacity = n;
 }
 
+void BinnedScratch::reserve_nodes(std::size_t n) {
+  if (node_capacity >= n) return;
+  node_capacity = 0;
+  nodes.reset();
+  // Raw memory: a Node is an implicit-lifetime aggregate, so the array begins to exist in it
+  // without a constructor touching every page here, on one thread; each subtree's task
+  // touches its own region's pages, and writes every slot before reading it.
+  nodes.reset(static_cast<Node*>(::operator new[](2 * n * sizeof(Node))));
+  cullpipe::detail::advise_huge_pages(nodes.get(), 2 * n * sizeof(Node));
+  node_capacity = n;
+}
+
 bool binned_sah_avx2_available() {
 #if defined(CULLPIPE_HAVE_X86_BUILDERS)
   // __builtin_cpu_init first: a build from a static initialiser may run before the runtime's.
@@ -71,8 +83,9 @@ bool use_avx2() {
 
 #if !defined(CULLPIPE_HAVE_X86_BUILDERS)
 namespace avx2 {
-void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScratch& scratch, Tree& tree) {
-  baseline::build(boxes, options, scratch, tree);
+void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScratch& scratch, Tree& tree,
+           ThreadPool* pool) {
+  baseline::build(boxes, options, scratch, tree, pool);
 }
 }  // namespace avx2
 #endif
@@ -84,20 +97,20 @@ BinnedSahBuilder::~BinnedSahBuilder() = default;
 BinnedSahBuilder::BinnedSahBuilder(BinnedSahBuilder&&) noexcept = default;
 BinnedSahBuilder& BinnedSahBuilder::operator=(BinnedSahBuilder&&) noexcept = default;
 
-void BinnedSahBuilder::build(std::span<const Aabb> boxes, const TopDownOptions& options, Tree& tree) {
+void BinnedSahBuilder::build(std::span<const Aabb> boxes, const TopDownOptions& options, Tree& tree, ThreadPool* pool) {
   if (!scratch_) scratch_ = std::make_unique<detail::BinnedScratch>();  // a moved-from builder
   if (detail::use_avx2()) {
-    detail::avx2::build(boxes, options, *scratch_, tree);
+    detail::avx2::build(boxes, options, *scratch_, tree, pool);
   } else {
-    detail::baseline::build(boxes, options, *scratch_, tree);
+    detail::baseline::build(boxes, options, *scratch_, tree, pool);
   }
 }
 
 void BinnedSahBuilder::release() { scratch_ = std::make_unique<detail::BinnedScratch>(); }
 
-Tree build_binned_sah(std::span<const Aabb> boxes, const TopDownOptions& options) {
+Tree build_binned_sah(std::span<const Aabb> boxes, const TopDownOptions& options, ThreadPool* pool) {
   Tree tree;
-  BinnedSahBuilder().build(boxes, options, tree);
+  BinnedSahBuilder().build(boxes, options, tree, pool);
   return tree;
 }
 

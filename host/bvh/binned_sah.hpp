@@ -9,6 +9,10 @@
 
 #include "bvh/bvh.hpp"
 
+namespace cullpipe {
+class ThreadPool;
+}
+
 namespace cullpipe::bvh::detail {
 
 /// A box as eight floats: its minimum corner (x, y, z, +inf) and its maximum corner negated
@@ -24,23 +28,33 @@ struct alignas(32) Box8 {
 };
 
 /// The builder's per-object working memory: two buffers of records (a split moves a node's
-/// records from one to the other) and each record's three bin indices.
+/// records from one to the other) and each record's three bin indices; for a build on several
+/// threads, room for its subtrees' nodes (2 per object).
 struct BinnedScratch {
   std::size_t capacity = 0;  ///< objects the buffers hold
   std::unique_ptr<Box8[]> buffer[2];
   std::unique_ptr<std::uint32_t[]> bin_of;
+  std::size_t node_capacity = 0;  ///< objects `nodes` has room for
+  struct RawDelete {
+    void operator()(Node* p) const { ::operator delete[](p); }
+  };
+  std::unique_ptr<Node[], RawDelete> nodes;  ///< raw memory (operator new[]): see reserve_nodes
   /// Room for n objects (kept when there already is; left uninitialised).
   void reserve(std::size_t n);
+  /// Room for the nodes of n objects' subtrees (kept when there already is).
+  void reserve_nodes(std::size_t n);
 };
 
 namespace baseline {
 /// SSE2 on x86-64 (every x86-64 CPU has it), plain C++ elsewhere.
-void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScratch& scratch, Tree& tree);
+void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScratch& scratch, Tree& tree,
+           ThreadPool* pool = nullptr);
 }  // namespace baseline
 
 namespace avx2 {
 /// AVX2 (a target pragma on its functions alone); call only when binned_sah_avx2_available().
-void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScratch& scratch, Tree& tree);
+void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScratch& scratch, Tree& tree,
+           ThreadPool* pool = nullptr);
 }  // namespace avx2
 
 /// True when the AVX2 variant is built in and this CPU runs it.

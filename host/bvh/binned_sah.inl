@@ -20,10 +20,12 @@
 
 #include "bvh/binned_sah.hpp"
 #include "core/huge_pages.hpp"
+#include "core/thread_pool.hpp"
 
 namespace cullpipe::bvh::detail::CULLPIPE_BINNED_NS {
 namespace {
 
+constexpr std::size_t kCacheLine = 64;
 constexpr Box8 kEmpty{{INFINITY, INFINITY, INFINITY, INFINITY, INFINITY, INFINITY, INFINITY, INFINITY}};
 
 // Centroids and bin coordinates: x, y, z and an unused fourth lane.
@@ -210,12 +212,13 @@ constexpr std::size_t kByteOf[3] = {kLittle ? 0u : 3u, kLittle ? 1u : 2u, kLittl
 // list[j+1..k-1] right; its cost is half_area(left) * |left| + half_area(right) * |right|.
 class Sweep {
  public:
+  // (Each array ends in a cache line's worth of slots never used: see Workspace.)
   explicit Sweep(std::uint32_t bins)
-      : left_(round4(bins)),
-        right_(round4(bins)),
-        nl_(round4(bins)),
-        nr_(CULLPIPE_BINNED_AVX2 ? 0 : round4(bins)),
-        cost_(round4(bins)) {}
+      : left_(round4(bins) + kCacheLine / sizeof(Box8)),
+        right_(round4(bins) + kCacheLine / sizeof(Box8)),
+        nl_(round4(bins) + kCacheLine / sizeof(std::uint32_t)),
+        nr_(CULLPIPE_BINNED_AVX2 ? 0 : round4(bins) + kCacheLine / sizeof(double)),
+        cost_(round4(bins) + kCacheLine / sizeof(double)) {}
 
   // The first candidate with the axis's least cost, when that cost is below best_cost (which
   // it then becomes); else kNone. Costs that are NaN never win; neither does +infinity.
@@ -461,6 +464,528 @@ void bounds_of(const Box8* refs, std::uint32_t count, Box8& box, PointBox& centr
   }
 }
 
+// `into` grown by the centroid box `later` of records that come after its own, lane by lane as
+// grow_point grows it by their centroids one by one: minimums and maximums are exact, and ties
+// keep the value `into` holds (the earlier record's), so a box gathered in pieces is the box
+// gathered in one pass, bit for bit (-0 against +0 included).
+inline void merge_later(PointBox& into, const PointBox& later) {
+#if defined(__SSE2__)
+  _mm_store_ps(into.lo.v, _mm_min_ps(_mm_load_ps(later.lo.v), _mm_load_ps(into.lo.v)));
+  _mm_store_ps(into.hi.v, _mm_max_ps(_mm_load_ps(later.hi.v), _mm_load_ps(into.hi.v)));
+#else
+  for (int k = 0; k < 4; ++k) {
+    into.lo.v[k] = later.lo.v[k] < into.lo.v[k] ? later.lo.v[k] : into.lo.v[k];
+    into.hi.v[k] = into.hi.v[k] < later.hi.v[k] ? later.hi.v[k] : into.hi.v[k];
+  }
+#endif
+}
+
+// A build's constants.
+struct Params {
+  std::uint32_t max_leaf, bins, stride;
+  float last_bin;
+};
+
+// A node waiting to be split.
+struct Task {
+  std::uint32_t node, first, count;
+  std::uint32_t buffer;  // which buffer holds the node's records
+  PointBox centroids;    // the box of the node's centroids (its box is in the node)
+};
+
+// One thread's bins. Bins of axis a are bin[a * stride, a * stride + bins), each a box, and
+// their object counts count[a * stride + b] (integers beside the boxes); all empty between
+// nodes. The stride rounds up to whole groups of the non-zero mask (the padding counts stay 0).
+// Threads write their own workspaces for every node (every record, for the bins), so no
+// cache line may hold two threads' data: a workspace is aligned to a line, and its arrays
+// (and the sweep's) end in a line's worth of slots never used, so the next allocation's data
+// starts on a line of its own. Without that, building the subtrees took 1.8x as long on 2
+// threads as on one.
+struct alignas(kCacheLine) Workspace {
+  explicit Workspace(const Params& p)
+      : bin(3 * std::size_t(p.stride) + kCacheLine / sizeof(Box8), kEmpty),
+        count(3 * std::size_t(p.stride) + kCacheLine / sizeof(std::uint32_t), 0),
+        used(3 * std::size_t(p.stride) + kCacheLine / sizeof(std::uint32_t)),
+        sweep(p.bins) {}
+  std::vector<Box8> bin;
+  std::vector<std::uint32_t> count;
+  std::vector<std::uint32_t> used;  // non-empty bins per axis, ascending
+  std::uint32_t used_count[3] = {0, 0, 0};
+  Sweep sweep;
+};
+
+// How a node's centroids map to bins: a flat axis (zero or subnormal extent) is binned with
+// scale 0 (everything in bin 0) and not considered.
+struct Binning {
+  Lanes lo{{0, 0, 0, 0}}, scale{{0, 0, 0, 0}}, last{{0, 0, 0, 0}};
+  bool usable[3] = {false, false, false};
+};
+inline Binning binning_of(const PointBox& centroids, const Params& p) {
+  Binning b;
+  b.last = Lanes{{p.last_bin, p.last_bin, p.last_bin, 0}};
+  for (int axis = 0; axis < 3; ++axis) {
+    b.lo.v[axis] = centroids.lo.v[axis];
+    const float extent = centroids.hi.v[axis] - b.lo.v[axis];
+    b.scale.v[axis] = float(p.bins) / extent;
+    b.usable[axis] = extent > 0.0f && std::isfinite(extent) && std::isfinite(b.scale.v[axis]);
+    if (!b.usable[axis]) b.scale.v[axis] = 0.0f;
+  }
+  return b;
+}
+
+// Bins records [0, count) of objs along all three axes in one pass, saving each record's
+// packed bin indices in bin_of[0, count).
+inline void bin_records(const Box8* objs, std::uint32_t count, std::uint32_t* bin_of, const Binning& binning,
+                        Workspace& ws, std::uint32_t stride) {
+  Box8* const bin0 = ws.bin.data();
+  Box8* const bin1 = bin0 + stride;
+  Box8* const bin2 = bin1 + stride;
+  std::uint32_t* const count0 = ws.count.data();
+  std::uint32_t* const count1 = count0 + stride;
+  std::uint32_t* const count2 = count1 + stride;
+  // Each record's bin indices are computed three records ahead of its bin updates: their
+  // long chain of dependent operations then never holds up the updates, and more records
+  // are in flight at once (fewer ahead hide less of the chain; more gain nothing). Past the
+  // last record, the last one is computed again.
+  const std::uint32_t final_i = count - 1;
+  const auto indices_of = [&](std::uint32_t i) {
+    return bin_indices(centroid(objs[std::min(i, final_i)]), binning.lo, binning.scale, binning.last);
+  };
+  auto ahead1 = indices_of(0), ahead2 = indices_of(1), ahead3 = indices_of(2);
+  for (std::uint32_t i = 0; i < count; ++i) {
+    const Rec r = load(objs[i]);
+    const auto idx = ahead1;
+    ahead1 = ahead2;
+    ahead2 = ahead3;
+    ahead3 = indices_of(i + 3);
+    bin_of[i] = packed(idx);
+    // Byte offsets of the bins' counts (4 bytes each); their boxes are at 8 times those.
+    std::uint32_t o0, o1, o2;
+    index3(times4(idx), o0, o1, o2);
+    grow(box_at(bin0, o0), r);
+    ++count_at(count0, o0);
+    grow(box_at(bin1, o1), r);
+    ++count_at(count1, o1);
+    grow(box_at(bin2, o2), r);
+    ++count_at(count2, o2);
+  }
+}
+
+// The best binned SAH split over the three axes of a node of `count` objects whose records
+// are in ws's bins: bins [0, split] of `axis` go left; axis -1 when no candidate wins.
+struct Choice {
+  int axis = -1;
+  std::uint32_t split = 0;
+};
+inline Choice choose_split(Workspace& ws, const Binning& binning, std::uint32_t count, std::uint32_t stride) {
+  for (int axis = 0; axis < 3; ++axis)
+    ws.used_count[axis] =
+        list_used(ws.count.data() + std::size_t(axis) * stride, stride, ws.used.data() + std::size_t(axis) * stride);
+  double best_cost = INFINITY;
+  Choice c;
+  for (int axis = 0; axis < 3; ++axis) {
+    if (!binning.usable[axis]) continue;
+    const std::uint32_t* list = ws.used.data() + std::size_t(axis) * stride;
+    const std::uint32_t j =
+        ws.sweep.best(ws.bin.data() + std::size_t(axis) * stride, ws.count.data() + std::size_t(axis) * stride, list,
+                      ws.used_count[axis], count, best_cost);
+    if (j != kNone) c.axis = axis, c.split = list[j];
+  }
+  return c;
+}
+
+// Empties ws's bins (the non-empty ones choose_split listed) for the next node.
+inline void clear_bins(Workspace& ws, std::uint32_t stride) {
+  for (int axis = 0; axis < 3; ++axis)
+    for (std::uint32_t j = 0; j < ws.used_count[axis]; ++j) {
+      const std::size_t b = std::size_t(axis) * stride + ws.used[std::size_t(axis) * stride + j];
+      ws.bin[b] = kEmpty;
+      ws.count[b] = 0;
+    }
+}
+
+// A node's split: [0, mid) of its range goes left, in buffer child_buffer.
+struct Split {
+  std::uint32_t mid = 0, child_buffer = 0;
+  Box8 left_box = kEmpty, right_box = kEmpty;
+  PointBox left_centroids, right_centroids;
+};
+
+// The left side's object count and both children's boxes: unions of the chosen bins.
+inline void children_from_bins(const Workspace& ws, const Choice& c, std::uint32_t stride, Split& s) {
+  const Box8* axis_bin = ws.bin.data() + std::size_t(c.axis) * stride;
+  const std::uint32_t* list = ws.used.data() + std::size_t(c.axis) * stride;
+  for (std::uint32_t j = 0; j < ws.used_count[c.axis]; ++j) {
+    const std::uint32_t b = list[j];
+    if (b <= c.split) s.mid += ws.count[std::size_t(c.axis) * stride + b];
+    grow(b <= c.split ? s.left_box : s.right_box, axis_bin[b]);
+  }
+}
+
+// Moves records [0, count) of objs, stably, to out: bins [0, split] of `axis` to out[l, ...),
+// the others to out[r, ...), gathering each side's centroid box on the way; l and r end past
+// the last record each side received.
+inline void partition_records(const Box8* objs, std::uint32_t count, const std::uint32_t* bin_of, int axis,
+                              std::uint32_t split, Box8* out, std::uint32_t& l, std::uint32_t& r,
+                              SideCentroids& sides) {
+  // Each record's bin along the split axis: byte `axis` of its packed indices.
+  const std::uint8_t* const split_bin = reinterpret_cast<const std::uint8_t*>(bin_of) + kByteOf[axis];
+  for (std::uint32_t i = 0; i < count; ++i) {
+    const Box8& ref = objs[i];
+    const std::uint32_t go_left =
+        split_bin[sizeof(std::uint32_t) * std::size_t(i)] <= split;  // size_t: nodes past 2^30 objects
+    // l or r, as a select: GCC makes it a conditional move in both variants (a branch on
+    // go_left would mispredict wherever the sides follow no pattern). `r + (l - r) * go_left` and
+    // `r ^ ((l ^ r) & -go_left)` are branch-free whatever the compiler does, but cost more.
+    const std::uint32_t at = go_left ? l : r;
+    copy(out[at], ref);
+    sides.add(ref, go_left);
+    l += go_left;
+    r += go_left ^ 1u;
+  }
+}
+
+// A split that moved nothing (all centroids equal, or no candidate won) splits the range in
+// half by id: every node's records are already in id order (the root's are, and the partition
+// and this split keep the order), so the halves are the lower and the upper ids.
+inline void split_in_half_if_one_sided(const Task& task, const Box8* objs, Split& s) {
+  if (s.mid != 0 && s.mid != task.count) return;
+  s.mid = task.count / 2;
+  s.child_buffer = task.buffer;
+  s.left_box = s.right_box = kEmpty;
+  s.left_centroids = s.right_centroids = PointBox{};
+  bounds_of(objs, s.mid, s.left_box, s.left_centroids);
+  bounds_of(objs + s.mid, task.count - s.mid, s.right_box, s.right_centroids);
+}
+
+// A node's split on the calling thread.
+inline Split split_node(const Task& task, Box8* const buffer[2], std::uint32_t* bin_of_all, Workspace& ws,
+                        const Params& p) {
+  const Box8* objs = buffer[task.buffer] + task.first;
+  std::uint32_t* const bin_of = bin_of_all + task.first;
+  const Binning binning = binning_of(task.centroids, p);
+  bin_records(objs, task.count, bin_of, binning, ws, p.stride);
+  const Choice c = choose_split(ws, binning, task.count, p.stride);
+  Split s;
+  s.child_buffer = task.buffer;
+  if (c.axis >= 0) {
+    children_from_bins(ws, c, p.stride, s);
+    s.child_buffer = 1 - task.buffer;
+    std::uint32_t l = 0, r = s.mid;
+    SideCentroids sides;
+    partition_records(objs, task.count, bin_of, c.axis, c.split, buffer[s.child_buffer] + task.first, l, r, sides);
+    if (l != s.mid || r != task.count)
+      throw std::logic_error("build_binned_sah: bin counts disagree with the partition");
+    s.left_centroids = sides.left();
+    s.right_centroids = sides.right();
+  }
+  clear_bins(ws, p.stride);
+  split_in_half_if_one_sided(task, objs, s);
+  return s;
+}
+
+// Chunk c of `chunks` equal parts of [0, count).
+inline std::uint32_t chunk_begin(std::uint32_t count, std::size_t c, std::size_t chunks) {
+  return std::uint32_t(std::uint64_t(count) * c / chunks);
+}
+
+// The same split as split_node, with each pass over the records cut into one chunk per thread
+// of `pool`. Bins and centroid boxes are gathered per chunk and merged in chunk order, where
+// ties keep the earlier chunk's value, as one pass keeps the earlier record's; counts are
+// integers; the partition writes each chunk's records where the one-pass partition would (its
+// start on each side is the earlier chunks' counts). So the split is split_node's, bit for bit.
+Split split_node_parallel(const Task& task, Box8* const buffer[2], std::uint32_t* bin_of_all,
+                          std::vector<Workspace>& ws, const Params& p, ThreadPool& pool) {
+  const Box8* objs = buffer[task.buffer] + task.first;
+  std::uint32_t* const bin_of = bin_of_all + task.first;
+  const std::size_t chunks = ws.size();
+  const Binning binning = binning_of(task.centroids, p);
+  auto bin_chunk = [&](std::size_t c) {
+    const std::uint32_t b = chunk_begin(task.count, c, chunks), e = chunk_begin(task.count, c + 1, chunks);
+    if (e > b) bin_records(objs + b, e - b, bin_of + b, binning, ws[c], p.stride);
+  };
+  pool.parallel_for(chunks, bin_chunk);
+  const std::size_t slots = 3 * std::size_t(p.stride);
+  for (std::size_t c = 1; c < chunks; ++c)
+    for (std::size_t b = 0; b < slots; ++b)
+      if (ws[c].count[b] != 0) {
+        grow(ws[0].bin[b], ws[c].bin[b]);
+        ws[0].count[b] += ws[c].count[b];
+      }
+  const Choice choice = choose_split(ws[0], binning, task.count, p.stride);
+  Split s;
+  s.child_buffer = task.buffer;
+  if (choice.axis >= 0) {
+    children_from_bins(ws[0], choice, p.stride, s);
+    // Each chunk's start on either side: the earlier chunks' left and right counts (from their
+    // own bins; chunk 0's are the rest).
+    std::vector<std::uint32_t> left_start(chunks + 1, 0), right_start(chunks + 1, s.mid);
+    std::uint32_t left_of_others = 0;
+    for (std::size_t c = 1; c < chunks; ++c) {
+      std::uint32_t left = 0;
+      for (std::uint32_t b = 0; b <= choice.split; ++b) left += ws[c].count[std::size_t(choice.axis) * p.stride + b];
+      left_start[c + 1] = left;  // (made a running sum below)
+      left_of_others += left;
+    }
+    left_start[1] = s.mid - left_of_others;
+    for (std::size_t c = 1; c <= chunks; ++c) {
+      const std::uint32_t size = chunk_begin(task.count, c, chunks) - chunk_begin(task.count, c - 1, chunks);
+      right_start[c] = right_start[c - 1] + (size - left_start[c]);
+      left_start[c] += left_start[c - 1];
+    }
+    s.child_buffer = 1 - task.buffer;
+    Box8* const out = buffer[s.child_buffer] + task.first;
+    std::vector<PointBox> lefts(chunks), rights(chunks);
+    std::vector<std::uint8_t> agree(chunks, 0);
+    auto move_chunk = [&](std::size_t c) {
+      const std::uint32_t b = chunk_begin(task.count, c, chunks), e = chunk_begin(task.count, c + 1, chunks);
+      std::uint32_t l = left_start[c], r = right_start[c];
+      SideCentroids sides;
+      partition_records(objs + b, e - b, bin_of + b, choice.axis, choice.split, out, l, r, sides);
+      agree[c] = l == left_start[c + 1] && r == right_start[c + 1];
+      lefts[c] = sides.left();
+      rights[c] = sides.right();
+    };
+    pool.parallel_for(chunks, move_chunk);
+    for (std::size_t c = 0; c < chunks; ++c)
+      if (!agree[c]) throw std::logic_error("build_binned_sah: bin counts disagree with the partition");
+    s.left_centroids = lefts[0];
+    s.right_centroids = rights[0];
+    for (std::size_t c = 1; c < chunks; ++c) {
+      merge_later(s.left_centroids, lefts[c]);
+      merge_later(s.right_centroids, rights[c]);
+    }
+  }
+  for (Workspace& w : ws) {
+    std::fill(w.bin.begin(), w.bin.end(), kEmpty);
+    std::fill(w.count.begin(), w.count.end(), 0u);
+  }
+  split_in_half_if_one_sided(task, objs, s);
+  return s;
+}
+
+// A node of at most max_leaf objects becomes a leaf: its range and its objects' ids. Up to
+// kFixedLeafWrite ids go as a fixed run of that many slots (no branch on the count), the slots
+// past the leaf's range rewritten with what they hold, when the run stays inside `limit` (the
+// range of objects only this thread writes).
+constexpr std::uint32_t kFixedLeafWrite = 4;
+inline void make_leaf(Node& node, std::uint32_t first, std::uint32_t count, const Box8* records, std::uint32_t* objects,
+                      std::uint32_t limit, bool fixed_leaf_write) {
+  node.first = first;
+  node.count = count;
+  const Box8* objs = records + first;
+  std::uint32_t* ids = objects + first;
+  if (fixed_leaf_write && first + kFixedLeafWrite <= limit) {
+    for (std::uint32_t i = 0; i < kFixedLeafWrite; ++i) ids[i] = i < count ? objs[i].id() : ids[i];
+  } else {
+    for (std::uint32_t i = 0; i < count; ++i) ids[i] = objs[i].id();
+  }
+}
+
+// Nodes appended to a vector (the whole tree on one thread) or to raw memory (a subtree).
+struct VectorNodes {
+  std::vector<Node>& v;
+  std::uint32_t size() const { return std::uint32_t(v.size()); }
+  void add_two() {
+    v.emplace_back();
+    v.emplace_back();
+  }
+  Node& operator[](std::uint32_t i) { return v[i]; }
+};
+struct RawNodes {
+  Node* data;
+  std::uint32_t count;
+  std::uint32_t size() const { return count; }
+  void add_two() {
+    data[count] = Node{};
+    data[count + 1] = Node{};
+    count += 2;
+  }
+  Node& operator[](std::uint32_t i) { return data[i]; }
+};
+
+// Splits `root` and everything below it on the calling thread, depth first, the left child
+// first: a node's two children are appended when it is split, so a subtree's nodes follow its
+// children in one block. Objects [root.first, root.first + root.count) are this call's alone.
+template <class Nodes>
+void build_subtree(const Task& root, Nodes& nodes, Box8* const buffer[2], std::uint32_t* bin_of, Workspace& ws,
+                   const Params& p, std::uint32_t* objects, std::vector<Task>& stack) {
+  const bool fixed_leaf_write = p.max_leaf <= kFixedLeafWrite;
+  const std::uint32_t limit = root.first + root.count;
+  stack.clear();
+  stack.push_back(root);
+  while (!stack.empty()) {
+    const Task task = stack.back();
+    stack.pop_back();
+    const Split s = split_node(task, buffer, bin_of, ws, p);
+    const std::uint32_t left = nodes.size();
+    nodes.add_two();
+    nodes[task.node].left = left;
+    nodes[task.node].right = left + 1;
+    nodes[left].box = s.left_box.box();
+    nodes[left + 1].box = s.right_box.box();
+    // The leaves, then the inner children onto the stack, the left one on top.
+    const std::uint32_t right_count = task.count - s.mid;
+    if (s.mid <= p.max_leaf)
+      make_leaf(nodes[left], task.first, s.mid, buffer[s.child_buffer], objects, limit, fixed_leaf_write);
+    if (right_count <= p.max_leaf) {
+      make_leaf(nodes[left + 1], task.first + s.mid, right_count, buffer[s.child_buffer], objects, limit,
+                fixed_leaf_write);
+    } else {
+      stack.push_back({left + 1, task.first + s.mid, right_count, s.child_buffer, s.right_centroids});
+    }
+    if (s.mid > p.max_leaf) stack.push_back({left, task.first, s.mid, s.child_buffer, s.left_centroids});
+  }
+}
+
+// Below this many objects (and at least n / kTasksPerBuild), a node's subtree is built by one
+// thread; above it, each pass over a node's records is shared by every thread. Fixed by n
+// alone, so the cut, and with it the tree, is the same for any number of threads. The passes
+// above the cut run at the speed of memory, not of the threads (4 levels of 10^6 objects take
+// ~21 ms on 2 threads, ~26 on one), so few levels go there: 16 tasks and more balanced 2
+// threads as well as 128 did, and built 10^6 objects 10% faster.
+constexpr std::uint32_t kMinTaskObjects = 4096, kTasksPerBuild = 16;
+
+// The tree on the threads of `pool`, in the order one thread would have appended its nodes.
+// The nodes above the cut are split in depth-first order with every thread in each pass; the
+// subtrees below it are built as tasks, each one's nodes a block that follows its root's
+// split. With leaves of one object, a subtree of c objects has exactly 2c - 1 nodes, so every
+// node's place is known as the splits above the cut happen, and the tasks build straight into
+// the tree. Otherwise each task builds into memory of its own (a subtree of c objects has at
+// most 2c - 1 nodes: its region of 2c slots at 2 * first never meets another's), and the tree
+// is put together afterwards: each block where its root was split.
+void build_threaded(std::uint32_t n, const Task& root, Box8* const buffer[2], BinnedScratch& scratch, const Params& p,
+                    ThreadPool& pool, Tree& tree) {
+  const std::uint32_t cut = std::max(kMinTaskObjects, n / kTasksPerBuild);
+  const bool direct = p.max_leaf == 1;
+  std::vector<Workspace> ws;
+  ws.reserve(pool.size());
+  for (unsigned t = 0; t < pool.size(); ++t) ws.emplace_back(p);
+  std::uint32_t* const bin_of = scratch.bin_of.get();
+  // Above the cut, directly: the tree itself, at final places. Otherwise a tree of its own
+  // ("top"), and the order things happen in: a split (children appended) or a task started.
+  std::vector<Node> top;
+  if (direct) {
+    tree.nodes.resize(2 * std::size_t(n) - 1);
+  } else {
+    top.resize(1);
+    top[0].box = tree.nodes[0].box;
+  }
+  std::vector<Node>& upper = direct ? tree.nodes : top;
+  std::vector<Task> tasks, stack{root};
+  std::vector<std::uint32_t> block;  // direct: each task's first descendant's place
+  std::uint32_t next = 1;            // direct: the next place
+  std::vector<std::int64_t> events;  // otherwise: >= 0 top node split; < 0 task -1 - event started
+  while (!stack.empty()) {
+    const Task task = stack.back();
+    stack.pop_back();
+    if (task.count <= cut) {
+      if (direct) {
+        block.push_back(next);
+        next += 2 * task.count - 2;
+      } else {
+        events.push_back(-1 - std::int64_t(tasks.size()));
+      }
+      tasks.push_back(task);
+      continue;
+    }
+    const Split s = split_node_parallel(task, buffer, bin_of, ws, p, pool);
+    std::uint32_t left = next;
+    if (direct) {
+      next += 2;
+    } else {
+      events.push_back(task.node);
+      left = std::uint32_t(top.size());
+      top.emplace_back();
+      top.emplace_back();
+    }
+    upper[task.node].left = left;
+    upper[task.node].right = left + 1;
+    upper[left].box = s.left_box.box();
+    upper[left + 1].box = s.right_box.box();
+    const std::uint32_t right_count = task.count - s.mid;
+    if (s.mid <= p.max_leaf)
+      make_leaf(upper[left], task.first, s.mid, buffer[s.child_buffer], tree.objects.data(), n, false);
+    if (right_count <= p.max_leaf) {
+      make_leaf(upper[left + 1], task.first + s.mid, right_count, buffer[s.child_buffer], tree.objects.data(), n,
+                false);
+    } else {
+      stack.push_back({left + 1, task.first + s.mid, right_count, s.child_buffer, s.right_centroids});
+    }
+    if (s.mid > p.max_leaf) stack.push_back({left, task.first, s.mid, s.child_buffer, s.left_centroids});
+  }
+  if (direct && next != tree.nodes.size()) throw std::logic_error("build_binned_sah: subtree sizes disagree");
+  // The subtrees, largest first (they balance better).
+  if (!direct) scratch.reserve_nodes(n);
+  std::vector<std::uint32_t> by_size(tasks.size()), task_nodes(tasks.size());
+  for (std::uint32_t t = 0; t < tasks.size(); ++t) by_size[t] = t;
+  std::sort(by_size.begin(), by_size.end(), [&](std::uint32_t a, std::uint32_t b) {
+    return tasks[a].count != tasks[b].count ? tasks[a].count > tasks[b].count : a < b;
+  });
+  struct alignas(kCacheLine) Stack {  // (a line each: see Workspace)
+    std::vector<Task> v;
+  };
+  std::vector<Stack> stacks(pool.size());
+  auto build_task = [&](std::size_t i) {
+    const std::uint32_t t = by_size[i];
+    const unsigned thread = pool.thread_index();
+    Task local = tasks[t];
+    // Direct: appended at the task's place in the tree, under its root's place. Otherwise:
+    // the root at slot 0 of the task's region, the rest after it.
+    RawNodes nodes{tree.nodes.data(), direct ? block[t] : 0};
+    if (!direct) {
+      nodes = {scratch.nodes.get() + 2 * std::size_t(tasks[t].first), 1};
+      nodes.data[0] = Node{};
+      local.node = 0;
+    }
+    build_subtree(local, nodes, buffer, bin_of, ws[thread], p, tree.objects.data(), stacks[thread].v);
+    task_nodes[t] = nodes.count;
+  };
+  pool.parallel_for(tasks.size(), build_task);
+  if (direct) {
+    for (std::size_t t = 0; t < tasks.size(); ++t)
+      if (task_nodes[t] != block[t] + 2 * tasks[t].count - 2)
+        throw std::logic_error("build_binned_sah: subtree sizes disagree");
+    return;
+  }
+  // Where every node goes: walk the events in order, as one thread appends.
+  std::vector<std::uint32_t> top_final(top.size(), 0);
+  block.assign(tasks.size(), 0);
+  for (const std::int64_t e : events) {
+    if (e >= 0) {
+      top_final[top[std::size_t(e)].left] = next;
+      top_final[top[std::size_t(e)].right] = next + 1;
+      next += 2;
+    } else {
+      const std::size_t t = std::size_t(-1 - e);
+      block[t] = next;
+      next += task_nodes[t] - 1;
+    }
+  }
+  tree.nodes.resize(next);
+  for (std::size_t i = 0; i < top.size(); ++i) {
+    Node node = top[i];
+    if (!node.leaf()) node.left = top_final[node.left], node.right = top_final[node.right];
+    tree.nodes[top_final[i]] = node;
+  }
+  // A subtree's slot i > 0 goes to block + i - 1; its root's children are set in place.
+  auto place_task = [&](std::size_t t) {
+    const Node* local = scratch.nodes.get() + 2 * std::size_t(tasks[t].first);
+    const auto place = [&](std::uint32_t i) { return i == kNone ? kNone : block[t] + i - 1; };
+    Node& root_node = tree.nodes[top_final[tasks[t].node]];
+    root_node.left = place(local[0].left);
+    root_node.right = place(local[0].right);
+    Node* out = tree.nodes.data() + block[t];
+    for (std::uint32_t i = 1; i < task_nodes[t]; ++i) {
+      Node node = local[i];
+      node.left = place(node.left);
+      node.right = place(node.right);
+      out[i - 1] = node;
+    }
+  };
+  pool.parallel_for(tasks.size(), place_task);
+}
+
 }  // namespace
 
 // Implementation notes (the tree is fixed by the description in bvh.hpp; these only make it
@@ -472,205 +997,69 @@ void bounds_of(const Box8* refs, std::uint32_t count, Box8& box, PointBox& centr
 // empty bin repeats the cost of the split before it, which is tried first and kept on ties),
 // listed from a mask of the non-zero counts; the binning pass saves each record's three bin
 // indices, so the partition reads a byte instead of recomputing a centroid; bin counts are
-// integers beside the bin boxes; the large buffers ask for transparent huge pages.
-void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScratch& scratch, Tree& tree) {
+// integers beside the bin boxes; the large buffers ask for transparent huge pages. On several
+// threads (build_threaded), the same tree.
+void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScratch& scratch, Tree& tree,
+           ThreadPool* pool) {
   tree.nodes.clear();
   tree.objects.clear();
   const std::size_t n = boxes.size();
   if (n == 0) return;
-  const std::uint32_t max_leaf = std::max<std::uint32_t>(options.max_leaf_size, 1);
   const std::uint32_t bins = std::clamp<std::uint32_t>(options.bins, 2, 256);
+  const Params p{std::max<std::uint32_t>(options.max_leaf_size, 1), bins,
+                 (bins + kMaskStep - 1) / kMaskStep * kMaskStep, float(bins - 1)};
+  const bool threaded = pool != nullptr && pool->size() > 1 && n > kMinTaskObjects;
   // Two buffers of records, left uninitialised (they are written before they are read).
   scratch.reserve(n);
   Box8* const buffer[2] = {scratch.buffer[0].get(), scratch.buffer[1].get()};
-  std::uint32_t* const bin_of = scratch.bin_of.get();
   Box8 root_box = kEmpty;
   PointBox root_centroids;
-  for (std::size_t i = 0; i < n; ++i) {
-    Box8& r = buffer[0][i];
-    store_record(r, boxes[i], std::uint32_t(i));
-    grow(root_box, r);
-    grow_point(root_centroids.lo, root_centroids.hi, centroid(r));
+  const auto store_range = [&](std::size_t b, std::size_t e, Box8& box, PointBox& centroids) {
+    for (std::size_t i = b; i < e; ++i) {
+      Box8& r = buffer[0][i];
+      store_record(r, boxes[i], std::uint32_t(i));
+      grow(box, r);
+      grow_point(centroids.lo, centroids.hi, centroid(r));
+    }
+  };
+  if (threaded) {
+    // Per chunk, merged in chunk order (merge_later): the one-pass boxes.
+    const std::size_t chunks = pool->size();
+    std::vector<Box8> chunk_box(chunks, kEmpty);
+    std::vector<PointBox> chunk_centroids(chunks);
+    auto store_chunk = [&](std::size_t c) {
+      store_range(chunk_begin(std::uint32_t(n), c, chunks), chunk_begin(std::uint32_t(n), c + 1, chunks), chunk_box[c],
+                  chunk_centroids[c]);
+    };
+    pool->parallel_for(chunks, store_chunk);
+    for (std::size_t c = 0; c < chunks; ++c) {
+      grow(root_box, chunk_box[c]);
+      merge_later(root_centroids, chunk_centroids[c]);
+    }
+  } else {
+    store_range(0, n, root_box, root_centroids);
   }
   tree.objects.resize(n);
-
-  struct Task {
-    std::uint32_t node, first, count;
-    std::uint32_t buffer;  // which buffer holds the node's records
-    PointBox centroids;    // the box of the node's centroids (its box is in tree.nodes)
-  };
   if (tree.nodes.capacity() < 2 * n) {
     tree.nodes.reserve(2 * n);  // at most 2n - 1; pages never touched cost nothing
     cullpipe::detail::advise_huge_pages(tree.nodes.data(), tree.nodes.capacity() * sizeof(Node));
   }
   tree.nodes.emplace_back();
   tree.nodes[0].box = root_box.box();
-  std::vector<Task> stack;  // nodes of more than max_leaf objects, waiting to be split
-  // A node of at most max_leaf objects becomes a leaf: its range and its objects' ids. Up to
-  // kFixedLeafWrite ids go as a fixed run of that many slots (no branch on the count), the slots
-  // past the leaf's range rewritten with what they hold.
-  constexpr std::uint32_t kFixedLeafWrite = 4;
-  const bool fixed_leaf_write = max_leaf <= kFixedLeafWrite;
-  const auto make_leaf = [&](std::uint32_t node, std::uint32_t first, std::uint32_t count, std::uint32_t in) {
-    tree.nodes[node].first = first;
-    tree.nodes[node].count = count;
-    const Box8* objs = buffer[in] + first;
-    std::uint32_t* ids = tree.objects.data() + first;
-    if (fixed_leaf_write && first + kFixedLeafWrite <= n) {
-      for (std::uint32_t i = 0; i < kFixedLeafWrite; ++i) ids[i] = i < count ? objs[i].id() : ids[i];
-    } else {
-      for (std::uint32_t i = 0; i < count; ++i) ids[i] = objs[i].id();
-    }
-  };
-  if (n <= max_leaf) {
-    make_leaf(0, 0, std::uint32_t(n), 0);
-  } else {
-    stack.push_back({0, 0, std::uint32_t(n), 0, root_centroids});
+  if (n <= p.max_leaf) {
+    make_leaf(tree.nodes[0], 0, std::uint32_t(n), buffer[0], tree.objects.data(), std::uint32_t(n),
+              p.max_leaf <= kFixedLeafWrite);
+    return;
   }
-  // Bins of axis a are bin[a * stride, a * stride + bins), each a box, and their object counts
-  // bin_count[a * stride + b] (integers beside the boxes); all empty between nodes. The stride
-  // rounds up to whole groups of the non-zero mask (the padding counts stay 0).
-  const std::uint32_t stride = (bins + kMaskStep - 1) / kMaskStep * kMaskStep;
-  std::vector<Box8> bin(3 * std::size_t(stride), kEmpty);
-  std::vector<std::uint32_t> bin_count(3 * std::size_t(stride), 0);
-  std::vector<std::uint32_t> used(3 * std::size_t(stride));  // non-empty bins per axis, ascending
-  std::uint32_t used_count[3];
-  Sweep sweep(bins);
-  const float last_bin = float(bins - 1);
-  while (!stack.empty()) {
-    const Task task = stack.back();
-    stack.pop_back();
-    Box8* objs = buffer[task.buffer] + task.first;
-    // Bin the centroids along all three axes in one pass; a flat axis (zero or subnormal
-    // extent) is binned with scale 0 (everything in bin 0) and not considered.
-    Lanes lo{{0, 0, 0, 0}}, scale{{0, 0, 0, 0}}, last{{last_bin, last_bin, last_bin, 0}};
-    bool usable[3];
-    for (int axis = 0; axis < 3; ++axis) {
-      lo.v[axis] = task.centroids.lo.v[axis];
-      const float extent = task.centroids.hi.v[axis] - lo.v[axis];
-      scale.v[axis] = float(bins) / extent;
-      usable[axis] = extent > 0.0f && std::isfinite(extent) && std::isfinite(scale.v[axis]);
-      if (!usable[axis]) scale.v[axis] = 0.0f;
-    }
-    Box8* const bin0 = bin.data();
-    Box8* const bin1 = bin0 + stride;
-    Box8* const bin2 = bin1 + stride;
-    std::uint32_t* const count0 = bin_count.data();
-    std::uint32_t* const count1 = count0 + stride;
-    std::uint32_t* const count2 = count1 + stride;
-    // Each record's bin indices are computed three records ahead of its bin updates: their
-    // long chain of dependent operations then never holds up the updates, and more records
-    // are in flight at once (fewer ahead hide less of the chain; more gain nothing). Past the
-    // last record, the last one is computed again.
-    const std::uint32_t final_i = task.count - 1;
-    const auto indices_of = [&](std::uint32_t i) {
-      return bin_indices(centroid(objs[std::min(i, final_i)]), lo, scale, last);
-    };
-    auto ahead1 = indices_of(0), ahead2 = indices_of(1), ahead3 = indices_of(2);
-    for (std::uint32_t i = 0; i < task.count; ++i) {
-      const Rec r = load(objs[i]);
-      const auto idx = ahead1;
-      ahead1 = ahead2;
-      ahead2 = ahead3;
-      ahead3 = indices_of(i + 3);
-      bin_of[i] = packed(idx);
-      // Byte offsets of the bins' counts (4 bytes each); their boxes are at 8 times those.
-      std::uint32_t o0, o1, o2;
-      index3(times4(idx), o0, o1, o2);
-      grow(box_at(bin0, o0), r);
-      ++count_at(count0, o0);
-      grow(box_at(bin1, o1), r);
-      ++count_at(count1, o1);
-      grow(box_at(bin2, o2), r);
-      ++count_at(count2, o2);
-    }
-    for (int axis = 0; axis < 3; ++axis)
-      used_count[axis] =
-          list_used(bin_count.data() + std::size_t(axis) * stride, stride, used.data() + std::size_t(axis) * stride);
-    // Best binned SAH split over the three axes: bins [0, best_split] go left.
-    double best_cost = INFINITY;
-    int best_axis = -1;
-    std::uint32_t best_split = 0;
-    for (int axis = 0; axis < 3; ++axis) {
-      if (!usable[axis]) continue;
-      const std::uint32_t* list = used.data() + std::size_t(axis) * stride;
-      const std::uint32_t j =
-          sweep.best(bin.data() + std::size_t(axis) * stride, bin_count.data() + std::size_t(axis) * stride, list,
-                     used_count[axis], task.count, best_cost);
-      if (j != kNone) best_axis = axis, best_split = list[j];
-    }
-    std::uint32_t mid = 0, child_buffer = task.buffer;
-    Box8 left_box = kEmpty, right_box = kEmpty;
-    PointBox left_centroids, right_centroids;
-    if (best_axis >= 0) {
-      const int axis = best_axis;
-      const Box8* axis_bin = bin.data() + std::size_t(axis) * stride;
-      const std::uint32_t* list = used.data() + std::size_t(axis) * stride;
-      for (std::uint32_t j = 0; j < used_count[axis]; ++j) {
-        const std::uint32_t b = list[j];
-        if (b <= best_split) mid += bin_count[std::size_t(axis) * stride + b];
-        grow(b <= best_split ? left_box : right_box, axis_bin[b]);
-      }
-      // Stable partition into the other buffer, bins [0, best_split] to the front, gathering
-      // each side's centroid box on the way.
-      child_buffer = 1 - task.buffer;
-      Box8* out = buffer[child_buffer] + task.first;
-      std::uint32_t l = 0, r = mid;
-      SideCentroids sides;
-      // Each record's bin along the split axis: byte `axis` of its packed indices.
-      const std::uint8_t* const split_bin = reinterpret_cast<const std::uint8_t*>(bin_of) + kByteOf[axis];
-      for (std::uint32_t i = 0; i < task.count; ++i) {
-        const Box8& ref = objs[i];
-        const std::uint32_t go_left =
-            split_bin[sizeof(std::uint32_t) * std::size_t(i)] <= best_split;  // size_t: nodes past 2^30 objects
-        // l or r, as a select: GCC makes it a conditional move in both variants (a branch on
-        // go_left would mispredict wherever the sides follow no pattern). `r + (l - r) * go_left` and
-        // `r ^ ((l ^ r) & -go_left)` are branch-free whatever the compiler does, but cost more.
-        const std::uint32_t at = go_left ? l : r;
-        copy(out[at], ref);
-        sides.add(ref, go_left);
-        l += go_left;
-        r += go_left ^ 1u;
-      }
-      if (l != mid || r != task.count)
-        throw std::logic_error("build_binned_sah: bin counts disagree with the partition");
-      left_centroids = sides.left();
-      right_centroids = sides.right();
-    }
-    // Empty the bins for the next node.
-    for (int axis = 0; axis < 3; ++axis)
-      for (std::uint32_t j = 0; j < used_count[axis]; ++j) {
-        const std::size_t b = std::size_t(axis) * stride + used[std::size_t(axis) * stride + j];
-        bin[b] = kEmpty;
-        bin_count[b] = 0;
-      }
-    if (mid == 0 || mid == task.count) {  // equal centroids: split the range in half (by id, deterministic)
-      mid = task.count / 2;
-      child_buffer = task.buffer;
-      // Every node's records are already in id order (the root's are, and the partition and
-      // this split keep the order), so the halves are the lower and the upper ids.
-      left_box = right_box = kEmpty;
-      left_centroids = right_centroids = PointBox{};
-      bounds_of(objs, mid, left_box, left_centroids);
-      bounds_of(objs + mid, task.count - mid, right_box, right_centroids);
-    }
-    const std::uint32_t left = std::uint32_t(tree.nodes.size());
-    tree.nodes.emplace_back();
-    tree.nodes.emplace_back();
-    tree.nodes[task.node].left = left;
-    tree.nodes[task.node].right = left + 1;
-    tree.nodes[left].box = left_box.box();
-    tree.nodes[left + 1].box = right_box.box();
-    // The leaves, then the inner children onto the stack, the left one on top.
-    const std::uint32_t right_count = task.count - mid;
-    if (mid <= max_leaf) make_leaf(left, task.first, mid, child_buffer);
-    if (right_count <= max_leaf) {
-      make_leaf(left + 1, task.first + mid, right_count, child_buffer);
-    } else {
-      stack.push_back({left + 1, task.first + mid, right_count, child_buffer, right_centroids});
-    }
-    if (mid > max_leaf) stack.push_back({left, task.first, mid, child_buffer, left_centroids});
+  const Task root{0, 0, std::uint32_t(n), 0, root_centroids};
+  if (threaded) {
+    build_threaded(std::uint32_t(n), root, buffer, scratch, p, *pool, tree);
+    return;
   }
+  Workspace ws(p);
+  std::vector<Task> stack;
+  VectorNodes nodes{tree.nodes};
+  build_subtree(root, nodes, buffer, scratch.bin_of.get(), ws, p, tree.objects.data(), stack);
 }
 
 }  // namespace cullpipe::bvh::detail::CULLPIPE_BINNED_NS

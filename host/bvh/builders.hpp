@@ -77,6 +77,9 @@ struct BuildOptions {
   std::uint32_t neighbours = 4;  ///< fast agglomerative: partners searched among this many Morton neighbours each side
   bool rotations = false;        ///< insertion: rebalance by tree rotations along the insertion path
   InsertionOrder insertion_order = InsertionOrder::Shuffled;  ///< insertion builders' order
+  /// Threads for the builders that run on several (binned-sah: the same tree on any number of
+  /// threads); null: the calling thread alone. Not owned.
+  ThreadPool* pool = nullptr;
 };
 
 /// The generic top-down builder (explicit stack, any depth), nodes emitted root first as

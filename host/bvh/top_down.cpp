@@ -386,7 +386,7 @@ Tree build_generic(std::span<const Aabb> boxes, const BuildOptions& options) {
 
 Tree build_top_down(std::span<const Aabb> boxes, const BuildOptions& options) {
   if (options.axis == SplitAxis::Best && options.position == SplitPosition::Binned && options.cost == SplitCost::Sah)
-    return build_binned_sah(boxes, {options.max_leaf_size, options.bins});
+    return build_binned_sah(boxes, {options.max_leaf_size, options.bins}, options.pool);
   return build_generic(boxes, options);
 }
 
