@@ -122,7 +122,7 @@ nlohmann::json bench_builders(const std::vector<std::size_t>& sizes, std::vector
 
 // The binned SAH build on one thread against the same build on `threads`, interleaved (so
 // drift in the machine's memory state hits both), fresh and through a kept BinnedSahBuilder,
-// with leaves of at most 4 and of 1. The trees must be equal, node for node.
+// with leaves of at most 4 and of 1; then PLOC likewise. The trees must be equal, node for node.
 // What `pool`'s threads can do together on this machine: the throughput of a loop of dependent
 // arithmetic (no memory traffic) on every thread at once, relative to one thread. On a virtual
 // machine whose cores share physical ones with other work, this is well below the thread
@@ -146,8 +146,9 @@ double machine_scaling(ThreadPool& pool) {
 
 nlohmann::json bench_threaded(const std::vector<std::size_t>& sizes, unsigned threads, int repeats_override) {
   ThreadPool pool(threads);
-  std::printf("Binned SAH on %u threads against one, uniform random scene, median build time (interleaved)\n\n",
-              pool.size());
+  std::printf(
+      "Binned SAH and PLOC on %u threads against one, uniform random scene, median build time (interleaved)\n\n",
+      pool.size());
   const double ceiling = machine_scaling(pool);
   std::printf("The machine's own scaling (dependent arithmetic on every thread against one): %.2fx\n\n", ceiling);
   std::printf("%9s %5s %9s %12s %12s %8s %10s %s\n", "N", "leaf", "builder", "1 thread ms", "threads ms", "speedup",
@@ -193,6 +194,7 @@ nlohmann::json bench_threaded(const std::vector<std::size_t>& sizes, unsigned th
         std::fflush(stdout);
         if (!same) throw std::runtime_error("the threaded build gave another tree at n = " + std::to_string(n));
         cells.push_back({{"n", n},
+                         {"builder", "binned-sah"},
                          {"max_leaf_size", leaf},
                          {"reused_builder", reused},
                          {"threads", pool.size()},
@@ -202,6 +204,35 @@ nlohmann::json bench_threaded(const std::vector<std::size_t>& sizes, unsigned th
                          {"speedup", a / b},
                          {"sah_cost", cost}});
       }
+    // PLOC (leaves of at most 4): its Morton sort, pool and final collapse stay on one thread.
+    bvh::BuildOptions ploc;
+    const auto build_ploc = [&](ThreadPool* p) {
+      ploc.pool = p;
+      return bvh::build("agglomerative-local", boxes, ploc);
+    };
+    std::vector<double> t1, tn;
+    bool same = true;
+    for (int r = 0; r < std::max(3, reps / 4); ++r) {
+      auto t0 = Clock::now();
+      const bvh::Tree one = build_ploc(nullptr);
+      t1.push_back(since(t0));
+      t0 = Clock::now();
+      same &= build_ploc(&pool) == one;
+      tn.push_back(since(t0));
+    }
+    const double a = median(t1), b = median(tn);
+    std::printf("%9zu %5u %9s %12.2f %12.2f %7.2fx %10s %s\n", n, 4u, "ploc", a / 1e6, b / 1e6, a / b, "",
+                same ? "yes" : "NO");
+    std::fflush(stdout);
+    if (!same) throw std::runtime_error("threaded PLOC gave another tree at n = " + std::to_string(n));
+    cells.push_back({{"n", n},
+                     {"builder", "agglomerative-local"},
+                     {"max_leaf_size", 4},
+                     {"threads", pool.size()},
+                     {"machine_scaling", ceiling},
+                     {"one_thread_ns", a},
+                     {"threaded_ns", b},
+                     {"speedup", a / b}});
   }
   std::printf("\n");
   return cells;

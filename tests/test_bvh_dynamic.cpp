@@ -7,6 +7,7 @@
 
 #include "bvh/builders.hpp"
 #include "bvh_test_util.hpp"
+#include "core/thread_pool.hpp"
 #include "cull/reference.hpp"
 #include "scene/generators.hpp"
 #include "test_util.hpp"
@@ -454,6 +455,30 @@ TEST(BvhDynamic, CollapseLeaves) {
   const bvh::Tree p = bvh::collapse_leaves(bvh::build_agglomerative_brute(pairs, {.max_leaf_size = 1}), 4);
   EXPECT_EQ(bvh::metrics(p).leaves, 2u);
   EXPECT_EQ(bvh::metrics(p).max_leaf_size, 2u);
+}
+
+// PLOC on a pool of 2 or 3 threads gives the one-thread tree exactly, on sets past the size
+// where its passes are shared (16,384 clusters): random boxes, duplicated points (ties), equal
+// boxes, nested boxes (the chain guard's path), and a wide neighbourhood.
+TEST(BvhDynamic, AgglomerativeLocalOnSeveralThreadsIsTheOneThreadTree) {
+  std::vector<Aabb> points = random_boxes(30000, 62, 100.0f, 0.0f), nested;
+  for (std::size_t i = 0; i < 10000; ++i) points[i] = points[i + 15000];
+  for (int i = 0; i < 20000; ++i)
+    nested.push_back({glm::vec3(-0.001f * float(i + 1)), glm::vec3(0.001f * float(i + 1))});
+  const std::vector<std::vector<Aabb>> sets = {random_boxes(40000, 63, 300.0f, 2.0f), points,
+                                               std::vector<Aabb>(20000, Aabb{glm::vec3(-1), glm::vec3(1)}), nested};
+  ThreadPool two(2), three(3);
+  for (std::size_t k = 0; k < sets.size(); ++k)
+    for (std::uint32_t neighbours : {4u, 16u}) {
+      bvh::BuildOptions options{.max_leaf_size = 4, .neighbours = neighbours};
+      const bvh::Tree one = bvh::build_agglomerative_local(sets[k], options);
+      ASSERT_EQ(bvh::check_tree(one, sets[k]), "") << "set " << k;
+      for (ThreadPool* pool : {&two, &three}) {
+        options.pool = pool;
+        EXPECT_EQ(bvh::build_agglomerative_local(sets[k], options), one)
+            << "set " << k << ", " << neighbours << " neighbours, " << pool->size() << " threads";
+      }
+    }
 }
 
 TEST(BvhDynamic, LargeAndPathologicalSetsFinish) {

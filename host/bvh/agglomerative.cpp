@@ -12,6 +12,7 @@
 
 #include "bvh/box_ops.hpp"
 #include "bvh/builders.hpp"
+#include "core/thread_pool.hpp"
 
 namespace cullpipe::bvh {
 
@@ -203,59 +204,121 @@ Tree build_agglomerative_local(std::span<const Aabb> boxes, const BuildOptions& 
   const std::uint32_t radius = std::max<std::uint32_t>(options.neighbours, 1);
   std::vector<Node> pool = leaf_pool(boxes);
 
-  // The clusters in Morton order: their pool ids and boxes.
-  std::vector<std::uint32_t> id = morton_order(boxes);
-  std::vector<Aabb> box(n);
+  // The clusters in Morton order: their pool ids and boxes (and room to compact them into).
+  std::vector<std::uint32_t> id = morton_order(boxes), next_id(n);
+  std::vector<Aabb> box(n), next_box(n);
   for (std::size_t i = 0; i < n; ++i) box[i] = boxes[id[i]];
 
   std::vector<LocalKey> best(n);
   std::vector<std::uint32_t> nearest(n);
   enum : char { kUntouched, kAbsorbed, kGrown };  // a cluster's fate in the current pass
   std::vector<char> state(n);
+  // On several threads, a pass over at least kShared clusters is cut into one chunk per
+  // thread. Every step gives what the one-thread pass gives: a cluster's candidates are
+  // offered to it in the same order (a chunk first offers the pairs reaching into it from the
+  // `radius` positions before it, then its own), merges take pool ids in position order (each
+  // chunk's start is the earlier chunks' count), and the compaction keeps the order.
+  ThreadPool* const threads = options.pool != nullptr && options.pool->size() > 1 ? options.pool : nullptr;
+  constexpr std::size_t kShared = 1u << 14;
+  std::vector<std::size_t> chunk_merges, chunk_kept;
   std::size_t m = n;
   while (m > 1) {
-    // Nearest neighbour of each cluster within `radius` positions each side; each pair's cost
-    // is computed once and offered to both ends.
-    std::fill(best.begin(), best.begin() + std::ptrdiff_t(m), LocalKey{{INFINITY, INFINITY}, kNone, kNone, kNone});
-    for (std::uint32_t i = 0; i < m; ++i) {
-      const std::uint32_t end = std::uint32_t(std::min<std::size_t>(m, std::size_t(i) + radius + 1));
-      for (std::uint32_t j = i + 1; j < end; ++j) {
-        const LocalKey key{measure(merged(box[i], box[j])), j - i, i & 1u, i};
-        if (key < best[i]) best[i] = key, nearest[i] = j;
-        if (key < best[j]) best[j] = key, nearest[j] = i;
-      }
-    }
-    // Merge mutual nearest neighbours; the new cluster takes the lower position.
-    std::fill(state.begin(), state.begin() + std::ptrdiff_t(m), kUntouched);
-    std::size_t merges = 0;
-    const auto merge_at = [&](std::uint32_t i, std::uint32_t j) {  // i < j
-      box[i] = merged(box[i], box[j]);
-      id[i] = merge(pool, id[i], id[j], box[i]);
-      state[i] = kGrown;
-      state[j] = kAbsorbed;
-      ++merges;
+    const std::size_t chunks = threads != nullptr && m >= kShared ? threads->size() : 1;
+    const auto chunk_range = [&](std::size_t c) {
+      return std::pair<std::uint32_t, std::uint32_t>(std::uint32_t(m * c / chunks),
+                                                     std::uint32_t(m * (c + 1) / chunks));
     };
-    for (std::uint32_t i = 0; i < m; ++i) {
-      const std::uint32_t j = nearest[i];
-      if (i < j && nearest[j] == i) merge_at(i, j);
-    }
+    const auto run = [&](auto&& chunk) {
+      if (chunks == 1) {
+        chunk(std::size_t(0));
+      } else {
+        threads->parallel_for(chunks, chunk);
+      }
+    };
+    // Nearest neighbour of each cluster within `radius` positions each side; each pair's cost
+    // is computed once (twice at a chunk's start) and offered to both ends.
+    auto search = [&](std::size_t c) {
+      const auto [b, e] = chunk_range(c);
+      std::fill(best.begin() + b, best.begin() + e, LocalKey{{INFINITY, INFINITY}, kNone, kNone, kNone});
+      const auto offer = [&](std::uint32_t i, std::uint32_t j) {
+        const LocalKey key{measure(merged(box[i], box[j])), j - i, i & 1u, i};
+        if (i >= b && key < best[i]) best[i] = key, nearest[i] = j;
+        if (j < e && key < best[j]) best[j] = key, nearest[j] = i;
+      };
+      for (std::uint32_t i = b > radius ? b - radius : 0; i < b; ++i)
+        for (std::uint32_t j = b; j < std::min<std::size_t>(e, std::size_t(i) + radius + 1); ++j) offer(i, j);
+      for (std::uint32_t i = b; i < e; ++i) {
+        const std::uint32_t end = std::uint32_t(std::min<std::size_t>(m, std::size_t(i) + radius + 1));
+        for (std::uint32_t j = i + 1; j < end; ++j) offer(i, j);
+      }
+    };
+    run(search);
+    // Merge mutual nearest neighbours; the new cluster takes the lower position.
+    chunk_merges.assign(chunks + 1, 0);
+    auto count_merges = [&](std::size_t c) {
+      const auto [b, e] = chunk_range(c);
+      std::size_t k = 0;
+      for (std::uint32_t i = b; i < e; ++i) k += i < nearest[i] && nearest[nearest[i]] == i;
+      chunk_merges[c + 1] = k;
+      std::fill(state.begin() + b, state.begin() + e, kUntouched);
+    };
+    run(count_merges);
+    for (std::size_t c = 0; c < chunks; ++c) chunk_merges[c + 1] += chunk_merges[c];
+    const std::size_t first_new = pool.size();
+    pool.resize(first_new + chunk_merges[chunks]);
+    // (A cluster j absorbed by i of another chunk is never the lower end of a pair, so no
+    // chunk writes what another reads.)
+    auto merge_mutual = [&](std::size_t c) {
+      const auto [b, e] = chunk_range(c);
+      std::size_t at = first_new + chunk_merges[c];
+      for (std::uint32_t i = b; i < e; ++i) {
+        const std::uint32_t j = nearest[i];
+        if (!(i < j && nearest[j] == i)) continue;
+        box[i] = merged(box[i], box[j]);
+        pool[at] = {box[i], std::min(id[i], id[j]), std::max(id[i], id[j]), 0, pool[id[i]].count + pool[id[j]].count};
+        id[i] = std::uint32_t(at++);
+        state[i] = kGrown;
+        state[j] = kAbsorbed;
+      }
+    };
+    run(merge_mutual);
     // Guard against long chains of preference (e.g. nested boxes, where the exact rule merges
     // one pair per pass and the build would take quadratic time): when mutual pairs are rare,
     // also merge each unmerged cluster with its unmerged nearest neighbour, in order.
-    if (merges * 64 < m) {
+    if (chunk_merges[chunks] * 64 < m) {
       for (std::uint32_t i = 0; i < m; ++i) {
         const std::uint32_t j = nearest[i];
-        if (state[i] == kUntouched && state[j] == kUntouched) merge_at(std::min(i, j), std::max(i, j));
+        if (state[i] != kUntouched || state[j] != kUntouched) continue;
+        const std::uint32_t lo = std::min(i, j), hi = std::max(i, j);
+        box[lo] = merged(box[lo], box[hi]);
+        id[lo] = merge(pool, id[lo], id[hi], box[lo]);
+        state[lo] = kGrown;
+        state[hi] = kAbsorbed;
       }
     }
-    std::size_t w = 0;
-    for (std::size_t i = 0; i < m; ++i) {
-      if (state[i] == kAbsorbed) continue;
-      id[w] = id[i];
-      box[w] = box[i];
-      ++w;
-    }
-    m = w;
+    // The survivors, in order, into the other arrays.
+    chunk_kept.assign(chunks + 1, 0);
+    auto count_kept = [&](std::size_t c) {
+      const auto [b, e] = chunk_range(c);
+      chunk_kept[c + 1] =
+          std::size_t(std::count_if(state.begin() + b, state.begin() + e, [](char s) { return s != kAbsorbed; }));
+    };
+    run(count_kept);
+    for (std::size_t c = 0; c < chunks; ++c) chunk_kept[c + 1] += chunk_kept[c];
+    auto compact = [&](std::size_t c) {
+      const auto [b, e] = chunk_range(c);
+      std::size_t w = chunk_kept[c];
+      for (std::uint32_t i = b; i < e; ++i) {
+        if (state[i] == kAbsorbed) continue;
+        next_id[w] = id[i];
+        next_box[w] = box[i];
+        ++w;
+      }
+    };
+    run(compact);
+    id.swap(next_id);
+    box.swap(next_box);
+    m = chunk_kept[chunks];
   }
   const std::uint32_t root = id[0];
   return finish(std::move(pool), root, n, options.max_leaf_size);
