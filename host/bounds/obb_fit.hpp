@@ -40,7 +40,9 @@ Obb hull_face_obb(std::span<const glm::vec3> points, const ConvexHull& hull);
 /// support vertices tracked through exact event times and the volume minimised between
 /// events (see obb_exact.cpp). Beats the hull-face method where the best box has no face flush
 /// with a hull face (e.g. a long thin tetrahedron whose best box is rotated 45 degrees).
-/// Cost grows with the square of the hull's edge count.
+/// Cost grows with the square of the hull's edge count; on hulls of more than 24 vertices,
+/// proved lower bounds skip edge arcs, pair families and pieces that cannot beat the best
+/// box found (2.6x faster over the shared meshes; bench/NOTES.md, "Bounding volumes").
 Obb exact_obb(std::span<const glm::vec3> points);
 
 /// The box `b` carried by an affine transform (`update` for a moving object): exact for
