@@ -67,7 +67,7 @@ int bvh_command(const BvhOptions& o, std::ostream& out, std::ostream& err) {
     ThreadPool pool(o.threads);
     out << "cullpipe bvh: " << (loaded.scene.name.empty() ? loaded.source : loaded.scene.name) << " (" << loaded.source
         << "), " << n << " objects, leaves of <= " << o.leaf_size << ", median of " << o.repeats
-        << (o.repeats == 1 ? " build" : " builds") << "; binned-sah on " << pool.size()
+        << (o.repeats == 1 ? " build" : " builds") << "; binned-sah and agglomerative-local on " << pool.size()
         << (pool.size() == 1 ? " thread\n\n" : " threads\n\n");
     out << "  " << left("builder", 26)
         << "  build ms  Mobj/s   SAH cost     nodes    leaves  depth  leaf depth  balance  volume  overlap\n";

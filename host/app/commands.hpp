@@ -86,7 +86,7 @@ struct BvhOptions : SceneOptions {
   std::vector<std::string> builders{"binned-sah"};  ///< names (bvh::builders()), or "all"
   std::uint32_t leaf_size = 4;
   std::size_t repeats = 1;  ///< builds per builder; the median time is reported
-  unsigned threads = 1;     ///< threads of the builders that run on several (binned-sah); 0: every core
+  unsigned threads = 1;     ///< threads of the builders that run on several; 0: every core
   std::string json_path;
 };
 

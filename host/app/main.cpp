@@ -157,8 +157,8 @@ int main(int argc, char** argv) {
       ->check(CLI::PositiveNumber);
   bvh_cmd
       ->add_option("--threads", bvh.threads,
-                   "Threads of the builders that run on several (binned-sah, the same tree on any number); 0: "
-                   "every core")
+                   "Threads of the builders that run on several (binned-sah, agglomerative-local: the same tree on "
+                   "any number); 0: every core")
       ->capture_default_str()
       ->check(CLI::Range(0u, 256u));
   bvh_cmd->add_option("--json", bvh.json_path, "Write every builder's metrics as JSON");

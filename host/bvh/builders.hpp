@@ -77,8 +77,8 @@ struct BuildOptions {
   std::uint32_t neighbours = 4;  ///< fast agglomerative: partners searched among this many Morton neighbours each side
   bool rotations = false;        ///< insertion: rebalance by tree rotations along the insertion path
   InsertionOrder insertion_order = InsertionOrder::Shuffled;  ///< insertion builders' order
-  /// Threads for the builders that run on several (binned-sah: the same tree on any number of
-  /// threads); null: the calling thread alone. Not owned.
+  /// Threads for the builders that run on several (binned-sah and agglomerative-local, each the
+  /// same tree on any number of threads); null: the calling thread alone. Not owned.
   ThreadPool* pool = nullptr;
 };
 
