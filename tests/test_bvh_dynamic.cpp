@@ -3,6 +3,7 @@
 
 #include <chrono>
 #include <cstdio>
+#include <cstring>
 #include <string>
 
 #include "bvh/builders.hpp"
@@ -457,28 +458,38 @@ TEST(BvhDynamic, CollapseLeaves) {
   EXPECT_EQ(bvh::metrics(p).max_leaf_size, 2u);
 }
 
-// PLOC on a pool of 2 or 3 threads gives the one-thread tree exactly, on sets past the size
-// where its passes are shared (16,384 clusters): random boxes, duplicated points (ties), equal
-// boxes, nested boxes (the chain guard's path), and a wide neighbourhood.
+// PLOC on a pool of 2 or 3 threads gives the one-thread tree exactly (node bytes, so -0 and +0
+// count), on sets past the size where its passes are shared (16,384 clusters): random boxes,
+// duplicated points (ties), equal boxes, nested boxes (the chain guard's path), rays reaching
+// to infinity along a flat axis (NaN costs: infinity times 0), and a wide neighbourhood.
 TEST(BvhDynamic, AgglomerativeLocalOnSeveralThreadsIsTheOneThreadTree) {
-  std::vector<Aabb> points = random_boxes(30000, 62, 100.0f, 0.0f), nested;
+  std::vector<Aabb> points = random_boxes(30000, 62, 100.0f, 0.0f), nested, rays;
   for (std::size_t i = 0; i < 10000; ++i) points[i] = points[i + 15000];
-  for (int i = 0; i < 20000; ++i)
+  for (int i = 0; i < 20000; ++i) {
     nested.push_back({glm::vec3(-0.001f * float(i + 1)), glm::vec3(0.001f * float(i + 1))});
+    rays.push_back({glm::vec3(float(i % 500), 0, 0), glm::vec3(INFINITY, 0, 0)});
+  }
   const std::vector<std::vector<Aabb>> sets = {random_boxes(40000, 63, 300.0f, 2.0f), points,
-                                               std::vector<Aabb>(20000, Aabb{glm::vec3(-1), glm::vec3(1)}), nested};
+                                               std::vector<Aabb>(20000, Aabb{glm::vec3(-1), glm::vec3(1)}), nested,
+                                               rays};
+  const auto same_bytes = [](const bvh::Tree& a, const bvh::Tree& b) {
+    return a.nodes.size() == b.nodes.size() && a.objects == b.objects &&
+           std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(bvh::Node)) == 0;
+  };
   ThreadPool two(2), three(3);
   for (std::size_t k = 0; k < sets.size(); ++k)
-    for (std::uint32_t neighbours : {4u, 16u}) {
-      bvh::BuildOptions options{.max_leaf_size = 4, .neighbours = neighbours};
-      const bvh::Tree one = bvh::build_agglomerative_local(sets[k], options);
-      ASSERT_EQ(bvh::check_tree(one, sets[k]), "") << "set " << k;
-      for (ThreadPool* pool : {&two, &three}) {
-        options.pool = pool;
-        EXPECT_EQ(bvh::build_agglomerative_local(sets[k], options), one)
-            << "set " << k << ", " << neighbours << " neighbours, " << pool->size() << " threads";
+    for (std::uint32_t leaf : {1u, 4u})
+      for (std::uint32_t neighbours : {4u, 16u}) {
+        bvh::BuildOptions options{.max_leaf_size = leaf, .neighbours = neighbours};
+        const bvh::Tree one = bvh::build_agglomerative_local(sets[k], options);
+        ASSERT_EQ(bvh::check_tree(one, sets[k]), "") << "set " << k;
+        for (ThreadPool* pool : {&two, &three}) {
+          options.pool = pool;
+          EXPECT_TRUE(same_bytes(bvh::build_agglomerative_local(sets[k], options), one))
+              << "set " << k << ", leaves of " << leaf << ", " << neighbours << " neighbours, " << pool->size()
+              << " threads";
+        }
       }
-    }
 }
 
 TEST(BvhDynamic, LargeAndPathologicalSetsFinish) {

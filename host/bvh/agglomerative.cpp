@@ -7,6 +7,8 @@
 #include <functional>
 #include <numeric>
 #include <queue>
+#include <stdexcept>
+#include <string>
 #include <tuple>
 #include <vector>
 
@@ -201,6 +203,9 @@ Tree build_agglomerative_pq(std::span<const Aabb> boxes, const BuildOptions& opt
 Tree build_agglomerative_local(std::span<const Aabb> boxes, const BuildOptions& options) {
   const std::size_t n = boxes.size();
   if (n == 0) return {};
+  if (n > std::size_t(kNone - 1) / 2)
+    throw std::length_error("build_agglomerative_local: " + std::to_string(n) + " objects; at most " +
+                            std::to_string((kNone - 1) / 2) + " fit 32-bit node indices");
   const std::uint32_t radius = std::max<std::uint32_t>(options.neighbours, 1);
   std::vector<Node> pool = leaf_pool(boxes);
 
@@ -241,7 +246,11 @@ Tree build_agglomerative_local(std::span<const Aabb> boxes, const BuildOptions& 
       const auto [b, e] = chunk_range(c);
       std::fill(best.begin() + b, best.begin() + e, LocalKey{{INFINITY, INFINITY}, kNone, kNone, kNone});
       const auto offer = [&](std::uint32_t i, std::uint32_t j) {
-        const LocalKey key{measure(merged(box[i], box[j])), j - i, i & 1u, i};
+        LocalKey key{measure(merged(box[i], box[j])), j - i, i & 1u, i};
+        // A NaN cost (boxes reaching to infinity along a flat axis: infinity times 0) counts
+        // as the worst real cost, so every cluster still gets a nearest neighbour (else it kept
+        // last pass's, and the chain guard could merge a cluster with itself).
+        if (std::isnan(key.cost.area) || std::isnan(key.cost.perimeter)) key.cost = {INFINITY, INFINITY};
         if (i >= b && key < best[i]) best[i] = key, nearest[i] = j;
         if (j < e && key < best[j]) best[j] = key, nearest[j] = i;
       };

@@ -13,6 +13,7 @@
 #include <cstddef>
 #include <memory>
 #include <stdexcept>
+#include <string>
 #include <vector>
 #if defined(__SSE2__)
 #include <immintrin.h>
@@ -1005,6 +1006,10 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
   tree.objects.clear();
   const std::size_t n = boxes.size();
   if (n == 0) return;
+  // Node indices are 32-bit, and a tree of n objects may have 2n - 1 nodes.
+  if (n > std::size_t(kNone - 1) / 2)
+    throw std::length_error("build_binned_sah: " + std::to_string(n) + " objects; at most " +
+                            std::to_string((kNone - 1) / 2) + " fit 32-bit node indices");
   const std::uint32_t bins = std::clamp<std::uint32_t>(options.bins, 2, 256);
   const Params p{std::max<std::uint32_t>(options.max_leaf_size, 1), bins,
                  (bins + kMaskStep - 1) / kMaskStep * kMaskStep, float(bins - 1)};
@@ -1023,13 +1028,18 @@ void build(std::span<const Aabb> boxes, const TopDownOptions& options, BinnedScr
     }
   };
   if (threaded) {
-    // Per chunk, merged in chunk order (merge_later): the one-pass boxes.
+    // Per chunk, merged in chunk order (merge_later): the one-pass boxes. Each chunk grows
+    // boxes of its own and stores them once (the chunks' entries share cache lines).
     const std::size_t chunks = pool->size();
     std::vector<Box8> chunk_box(chunks, kEmpty);
     std::vector<PointBox> chunk_centroids(chunks);
     auto store_chunk = [&](std::size_t c) {
-      store_range(chunk_begin(std::uint32_t(n), c, chunks), chunk_begin(std::uint32_t(n), c + 1, chunks), chunk_box[c],
-                  chunk_centroids[c]);
+      Box8 box = kEmpty;
+      PointBox centroids;
+      store_range(chunk_begin(std::uint32_t(n), c, chunks), chunk_begin(std::uint32_t(n), c + 1, chunks), box,
+                  centroids);
+      chunk_box[c] = box;
+      chunk_centroids[c] = centroids;
     };
     pool->parallel_for(chunks, store_chunk);
     for (std::size_t c = 0; c < chunks; ++c) {

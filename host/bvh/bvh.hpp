@@ -66,10 +66,12 @@ struct BinnedScratch;
 }
 
 /// build_binned_sah for an engine that rebuilds every frame: the same tree, but the builder
-/// keeps its per-object working memory (68 bytes per object) and `tree` keeps its storage
-/// between builds, so a rebuild of no more objects than before faults in no fresh pages (a
-/// noticeable share of a first build's time). Uses AVX2 where the CPU has it, like
-/// build_binned_sah. Not thread-safe: one builder per thread.
+/// keeps its per-object working memory (68 bytes per object; 148 once it has built on several
+/// threads with leaves of more than one object) and `tree` keeps its storage between builds,
+/// so a rebuild of no more objects than before faults in no fresh pages (a noticeable share of
+/// a first build's time). Uses AVX2 where the CPU has it, like build_binned_sah. One build at a
+/// time: a builder is not shared between threads that build at once (a build given a pool
+/// uses the pool's threads itself).
 class BinnedSahBuilder {
  public:
   BinnedSahBuilder();
