@@ -243,7 +243,7 @@ Tree build_agglomerative_local(std::span<const Aabb> boxes, const BuildOptions& 
     // Nearest neighbour of each cluster within `radius` positions each side; each pair's cost
     // is computed once (twice at a chunk's start) and offered to both ends.
     auto search = [&](std::size_t c) {
-      const auto [b, e] = chunk_range(c);
+      const std::uint32_t b = chunk_range(c).first, e = chunk_range(c).second;
       std::fill(best.begin() + b, best.begin() + e, LocalKey{{INFINITY, INFINITY}, kNone, kNone, kNone});
       const auto offer = [&](std::uint32_t i, std::uint32_t j) {
         LocalKey key{measure(merged(box[i], box[j])), j - i, i & 1u, i};
@@ -265,7 +265,7 @@ Tree build_agglomerative_local(std::span<const Aabb> boxes, const BuildOptions& 
     // Merge mutual nearest neighbours; the new cluster takes the lower position.
     chunk_merges.assign(chunks + 1, 0);
     auto count_merges = [&](std::size_t c) {
-      const auto [b, e] = chunk_range(c);
+      const std::uint32_t b = chunk_range(c).first, e = chunk_range(c).second;
       std::size_t k = 0;
       for (std::uint32_t i = b; i < e; ++i) k += i < nearest[i] && nearest[nearest[i]] == i;
       chunk_merges[c + 1] = k;
@@ -278,7 +278,7 @@ Tree build_agglomerative_local(std::span<const Aabb> boxes, const BuildOptions& 
     // (A cluster j absorbed by i of another chunk is never the lower end of a pair, so no
     // chunk writes what another reads.)
     auto merge_mutual = [&](std::size_t c) {
-      const auto [b, e] = chunk_range(c);
+      const std::uint32_t b = chunk_range(c).first, e = chunk_range(c).second;
       std::size_t at = first_new + chunk_merges[c];
       for (std::uint32_t i = b; i < e; ++i) {
         const std::uint32_t j = nearest[i];
@@ -308,14 +308,14 @@ Tree build_agglomerative_local(std::span<const Aabb> boxes, const BuildOptions& 
     // The survivors, in order, into the other arrays.
     chunk_kept.assign(chunks + 1, 0);
     auto count_kept = [&](std::size_t c) {
-      const auto [b, e] = chunk_range(c);
+      const std::uint32_t b = chunk_range(c).first, e = chunk_range(c).second;
       chunk_kept[c + 1] =
           std::size_t(std::count_if(state.begin() + b, state.begin() + e, [](char s) { return s != kAbsorbed; }));
     };
     run(count_kept);
     for (std::size_t c = 0; c < chunks; ++c) chunk_kept[c + 1] += chunk_kept[c];
     auto compact = [&](std::size_t c) {
-      const auto [b, e] = chunk_range(c);
+      const std::uint32_t b = chunk_range(c).first, e = chunk_range(c).second;
       std::size_t w = chunk_kept[c];
       for (std::uint32_t i = b; i < e; ++i) {
         if (state[i] == kAbsorbed) continue;
