@@ -20,11 +20,11 @@
 #include <vector>
 
 #include "bench_util.hpp"
-#include "bounds/aabb_update.hpp"
-#include "bounds/obb_fit.hpp"
-#include "bounds/sphere_fit.hpp"
-#include "core/splitmix.hpp"
-#include "scene/gltf_points.hpp"
+#include "cullpipe/bounds/aabb_update.hpp"
+#include "cullpipe/bounds/obb_fit.hpp"
+#include "cullpipe/bounds/sphere_fit.hpp"
+#include "cullpipe/core/splitmix.hpp"
+#include "cullpipe/scene/gltf_points.hpp"
 
 using namespace cullpipe;
 using cullpipe::bench::median;

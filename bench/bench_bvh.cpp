@@ -28,16 +28,16 @@
 #include <vector>
 
 #include "bench_util.hpp"
-#include "bvh/builders.hpp"
-#include "bvh/bvh.hpp"
-#include "core/thread_pool.hpp"
-#include "cull/cpu_bvh_culler.hpp"
-#include "cull/cpu_culler.hpp"
-#include "cull/reference.hpp"
-#include "gpu/bvh_culler.hpp"
-#include "gpu/gpu_culler.hpp"
-#include "scene/generators.hpp"
-#include "vk/context.hpp"
+#include "cullpipe/bvh/builders.hpp"
+#include "cullpipe/bvh/bvh.hpp"
+#include "cullpipe/core/thread_pool.hpp"
+#include "cullpipe/cull/cpu_bvh_culler.hpp"
+#include "cullpipe/cull/cpu_culler.hpp"
+#include "cullpipe/cull/reference.hpp"
+#include "cullpipe/gpu/bvh_culler.hpp"
+#include "cullpipe/gpu/gpu_culler.hpp"
+#include "cullpipe/scene/generators.hpp"
+#include "cullpipe/vulkan/context.hpp"
 
 using namespace cullpipe;
 using namespace cullpipe::bench;
@@ -240,9 +240,9 @@ nlohmann::json bench_threaded(const std::vector<std::size_t>& sizes, unsigned th
 
 nlohmann::json bench_cull(std::size_t n, std::uint32_t leaf_size, const std::vector<double>& fractions,
                           int repeats_override, const std::string& device, bool& all_agree) {
-  vk::ContextOptions options;
+  vulkan::ContextOptions options;
   options.device_filter = device;
-  vk::Context ctx(options);
+  vulkan::Context ctx(options);
   gpu::GpuCuller flat_culler(ctx);
   gpu::BvhCuller bvh_culler(ctx);
   const Scene scene = generate_scene(SceneKind::Uniform, n, 11);

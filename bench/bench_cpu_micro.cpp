@@ -8,9 +8,9 @@
 #include <string>
 #include <vector>
 
-#include "cull/cpu_culler.hpp"
-#include "cull/reference.hpp"
-#include "scene/generators.hpp"
+#include "cullpipe/cull/cpu_culler.hpp"
+#include "cullpipe/cull/reference.hpp"
+#include "cullpipe/scene/generators.hpp"
 
 using namespace cullpipe;
 

@@ -18,10 +18,10 @@
 #include <vector>
 
 #include "bench_util.hpp"
-#include "cull/reference.hpp"
-#include "gpu/gpu_culler.hpp"
-#include "scene/generators.hpp"
-#include "vk/context.hpp"
+#include "cullpipe/cull/reference.hpp"
+#include "cullpipe/gpu/gpu_culler.hpp"
+#include "cullpipe/scene/generators.hpp"
+#include "cullpipe/vulkan/context.hpp"
 
 using namespace cullpipe;
 using namespace cullpipe::bench;
@@ -119,9 +119,9 @@ int main(int argc, char** argv) {
   app.add_option("--json", json_path, "Write the results as JSON");
   bench::parse_command_line(app, argc, argv);
 
-  vk::ContextOptions options;
+  vulkan::ContextOptions options;
   options.device_filter = device;
-  vk::Context ctx(options);
+  vulkan::Context ctx(options);
   gpu::GpuCuller culler(ctx);
   std::printf("bench_flat: scalar CPU reference vs flat GPU culling, medians of repeats\n");
   std::printf("cpu: %s, %u hardware threads (reference is single-threaded)\n", cpu_model().c_str(),

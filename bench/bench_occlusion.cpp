@@ -21,15 +21,15 @@
 #include <vector>
 
 #include "bench_util.hpp"
-#include "bvh/builders.hpp"
-#include "core/thread_pool.hpp"
-#include "cull/occlusion.hpp"
-#include "cull/software_depth.hpp"
-#include "gpu/bvh_culler.hpp"
-#include "gpu/gpu_culler.hpp"
-#include "render/renderer.hpp"
-#include "scene/generators.hpp"
-#include "vk/context.hpp"
+#include "cullpipe/bvh/builders.hpp"
+#include "cullpipe/core/thread_pool.hpp"
+#include "cullpipe/cull/occlusion.hpp"
+#include "cullpipe/cull/software_depth.hpp"
+#include "cullpipe/gpu/bvh_culler.hpp"
+#include "cullpipe/gpu/gpu_culler.hpp"
+#include "cullpipe/render/renderer.hpp"
+#include "cullpipe/scene/generators.hpp"
+#include "cullpipe/vulkan/context.hpp"
 
 using namespace cullpipe;
 using namespace cullpipe::bench;
@@ -70,7 +70,7 @@ double median_wall_ns(int repeats, const std::function<gpu::CullResult()>& pass)
 
 /// The flat and hierarchical passes with and without the pyramid of the frame `renderer` drew
 /// last, seen by `camera`; their answers against the reference's; the pyramid's build time.
-void measure_passes(const vk::Context& ctx, std::span<const Aabb> boxes, const Camera& camera,
+void measure_passes(const vulkan::Context& ctx, std::span<const Aabb> boxes, const Camera& camera,
                     const render::Renderer& renderer, const Config& config, Row& row) {
   const std::size_t n = boxes.size();
   const occlusion::OcclusionOptions occlusion_options{config.texels};
@@ -118,7 +118,7 @@ void measure_passes(const vk::Context& ctx, std::span<const Aabb> boxes, const C
   row.pyramid_ns = median(builds);
 }
 
-Row measure(const vk::Context& ctx, std::size_t n, const Config& config) {
+Row measure(const vulkan::Context& ctx, std::size_t n, const Config& config) {
   Row row;
   row.n = n;
   const Scene scene = generate_scene(SceneKind::Streets, n, 1);
@@ -200,10 +200,10 @@ int main(int argc, char** argv) {
   app.add_option("--json", config.json, "Write every row as JSON");
   parse_command_line(app, argc, argv);
 
-  vk::ContextOptions options;
+  vulkan::ContextOptions options;
   options.validation = config.validation;
   options.device_filter = config.device;
-  const vk::Context ctx(options);
+  const vulkan::Context ctx(options);
   std::printf("bench_occlusion: streets along their path, %ux%u, %u texels per axis, %s; %s\n", config.width,
               config.height, config.texels, ctx.info().name.c_str(), cpu_model().c_str());
   std::printf("\n%9s %6s | %10s %10s %6s | %8s %8s %7s %7s %6s | %9s %9s %6s %9s %9s %6s %8s %9s | %7s %8s | %s\n",

@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "geom/frustum.hpp"
-#include "scene/camera.hpp"
+#include "cullpipe/geom/frustum.hpp"
+#include "cullpipe/scene/camera.hpp"
 
 namespace cullpipe::bench {
 

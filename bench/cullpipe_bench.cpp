@@ -46,16 +46,16 @@
 #include <vector>
 
 #include "bench_util.hpp"
-#include "bvh/builders.hpp"
-#include "bvh/bvh.hpp"
-#include "core/splitmix.hpp"
-#include "cull/cpu_bvh_culler.hpp"
-#include "cull/cpu_culler.hpp"
-#include "cull/reference.hpp"
-#include "gpu/bvh_culler.hpp"
-#include "gpu/gpu_culler.hpp"
-#include "scene/generators.hpp"
-#include "vk/context.hpp"
+#include "cullpipe/bvh/builders.hpp"
+#include "cullpipe/bvh/bvh.hpp"
+#include "cullpipe/core/splitmix.hpp"
+#include "cullpipe/cull/cpu_bvh_culler.hpp"
+#include "cullpipe/cull/cpu_culler.hpp"
+#include "cullpipe/cull/reference.hpp"
+#include "cullpipe/gpu/bvh_culler.hpp"
+#include "cullpipe/gpu/gpu_culler.hpp"
+#include "cullpipe/scene/generators.hpp"
+#include "cullpipe/vulkan/context.hpp"
 
 using namespace cullpipe;
 using namespace cullpipe::bench;
@@ -110,7 +110,7 @@ bool wants(const Config& c, const std::string& method) {
 
 /// The GPU side, created on first use; its absence is a note, not an error.
 struct Gpu {
-  std::unique_ptr<vk::Context> ctx;
+  std::unique_ptr<vulkan::Context> ctx;
   std::unique_ptr<gpu::GpuCuller> flat;
   std::unique_ptr<gpu::BvhCuller> bvh;
   std::string error;
@@ -552,20 +552,20 @@ int main(int argc, char** argv) {
   fast_config.isa = config.isa;
   fast::CpuCuller fast_culler(fast_config);
   fast::CpuBvhCuller fast_bvh(config.threads, config.isa);
-  // Counted here, not read from vk::Context::validation_message_count: vkDestroyDevice, in
+  // Counted here, not read from vulkan::Context::validation_message_count: vkDestroyDevice, in
   // the context's destructor, reports what was left undestroyed, after the count could be read.
   std::size_t validation_messages = 0;  // (declared before gpu, so it outlives the context)
   Gpu gpu;
   if (wants(config, "gpu-flat") || wants(config, "gpu-bvh")) {
     try {
-      vk::ContextOptions options;
+      vulkan::ContextOptions options;
       options.device_filter = config.device;
       options.validation = config.validation;
       options.on_message = [&](std::string_view message) {
         ++validation_messages;
         std::fprintf(stderr, "%s: validation: %.*s\n", kProgram, int(message.size()), message.data());
       };
-      gpu.ctx = std::make_unique<vk::Context>(options);
+      gpu.ctx = std::make_unique<vulkan::Context>(options);
       gpu::GpuCullerConfig flat_config;
       flat_config.upload_threads = config.threads;  // the same threads as the CPU paths
       gpu.flat = std::make_unique<gpu::GpuCuller>(*gpu.ctx, flat_config);

@@ -15,6 +15,11 @@ ctest --test-dir "$build" --output-on-failure
 # buffer, checked against the CPU reference, the culled scene drawn to a PNG).
 rm -rf "$build/install" "$build/example"
 cmake --install "$build" --prefix "$build/install" >/dev/null
+# Every installed header compiles on its own include path alone (none needs a header that was
+# not installed), without warnings.
+mkdir -p "$build/example"
+(cd "$build/install/include" && find cullpipe \( -name '*.hpp' -o -name '*.h' \) | sort | sed 's/.*/#include <&>/') >"$build/example/every_header.cpp"
+c++ -std=c++20 -fsyntax-only -Wall -Wextra -Wpedantic -Werror -I"$build/install/include" "$build/example/every_header.cpp"
 cmake -S "$root/examples/engine" -B "$build/example" -G Ninja -DCMAKE_PREFIX_PATH="$build/install" -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build "$build/example"
 (cd "$build/example" && ./engine_example)

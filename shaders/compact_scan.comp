@@ -7,7 +7,7 @@
 // deterministic.
 #extension GL_GOOGLE_include_directive : require
 
-#include "shared/cull_types.h"
+#include "cullpipe/gpu/cull_types.h"
 
 layout(local_size_x_id = 1) in;  // the culling group size (the counts are per culling workgroup)
 layout(constant_id = 4) const uint OBJECTS_PER_INVOCATION = 1;  // the culling pass's

@@ -8,7 +8,7 @@
 #extension GL_GOOGLE_include_directive : require
 #extension GL_EXT_control_flow_attributes : require
 
-#include "shared/cull_types.h"
+#include "cullpipe/gpu/cull_types.h"
 
 layout(local_size_x_id = 1) in;
 layout(constant_id = 3) const uint WRITE_DRAWS = 0;

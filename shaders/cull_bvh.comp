@@ -35,7 +35,7 @@
 // tested for occlusion, and what the frustum keeps there is OCCLUDED (an INSIDE node's range
 // as one record, flagged); an INSIDE node that is not occluded is walked on with no planes, so
 // that its objects get their own occlusion test, as do the kept objects of listed chunks.
-// The result equals host/bvh cull_hierarchical bit for bit (with OCCLUSION,
+// The result equals src/cullpipe/bvh cull_hierarchical bit for bit (with OCCLUSION,
 // occlusion::cull_hierarchical): same p/n-vertex test, distances as
 // ((n.x*p.x + n.y*p.y) + n.z*p.z) + d marked `precise`, same masks, the same occlusion tests,
 // and the same counts of node and object tests.
@@ -46,7 +46,7 @@
 #extension GL_KHR_shader_subgroup_shuffle : require
 #extension GL_EXT_control_flow_attributes : require
 
-#include "shared/cull_types.h"
+#include "cullpipe/gpu/cull_types.h"
 
 layout(local_size_x_id = 1) in;  // the device's subgroup size, at most BVH_CULL_GROUP_SIZE, set by the host
 
@@ -92,7 +92,7 @@ layout(std430, set = 0, binding = BVH_BINDING_CUTS) readonly buffer Cuts { uint 
 layout(set = 0, binding = BVH_BINDING_RECORDS, rg32ui) uniform coherent uimageBuffer records;
 uvec2 record_at(uint at) { return imageLoad(records, int(at)).xy; }
 void set_record(uint at, uvec2 record) { imageStore(records, int(at), uvec4(record, 0u, 0u)); }
-// AABBs: per object in tree order xyz = centre, w = bound (host/geom/plane_bounds.hpp), as the
+// AABBs: per object in tree order xyz = centre, w = bound (src/cullpipe/geom/plane_bounds.hpp), as the
 // flat pass's BINDING_CENTRES.
 layout(set = 0, binding = BVH_BINDING_CENTRES) uniform usamplerBuffer centres;
 layout(std430, set = 0, binding = BVH_BINDING_PYRAMID) readonly buffer Pyramid { float pyramid[]; };
@@ -264,7 +264,7 @@ void main() {
   uvec4 cut_links = texelFetch(nodes, int(3u * cut + 2u));  // skip, second child, leaf, depth
   uint cut_first = cut_lo.w, cut_count = has_cut ? cut_hi.w : 0u, cut_depth = cut_links.w;
   uint mask = (1u << view_plane_count) - 1u;
-  uvec2 tests = uvec2(0u);  // node tests, object tests (counted as host/bvh counts them)
+  uvec2 tests = uvec2(0u);  // node tests, object tests (counted as src/cullpipe/bvh counts them)
 
   // 1. From the root down to the cut node.
   bool walk = has_cut, accept_all = false, descending = has_cut && cut != 0u;

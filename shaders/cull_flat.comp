@@ -22,7 +22,7 @@
 #extension GL_KHR_shader_subgroup_shuffle : require
 #extension GL_EXT_control_flow_attributes : require
 
-#include "shared/cull_types.h"
+#include "cullpipe/gpu/cull_types.h"
 
 layout(local_size_x_id = 1) in;                 // = FLAT_CULL_GROUP_SIZE, set by the host
 layout(constant_id = 0) const uint BV_KIND = BV_KIND_AABB;
@@ -48,7 +48,7 @@ layout(std430, set = 0, binding = BINDING_CLASSES) writeonly buffer Classes { ui
 layout(std430, set = 0, binding = BINDING_VISIBLE) writeonly buffer Visible { uint visible_ids[]; };
 layout(std430, set = 0, binding = BINDING_COUNTERS) buffer Counters { ViewCounters counters[]; };
 layout(set = 0, binding = BINDING_VIEWS) uniform usamplerBuffer views;  // GpuFrustum, FRUSTUM_TEXELS texels each
-// AABBs: per object xyz = centre, w = bound (host/geom/plane_bounds.hpp), as integer texels.
+// AABBs: per object xyz = centre, w = bound (src/cullpipe/geom/plane_bounds.hpp), as integer texels.
 layout(set = 0, binding = BINDING_CENTRES) uniform usamplerBuffer centres;
 layout(std430, set = 0, binding = BINDING_DRAW_TEMPLATES) readonly buffer DrawTemplates { DrawCommand templates[]; };
 layout(std430, set = 0, binding = BINDING_DRAWS) writeonly buffer Draws { DrawCommand draws[]; };

@@ -8,7 +8,7 @@
 #extension GL_GOOGLE_include_directive : require
 #extension GL_EXT_control_flow_attributes : require
 
-#include "shared/cull_types.h"
+#include "cullpipe/gpu/cull_types.h"
 
 layout(local_size_x = PYRAMID_GROUP_SIDE, local_size_y = PYRAMID_GROUP_SIDE) in;
 layout(std430, set = 0, binding = 0) writeonly buffer Texels { float texels[]; };

@@ -1,10 +1,10 @@
 #version 460
-// Mesh pipeline of host/render: positions from the shared vertex buffer, the object's model
+// Mesh pipeline of src/cullpipe/render: positions from the shared vertex buffer, the object's model
 // matrix and colour from the object buffer at gl_InstanceIndex (each draw's firstInstance is
 // its object id), so culled and unculled draws of an object are the same draw.
 #extension GL_GOOGLE_include_directive : require
 
-#include "shared/cull_types.h"
+#include "cullpipe/gpu/cull_types.h"
 
 layout(location = 0) in vec3 position;
 layout(std430, set = 0, binding = 0) readonly buffer Objects { RenderObject objects[]; };

@@ -8,8 +8,8 @@
 #include <span>
 #include <vector>
 
-#include "bvh/bvh.hpp"
-#include "cull/reference.hpp"
+#include "cullpipe/bvh/bvh.hpp"
+#include "cullpipe/cull/reference.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe::test {

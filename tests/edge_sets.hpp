@@ -1,6 +1,6 @@
 #pragma once
 // Volume sets at the edge of the plane bounds that let the fast CPU kernels and the GPU flat
-// pass settle most objects without the reference's full test (host/geom/plane_bounds.hpp):
+// pass settle most objects without the reference's full test (src/cullpipe/geom/plane_bounds.hpp):
 // each set comes with views of one plane each, and the answers must still be the reference's.
 #include <gtest/gtest.h>
 
@@ -10,8 +10,8 @@
 #include <limits>
 #include <vector>
 
-#include "cull/simd_kernels.hpp"
-#include "geom/pn_vertex.hpp"
+#include "cullpipe/cull/simd_kernels.hpp"
+#include "cullpipe/geom/pn_vertex.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe::test {

@@ -9,20 +9,20 @@
 #include <memory>
 #include <string_view>
 
-#include "vk/context.hpp"
+#include "cullpipe/vulkan/context.hpp"
 
 namespace cullpipe::test {
 
 template <class Culler>
 class GpuTestEnvironment : public ::testing::Environment {
  public:
-  static inline std::unique_ptr<vk::Context> context;
+  static inline std::unique_ptr<vulkan::Context> context;
   static inline std::unique_ptr<Culler> culler;
   void SetUp() override {
-    vk::ContextOptions options;
+    vulkan::ContextOptions options;
     options.validation = true;
     options.on_message = [](std::string_view m) { ADD_FAILURE() << m; };
-    context = std::make_unique<vk::Context>(options);
+    context = std::make_unique<vulkan::Context>(options);
     culler = std::make_unique<Culler>(*context);
     std::printf("device: %s (%s)\n", context->info().name.c_str(), context->info().driver.c_str());
   }

@@ -10,10 +10,10 @@
 #include <optional>
 #include <vector>
 
-#include "geom/aabb.hpp"
-#include "geom/obb.hpp"
-#include "geom/sphere.hpp"
-#include "scene/camera.hpp"
+#include "cullpipe/geom/aabb.hpp"
+#include "cullpipe/geom/obb.hpp"
+#include "cullpipe/geom/sphere.hpp"
+#include "cullpipe/scene/camera.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe::test {

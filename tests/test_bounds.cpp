@@ -8,14 +8,14 @@
 #include <limits>
 #include <set>
 
-#include "bounds/aabb_update.hpp"
-#include "bounds/convex_hull.hpp"
-#include "bounds/obb_fit.hpp"
-#include "bounds/points.hpp"
-#include "bounds/sphere_fit.hpp"
-#include "geom/validate.hpp"
-#include "scene/gltf_points.hpp"
-#include "scene/point_io.hpp"
+#include "cullpipe/bounds/aabb_update.hpp"
+#include "cullpipe/bounds/convex_hull.hpp"
+#include "cullpipe/bounds/obb_fit.hpp"
+#include "cullpipe/bounds/points.hpp"
+#include "cullpipe/bounds/sphere_fit.hpp"
+#include "cullpipe/geom/validate.hpp"
+#include "cullpipe/scene/gltf_points.hpp"
+#include "cullpipe/scene/point_io.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe::bounds {

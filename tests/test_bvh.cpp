@@ -1,4 +1,4 @@
-// host/bvh: the binned-SAH builder, validation, flattening and the scalar hierarchical cull.
+// src/cullpipe/bvh: the binned-SAH builder, validation, flattening and the scalar hierarchical cull.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -11,13 +11,13 @@
 #include <xmmintrin.h>
 #endif
 
-#include "bvh/binned_sah.hpp"
-#include "bvh/bvh.hpp"
 #include "bvh_test_util.hpp"
-#include "core/thread_pool.hpp"
-#include "cull/reference.hpp"
-#include "scene/generators.hpp"
-#include "scene/gltf_scene.hpp"
+#include "cullpipe/bvh/binned_sah.hpp"
+#include "cullpipe/bvh/bvh.hpp"
+#include "cullpipe/core/thread_pool.hpp"
+#include "cullpipe/cull/reference.hpp"
+#include "cullpipe/scene/generators.hpp"
+#include "cullpipe/scene/gltf_scene.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe {

@@ -1,4 +1,4 @@
-// host/bvh: the bottom-up (agglomerative) and insertion builders, refit and leaf collapsing.
+// src/cullpipe/bvh: the bottom-up (agglomerative) and insertion builders, refit and leaf collapsing.
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -6,11 +6,11 @@
 #include <cstring>
 #include <string>
 
-#include "bvh/builders.hpp"
 #include "bvh_test_util.hpp"
-#include "core/thread_pool.hpp"
-#include "cull/reference.hpp"
-#include "scene/generators.hpp"
+#include "cullpipe/bvh/builders.hpp"
+#include "cullpipe/core/thread_pool.hpp"
+#include "cullpipe/cull/reference.hpp"
+#include "cullpipe/scene/generators.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe {

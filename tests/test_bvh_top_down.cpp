@@ -1,4 +1,4 @@
-// host/bvh top-down builders (every axis x position x cost), detailed metrics and the
+// src/cullpipe/bvh top-down builders (every axis x position x cost), detailed metrics and the
 // builder registry.
 #include <gtest/gtest.h>
 
@@ -8,11 +8,11 @@
 #include <stdexcept>
 #include <string>
 
-#include "bvh/binned_sah.hpp"
-#include "bvh/builders.hpp"
 #include "bvh_test_util.hpp"
-#include "cull/reference.hpp"
-#include "scene/generators.hpp"
+#include "cullpipe/bvh/binned_sah.hpp"
+#include "cullpipe/bvh/builders.hpp"
+#include "cullpipe/cull/reference.hpp"
+#include "cullpipe/scene/generators.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe {

@@ -1,4 +1,4 @@
-// Hierarchies over OBBs and spheres (host/bvh): enclosing boxes, the node test with a margin,
+// Hierarchies over OBBs and spheres (src/cullpipe/bvh): enclosing boxes, the node test with a margin,
 // and hierarchical culling that gives every object exactly the class flat culling gives it,
 // including objects exactly on the planes and scenes far from the origin.
 #include <gtest/gtest.h>
@@ -9,10 +9,10 @@
 #include <string>
 #include <vector>
 
-#include "bvh/builders.hpp"
-#include "bvh/bvh.hpp"
 #include "bvh_test_util.hpp"
-#include "cull/reference.hpp"
+#include "cullpipe/bvh/builders.hpp"
+#include "cullpipe/bvh/bvh.hpp"
+#include "cullpipe/cull/reference.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe {

@@ -21,18 +21,18 @@
 #include <xmmintrin.h>
 #endif
 
-#include "bvh/builders.hpp"
-#include "bvh/bvh.hpp"
-#include "core/thread_pool.hpp"
-#include "cull/compare.hpp"
-#include "cull/cpu_bvh_culler.hpp"
-#include "cull/cpu_culler.hpp"
-#include "cull/kernel_select.hpp"
-#include "cull/reference.hpp"
+#include "cullpipe/bvh/builders.hpp"
+#include "cullpipe/bvh/bvh.hpp"
+#include "cullpipe/core/thread_pool.hpp"
+#include "cullpipe/cull/compare.hpp"
+#include "cullpipe/cull/cpu_bvh_culler.hpp"
+#include "cullpipe/cull/cpu_culler.hpp"
+#include "cullpipe/cull/kernel_select.hpp"
+#include "cullpipe/cull/reference.hpp"
+#include "cullpipe/geom/plane_bounds.hpp"
+#include "cullpipe/geom/pn_vertex.hpp"
+#include "cullpipe/scene/camera.hpp"
 #include "edge_sets.hpp"
-#include "geom/plane_bounds.hpp"
-#include "geom/pn_vertex.hpp"
-#include "scene/camera.hpp"
 #include "test_util.hpp"
 
 // Counts operator new calls, so a test can check that a steady pass allocates nothing; and

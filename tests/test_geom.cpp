@@ -10,12 +10,12 @@
 #include <glm/ext/matrix_transform.hpp>
 #include <limits>
 
-#include "geom/aabb.hpp"
-#include "geom/frustum.hpp"
-#include "geom/obb.hpp"
-#include "geom/rounding.hpp"
-#include "geom/sphere.hpp"
-#include "geom/validate.hpp"
+#include "cullpipe/geom/aabb.hpp"
+#include "cullpipe/geom/frustum.hpp"
+#include "cullpipe/geom/obb.hpp"
+#include "cullpipe/geom/rounding.hpp"
+#include "cullpipe/geom/sphere.hpp"
+#include "cullpipe/geom/validate.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe {

@@ -1,4 +1,4 @@
-// glTF scenes: node hierarchies, instancing, cameras and malformed files (host/scene/gltf_scene).
+// glTF scenes: node hierarchies, instancing, cameras and malformed files (src/cullpipe/scene/gltf_scene).
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -11,11 +11,11 @@
 #include <glm/gtc/quaternion.hpp>
 #include <nlohmann/json.hpp>
 
-#include "cull/reference.hpp"
-#include "geom/validate.hpp"
-#include "scene/generators.hpp"
-#include "scene/gltf_points.hpp"
-#include "scene/gltf_scene.hpp"
+#include "cullpipe/cull/reference.hpp"
+#include "cullpipe/geom/validate.hpp"
+#include "cullpipe/scene/generators.hpp"
+#include "cullpipe/scene/gltf_points.hpp"
+#include "cullpipe/scene/gltf_scene.hpp"
 
 namespace cullpipe {
 namespace {

@@ -9,18 +9,18 @@
 #include <limits>
 #include <memory>
 
-#include "cull/compare.hpp"
-#include "cull/reference.hpp"
+#include "cullpipe/cull/compare.hpp"
+#include "cullpipe/cull/reference.hpp"
+#include "cullpipe/gpu/gpu_culler.hpp"
+#include "cullpipe/gpu/layout.hpp"
+#include "cullpipe/gpu/pass_support.hpp"
+#include "cullpipe/scene/generators.hpp"
+#include "cullpipe/scene/gltf_scene.hpp"
+#include "cullpipe/vulkan/check.hpp"
+#include "cullpipe/vulkan/compute_pipeline.hpp"
 #include "edge_sets.hpp"
-#include "gpu/gpu_culler.hpp"
-#include "gpu/layout.hpp"
-#include "gpu/pass_support.hpp"
 #include "gpu_test_env.hpp"
-#include "scene/generators.hpp"
-#include "scene/gltf_scene.hpp"
 #include "test_util.hpp"
-#include "vk/check.hpp"
-#include "vk/compute_pipeline.hpp"
 
 namespace cullpipe {
 namespace {
@@ -475,9 +475,9 @@ TEST_F(Gpu, SegmentedPassesAgreeForEveryKindAndOutput) {
 }
 
 TEST_F(Gpu, OutOfDeviceMemoryIsAClearErrorAndTheCullerStaysUsable) {
-  vk::Context& ctx = *GpuEnvironment::context;
+  vulkan::Context& ctx = *GpuEnvironment::context;
   struct BudgetReset {  // the shared context must not keep a budget, whatever happens here
-    vk::Context& c;
+    vulkan::Context& c;
     ~BudgetReset() { c.set_memory_budget(0); }
   } reset{ctx};
   gpu::GpuCuller culler_under_budget(ctx);
@@ -488,8 +488,8 @@ TEST_F(Gpu, OutOfDeviceMemoryIsAClearErrorAndTheCullerStaysUsable) {
   ctx.set_memory_budget(ctx.memory_in_use() + (1u << 20));
   try {
     culler_under_budget.upload(std::span<const Aabb>(boxes));
-    FAIL() << "expected vk::Error";
-  } catch (const vk::Error& e) {
+    FAIL() << "expected vulkan::Error";
+  } catch (const vulkan::Error& e) {
     EXPECT_EQ(e.result(), VK_ERROR_OUT_OF_DEVICE_MEMORY);
     // The first of the upload's buffers: boxes' centre bounds (1.6 MB), then their records.
     EXPECT_NE(std::string(e.what()).find("centre bound buffer"), std::string::npos) << e.what();
@@ -503,7 +503,7 @@ TEST_F(Gpu, OutOfDeviceMemoryIsAClearErrorAndTheCullerStaysUsable) {
   ctx.set_memory_budget(ctx.memory_in_use() + 1024);
   culler_under_budget.upload(std::span<const Aabb>(few));  // reuses the bounds buffer
   std::vector<Frustum> many_views(64, test_frusta()[0]);
-  EXPECT_THROW(culler_under_budget.cull(many_views), vk::Error);
+  EXPECT_THROW(culler_under_budget.cull(many_views), vulkan::Error);
   ctx.set_memory_budget(0);
   expect_agreement(culler_under_budget, few, many_views);
   const VkDeviceSize held = ctx.memory_in_use();
@@ -514,7 +514,7 @@ TEST_F(Gpu, OutOfDeviceMemoryIsAClearErrorAndTheCullerStaysUsable) {
 TEST_F(Gpu, AMissingDeviceFeatureIsAClearError) {
   // What the cullers need is there; a feature this device lacks is named in the error. (lavapipe
   // has no clustered subgroup operations; on a device that has them the check passes.)
-  const vk::Context& ctx = *GpuEnvironment::context;
+  const vulkan::Context& ctx = *GpuEnvironment::context;
   EXPECT_NO_THROW(gpu::detail::check_subgroup_operations(
       ctx, VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_BALLOT_BIT, "flat culling"));
   VkPhysicalDeviceSubgroupProperties subgroup{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_SUBGROUP_PROPERTIES};
@@ -525,8 +525,8 @@ TEST_F(Gpu, AMissingDeviceFeatureIsAClearError) {
   try {
     gpu::detail::check_subgroup_operations(ctx, VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_CLUSTERED_BIT,
                                            "a test pass");
-    FAIL() << "expected vk::Error";
-  } catch (const vk::Error& e) {
+    FAIL() << "expected vulkan::Error";
+  } catch (const vulkan::Error& e) {
     const std::string what = e.what();
     EXPECT_NE(what.find("a test pass needs subgroup operations"), std::string::npos) << what;
     EXPECT_NE(what.find("lacks: clustered"), std::string::npos) << what;
@@ -537,26 +537,27 @@ TEST_F(Gpu, CorruptShadersAreRefusedBeforeTheDriverSeesThem) {
   // A minimal sound module: header, then OpCapability Shader (2 words) and OpMemoryModel
   // Logical GLSL450 (3 words).
   const std::vector<std::uint32_t> sound = {0x07230203u, 0x00010300u, 0, 8, 0, 2u << 16 | 17u, 1, 3u << 16 | 14u, 0, 1};
-  EXPECT_EQ(vk::spirv_problem(sound), "");
+  EXPECT_EQ(vulkan::spirv_problem(sound), "");
   std::vector<std::uint32_t> bad = sound;
   bad[0] = 0x03022307u;  // byte-swapped magic
-  EXPECT_NE(vk::spirv_problem(bad).find("magic"), std::string::npos);
+  EXPECT_NE(vulkan::spirv_problem(bad).find("magic"), std::string::npos);
   bad = sound;
   bad.pop_back();  // truncated
-  EXPECT_NE(vk::spirv_problem(bad).find("past the end"), std::string::npos);
+  EXPECT_NE(vulkan::spirv_problem(bad).find("past the end"), std::string::npos);
   bad = sound;
   bad[5] = 0;  // zero word count
-  EXPECT_NE(vk::spirv_problem(bad).find("word count of 0"), std::string::npos);
-  EXPECT_NE(vk::spirv_problem(std::span(sound).first(3)).find("header"), std::string::npos);
+  EXPECT_NE(vulkan::spirv_problem(bad).find("word count of 0"), std::string::npos);
+  EXPECT_NE(vulkan::spirv_problem(std::span(sound).first(3)).find("header"), std::string::npos);
   bad = sound;
   bad[1] = 0x00020000u;
-  EXPECT_NE(vk::spirv_problem(bad).find("version"), std::string::npos);
+  EXPECT_NE(vulkan::spirv_problem(bad).find("version"), std::string::npos);
   for (const std::vector<std::uint32_t>& words :
        {std::vector<std::uint32_t>{}, std::vector<std::uint32_t>(sound.begin(), sound.end() - 1)}) {
     try {
-      vk::ComputePipeline pipe(*GpuEnvironment::context, vk::ComputePipelineDesc{words, 1, 0, {}, "test pipeline"});
-      FAIL() << "expected vk::Error";
-    } catch (const vk::Error& e) {
+      vulkan::ComputePipeline pipe(*GpuEnvironment::context,
+                                   vulkan::ComputePipelineDesc{words, 1, 0, {}, "test pipeline"});
+      FAIL() << "expected vulkan::Error";
+    } catch (const vulkan::Error& e) {
       EXPECT_NE(std::string(e.what()).find("test pipeline: SPIR-V is corrupt"), std::string::npos) << e.what();
     }
   }
@@ -728,9 +729,9 @@ TEST_F(Gpu, OrderedCompactionAndDrawCommands) {
 // The engine path: a context borrowing the caller's device, the pass recorded into the
 // caller's command buffer and submitted by the caller; results identical to cull().
 TEST_F(Gpu, RecordsIntoTheCallersCommandBufferOnABorrowedDevice) {
-  const vk::Context& owner = *GpuEnvironment::context;
-  vk::Context borrowed(vk::ExternalDevice{owner.instance(), owner.physical_device(), owner.device(), owner.queue(),
-                                          owner.queue_family()});
+  const vulkan::Context& owner = *GpuEnvironment::context;
+  vulkan::Context borrowed(vulkan::ExternalDevice{owner.instance(), owner.physical_device(), owner.device(),
+                                                  owner.queue(), owner.queue_family()});
   EXPECT_FALSE(borrowed.owns_device());
   gpu::GpuCuller engine_culler(borrowed);
 
@@ -785,7 +786,7 @@ TEST_F(Gpu, RecordsIntoTheCallersCommandBufferOnABorrowedDevice) {
   EXPECT_TRUE(engine_culler.draw_buffer().handle() != VK_NULL_HANDLE);
   vkDestroyFence(dev, fence, nullptr);
   vkDestroyCommandPool(dev, pool, nullptr);
-  EXPECT_THROW(vk::Context(vk::ExternalDevice{}), vk::Error);
+  EXPECT_THROW(vulkan::Context(vulkan::ExternalDevice{}), vulkan::Error);
 }
 
 TEST_F(Gpu, DrawsNeedTemplatesForEveryObject) {
@@ -810,12 +811,12 @@ TEST_F(Gpu, TimestampsAreReported) {
 }
 
 TEST(GpuDevice, UnknownDeviceNameIsAClearError) {
-  vk::ContextOptions options;
+  vulkan::ContextOptions options;
   options.device_filter = "no-such-device-xyz";
   try {
-    vk::Context ctx(options);
-    FAIL() << "expected vk::Error";
-  } catch (const vk::Error& e) {
+    vulkan::Context ctx(options);
+    FAIL() << "expected vulkan::Error";
+  } catch (const vulkan::Error& e) {
     EXPECT_NE(std::string(e.what()).find("no usable Vulkan device matching 'no-such-device-xyz'"), std::string::npos)
         << e.what();
   }
@@ -831,10 +832,10 @@ namespace {
 // "no validation message" checks above can fail.
 TEST(GpuValidation, InvalidCallIsReported) {
   std::vector<std::string> seen;
-  vk::ContextOptions options;
+  vulkan::ContextOptions options;
   options.validation = true;
   options.on_message = [&](std::string_view m) { seen.emplace_back(m); };
-  vk::Context ctx(options);
+  vulkan::Context ctx(options);
   VkBufferCreateInfo info{VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO};
   info.size = 16;
   info.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;

@@ -12,19 +12,19 @@
 #include <glm/gtc/matrix_transform.hpp>
 #include <memory>
 
-#include "bvh/builders.hpp"
-#include "bvh/bvh.hpp"
 #include "bvh_test_util.hpp"
-#include "cull/compare.hpp"
-#include "cull/reference.hpp"
+#include "cullpipe/bvh/builders.hpp"
+#include "cullpipe/bvh/bvh.hpp"
+#include "cullpipe/cull/compare.hpp"
+#include "cullpipe/cull/reference.hpp"
+#include "cullpipe/geom/validate.hpp"
+#include "cullpipe/gpu/bvh_culler.hpp"
+#include "cullpipe/scene/generators.hpp"
+#include "cullpipe/scene/gltf_scene.hpp"
+#include "cullpipe/vulkan/check.hpp"
 #include "edge_sets.hpp"
-#include "geom/validate.hpp"
-#include "gpu/bvh_culler.hpp"
 #include "gpu_test_env.hpp"
-#include "scene/generators.hpp"
-#include "scene/gltf_scene.hpp"
 #include "test_util.hpp"
-#include "vk/check.hpp"
 
 namespace cullpipe {
 namespace {
@@ -514,7 +514,7 @@ TEST_F(GpuBvh, GltfScenesAgree) {
 }
 
 TEST_F(GpuBvh, RecordsIntoTheCallersCommandBuffer) {
-  const vk::Context& ctx = *GpuBvhEnvironment::context;
+  const vulkan::Context& ctx = *GpuBvhEnvironment::context;
   const Scene scene = generate_scene(SceneKind::Uniform, 10000, 5);
   const std::vector<Aabb> boxes = world_aabbs(scene);
   const bvh::FlatTree flat = flat_tree(boxes);

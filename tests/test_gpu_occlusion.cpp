@@ -7,18 +7,18 @@
 #include <limits>
 #include <vector>
 
-#include "bvh/builders.hpp"
-#include "cull/compare.hpp"
-#include "cull/depth_pyramid.hpp"
-#include "cull/occlusion.hpp"
-#include "gpu/bvh_culler.hpp"
-#include "gpu/depth_pyramid_pass.hpp"
-#include "gpu/gpu_culler.hpp"
+#include "cullpipe/bvh/builders.hpp"
+#include "cullpipe/cull/compare.hpp"
+#include "cullpipe/cull/depth_pyramid.hpp"
+#include "cullpipe/cull/occlusion.hpp"
+#include "cullpipe/gpu/bvh_culler.hpp"
+#include "cullpipe/gpu/depth_pyramid_pass.hpp"
+#include "cullpipe/gpu/gpu_culler.hpp"
+#include "cullpipe/vulkan/buffer.hpp"
+#include "cullpipe/vulkan/check.hpp"
 #include "gpu_test_env.hpp"
 #include "occlusion_test_util.hpp"
 #include "test_util.hpp"
-#include "vk/buffer.hpp"
-#include "vk/check.hpp"
 
 namespace cullpipe {
 namespace {
@@ -31,7 +31,7 @@ using GpuPyramid = test::GpuTest<gpu::DepthPyramidPass>;
 /// its depth attachment.
 class DepthImage {
  public:
-  DepthImage(const vk::Context& ctx, std::uint32_t width, std::uint32_t height, const std::vector<float>& depth,
+  DepthImage(const vulkan::Context& ctx, std::uint32_t width, std::uint32_t height, const std::vector<float>& depth,
              VkFormat format = VK_FORMAT_D32_SFLOAT,
              VkImageLayout layout = VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL)
       : ctx_(ctx) {
@@ -55,7 +55,7 @@ class DepthImage {
     CULLPIPE_VK_CHECK(vkBindImageMemory(ctx.device(), image_, memory_, 0));
     const bool stencil = format == VK_FORMAT_D32_SFLOAT_S8_UINT;
     // Staging copy of the depth values into the image, then the layout a renderer leaves.
-    vk::Buffer staging(ctx, depth.size() * sizeof(float), VK_BUFFER_USAGE_TRANSFER_SRC_BIT, "depth staging");
+    vulkan::Buffer staging(ctx, depth.size() * sizeof(float), VK_BUFFER_USAGE_TRANSFER_SRC_BIT, "depth staging");
     std::memcpy(staging.data(), depth.data(), depth.size() * sizeof(float));
     VkCommandBufferAllocateInfo cmd_info{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
     cmd_info.commandPool = ctx.command_pool();
@@ -103,13 +103,13 @@ class DepthImage {
   const gpu::DepthSource& source() const { return source_; }
 
  private:
-  const vk::Context& ctx_;
+  const vulkan::Context& ctx_;
   VkImage image_ = VK_NULL_HANDLE;
   VkDeviceMemory memory_ = VK_NULL_HANDLE;
   gpu::DepthSource source_;
 };
 
-const vk::Context& context() { return *PyramidEnvironment::context; }
+const vulkan::Context& context() { return *PyramidEnvironment::context; }
 
 void expect_same_pyramid(const occlusion::DepthPyramid& gpu, const occlusion::DepthPyramid& cpu,
                          const std::string& what) {

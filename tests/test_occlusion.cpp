@@ -9,13 +9,13 @@
 #include <optional>
 #include <vector>
 
-#include "bvh/builders.hpp"
-#include "cull/compare.hpp"
-#include "cull/depth_pyramid.hpp"
-#include "cull/occlusion.hpp"
-#include "cull/software_depth.hpp"
+#include "cullpipe/bvh/builders.hpp"
+#include "cullpipe/cull/compare.hpp"
+#include "cullpipe/cull/depth_pyramid.hpp"
+#include "cullpipe/cull/occlusion.hpp"
+#include "cullpipe/cull/software_depth.hpp"
+#include "cullpipe/scene/camera.hpp"
 #include "occlusion_test_util.hpp"
-#include "scene/camera.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe {

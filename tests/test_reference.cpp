@@ -1,7 +1,7 @@
 #include <gtest/gtest.h>
 
-#include "cull/compare.hpp"
-#include "cull/reference.hpp"
+#include "cullpipe/cull/compare.hpp"
+#include "cullpipe/cull/reference.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe {

@@ -9,16 +9,16 @@
 #include <glm/ext/matrix_transform.hpp>
 #include <memory>
 
-#include "core/thread_pool.hpp"
-#include "cull/occlusion.hpp"
-#include "cull/reference.hpp"
-#include "cull/software_depth.hpp"
-#include "gpu/depth_pyramid_pass.hpp"
-#include "render/image.hpp"
-#include "render/renderer.hpp"
-#include "scene/generators.hpp"
-#include "scene/gltf_scene.hpp"
-#include "scene/scene_io.hpp"
+#include "cullpipe/core/thread_pool.hpp"
+#include "cullpipe/cull/occlusion.hpp"
+#include "cullpipe/cull/reference.hpp"
+#include "cullpipe/cull/software_depth.hpp"
+#include "cullpipe/gpu/depth_pyramid_pass.hpp"
+#include "cullpipe/render/image.hpp"
+#include "cullpipe/render/renderer.hpp"
+#include "cullpipe/scene/generators.hpp"
+#include "cullpipe/scene/gltf_scene.hpp"
+#include "cullpipe/scene/scene_io.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe {
@@ -26,12 +26,12 @@ namespace {
 
 class RenderEnvironment : public ::testing::Environment {
  public:
-  static inline std::unique_ptr<vk::Context> context;
+  static inline std::unique_ptr<vulkan::Context> context;
   void SetUp() override {
-    vk::ContextOptions options;
+    vulkan::ContextOptions options;
     options.validation = true;
     options.on_message = [](std::string_view m) { ADD_FAILURE() << m; };
-    context = std::make_unique<vk::Context>(options);
+    context = std::make_unique<vulkan::Context>(options);
   }
   void TearDown() override { context.reset(); }
 };

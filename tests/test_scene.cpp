@@ -7,12 +7,12 @@
 #include <fstream>
 #include <glm/ext/matrix_transform.hpp>
 
-#include "cull/reference.hpp"
-#include "geom/validate.hpp"
-#include "scene/cull_case_io.hpp"
-#include "scene/generators.hpp"
-#include "scene/point_io.hpp"
-#include "scene/scene_io.hpp"
+#include "cullpipe/cull/reference.hpp"
+#include "cullpipe/geom/validate.hpp"
+#include "cullpipe/scene/cull_case_io.hpp"
+#include "cullpipe/scene/generators.hpp"
+#include "cullpipe/scene/point_io.hpp"
+#include "cullpipe/scene/scene_io.hpp"
 
 namespace cullpipe {
 namespace {
@@ -543,8 +543,8 @@ TEST(PointIo, BadFilesNameTheLine) {
 }  // namespace
 }  // namespace cullpipe
 
-#include "bounds/sphere_fit.hpp"
-#include "scene/gltf_points.hpp"
+#include "cullpipe/bounds/sphere_fit.hpp"
+#include "cullpipe/scene/gltf_points.hpp"
 
 namespace cullpipe {
 namespace {

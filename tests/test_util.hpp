@@ -11,11 +11,11 @@
 #include <glm/mat3x3.hpp>
 #include <vector>
 
-#include "core/splitmix.hpp"
-#include "geom/aabb.hpp"
-#include "geom/frustum.hpp"
-#include "geom/obb.hpp"
-#include "geom/sphere.hpp"
+#include "cullpipe/core/splitmix.hpp"
+#include "cullpipe/geom/aabb.hpp"
+#include "cullpipe/geom/frustum.hpp"
+#include "cullpipe/geom/obb.hpp"
+#include "cullpipe/geom/sphere.hpp"
 
 namespace cullpipe::test {
 

@@ -1,7 +1,7 @@
 // engine_example [SCENE.gltf|.glb] [OUT.png]
 //
 // What an engine does with cullpipe: it owns the Vulkan instance, device and queue; cullpipe
-// borrows them (vk::ExternalDevice), records its culling pass into the engine's command
+// borrows them (vulkan::ExternalDevice), records its culling pass into the engine's command
 // buffer, and the engine draws from the draw and count buffers the pass wrote. Here the
 // "engine" also checks the GPU's answers against the CPU reference and draws the culled scene
 // with cullpipe's renderer into a PNG.
@@ -9,17 +9,16 @@
 
 #include <cstdio>
 #include <cstring>
+#include <cullpipe/cull/reference.hpp>
+#include <cullpipe/gpu/gpu_culler.hpp>
+#include <cullpipe/render/image.hpp>
+#include <cullpipe/render/renderer.hpp>
+#include <cullpipe/scene/generators.hpp>
+#include <cullpipe/scene/gltf_scene.hpp>
+#include <cullpipe/vulkan/context.hpp>
 #include <stdexcept>
 #include <string>
 #include <vector>
-
-#include "cull/reference.hpp"
-#include "gpu/gpu_culler.hpp"
-#include "render/image.hpp"
-#include "render/renderer.hpp"
-#include "scene/generators.hpp"
-#include "scene/gltf_scene.hpp"
-#include "vk/context.hpp"
 
 namespace {
 
@@ -93,8 +92,9 @@ int main(int argc, char** argv) try {
   using namespace cullpipe;
   EngineDevice engine;
   // cullpipe borrows the engine's device: it never destroys it.
-  vk::Context ctx(vk::ExternalDevice{engine.instance, engine.physical, engine.device, engine.queue, engine.family,
-                                     /*draw_indirect_count=*/true, /*pipeline_statistics=*/false});
+  vulkan::Context ctx(vulkan::ExternalDevice{engine.instance, engine.physical, engine.device, engine.queue,
+                                             engine.family,
+                                             /*draw_indirect_count=*/true, /*pipeline_statistics=*/false});
 
   Scene scene = argc > 1 ? load_gltf_scene(argv[1]).scene : generate_scene(SceneKind::City, 2000, 1);
   const std::vector<Aabb> boxes = world_aabbs(scene);

@@ -2,7 +2,7 @@
 // view selected by `mask` (bit k = plane k; the flat pass passes every bit). Included after
 // the includer declares `uint view_plane_count` and `vec4 view_planes[MAX_FRUSTUM_PLANES]`.
 //
-// Bit-exact contract with host/cull/reference.cpp and host/bvh (classify_masked,
+// Bit-exact contract with src/cullpipe/cull/reference.cpp and src/cullpipe/bvh (classify_masked,
 // classify_object): every distance is ((n.x*p.x + n.y*p.y) + n.z*p.z) + d, written out (not
 // dot()) and marked `precise`, so no reassociation or fused multiply-add can change a result
 // (docs/numerics.md, GPU and CPU agreement).

@@ -1,5 +1,5 @@
 // occlusion.glsl: the occlusion test of the flat pass, the same float operations in the same
-// order as host/cull/occlusion.cpp (the reference), every sum and product `precise`. A volume's
+// order as src/cullpipe/cull/occlusion.cpp (the reference), every sum and product `precise`. A volume's
 // footprint from its eight corners (a pixel rectangle and a bound on its nearest fragment depth),
 // read against the depth pyramid at the finest level spanning at most texels_per_axis texels.
 // Proof that it is conservative: docs/numerics.md, Occlusion footprints.

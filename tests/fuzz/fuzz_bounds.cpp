@@ -1,4 +1,4 @@
-// Fuzzes the bounding-volume builders (host/bounds) with arbitrary point sets: the bytes after
+// Fuzzes the bounding-volume builders (src/cullpipe/bounds) with arbitrary point sets: the bytes after
 // the first are read as float triples (x, y, z), any values at all. Every builder must either
 // reject the set as documented (BadPoints: empty, or a NaN or infinite coordinate) or return a
 // volume that encloses every point; the convex hull's indices must stay inside its arrays, and
@@ -17,11 +17,11 @@
 #include <glm/geometric.hpp>
 #include <vector>
 
-#include "bounds/aabb_update.hpp"
-#include "bounds/convex_hull.hpp"
-#include "bounds/obb_fit.hpp"
-#include "bounds/points.hpp"
-#include "bounds/sphere_fit.hpp"
+#include "cullpipe/bounds/aabb_update.hpp"
+#include "cullpipe/bounds/convex_hull.hpp"
+#include "cullpipe/bounds/obb_fit.hpp"
+#include "cullpipe/bounds/points.hpp"
+#include "cullpipe/bounds/sphere_fit.hpp"
 #include "fuzz_util.hpp"
 
 namespace {

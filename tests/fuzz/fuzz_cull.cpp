@@ -1,4 +1,4 @@
-// Fuzzes the fast CPU cullers (host/cull) against the scalar reference, bit for bit. The bytes
+// Fuzzes the fast CPU cullers (src/cullpipe/cull) against the scalar reference, bit for bit. The bytes
 // describe a scene: the volume kind, up to 256 volumes (boxes, spheres or OBBs with small-integer
 // coordinates at a chosen scale, so that many touch a plane exactly), copies of them side by side
 // (up to 33,280 objects, enough for several subtree tasks), a frustum of 1-6 planes (for boxes
@@ -26,14 +26,14 @@
 #include <type_traits>
 #include <vector>
 
-#include "bvh/box_ops.hpp"
-#include "bvh/builders.hpp"
-#include "bvh/bvh.hpp"
-#include "cull/compare.hpp"
-#include "cull/cpu_bvh_culler.hpp"
-#include "cull/cpu_culler.hpp"
-#include "cull/reference.hpp"
-#include "geom/frustum.hpp"
+#include "cullpipe/bvh/box_ops.hpp"
+#include "cullpipe/bvh/builders.hpp"
+#include "cullpipe/bvh/bvh.hpp"
+#include "cullpipe/cull/compare.hpp"
+#include "cullpipe/cull/cpu_bvh_culler.hpp"
+#include "cullpipe/cull/cpu_culler.hpp"
+#include "cullpipe/cull/reference.hpp"
+#include "cullpipe/geom/frustum.hpp"
 
 namespace {
 

@@ -2,9 +2,9 @@
 // (binary) files: an input starting with the GLB magic "glTF" is loaded as .glb.
 #include <cstring>
 
+#include "cullpipe/scene/gltf_points.hpp"
+#include "cullpipe/scene/gltf_scene.hpp"
 #include "fuzz_util.hpp"
-#include "scene/gltf_points.hpp"
-#include "scene/gltf_scene.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using namespace cullpipe;

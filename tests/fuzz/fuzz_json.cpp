@@ -1,9 +1,9 @@
 // Fuzzes the JSON readers: classify/dump files (parse_cull_case) and scene files (parse_scene).
 #include <string>
 
+#include "cullpipe/scene/cull_case_io.hpp"
+#include "cullpipe/scene/scene_io.hpp"
 #include "fuzz_util.hpp"
-#include "scene/cull_case_io.hpp"
-#include "scene/scene_io.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using namespace cullpipe;

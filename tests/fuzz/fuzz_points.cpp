@@ -2,8 +2,8 @@
 // the rest is the file.
 #include <cmath>
 
+#include "cullpipe/scene/point_io.hpp"
 #include "fuzz_util.hpp"
-#include "scene/point_io.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using namespace cullpipe;

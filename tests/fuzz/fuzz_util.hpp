@@ -15,7 +15,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "scene/scene.hpp"
+#include "cullpipe/scene/scene.hpp"
 
 namespace cullpipe::fuzz {
 

@@ -1,0 +1,261 @@
+// cull_types.h: the one definition of every struct and constant shared by the GLSL compute
+// shaders and the C++ host. Included by both; std430 layout, vec4-packed, no implicit padding.
+// Offsets and sizes are checked by static_assert in src/cullpipe/gpu/layout_checks.cpp.
+#ifndef CULLPIPE_SHADERS_SHARED_CULL_TYPES_H
+#define CULLPIPE_SHADERS_SHARED_CULL_TYPES_H
+
+#ifdef __cplusplus
+#include <cstdint>
+#include <glm/ext/vector_uint4.hpp>
+#include <glm/mat4x4.hpp>
+#include <glm/vec3.hpp>
+#include <glm/vec4.hpp>
+namespace cullpipe::gpu {
+using vec3 = glm::vec3;
+using vec4 = glm::vec4;
+using uvec4 = glm::uvec4;
+using mat4 = glm::mat4;
+using uint = std::uint32_t;
+#define CP_CONST inline constexpr uint
+#else
+#define CP_CONST const uint
+#endif
+
+// Bounding-volume kinds; selected in the shader by specialization constant 0.
+CP_CONST BV_KIND_AABB = 0u;
+CP_CONST BV_KIND_OBB = 1u;
+CP_CONST BV_KIND_SPHERE = 2u;
+
+// Classification values written per object (same numbering as cullpipe::Classification).
+CP_CONST CLASS_OUTSIDE = 0u;
+CP_CONST CLASS_INTERSECTING = 1u;
+CP_CONST CLASS_INSIDE = 2u;
+CP_CONST CLASS_OCCLUDED = 3u;
+
+// Invocations per workgroup of the flat culling shader.
+CP_CONST FLAT_CULL_GROUP_SIZE = 256u;
+// Objects per invocation of the flat arrival-order pass (GpuCullerConfig::objects_per_invocation).
+CP_CONST FLAT_OBJECTS_PER_INVOCATION = 8u;
+// Planes in a frustum: left, right, bottom, top, near, far (far may be absent: infinite).
+CP_CONST MAX_FRUSTUM_PLANES = 6u;
+
+// Number of vec4 words each volume kind occupies in the bounds buffer.
+CP_CONST AABB_VEC4S = 2u;    // GpuAabb
+CP_CONST OBB_VEC4S = 4u;     // GpuObb
+CP_CONST SPHERE_VEC4S = 1u;  // GpuSphere
+
+// Axis-aligned box, min/max form. w components are unused (kept 0).
+struct GpuAabb {
+  vec4 min_corner;  // xyz = minimum corner
+  vec4 max_corner;  // xyz = maximum corner
+};
+
+// Oriented box, basis matrix + radius form: centre, three unit axes, half extent per axis.
+struct GpuObb {
+  vec4 center;  // xyz = centre; w = flat pass: a bound on the projected radius (src/cullpipe/geom/plane_bounds.hpp)
+  vec4 axis_x;  // xyz = unit axis, w = half extent along it
+  vec4 axis_y;
+  vec4 axis_z;
+};
+
+// Sphere: xyz = centre, w = radius.
+struct GpuSphere {
+  vec4 center_radius;
+};
+
+// One view's frustum, as stored in the views buffer (one entry per view).
+// The culling shaders read the views as integer texels of a uniform texel buffer, FRUSTUM_TEXELS
+// per view: on lavapipe a storage-buffer load at an index it cannot prove uniform (the view
+// index comes from the workgroup id) is a loop over the lanes, each inserting one component
+// through the stack, and the 25 such loads per invocation would dominate the flat pass.
+struct GpuFrustum {
+  vec4 planes[MAX_FRUSTUM_PLANES];  // xyz = unit inward normal, w = d; inside when dot(n,p)+d >= 0
+  uint plane_count;                 // planes actually used (5 when the far plane is at infinity)
+  float settle_margin;              // the margin added to each box's centre bound (NaN or inf: none settles)
+  uint reserved1;
+  uint reserved2;
+};
+CP_CONST FRUSTUM_TEXELS = 7u;
+
+// Push constants of the flat culling pass. One dispatch covers every view (y = view index)
+// and up to maxComputeWorkGroupCount[0] groups of objects, starting at first_object. Scenes
+// larger than one storage buffer are culled in segments, each bound as its own range of the
+// bounds, classes and draw-template buffers; indices here are within the segment.
+struct FlatCullParams {
+  uint object_count;      // objects in the bound segment of the bounds buffer
+  uint first_object;      // index of the first object of this dispatch, within the segment
+  uint view_count;        // views in the views buffer
+  uint visible_capacity;  // capacity of each view's visible-id list
+  uint id_base;           // object id of the segment's first object (added to listed ids)
+};
+
+// Largest workgroup and objects per invocation the compaction shaders support (their shared
+// arrays).
+CP_CONST MAX_CULL_GROUP_SIZE = 1024u;
+CP_CONST MAX_OBJECTS_PER_INVOCATION = 32u;
+
+// Bindings of set 0, shared by every culling shader (one descriptor set): storage buffers,
+// except the bounds, views and centres, which are uniform texel buffers.
+CP_CONST BINDING_BOUNDS = 0u;          // vec4 words of the volumes
+CP_CONST BINDING_CLASSES = 1u;         // uint per object and view: [view * object_count + i]
+CP_CONST BINDING_VISIBLE = 2u;         // visible ids: [view * visible_capacity + k]
+CP_CONST BINDING_COUNTERS = 3u;        // ViewCounters per view
+CP_CONST BINDING_VIEWS = 4u;           // GpuFrustum per view
+CP_CONST BINDING_DRAW_TEMPLATES = 5u;  // DrawCommand per object (object_id ignored)
+CP_CONST BINDING_DRAWS = 6u;           // DrawCommand out: [view * visible_capacity + k]
+CP_CONST BINDING_GROUP_COUNTS =
+    7u;  // ordered mode: [view][group] visible counts (then offsets), then [view][group] INSIDE counts
+CP_CONST BINDING_PYRAMID = 9u;           // occlusion: the depth pyramid's floats (DepthPyramidPass)
+CP_CONST BINDING_OCCLUSION_VIEWS = 10u;  // occlusion: GpuOcclusionView per view, OCCLUSION_VIEW_TEXELS texels each
+CP_CONST BINDING_CENTRES = 8u;  // AABBs: vec4 per object, xyz = centre, w = bound (src/cullpipe/geom/plane_bounds.hpp)
+CP_CONST CULL_BINDING_COUNT = 11u;
+
+// One indirect draw of a visible object: the first five fields are exactly
+// VkDrawIndexedIndirectCommand (so the array can be passed to vkCmdDrawIndexedIndirectCount
+// with stride sizeof(DrawCommand) = 24), followed by the id of the object it draws.
+struct DrawCommand {
+  uint index_count;
+  uint instance_count;
+  uint first_index;
+  int vertex_offset;
+  uint first_instance;
+  uint object_id;
+};
+
+// Per-view counters, written by the shader (cleared with vkCmdFillBuffer before each pass).
+// INTERSECTING = visible - inside, derived on the host (one atomic fewer per subgroup).
+// visible_count (offset 0 of each view's entry) is also the draw count for
+// vkCmdDrawIndexedIndirectCount; pass maxDrawCount = visible_capacity, since it may exceed it.
+struct ViewCounters {
+  uint visible_count;   // visible objects found; may exceed visible_capacity (overflow)
+  uint inside_count;    // of which INSIDE
+  uint node_tests;      // hierarchical pass: BVH node boxes tested (flat pass: 0)
+  uint object_tests;    // hierarchical pass: objects tested in INTERSECTING leaves (flat pass: 0)
+  uint occluded_count;  // occlusion culling: objects the frustum keeps and the depth pyramid hides
+  uint reserved1;
+  uint reserved2;
+  uint reserved3;
+};
+
+// ---- hierarchical culling (shaders/cull_bvh.comp) ----
+// The BVH is stored depth first (src/cullpipe/bvh flatten): a node's first child follows it, `skip`
+// is the index of the node after its subtree, and every subtree's objects are the range
+// [first, first + count) of the object-order buffer.
+
+// Invocations per workgroup of the hierarchical pass, at most: a workgroup is one subgroup
+// (the device's subgroup size, up to this).
+CP_CONST BVH_CULL_GROUP_SIZE = 64u;
+// Entries per invocation of the hierarchical pass's walk stack (shared memory, 4 bytes each):
+// at most one cut node per lane and two nodes per lane for each of BVH_CUT_MAX_HEIGHT levels
+// below (see cull_bvh.comp).
+CP_CONST BVH_STACK_PER_INVOCATION = 40u;
+// A stack entry holds a node's offset from its workgroup's first cut node in the bits above the
+// 6 plane bits and the occluded-ancestor bit: a workgroup's cut subtrees must span fewer nodes
+// than this (checked on upload).
+CP_CONST BVH_WORKGROUP_NODE_SPAN = 1u << 25u;
+
+// The host cuts the tree into the highest subtrees of at most so many objects (a BvhCuller
+// setting) and at most BVH_CUT_MAX_HEIGHT levels below their root (20 levels in all), or
+// leaves; one invocation walks one. The height bound keeps a walk's plane masks (6 bits per
+// level) in four words.
+CP_CONST BVH_CUT_MAX_HEIGHT = 19u;
+
+// The node-test margin of hierarchies over OBBs and spheres, as float bits: 2^-16 and 2^-120
+// (bvh::kBvhMarginScale, kBvhMarginFloor, kBvhMarginLimit; checked in src/cullpipe/gpu/layout_checks.cpp).
+// Why they suffice: docs/numerics.md, BVH node margins.
+CP_CONST BVH_MARGIN_SCALE_BITS = 0x37800000u;
+CP_CONST BVH_MARGIN_FLOOR_BITS = 0x03800000u;
+CP_CONST BVH_MARGIN_LIMIT_BITS = 0x7b800000u;  // 2^120 (bvh::kBvhMarginLimit)
+
+struct GpuBvhNode {
+  vec3 box_min;
+  uint first;  // first object (index into the object-order buffer) of the subtree
+  vec3 box_max;
+  uint count;         // objects in the subtree
+  uint skip;          // node after this subtree
+  uint second_child;  // inner node: index of its second child (its first is this index + 1)
+  uint leaf;          // 1 for a leaf
+  uint depth;         // the root is 1
+};
+
+// Push constants of the hierarchical pass.
+struct BvhCullParams {
+  uint object_count;
+  uint view_count;
+  uint visible_capacity;  // per view
+  uint cut_count;         // cut subtrees (one invocation each, per view)
+  uint groups_per_view;   // workgroups per view: cut_count / BVH_CULL_GROUP_SIZE rounded up
+  uint cut_offset;        // the pass's cut starts at cuts[cut_offset] (occlusion passes take their own)
+};
+
+// Bindings of the hierarchical pass (set 0). 0..6 mean what they mean for the flat pass,
+// except that BINDING_BOUNDS holds each object's volume (GpuAabb, GpuObb or GpuSphere) in tree
+// order (the order of BVH_BINDING_OBJECTS), so a leaf's volumes are read together. Bounds,
+// views, nodes, the object order and the centre bounds are uniform texel buffers; the rest
+// storage buffers.
+CP_CONST BVH_BINDING_NODES = 7u;     // GpuBvhNode, depth first, three texels each
+CP_CONST BVH_BINDING_OBJECTS = 8u;   // object ids in tree order, four per texel
+CP_CONST BVH_BINDING_CUTS = 9u;      // uint: the cut nodes, depth first
+CP_CONST BVH_BINDING_RECORDS = 10u;  // uvec2 scratch: a record per object and view (each cut subtree's slice)
+CP_CONST BVH_BINDING_CENTRES =
+    11u;  // AABBs: vec4 per object in tree order, xyz = centre, w = bound (as BINDING_CENTRES)
+CP_CONST BVH_BINDING_PYRAMID = 12u;          // occlusion: the depth pyramid's floats (as BINDING_PYRAMID)
+CP_CONST BVH_BINDING_OCCLUSION_VIEWS = 13u;  // occlusion: GpuOcclusionView per view (as BINDING_OCCLUSION_VIEWS)
+CP_CONST BVH_BINDING_COUNT = 14u;
+
+// ---- occlusion: the depth pyramid (src/cullpipe/gpu/depth_pyramid_pass.hpp) ----
+
+// Invocations per workgroup side of depth_pyramid.comp (8 x 8 texels a workgroup).
+CP_CONST PYRAMID_GROUP_SIDE = 8u;
+
+// The most levels a pyramid has (a side of occlusion::kMaxViewportSide = 16384 pixels: 15).
+CP_CONST PYRAMID_MAX_LEVELS = 15u;
+
+// One view as the flat pass's occlusion test sees it (occlusion::OcclusionView and the
+// pyramid's levels), read as integer texels like GpuFrustum.
+struct GpuOcclusionView {
+  mat4 view_proj;  // the matrix the depth was rendered with
+  uint width;      // viewport = depth image size
+  uint height;
+  uint reversed_z;       // 1: depth 1 is nearest (GREATER test)
+  uint texels_per_axis;  // OcclusionOptions::texels_per_axis (the shaders take it as specialization constant 7)
+  uint level_count;
+  uint reserved1;
+  uint reserved2;
+  uint reserved3;
+  uvec4 levels[PYRAMID_MAX_LEVELS];  // x = offset in floats, y = width, z = height
+};
+CP_CONST OCCLUSION_VIEW_TEXELS = 21u;
+
+// Push constants of depth_pyramid.comp: one level from the level below it, both in one float
+// array (occlusion::pyramid_levels gives the offsets, in floats).
+struct PyramidReduceParams {
+  uint source_offset;
+  uint source_width;
+  uint source_height;
+  uint reversed_z;  // 1: the farthest depth is the smallest
+  uint offset;
+  uint width;
+  uint height;
+  uint pad;
+};
+
+// ---- src/cullpipe/render: the headless rasteriser that draws the culled objects ----
+
+// One drawable object, indexed by gl_InstanceIndex (= the draw's first_instance = object id).
+struct RenderObject {
+  mat4 model;  // object-to-world (for box objects: world * box placement of a unit cube)
+  vec4 color;  // rgb in 0..1, a = 1
+};
+
+// Push constants of the mesh pipeline.
+struct RenderParams {
+  mat4 view_proj;  // world to Vulkan clip space
+};
+
+#ifdef __cplusplus
+}  // namespace cullpipe::gpu
+#undef CP_CONST
+#endif
+
+#endif

@@ -1,0 +1,404 @@
+#include "cullpipe/gpu/gpu_culler.hpp"
+
+#include <algorithm>
+#include <cstring>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <system_error>
+
+#include "cullpipe/core/thread_pool.hpp"
+#include "cullpipe/geom/plane_bounds.hpp"
+#include "cullpipe/gpu/layout.hpp"
+#include "cullpipe/gpu/pass_support.hpp"
+#include "cullpipe/vulkan/check.hpp"
+
+// SPIR-V compiled from shaders/*.comp at build time (glslangValidator --vn).
+#include "compact_scan.spv.h"
+#include "compact_scatter.spv.h"
+#include "cull_flat.spv.h"
+
+namespace cullpipe::gpu {
+namespace {
+
+constexpr std::uint32_t kBindingCount = CULL_BINDING_COUNT;  // one descriptor set for every shader
+// The volumes are read through a uniform texel buffer: on lavapipe a texel fetch loads a whole
+// 16-byte texel per lane, where a storage-buffer load is a bounds-checked branch per lane and
+// per component; on GPUs both are ordinary typed loads.
+// The views and the AABBs' centre bounds too (see GpuFrustum, BINDING_CENTRES).
+constexpr std::uint32_t kTexelBindings =
+    1u << BINDING_BOUNDS | 1u << BINDING_VIEWS | 1u << BINDING_CENTRES | 1u << BINDING_OCCLUSION_VIEWS;
+constexpr VkBufferUsageFlags kBoundsUsage = VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT;
+constexpr std::size_t kUploadChunk = 16384;  // objects per upload task
+
+std::uint32_t kind_index(BvKind k) { return static_cast<std::uint32_t>(k); }
+
+}  // namespace
+
+GpuCuller::GpuCuller(const vulkan::Context& ctx, const GpuCullerConfig& config) : ctx_(ctx) {
+  const VkPhysicalDeviceLimits& limits = ctx_.properties().limits;
+  group_size_ = std::max<std::uint32_t>(
+      1, std::min({config.group_size, limits.maxComputeWorkGroupSize[0], limits.maxComputeWorkGroupInvocations}));
+  detail::check_subgroup_operations(ctx_,
+                                    VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT |
+                                        VK_SUBGROUP_FEATURE_BALLOT_BIT | VK_SUBGROUP_FEATURE_SHUFFLE_BIT,
+                                    "flat culling");
+  detail::check_texel_format(ctx_, "flat culling");
+  objects_per_invocation_ = std::clamp<std::uint32_t>(config.objects_per_invocation, 1, 32);
+  max_segment_objects_ = config.max_segment_objects;
+  upload_threads_ = config.upload_threads;
+  max_groups_ = config.max_groups_per_dispatch
+                    ? std::min(config.max_groups_per_dispatch, limits.maxComputeWorkGroupCount[0])
+                    : limits.maxComputeWorkGroupCount[0];
+  group_size_ = std::min(group_size_, MAX_CULL_GROUP_SIZE);
+  // Every pipeline has the same set layout; the flat AABB one of default options (arrival
+  // order, classes) is built now, for the descriptor set, the others on first use.
+  static_assert(BV_KIND_AABB == 0 && BV_KIND_OBB == 1 && BV_KIND_SPHERE == 2, "BvKind order must match the shader");
+  const vulkan::ComputePipeline& first = pipeline({.kind = BvKind::Aabb, .classes = true});
+  resources_ = std::make_unique<detail::PassResources>(ctx_, first.set_layout(), kBindingCount, kTexelBindings);
+}
+
+const vulkan::ComputePipeline& GpuCuller::pipeline(PipelineKey key) {
+  using Shader = PipelineKey::Shader;
+  if (key.shader != Shader::Cull)
+    key.kind = BvKind::Aabb, key.ordered = false, key.classes = false, key.occlusion_texels = 0;
+  if (key.ordered) key.classes = true;  // the scatter pass reads them
+  return pipelines_.get(key, [&] {
+    std::span<const std::uint32_t> spirv;
+    std::string name;
+    if (key.shader == Shader::Cull) {
+      spirv = cullpipe_cull_flat_spv;
+      name = "flat cull (" + std::string(to_string(key.kind)) + (key.ordered ? ", ordered" : "") +
+             (key.draws ? ", draws" : "") + (key.classes ? ", classes" : "") +
+             (key.occlusion_texels ? ", occlusion" : "") + ")";
+    } else if (key.shader == Shader::CompactScan) {
+      spirv = cullpipe_compact_scan_spv;
+      name = "ordered compaction scan";
+    } else {
+      spirv = cullpipe_compact_scatter_spv;
+      name = std::string("ordered compaction scatter") + (key.draws ? " (draws)" : "");
+    }
+    // Specialization constants: 0 kind, 1 group size, 2 ordered, 3 draws, 4 objects per
+    // invocation (every pass: the ordered passes' unit is a workgroup's run of objects), 5 classes,
+    // 6 occlusion, 7 texels per axis of the occlusion test.
+    const std::uint32_t spec[8] = {kind_index(key.kind),           group_size_,
+                                   key.ordered ? 1u : 0u,          key.draws ? 1u : 0u,
+                                   objects_per_invocation_,        key.classes ? 1u : 0u,
+                                   key.occlusion_texels ? 1u : 0u, key.occlusion_texels ? key.occlusion_texels : 4u};
+    return std::make_unique<vulkan::ComputePipeline>(
+        ctx_,
+        vulkan::ComputePipelineDesc{spirv, kBindingCount, sizeof(FlatCullParams), spec, name.c_str(), kTexelBindings});
+  });
+}
+
+GpuCuller::~GpuCuller() = default;
+
+// Every upload writes straight into the mapped buffers, in chunks on the upload pool: no
+// staging copy, and no fresh allocation whose pages fault in on every upload (faulting in a
+// large buffer costs more than culling it). `fill(first, end)` writes objects [first, end);
+// with `centres` (AABBs) the centre-bound buffer is sized for them too.
+template <class Fill>
+void GpuCuller::upload_volumes(BvKind kind, std::size_t count, std::size_t bytes_per_object, bool centres,
+                               Fill&& fill) {
+  const std::string what = std::to_string(count) + " " + std::string(to_string(kind)) + " volumes";
+  if (count > std::numeric_limits<std::uint32_t>::max())
+    throw std::length_error(what + ": object ids are 32-bit (at most 4294967295 objects)");
+  const VkDeviceSize bytes = VkDeviceSize(count) * bytes_per_object,
+                     centre_bytes = VkDeviceSize(count) * sizeof(glm::vec4);
+  // Both sizes are checked before anything changes: a scene that cannot fit keeps the old one.
+  detail::check_allocation_size(ctx_, bytes, what);
+  if (centres) detail::check_allocation_size(ctx_, centre_bytes, what + " (centre bounds)");
+  object_count_ = 0;  // stays 0 if an allocation below fails: no pass on half-written buffers
+  bytes_per_object_ = bytes_per_object;
+  descriptors_dirty_ = true;  // segment ranges depend on the object size and count
+  if (centres)
+    detail::ensure_buffer(ctx_, centres_, centre_bytes, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
+  detail::ensure_buffer(ctx_, bounds_, bytes, kBoundsUsage, "bounds buffer", descriptors_dirty_);
+  const std::size_t tasks = (count + kUploadChunk - 1) / kUploadChunk;
+  auto task = [&](std::size_t t) { fill(t * kUploadChunk, std::min(count, (t + 1) * kUploadChunk)); };
+  if (tasks > 1 && upload_threads_ != 1 && !upload_pool_) {
+    try {
+      upload_pool_ = std::make_unique<ThreadPool>(upload_threads_);
+    } catch (const std::system_error&) {  // no threads to be had: this upload runs on the caller
+    }
+  }
+  if (tasks > 1 && upload_pool_) {
+    upload_pool_->parallel_for(tasks, task);
+  } else {
+    for (std::size_t t = 0; t < tasks; ++t) task(t);
+  }
+  kind_ = kind;
+  object_count_ = count;
+}
+
+void GpuCuller::upload(std::span<const Aabb> volumes) {
+  // The culling passes first test each box's centre against its bound (one texel; the bounds
+  // of geom/plane_bounds.hpp, as the CPU kernels use them; proof: docs/numerics.md, Settling
+  // bounds); only the boxes it leaves open are read in full.
+  upload_volumes(BvKind::Aabb, volumes.size(), sizeof(GpuAabb), true, [&](std::size_t first, std::size_t end) {
+    GpuAabb* out = bounds_.as<GpuAabb>().data();
+    for (std::size_t i = first; i < end; ++i) out[i] = pack(volumes[i]);
+    plane_bounds::aabb_centre_bounds(volumes.subspan(first, end - first),
+                                     centres_.as<glm::vec4>().subspan(first, end - first));
+  });
+}
+
+void GpuCuller::upload(std::span<const Obb> volumes) {
+  upload_volumes(BvKind::Obb, volumes.size(), sizeof(GpuObb), false, [&](std::size_t first, std::size_t end) {
+    GpuObb* out = bounds_.as<GpuObb>().data();
+    constexpr std::size_t kBatch = 256;  // bounds on the stack (upload threads may be small-stack job threads)
+    float bounds[kBatch];
+    for (std::size_t b = first; b < end; b += kBatch) {
+      const std::size_t count = std::min(kBatch, end - b);
+      plane_bounds::obb_plane_bounds(volumes.subspan(b, count), std::span<float>(bounds, count));
+      for (std::size_t i = b; i < b + count; ++i) {
+        GpuObb o = pack(volumes[i]);
+        o.center.w = bounds[i - b];  // settles most boxes on the centre texel alone
+        out[i] = o;                  // one whole store to mapped (perhaps write-combined) memory
+      }
+    }
+  });
+}
+
+void GpuCuller::upload(std::span<const Sphere> volumes) {
+  upload_volumes(BvKind::Sphere, volumes.size(), sizeof(GpuSphere), false, [&](std::size_t first, std::size_t end) {
+    GpuSphere* out = bounds_.as<GpuSphere>().data();
+    for (std::size_t i = first; i < end; ++i) out[i] = pack(volumes[i]);
+  });
+}
+
+void GpuCuller::upload_draws(std::span<const DrawCommand> templates) {
+  const VkDeviceSize bytes = VkDeviceSize(templates.size()) * sizeof(DrawCommand);
+  detail::check_allocation_size(ctx_, bytes, std::to_string(templates.size()) + " draw templates");
+  template_count_ = 0;
+  descriptors_dirty_ = true;  // segment ranges of the templates
+  detail::ensure_buffer(ctx_, templates_, bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "draw template buffer",
+                        descriptors_dirty_);
+  if (bytes) std::memcpy(templates_.data(), templates.data(), bytes);
+  template_count_ = templates.size();
+}
+
+void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capacity, bool draws, bool ordered) {
+  const VkDeviceSize outputs = VkDeviceSize(object_count_) * view_count * sizeof(std::uint32_t);
+  const VkDeviceSize visible = VkDeviceSize(visible_capacity) * view_count * sizeof(std::uint32_t);
+  const VkDeviceSize draw_bytes = draws ? VkDeviceSize(visible_capacity) * view_count * sizeof(DrawCommand) : 0;
+  const VkDeviceSize groups = ordered ? group_count_bytes(view_count) : 0;
+  // Classes are bound per segment (plan_segments keeps each within range); all of them must
+  // still fit one allocation.
+  detail::check_allocation_size(
+      ctx_, outputs, std::to_string(view_count) + " views x " + std::to_string(object_count_) + " objects of output");
+  detail::check_storage_range(
+      ctx_, visible, std::to_string(view_count) + " views x " + std::to_string(visible_capacity) + " visible ids");
+  detail::check_storage_range(
+      ctx_, draw_bytes, std::to_string(view_count) + " views x " + std::to_string(visible_capacity) + " draw commands");
+  detail::check_texel_range(ctx_, VkDeviceSize(view_count) * sizeof(GpuFrustum), std::to_string(view_count) + " views");
+  detail::check_storage_range(
+      ctx_, groups,
+      std::to_string(view_count) + " views x " + std::to_string(object_count_) + " objects of workgroup counts");
+  constexpr VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
+  bool& dirty = descriptors_dirty_;
+  detail::ensure_buffer(ctx_, classes_, outputs, storage, "classification buffer", dirty);
+  detail::ensure_buffer(ctx_, visible_, visible, storage, "visible-id buffer", dirty);
+  detail::ensure_buffer(ctx_, counters_, view_count * sizeof(ViewCounters),
+                        storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT,
+                        "counter buffer", dirty);
+  detail::ensure_buffer(ctx_, views_, view_count * sizeof(GpuFrustum), kBoundsUsage, "view buffer", dirty);
+  detail::ensure_buffer(ctx_, draws_, draw_bytes, storage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "draw buffer", dirty);
+  detail::ensure_buffer(ctx_, templates_, 0, storage, "draw template buffer", dirty);
+  detail::ensure_buffer(ctx_, group_counts_, groups, storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, "group count buffer",
+                        dirty);
+}
+
+VkDeviceSize GpuCuller::group_count_bytes(std::size_t view_count) const {
+  // Ordered passes: a visible and an INSIDE count per workgroup and view.
+  return 2 * VkDeviceSize(vulkan::group_count(object_count_, group_size_ * objects_per_invocation_)) * view_count *
+         sizeof(std::uint32_t);
+}
+
+GpuCuller::SegmentPlan GpuCuller::plan_segments(std::size_t view_count, bool ordered) const {
+  // Objects per segment: as many as every per-object binding allows within one storage buffer
+  // range (the bounds: one texel buffer view), rounded down to a multiple of 256 so every segment's offset in every
+  // buffer is a multiple of 256 x (bytes per object) >= 1 KiB, and so of any minStorageBufferOffsetAlignment (at most
+  // 256 bytes by the Vulkan spec).
+  const VkDeviceSize range = ctx_.properties().limits.maxStorageBufferRange;
+  std::size_t s = object_count_;
+  s = std::min<std::size_t>(s, detail::texel_range(ctx_) / bytes_per_object_);
+  s = std::min<std::size_t>(s, range / (sizeof(std::uint32_t) * std::max<std::size_t>(view_count, 1)));
+  if (template_count_) s = std::min<std::size_t>(s, range / sizeof(DrawCommand));
+  if (max_segment_objects_) s = std::min(s, max_segment_objects_);
+  if (s < object_count_) s = std::max<std::size_t>(256, s / 256 * 256);
+  const SegmentPlan plan{s, object_count_ && s ? (object_count_ + s - 1) / s : 1};
+  if (plan.count > 1 && ordered)
+    throw std::length_error("object-order output (CullOptions::ordered) is limited to one storage buffer of objects; " +
+                            std::to_string(object_count_) + " objects need " + std::to_string(plan.count) +
+                            " segments of " + std::to_string(s) + " on " + ctx_.info().name + " (use arrival order)");
+  return plan;
+}
+
+void GpuCuller::update_descriptors() {
+  if (!descriptors_dirty_ && written_segment_objects_ == segment_objects_ && written_view_count_ == last_view_count_ &&
+      resources_->set_count() >= segment_count_ && written_pyramid_ == pyramid_generation_)
+    return;
+  static_assert(BINDING_BOUNDS == 0 && BINDING_CLASSES == 1 && BINDING_VISIBLE == 2 && BINDING_COUNTERS == 3 &&
+                BINDING_VIEWS == 4 && BINDING_DRAW_TEMPLATES == 5 && BINDING_DRAWS == 6 && BINDING_GROUP_COUNTS == 7 &&
+                BINDING_CENTRES == 8 && BINDING_PYRAMID == 9 && BINDING_OCCLUSION_VIEWS == 10);
+  resources_->ensure_sets(segment_count_);
+  const std::size_t views = last_view_count_;
+  for (std::size_t seg = 0; seg < segment_count_; ++seg) {
+    using Range = detail::PassResources::Range;
+    // Whole buffers, but never more than one storage buffer range (a buffer grown for an
+    // earlier, larger scene may be bigger).
+    const VkDeviceSize range = ctx_.properties().limits.maxStorageBufferRange;
+    auto whole = [&](const vulkan::Buffer& b) { return Range{&b, 0, std::min<VkDeviceSize>(b.size(), range)}; };
+    // Texel views: whole texels within one texel buffer view.
+    auto texels = [&](const vulkan::Buffer& b) {
+      return Range{
+          &b, 0,
+          std::min<VkDeviceSize>(b.size(), detail::texel_range(ctx_)) / detail::kTexelBytes * detail::kTexelBytes};
+    };
+    Range ranges[kBindingCount] = {texels(bounds_),  whole(classes_),   whole(visible_),         whole(counters_),
+                                   texels(views_),   whole(templates_), whole(draws_),           whole(group_counts_),
+                                   texels(centres_), whole(*pyramid_),  texels(occlusion_views_)};
+    if (segment_count_ > 1) {  // one segment binds whole buffers
+      const VkDeviceSize first = VkDeviceSize(seg) * segment_objects_;
+      const VkDeviceSize n = std::min<VkDeviceSize>(segment_objects_, object_count_ - first);
+      ranges[BINDING_BOUNDS] = {&bounds_, first * bytes_per_object_, n * bytes_per_object_};
+      ranges[BINDING_CLASSES] = {&classes_, first * views * sizeof(std::uint32_t), n * views * sizeof(std::uint32_t)};
+      if (kind_ == BvKind::Aabb)
+        ranges[BINDING_CENTRES] = {&centres_, first * sizeof(glm::vec4), n * sizeof(glm::vec4)};
+      if (template_count_ == object_count_)
+        ranges[BINDING_DRAW_TEMPLATES] = {&templates_, first * sizeof(DrawCommand), n * sizeof(DrawCommand)};
+    }
+    resources_->write(seg, ranges);
+  }
+  written_segment_objects_ = segment_objects_;
+  written_view_count_ = views;
+  written_pyramid_ = pyramid_generation_;
+  descriptors_dirty_ = false;
+}
+
+void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& options) {
+  const std::size_t capacity = options.visible_capacity ? options.visible_capacity : object_count_;
+  if (options.draws && template_count_ != object_count_)
+    throw std::invalid_argument("draw commands requested, but " + std::to_string(template_count_) +
+                                " draw templates were uploaded for " + std::to_string(object_count_) +
+                                " objects (call upload_draws)");
+  if (views.size() > ctx_.properties().limits.maxComputeWorkGroupCount[1])
+    throw std::length_error(std::to_string(views.size()) + " views exceed the device's dispatch limit of " +
+                            std::to_string(ctx_.properties().limits.maxComputeWorkGroupCount[1]));
+  detail::check_occlusion(ctx_, options, views.size());
+  detail::ensure_buffer(ctx_, bounds_, 0, kBoundsUsage, "bounds buffer", descriptors_dirty_);
+  detail::ensure_buffer(ctx_, centres_, 0, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
+  detail::ensure_buffer(ctx_, no_pyramid_, 16, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "empty pyramid buffer",
+                        descriptors_dirty_);
+  detail::ensure_buffer(ctx_, occlusion_views_, (options.pyramid ? views.size() : 1) * sizeof(GpuOcclusionView),
+                        kBoundsUsage, "occlusion view buffer", descriptors_dirty_);
+  // Nothing of the pass's state changes until every check and allocation has passed.
+  const SegmentPlan plan = plan_segments(views.size(), options.ordered);
+  ensure_outputs(views.size(), capacity, options.draws, options.ordered);
+  segment_objects_ = plan.objects;
+  segment_count_ = plan.count;
+  last_view_count_ = views.size();
+  pyramid_ = options.pyramid ? &options.pyramid->texels() : &no_pyramid_;
+  pyramid_generation_ = options.pyramid ? options.pyramid->generation() : 0;
+  update_descriptors();
+  if (options.pyramid) detail::write_occlusion_views(options, occlusion_views_.as<GpuOcclusionView>());
+  auto gpu_views = views_.as<GpuFrustum>();
+  for (std::size_t v = 0; v < views.size(); ++v) {
+    gpu_views[v] = pack(views[v]);
+    gpu_views[v].settle_margin = plane_bounds::settle_margin(views[v]);
+  }
+  last_capacity_ = capacity;
+  last_options_ = options;
+  // Build every pipeline the pass needs now, not while recording.
+  if (!options.ordered) {
+    pipeline(arrival_key(options));
+  } else {
+    pipeline(ordered_key(options));
+    pipeline({.shader = PipelineKey::Shader::CompactScan});
+    pipeline(scatter_key(options));
+  }
+}
+
+void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
+  const std::size_t view_count = last_view_count_;
+  const CullOptions& options = last_options_;
+
+  detail::record_entry_barrier(ctx_, cmd);
+  vkCmdFillBuffer(cmd, counters_.handle(), 0, view_count * sizeof(ViewCounters), 0);
+  if (options.ordered && object_count_ > 0)  // the per-workgroup counts the first pass adds to
+    vkCmdFillBuffer(cmd, group_counts_.handle(), 0, group_count_bytes(view_count), 0);
+  detail::record_transfer_to_compute(cmd);
+  if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, timestamps, 0);
+
+  auto compute_to_compute = [&] { detail::record_compute_to_compute(cmd); };
+  const VkDescriptorSet set = resources_->set();
+  // The ordered passes always write classes (the scatter pass reads them); the arrival-order
+  // pass only when they are read back (a pipeline of its own, see WRITE_CLASSES in cull_flat.comp).
+  const FlatCullParams base_params{std::uint32_t(object_count_), 0, std::uint32_t(view_count),
+                                   std::uint32_t(last_capacity_), 0};
+  // One pass over every object: per segment (its own descriptor set), in chunks of at most
+  // max_groups_ workgroups.
+  auto object_pass = [&](const vulkan::ComputePipeline& pipe, std::uint32_t objects_per_invocation) {
+    const std::uint64_t objects_per_group = std::uint64_t(group_size_) * objects_per_invocation;
+    const std::uint64_t objects_per_dispatch = std::uint64_t(max_groups_) * objects_per_group;
+    vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.pipeline());
+    for (std::size_t seg = 0; seg < segment_count_; ++seg) {
+      const VkDescriptorSet segment_set = resources_->set(seg);
+      vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.layout(), 0, 1, &segment_set, 0, nullptr);
+      const std::uint64_t segment_first = std::uint64_t(seg) * segment_objects_;
+      const std::uint64_t segment_count =
+          segment_count_ > 1 ? std::min<std::uint64_t>(segment_objects_, object_count_ - segment_first) : object_count_;
+      for (std::uint64_t first = 0; first < segment_count; first += objects_per_dispatch) {
+        if (first > 0 || seg > 0) compute_to_compute();  // successive dispatches update the same counters
+        const std::uint64_t count = std::min<std::uint64_t>(objects_per_dispatch, segment_count - first);
+        FlatCullParams params = base_params;
+        params.object_count = std::uint32_t(segment_count);
+        params.first_object = std::uint32_t(first);
+        params.id_base = std::uint32_t(segment_first);
+        vkCmdPushConstants(cmd, pipe.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
+        vkCmdDispatch(cmd, std::uint32_t((count + objects_per_group - 1) / objects_per_group),
+                      std::uint32_t(view_count), 1);
+      }
+    }
+  };
+  if (!options.ordered) {
+    object_pass(pipeline(arrival_key(options)), objects_per_invocation_);
+  } else if (object_count_ > 0) {
+    // Count per workgroup, scan the counts per view, scatter in object order.
+    object_pass(pipeline(ordered_key(options)), objects_per_invocation_);
+    compute_to_compute();
+    const vulkan::ComputePipeline& scan = pipeline({.shader = PipelineKey::Shader::CompactScan});
+    vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, scan.pipeline());
+    vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, scan.layout(), 0, 1, &set, 0, nullptr);
+    vkCmdPushConstants(cmd, scan.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(base_params), &base_params);
+    vkCmdDispatch(cmd, 1, std::uint32_t(view_count), 1);
+    compute_to_compute();
+    object_pass(pipeline(scatter_key(options)), objects_per_invocation_);
+  }
+  if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps, 1);
+  detail::record_exit_barrier(ctx_, cmd);
+}
+
+void GpuCuller::record(VkCommandBuffer cmd, std::span<const Frustum> views, const CullOptions& options) {
+  if (views.empty()) throw std::invalid_argument("GpuCuller::record: no views");
+  prepare(views, options);
+  record_passes(cmd, VK_NULL_HANDLE);
+}
+
+CullResult GpuCuller::read_results() const {
+  CullResult result = detail::read_outputs({counters_, classes_, visible_, draws_}, object_count_, last_view_count_,
+                                           last_capacity_, last_options_, segment_count_ > 1 ? segment_objects_ : 0);
+  for (ViewResult& view : result.views) view.object_tests = object_count_;  // flat: every object, no nodes
+  return result;
+}
+
+CullResult GpuCuller::cull(std::span<const Frustum> views, const CullOptions& options) {
+  if (views.empty()) return {};
+  return detail::timed_pass(
+      *resources_, [&] { prepare(views, options); },
+      [&](VkCommandBuffer cmd, VkQueryPool timestamps) { record_passes(cmd, timestamps); },
+      [&] { return read_results(); });
+}
+
+}  // namespace cullpipe::gpu

@@ -1,0 +1,249 @@
+#pragma once
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "cullpipe/cull/occlusion.hpp"
+#include "cullpipe/cull/reference.hpp"
+#include "cullpipe/geom/aabb.hpp"
+#include "cullpipe/geom/bv_kind.hpp"
+#include "cullpipe/geom/classification.hpp"
+#include "cullpipe/geom/frustum.hpp"
+#include "cullpipe/geom/obb.hpp"
+#include "cullpipe/geom/sphere.hpp"
+#include "cullpipe/gpu/depth_pyramid_pass.hpp"
+#include "cullpipe/gpu/layout.hpp"
+#include "cullpipe/gpu/pipeline_cache.hpp"
+#include "cullpipe/vulkan/buffer.hpp"
+#include "cullpipe/vulkan/compute_pipeline.hpp"
+#include "cullpipe/vulkan/context.hpp"
+
+namespace cullpipe {
+class ThreadPool;
+}
+
+namespace cullpipe::gpu {
+
+namespace detail {
+class PassResources;
+}
+
+/// One view's result of a GPU culling pass.
+struct ViewResult {
+  std::vector<Classification> classes;  ///< per object, in object order
+  /// Ids of INSIDE/INTERSECTING objects: in object order with CullOptions::ordered, else in
+  /// GPU arrival order.
+  std::vector<std::uint32_t> visible_ids;
+  /// With CullOptions::draws: one draw per visible id, in the same order: the object's
+  /// template (upload_draws) with object_id set.
+  std::vector<DrawCommand> draws;
+  reference::CullCounts counts;  ///< as counted by the GPU
+  bool overflow = false;         ///< more visible objects than the list could hold
+  /// Work done: hierarchical passes count node boxes tested and objects tested in
+  /// INTERSECTING leaves; a flat pass tests no nodes and every object.
+  std::size_t node_tests = 0;
+  std::size_t object_tests = 0;
+};
+
+/// Times of one pass. gpu_ns: between timestamps around the dispatches (0 when the queue has
+/// no timestamps). wall_ns: recording, submission, waiting and reading results back.
+struct CullTimings {
+  double gpu_ns = 0.0;
+  double wall_ns = 0.0;
+};
+
+struct CullResult {
+  std::vector<ViewResult> views;
+  CullTimings timings;
+};
+
+/// Options of one culling pass.
+struct CullOptions {
+  bool classes = true;      ///< read back per-object classifications
+  bool visible_ids = true;  ///< read back the compacted visible list
+  /// Room for visible ids per view; 0 means the object count (cannot overflow). With less,
+  /// the list holds the first ids that fit, the counters still count every visible object and
+  /// ViewResult::overflow is set.
+  std::size_t visible_capacity = 0;
+  /// Deterministic output: visible ids and draws in object order, by prefix-sum compaction
+  /// (two more passes), instead of atomic arrival order. With a capacity, the list holds the
+  /// first visible objects in object order.
+  bool ordered = false;
+  /// Also write a DrawCommand per visible object (needs upload_draws) and read them back.
+  bool draws = false;
+  /// Occlusion culling: with a pyramid, the objects the frustum keeps are tested against it as
+  /// each view's entry of occlusion_views says its depth was rendered (one per view), exactly as
+  /// occlusion::classify tests them; the hidden ones are Classification::Occluded, counted in
+  /// counts.occluded, neither listed nor drawn. The pyramid must have been built (its record()
+  /// earlier in the same command buffer, or its build()) and must outlive the pass.
+  const DepthPyramidPass* pyramid = nullptr;
+  std::vector<occlusion::OcclusionView> occlusion_views;
+  occlusion::OcclusionOptions occlusion_options;
+};
+
+namespace detail {
+/// The texels per axis the occlusion test of a pass with `options` reads (a specialization
+/// constant of the cull shaders), 0 without a pyramid.
+inline std::uint32_t occlusion_texels(const CullOptions& options) {
+  return options.pyramid ? options.occlusion_options.texels_per_axis : 0u;
+}
+}  // namespace detail
+
+/// How a GpuCuller is set up.
+struct GpuCullerConfig {
+  /// Invocations per workgroup; lowered to the device's limits when larger.
+  std::uint32_t group_size = FLAT_CULL_GROUP_SIZE;
+  /// Workgroups per dispatch before the pass is split into chunks; 0 means the device limit
+  /// (maxComputeWorkGroupCount[0]). Tests set it low to exercise the chunked path.
+  std::uint32_t max_groups_per_dispatch = 0;
+  /// Objects each invocation classifies in the arrival-order pass (1..32): planes loaded once
+  /// for all of them, and one visible-list atomic per subgroup for all of the subgroup's.
+  /// The ordered passes use the same number.
+  std::uint32_t objects_per_invocation = FLAT_OBJECTS_PER_INVOCATION;
+  /// Most objects per segment; 0 means as many as the device's limits allow (one texel buffer
+  /// view of volumes, one storage buffer of classes). Larger scenes are culled in segments of
+  /// this many objects (a multiple of 256), each bound as its own range. Tests set it low to
+  /// exercise that path.
+  std::size_t max_segment_objects = 0;
+  /// Threads that write an upload (packing the volumes and computing the boxes' bounds):
+  /// 0 means every core (std::thread::hardware_concurrency()), 1 the calling thread only.
+  /// The threads start with the first upload of more than 16384 objects and sleep between
+  /// uploads (each GpuCuller has its own; where none can start, uploads run on the caller).
+  unsigned upload_threads = 0;
+};
+
+/// Flat frustum culling on a Vulkan device: uploads one set of volumes, then classifies them
+/// against any number of views per pass, a few objects per compute invocation and view, with
+/// results identical bit for bit to cullpipe::reference. Not thread-safe; one pass at a time.
+class GpuCuller {
+ public:
+  explicit GpuCuller(const vulkan::Context& ctx, const GpuCullerConfig& config = {});
+  ~GpuCuller();
+  GpuCuller(const GpuCuller&) = delete;
+  GpuCuller& operator=(const GpuCuller&) = delete;
+
+  /// Uploads the volumes to cull, replacing any earlier upload. Volumes must be valid
+  /// (see invalid_reason). More than one storage buffer (maxStorageBufferRange) of them is
+  /// culled in segments; throws std::length_error, naming the sizes, when they do not fit one
+  /// memory allocation (maxMemoryAllocationSize) or exceed 2^32 - 1 objects.
+  void upload(std::span<const Aabb> volumes);
+  void upload(std::span<const Obb> volumes);
+  void upload(std::span<const Sphere> volumes);
+
+  /// One draw template per object, in object order (object_id is ignored): the indirect draw
+  /// each visible object gets. Needed before a pass with CullOptions::draws; must match the
+  /// object count of the volumes culled then.
+  void upload_draws(std::span<const DrawCommand> templates);
+
+  /// The output buffers of the last pass, for drawing from them without a readback:
+  /// draw_buffer() holds DrawCommand records for view v at byte offset
+  /// v * visible_capacity * sizeof(DrawCommand) (stride 24, usable with
+  /// vkCmdDrawIndexedIndirectCount); counter_buffer() holds ViewCounters per view, and the
+  /// draw count of view v is its visible_count at byte offset v * sizeof(ViewCounters) (it
+  /// may exceed visible_capacity: pass that as maxDrawCount). Both have
+  /// VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT.
+  const vulkan::Buffer& draw_buffer() const { return draws_; }
+  const vulkan::Buffer& counter_buffer() const { return counters_; }
+  std::size_t last_visible_capacity() const { return last_capacity_; }
+
+  /// Classifies the uploaded volumes against every view in one submission and waits.
+  /// Throws std::length_error when the visible lists or draws (views x capacity) exceed a
+  /// storage buffer, or when `ordered` output is asked of more than one segment of objects.
+  CullResult cull(std::span<const Frustum> views, const CullOptions& options = {});
+
+  /// The engine path: records the whole pass (counter reset, dispatches, barriers) into the
+  /// caller's command buffer, which must be recording, outside a render pass, for a queue of
+  /// the context's queue family. Nothing is submitted. The views are written to a host-visible
+  /// buffer now and buffers and descriptors may be (re)allocated, so one GpuCuller serves one
+  /// recorded pass at a time: record again (or cull, or upload) only after the submission of
+  /// the previous recording has completed; use one GpuCuller per frame in flight. The
+  /// recording starts with a barrier after earlier readers of the outputs (indirect draws,
+  /// shaders, transfers) and ends with one that makes draw_buffer() and counter_buffer() ready
+  /// for vkCmdDrawIndexedIndirectCount (DRAW_INDIRECT stage), vertex shaders (on graphics
+  /// queues, e.g. reading DrawCommand::object_id), later compute shaders and the host.
+  /// Pipelines are built here (not during recording's hot path later). After the caller's
+  /// submission has completed, read_results() returns what cull() would have (no timings).
+  void record(VkCommandBuffer cmd, std::span<const Frustum> views, const CullOptions& options = {});
+  CullResult read_results() const;
+
+  BvKind kind() const { return kind_; }
+  std::uint32_t group_size() const { return group_size_; }
+  std::uint32_t objects_per_invocation() const { return objects_per_invocation_; }
+  /// Segments of the last pass (1 unless the scene exceeds one storage buffer).
+  std::size_t last_segment_count() const { return segment_count_; }
+  std::size_t object_count() const { return object_count_; }
+  const vulkan::Context& context() const { return ctx_; }
+
+ private:
+  template <class Fill>
+  void upload_volumes(BvKind kind, std::size_t count, std::size_t bytes_per_object, bool centres, Fill&& fill);
+  void ensure_outputs(std::size_t view_count, std::size_t visible_capacity, bool draws, bool ordered);
+  VkDeviceSize group_count_bytes(std::size_t view_count) const;  // the ordered passes' workgroup counts
+  struct SegmentPlan {
+    std::size_t objects = 0;  // per segment
+    std::size_t count = 1;
+  };
+  SegmentPlan plan_segments(std::size_t view_count, bool ordered) const;
+  void prepare(std::span<const Frustum> views, const CullOptions& options);
+  void record_passes(VkCommandBuffer cmd, VkQueryPool timestamps);
+  /// One variant of the flat pass's shaders; fields a shader does not read stay at their defaults.
+  struct PipelineKey {
+    enum class Shader { Cull, CompactScan, CompactScatter };
+    Shader shader = Shader::Cull;
+    BvKind kind = BvKind::Aabb;  // Cull
+    bool ordered = false;        // Cull: count per workgroup for the ordered passes
+    bool draws = false;          // Cull, CompactScatter: write indirect draws
+    bool classes = false;        // Cull: write the per-object classes
+    // Cull: test the kept objects against the depth pyramid, reading at most this many texels per
+    // axis (0: no occlusion test).
+    std::uint32_t occlusion_texels = 0;
+    auto operator<=>(const PipelineKey&) const = default;
+  };
+  const vulkan::ComputePipeline& pipeline(PipelineKey key);
+  /// The cull pass in arrival order; the ordered passes' counting cull and their scatter.
+  PipelineKey arrival_key(const CullOptions& o) const {
+    return {.kind = kind_, .draws = o.draws, .classes = o.classes, .occlusion_texels = detail::occlusion_texels(o)};
+  }
+  PipelineKey ordered_key(const CullOptions& o) const {
+    return {.kind = kind_, .ordered = true, .classes = true, .occlusion_texels = detail::occlusion_texels(o)};
+  }
+  static PipelineKey scatter_key(const CullOptions& o) {
+    return {.shader = PipelineKey::Shader::CompactScatter, .draws = o.draws};
+  }
+  void update_descriptors();
+
+  const vulkan::Context& ctx_;
+  std::uint32_t group_size_ = FLAT_CULL_GROUP_SIZE;
+  std::uint32_t max_groups_ = 0;
+  std::uint32_t objects_per_invocation_ = 1;
+  std::size_t max_segment_objects_ = 0;
+  unsigned upload_threads_ = 0;
+  std::unique_ptr<ThreadPool> upload_pool_;  // started by the first upload of several chunks
+  std::size_t bytes_per_object_ = sizeof(GpuAabb);
+  // Segments of the current pass: objects per segment and their count (1 when all fit).
+  std::size_t segment_objects_ = 0;
+  std::size_t segment_count_ = 1;
+  // What the descriptor sets were last written for.
+  std::size_t written_segment_objects_ = 0, written_view_count_ = 0;
+  // The pyramid buffer the descriptors hold, by DepthPyramidPass::generation() (0: none; a
+  // handle could be reused by a later buffer, a generation is not).
+  std::uint64_t written_pyramid_ = ~std::uint64_t{0}, pyramid_generation_ = 0;
+  BvKind kind_ = BvKind::Aabb;
+  std::size_t object_count_ = 0;
+  detail::PipelineCache<PipelineKey> pipelines_;
+  vulkan::Buffer bounds_, classes_, visible_, counters_, views_, templates_, draws_, group_counts_;
+  vulkan::Buffer occlusion_views_;           // GpuOcclusionView per view (BINDING_OCCLUSION_VIEWS)
+  vulkan::Buffer no_pyramid_;                // bound to BINDING_PYRAMID in passes without occlusion
+  const vulkan::Buffer* pyramid_ = nullptr;  // the buffer bound to BINDING_PYRAMID
+  vulkan::Buffer centres_;                   // AABBs: centre and bound per object (BINDING_CENTRES)
+  std::size_t template_count_ = 0;
+  std::size_t last_capacity_ = 0;
+  std::size_t last_view_count_ = 0;
+  CullOptions last_options_;
+  std::unique_ptr<detail::PassResources> resources_;  // descriptor set, command buffer, timestamps
+  bool descriptors_dirty_ = true;
+};
+
+}  // namespace cullpipe::gpu

@@ -1,0 +1,152 @@
+#include "cullpipe/render/image.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <glm/geometric.hpp>
+#include <glm/mat4x4.hpp>
+#include <glm/matrix.hpp>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+#include "cullpipe/scene/scene.hpp"
+
+#define STB_IMAGE_WRITE_IMPLEMENTATION
+#include <stb/stb_image_write.h>
+
+namespace cullpipe::render {
+namespace {
+
+struct Canvas {
+  Image& image;
+  void put(int x, int y, std::uint32_t rgba) {
+    if (x < 0 || y < 0 || x >= int(image.width) || y >= int(image.height)) return;
+    std::uint8_t* p = image.rgba.data() + (std::size_t(y) * image.width + std::size_t(x)) * 4;
+    p[0] = std::uint8_t(rgba >> 24);
+    p[1] = std::uint8_t(rgba >> 16);
+    p[2] = std::uint8_t(rgba >> 8);
+    p[3] = std::uint8_t(rgba);
+  }
+  void fill(int x0, int y0, int x1, int y1, std::uint32_t rgba) {
+    x0 = std::max(x0, 0), y0 = std::max(y0, 0);
+    x1 = std::min(x1, int(image.width) - 1), y1 = std::min(y1, int(image.height) - 1);
+    for (int y = y0; y <= y1; ++y)
+      for (int x = x0; x <= x1; ++x) put(x, y, rgba);
+  }
+  void line(int x0, int y0, int x1, int y1, std::uint32_t rgba) {  // Bresenham
+    const int dx = std::abs(x1 - x0), dy = -std::abs(y1 - y0), sx = x0 < x1 ? 1 : -1, sy = y0 < y1 ? 1 : -1;
+    int err = dx + dy;
+    for (int guard = 0; guard < 1 << 16; ++guard) {
+      put(x0, y0, rgba);
+      if (x0 == x1 && y0 == y1) break;
+      const int e2 = 2 * err;
+      if (e2 >= dy) err += dy, x0 += sx;
+      if (e2 <= dx) err += dx, y0 += sy;
+    }
+  }
+};
+
+std::uint32_t darker(std::uint32_t c) {
+  const auto ch = [&](int shift) { return std::uint32_t(((c >> shift) & 0xff) * 3 / 5) << shift; };
+  return ch(24) | ch(16) | ch(8) | (c & 0xff);
+}
+
+}  // namespace
+
+void write_png(const std::string& path, const Image& image) {
+  if (image.width == 0 || image.height == 0 || image.rgba.size() != std::size_t(image.width) * image.height * 4)
+    throw InputError(path + ": cannot write an empty or inconsistent image");
+  // Encoded in memory, then written atomically: a failed or interrupted write never leaves a
+  // truncated PNG in place of an earlier one.
+  std::string png;
+  const auto append = [](void* context, void* data, int size) {
+    static_cast<std::string*>(context)->append(static_cast<const char*>(data), std::size_t(size));
+  };
+  if (!stbi_write_png_to_func(append, &png, int(image.width), int(image.height), 4, image.rgba.data(),
+                              int(image.width * 4)))
+    throw InputError(path + ": cannot encode the PNG image");
+  write_file_atomic(path, png);
+}
+
+std::size_t count_different_pixels(const Image& a, const Image& b) {
+  if (a.width != b.width || a.height != b.height || a.rgba.size() != b.rgba.size())
+    return std::numeric_limits<std::size_t>::max();
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < a.rgba.size(); i += 4)
+    if (a.rgba[i] != b.rgba[i] || a.rgba[i + 1] != b.rgba[i + 1] || a.rgba[i + 2] != b.rgba[i + 2] ||
+        a.rgba[i + 3] != b.rgba[i + 3])
+      ++n;
+  return n;
+}
+
+Image top_down_image(const std::vector<Aabb>& world_boxes, const std::vector<Classification>& classes,
+                     const Camera& camera, std::uint32_t size) {
+  // The frustum's corners: unproject the clip-space corners; an infinite or very far far
+  // plane is cut at `far_limit` from the eye so the drawing stays readable.
+  float lo_x = camera.eye.x, hi_x = camera.eye.x, lo_z = camera.eye.z, hi_z = camera.eye.z;
+  for (const Aabb& b : world_boxes) {
+    lo_x = std::min(lo_x, b.min.x), hi_x = std::max(hi_x, b.max.x);
+    lo_z = std::min(lo_z, b.min.z), hi_z = std::max(hi_z, b.max.z);
+  }
+  const float extent = std::max({hi_x - lo_x, hi_z - lo_z, 1e-3f});
+  const float far_limit = 2.0f * extent + glm::length(camera.target - camera.eye);
+  Camera cut = camera;
+  if (!cut.orthographic) {
+    cut.infinite_far = false;
+    cut.far_plane = std::min(camera.infinite_far ? far_limit : camera.far_plane, far_limit);
+    cut.far_plane = std::max(cut.far_plane, cut.near_plane * 2.0f);
+  }
+  const glm::mat4 inv = glm::inverse(cut.view_proj());
+  std::array<glm::vec3, 8> corners;
+  for (int i = 0; i < 8; ++i) {
+    const glm::vec4 clip((i & 1) ? 1.0f : -1.0f, (i & 2) ? 1.0f : -1.0f, (i & 4) ? 1.0f : 0.0f, 1.0f);
+    const glm::vec4 w = inv * clip;
+    corners[std::size_t(i)] = glm::vec3(w) / w.w;
+    lo_x = std::min(lo_x, corners[std::size_t(i)].x), hi_x = std::max(hi_x, corners[std::size_t(i)].x);
+    lo_z = std::min(lo_z, corners[std::size_t(i)].z), hi_z = std::max(hi_z, corners[std::size_t(i)].z);
+  }
+  const float span = std::max({hi_x - lo_x, hi_z - lo_z, 1e-3f}) * 1.04f;
+  const float cx = 0.5f * (lo_x + hi_x), cz = 0.5f * (lo_z + hi_z);
+  const float w_world = std::max(hi_x - lo_x, 1e-3f) * 1.04f, h_world = std::max(hi_z - lo_z, 1e-3f) * 1.04f;
+  Image img;
+  const float scale = float(size) / span;
+  img.width = std::max<std::uint32_t>(16, std::uint32_t(std::ceil(w_world * scale)));
+  img.height = std::max<std::uint32_t>(16, std::uint32_t(std::ceil(h_world * scale)));
+  img.rgba.assign(std::size_t(img.width) * img.height * 4, 0);
+  Canvas c{img};
+  c.fill(0, 0, int(img.width) - 1, int(img.height) - 1, 0x16181dff);
+  const auto px = [&](float x) { return int(std::floor((x - cx) * scale + 0.5f * float(img.width))); };
+  const auto pz = [&](float z) { return int(std::floor((z - cz) * scale + 0.5f * float(img.height))); };
+
+  // Outside, then occluded, intersecting and inside on top.
+  const Classification order[4] = {Classification::Outside, Classification::Occluded, Classification::Intersecting,
+                                   Classification::Inside};
+  const std::uint32_t colors[4] = {kColorOutside, kColorOccluded, kColorIntersecting, kColorInside};
+  for (int pass = 0; pass < 4; ++pass) {
+    const Classification want = order[pass];
+    const std::uint32_t color = colors[pass];
+    for (std::size_t i = 0; i < world_boxes.size() && i < classes.size(); ++i) {
+      if (classes[i] != want) continue;
+      const Aabb& b = world_boxes[i];
+      const int x0 = px(b.min.x), x1 = px(b.max.x), z0 = pz(b.min.z), z1 = pz(b.max.z);
+      c.fill(x0, z0, x1, z1, color);
+      if (x1 - x0 > 3 && z1 - z0 > 3) {
+        c.line(x0, z0, x1, z0, darker(color)), c.line(x1, z0, x1, z1, darker(color));
+        c.line(x1, z1, x0, z1, darker(color)), c.line(x0, z1, x0, z0, darker(color));
+      }
+    }
+  }
+  // Frustum edges: near quad, far quad, and the four side edges.
+  static const int edges[12][2] = {{0, 1}, {1, 3}, {3, 2}, {2, 0}, {4, 5}, {5, 7},
+                                   {7, 6}, {6, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
+  for (const auto& e : edges) {
+    const glm::vec3& a = corners[std::size_t(e[0])];
+    const glm::vec3& b = corners[std::size_t(e[1])];
+    c.line(px(a.x), pz(a.z), px(b.x), pz(b.z), 0xffffffff);
+  }
+  c.fill(px(camera.eye.x) - 3, pz(camera.eye.z) - 3, px(camera.eye.x) + 3, pz(camera.eye.z) + 3, 0xff4040ff);
+  return img;
+}
+
+}  // namespace cullpipe::render

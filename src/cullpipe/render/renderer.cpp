@@ -1,0 +1,603 @@
+#include "cullpipe/render/renderer.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <functional>
+#include <glm/ext/matrix_transform.hpp>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <unordered_map>
+
+#include "cullpipe/vulkan/check.hpp"
+
+// SPIR-V compiled from shaders/render_mesh.{vert,frag} at build time.
+#include "render_id.frag.spv.h"
+#include "render_mesh.frag.spv.h"
+#include "render_mesh.vert.spv.h"
+
+namespace cullpipe::render {
+namespace {
+
+using gpu::DrawCommand;
+using gpu::RenderObject;
+
+// A fixed, well-spread colour per object id (golden-ratio hue steps, HSV to RGB).
+glm::vec4 object_color(std::size_t id) {
+  const float h = std::fmod(0.11f + 0.61803398875f * float(id % 100000), 1.0f) * 6.0f;
+  const float s = 0.55f, v = 0.92f;
+  const float c = v * s, x = c * (1.0f - std::abs(std::fmod(h, 2.0f) - 1.0f)), m = v - c;
+  glm::vec3 rgb = h < 1   ? glm::vec3(c, x, 0)
+                  : h < 2 ? glm::vec3(x, c, 0)
+                  : h < 3 ? glm::vec3(0, c, x)
+                  : h < 4 ? glm::vec3(0, x, c)
+                  : h < 5 ? glm::vec3(x, 0, c)
+                          : glm::vec3(c, 0, x);
+  return glm::vec4(rgb + m, 1.0f);
+}
+
+// The unit cube [0,1]^3: 8 corners, 12 triangles.
+const glm::vec3 kCubeVertices[8] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0},
+                                    {0, 0, 1}, {1, 0, 1}, {0, 1, 1}, {1, 1, 1}};
+const std::uint32_t kCubeIndices[36] = {0, 2, 1, 1, 2, 3, 4, 5, 6, 5, 7, 6, 0, 1, 4, 1, 5, 4,
+                                        2, 6, 3, 3, 6, 7, 0, 4, 2, 2, 4, 6, 1, 3, 5, 3, 7, 5};
+
+VkShaderModule shader_module(VkDevice dev, const std::uint32_t* code, std::size_t bytes) {
+  VkShaderModuleCreateInfo info{VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO};
+  info.codeSize = bytes;
+  info.pCode = code;
+  VkShaderModule m = VK_NULL_HANDLE;
+  CULLPIPE_VK_CHECK(vkCreateShaderModule(dev, &info, nullptr, &m));
+  return m;
+}
+
+}  // namespace
+
+Renderer::Renderer(const vulkan::Context& ctx, const Scene& scene, const RendererConfig& config)
+    : ctx_(ctx), config_(config) {
+  if (!ctx.draw_indirect_count())
+    throw vulkan::Error(
+        "the renderer needs drawIndirectCount, multiDrawIndirect and drawIndirectFirstInstance, which " +
+        ctx.info().name + " does not offer (or which the borrowed device did not enable)");
+  if (!(ctx.queue_flags() & VK_QUEUE_GRAPHICS_BIT))
+    throw vulkan::Error("the renderer needs a queue with graphics and compute; " + ctx.info().name +
+                        "'s chosen queue has no graphics");
+  if (config_.width == 0 || config_.height == 0 || config_.width > ctx.properties().limits.maxFramebufferWidth ||
+      config_.height > ctx.properties().limits.maxFramebufferHeight)
+    throw std::invalid_argument("image size " + std::to_string(config_.width) + "x" + std::to_string(config_.height) +
+                                " is empty or larger than the device's framebuffer limit");
+  try {
+    // ---- geometry: each distinct triangle mesh once, box objects share one unit cube ----
+    std::vector<glm::vec3> vertices(std::begin(kCubeVertices), std::end(kCubeVertices));
+    std::vector<std::uint32_t> indices(std::begin(kCubeIndices), std::end(kCubeIndices));
+    struct Placed {
+      std::uint32_t first_index, index_count;
+      std::int32_t vertex_offset;
+    };
+    std::unordered_map<const TriangleMesh*, Placed> placed;
+    const std::size_t n = scene.objects.size();
+    templates_.resize(n);
+    std::vector<RenderObject> objects(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      const SceneObject& o = scene.objects[i];
+      Placed p{0, 36, 0};  // the cube
+      if (o.triangles) {
+        auto it = placed.find(o.triangles.get());
+        if (it == placed.end()) {
+          if (vertices.size() + o.triangles->positions.size() > std::size_t(std::numeric_limits<std::int32_t>::max()) ||
+              indices.size() + o.triangles->indices.size() > std::numeric_limits<std::uint32_t>::max())
+            throw std::length_error(
+                "the scene's distinct meshes have more vertices or indices than one draw can address");
+          p = {std::uint32_t(indices.size()), std::uint32_t(o.triangles->indices.size()),
+               std::int32_t(vertices.size())};
+          vertices.insert(vertices.end(), o.triangles->positions.begin(), o.triangles->positions.end());
+          indices.insert(indices.end(), o.triangles->indices.begin(), o.triangles->indices.end());
+          it = placed.emplace(o.triangles.get(), p).first;
+        }
+        p = it->second;
+        objects[i].model = o.world;
+      } else {
+        const glm::vec3 size = o.local_bounds.max - o.local_bounds.min;
+        objects[i].model = glm::scale(glm::translate(o.world, o.local_bounds.min), size);
+      }
+      objects[i].color = object_color(i);
+      templates_[i] = {p.index_count, 1, p.first_index, p.vertex_offset, std::uint32_t(i), 0};
+    }
+    const auto upload = [&](vulkan::Buffer& b, const void* data, std::size_t bytes, VkBufferUsageFlags usage,
+                            const char* what) {
+      b = vulkan::Buffer(ctx_, std::max<std::size_t>(bytes, 16), usage, what);
+      if (bytes) std::memcpy(b.data(), data, bytes);
+    };
+    upload(vertices_, vertices.data(), vertices.size() * sizeof(glm::vec3), VK_BUFFER_USAGE_VERTEX_BUFFER_BIT,
+           "vertex buffer");
+    upload(indices_, indices.data(), indices.size() * sizeof(std::uint32_t), VK_BUFFER_USAGE_INDEX_BUFFER_BIT,
+           "index buffer");
+    upload(objects_, objects.data(), objects.size() * sizeof(RenderObject), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT,
+           "render object buffer");
+    // The id pass's objects: the same, coloured by id + 1 in 24 bits (render_id.frag).
+    if (n >= (std::size_t(1) << 24) - 1)
+      throw std::length_error(std::to_string(n) + " objects: the id pass tells at most 2^24 - 2 apart");
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::uint32_t id = std::uint32_t(i + 1);
+      objects[i].color =
+          glm::vec4(float(id & 255u) / 255.0f, float(id >> 8 & 255u) / 255.0f, float(id >> 16) / 255.0f, 1.0f);
+    }
+    upload(id_objects_, objects.data(), objects.size() * sizeof(RenderObject), VK_BUFFER_USAGE_STORAGE_BUFFER_BIT,
+           "id pass object buffer");
+    upload(all_draws_, templates_.data(), templates_.size() * sizeof(DrawCommand), VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT,
+           "unculled draw buffer");
+    if (n > ctx_.properties().limits.maxDrawIndirectCount)
+      throw std::length_error(std::to_string(n) + " objects are more draws than one indirect draw call may issue on " +
+                              ctx_.info().name + " (maxDrawIndirectCount " +
+                              std::to_string(ctx_.properties().limits.maxDrawIndirectCount) + ")");
+    readback_ = vulkan::Buffer(ctx_, VkDeviceSize(config_.width) * config_.height * 4, VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                               "image readback buffer");
+
+    // ---- the culling pass on the same device ----
+    culler_ = std::make_unique<gpu::GpuCuller>(ctx_);
+    switch (config_.bv) {
+      case BvKind::Aabb: {
+        const std::vector<Aabb> v = world_aabbs(scene, config_.aabb_update);
+        culler_->upload(std::span<const Aabb>(v));
+        break;
+      }
+      case BvKind::Obb: {
+        const std::vector<Obb> v = world_obbs(scene);
+        culler_->upload(std::span<const Obb>(v));
+        break;
+      }
+      case BvKind::Sphere: {
+        const std::vector<Sphere> v = world_spheres(scene);
+        culler_->upload(std::span<const Sphere>(v));
+        break;
+      }
+    }
+    culler_->upload_draws(templates_);
+
+    create_targets();
+    create_pipelines();
+
+    VkCommandBufferAllocateInfo cmd_info{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
+    cmd_info.commandPool = ctx_.command_pool();
+    cmd_info.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+    cmd_info.commandBufferCount = 1;
+    CULLPIPE_VK_CHECK(vkAllocateCommandBuffers(ctx_.device(), &cmd_info, &cmd_));
+    if (ctx_.pipeline_statistics()) {
+      VkQueryPoolCreateInfo q{VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO};
+      q.queryType = VK_QUERY_TYPE_PIPELINE_STATISTICS;
+      q.queryCount = 1;
+      q.pipelineStatistics = VK_QUERY_PIPELINE_STATISTIC_INPUT_ASSEMBLY_PRIMITIVES_BIT;
+      CULLPIPE_VK_CHECK(vkCreateQueryPool(ctx_.device(), &q, nullptr, &stats_pool_));
+    }
+  } catch (...) {
+    release();
+    throw;
+  }
+}
+
+Renderer::~Renderer() { release(); }
+
+void Renderer::create_targets() {
+  VkDevice dev = ctx_.device();
+  const auto make_image = [&](VkFormat format, VkImageUsageFlags usage, VkImageAspectFlags aspect, VkImage& image,
+                              VkDeviceMemory& memory, VkImageView& view, const char* what) {
+    VkImageCreateInfo info{VK_STRUCTURE_TYPE_IMAGE_CREATE_INFO};
+    info.imageType = VK_IMAGE_TYPE_2D;
+    info.format = format;
+    info.extent = {config_.width, config_.height, 1};
+    info.mipLevels = 1;
+    info.arrayLayers = 1;
+    info.samples = VK_SAMPLE_COUNT_1_BIT;
+    info.tiling = VK_IMAGE_TILING_OPTIMAL;
+    info.usage = usage;
+    info.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
+    CULLPIPE_VK_CHECK(vkCreateImage(dev, &info, nullptr, &image));
+    VkMemoryRequirements req{};
+    vkGetImageMemoryRequirements(dev, image, &req);
+    VkMemoryAllocateInfo alloc{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
+    alloc.allocationSize = req.size;
+    alloc.memoryTypeIndex = ctx_.find_memory_type(req.memoryTypeBits, 0, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+    const VkResult r = vkAllocateMemory(dev, &alloc, nullptr, &memory);
+    if (r != VK_SUCCESS)
+      throw vulkan::Error(std::string("allocating the ") + what + " failed: " + vulkan::result_name(r), r);
+    CULLPIPE_VK_CHECK(vkBindImageMemory(dev, image, memory, 0));
+    VkImageViewCreateInfo view_info{VK_STRUCTURE_TYPE_IMAGE_VIEW_CREATE_INFO};
+    view_info.image = image;
+    view_info.viewType = VK_IMAGE_VIEW_TYPE_2D;
+    view_info.format = format;
+    view_info.subresourceRange = {aspect, 0, 1, 0, 1};
+    CULLPIPE_VK_CHECK(vkCreateImageView(dev, &view_info, nullptr, &view));
+  };
+  make_image(VK_FORMAT_R8G8B8A8_UNORM, VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT,
+             VK_IMAGE_ASPECT_COLOR_BIT, color_, color_memory_, color_view_, "colour image");
+  // (Transfer source: occlusion frames copy the first phase's depth into the pyramid.)
+  make_image(VK_FORMAT_D32_SFLOAT, VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT,
+             VK_IMAGE_ASPECT_DEPTH_BIT, depth_, depth_memory_, depth_view_, "depth image");
+
+  VkAttachmentDescription attachments[2]{};
+  attachments[0].format = VK_FORMAT_R8G8B8A8_UNORM;
+  attachments[0].samples = VK_SAMPLE_COUNT_1_BIT;
+  attachments[0].loadOp = VK_ATTACHMENT_LOAD_OP_CLEAR;
+  attachments[0].storeOp = VK_ATTACHMENT_STORE_OP_STORE;
+  attachments[0].stencilLoadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
+  attachments[0].stencilStoreOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
+  attachments[0].initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
+  attachments[0].finalLayout = VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL;
+  attachments[1] = attachments[0];
+  attachments[1].format = VK_FORMAT_D32_SFLOAT;
+  attachments[1].storeOp = VK_ATTACHMENT_STORE_OP_STORE;  // (the pyramid reads it)
+  attachments[1].finalLayout = VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL;
+  VkAttachmentReference color_ref{0, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL};
+  VkAttachmentReference depth_ref{1, VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL};
+  VkSubpassDescription subpass{};
+  subpass.pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
+  subpass.colorAttachmentCount = 1;
+  subpass.pColorAttachments = &color_ref;
+  subpass.pDepthStencilAttachment = &depth_ref;
+  // In: the previous frame's copy (transfer read of the colour image) and depth writes finish
+  // before this frame clears and writes. Out: colour writes finish before the copy.
+  VkSubpassDependency deps[2]{};
+  deps[0].srcSubpass = VK_SUBPASS_EXTERNAL;
+  deps[0].dstSubpass = 0;
+  // (Occlusion frames run the render pass twice: the first phase's colour writes finish too.)
+  deps[0].srcStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT |
+                         VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  deps[0].srcAccessMask = VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT | VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+  deps[0].dstStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT | VK_PIPELINE_STAGE_EARLY_FRAGMENT_TESTS_BIT |
+                         VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT;
+  deps[0].dstAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT | VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_READ_BIT |
+                          VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT;
+  deps[1].srcSubpass = 0;
+  deps[1].dstSubpass = VK_SUBPASS_EXTERNAL;
+  deps[1].srcStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  deps[1].srcAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+  deps[1].dstStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT;
+  deps[1].dstAccessMask = VK_ACCESS_TRANSFER_READ_BIT;
+  VkRenderPassCreateInfo rp{VK_STRUCTURE_TYPE_RENDER_PASS_CREATE_INFO};
+  rp.attachmentCount = 2;
+  rp.pAttachments = attachments;
+  rp.subpassCount = 1;
+  rp.pSubpasses = &subpass;
+  rp.dependencyCount = 2;
+  rp.pDependencies = deps;
+  CULLPIPE_VK_CHECK(vkCreateRenderPass(dev, &rp, nullptr, &render_pass_));
+  VkImageView views[2] = {color_view_, depth_view_};
+  VkFramebufferCreateInfo fb{VK_STRUCTURE_TYPE_FRAMEBUFFER_CREATE_INFO};
+  fb.renderPass = render_pass_;
+  fb.attachmentCount = 2;
+  fb.pAttachments = views;
+  fb.width = config_.width;
+  fb.height = config_.height;
+  fb.layers = 1;
+  CULLPIPE_VK_CHECK(vkCreateFramebuffer(dev, &fb, nullptr, &framebuffer_));
+}
+
+void Renderer::create_pipelines() {
+  VkDevice dev = ctx_.device();
+  VkDescriptorSetLayoutBinding binding{0, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_VERTEX_BIT, nullptr};
+  VkDescriptorSetLayoutCreateInfo set_info{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO};
+  set_info.bindingCount = 1;
+  set_info.pBindings = &binding;
+  CULLPIPE_VK_CHECK(vkCreateDescriptorSetLayout(dev, &set_info, nullptr, &set_layout_));
+  VkPushConstantRange push{VK_SHADER_STAGE_VERTEX_BIT, 0, sizeof(gpu::RenderParams)};
+  VkPipelineLayoutCreateInfo layout_info{VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO};
+  layout_info.setLayoutCount = 1;
+  layout_info.pSetLayouts = &set_layout_;
+  layout_info.pushConstantRangeCount = 1;
+  layout_info.pPushConstantRanges = &push;
+  CULLPIPE_VK_CHECK(vkCreatePipelineLayout(dev, &layout_info, nullptr, &pipeline_layout_));
+
+  VkDescriptorPoolSize pool_size{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 2};
+  VkDescriptorPoolCreateInfo pool_info{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
+  pool_info.maxSets = 2;
+  pool_info.poolSizeCount = 1;
+  pool_info.pPoolSizes = &pool_size;
+  CULLPIPE_VK_CHECK(vkCreateDescriptorPool(dev, &pool_info, nullptr, &descriptor_pool_));
+  VkDescriptorSetAllocateInfo alloc{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO};
+  alloc.descriptorPool = descriptor_pool_;
+  alloc.descriptorSetCount = 1;
+  alloc.pSetLayouts = &set_layout_;
+  CULLPIPE_VK_CHECK(vkAllocateDescriptorSets(dev, &alloc, &descriptor_set_));
+  VkDescriptorBufferInfo buffer_info{objects_.handle(), 0, VK_WHOLE_SIZE};
+  VkWriteDescriptorSet write{VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
+  write.dstSet = descriptor_set_;
+  write.dstBinding = 0;
+  write.descriptorCount = 1;
+  write.descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+  write.pBufferInfo = &buffer_info;
+  vkUpdateDescriptorSets(dev, 1, &write, 0, nullptr);
+  CULLPIPE_VK_CHECK(vkAllocateDescriptorSets(dev, &alloc, &id_descriptor_set_));
+  buffer_info.buffer = id_objects_.handle();
+  write.dstSet = id_descriptor_set_;
+  vkUpdateDescriptorSets(dev, 1, &write, 0, nullptr);
+
+  VkShaderModule vert = shader_module(dev, cullpipe_render_mesh_vert_spv, sizeof(cullpipe_render_mesh_vert_spv));
+  VkShaderModule frag = VK_NULL_HANDLE, id_frag = VK_NULL_HANDLE;
+  try {
+    frag = shader_module(dev, cullpipe_render_mesh_frag_spv, sizeof(cullpipe_render_mesh_frag_spv));
+    id_frag = shader_module(dev, cullpipe_render_id_frag_spv, sizeof(cullpipe_render_id_frag_spv));
+    VkPipelineShaderStageCreateInfo stages[2]{};
+    stages[0] = {VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO,
+                 nullptr,
+                 0,
+                 VK_SHADER_STAGE_VERTEX_BIT,
+                 vert,
+                 "main",
+                 nullptr};
+    stages[1] = {VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO,
+                 nullptr,
+                 0,
+                 VK_SHADER_STAGE_FRAGMENT_BIT,
+                 frag,
+                 "main",
+                 nullptr};
+    VkVertexInputBindingDescription vb{0, sizeof(glm::vec3), VK_VERTEX_INPUT_RATE_VERTEX};
+    VkVertexInputAttributeDescription va{0, 0, VK_FORMAT_R32G32B32_SFLOAT, 0};
+    VkPipelineVertexInputStateCreateInfo vertex_input{VK_STRUCTURE_TYPE_PIPELINE_VERTEX_INPUT_STATE_CREATE_INFO};
+    vertex_input.vertexBindingDescriptionCount = 1;
+    vertex_input.pVertexBindingDescriptions = &vb;
+    vertex_input.vertexAttributeDescriptionCount = 1;
+    vertex_input.pVertexAttributeDescriptions = &va;
+    VkPipelineInputAssemblyStateCreateInfo assembly{VK_STRUCTURE_TYPE_PIPELINE_INPUT_ASSEMBLY_STATE_CREATE_INFO};
+    assembly.topology = VK_PRIMITIVE_TOPOLOGY_TRIANGLE_LIST;
+    VkViewport viewport{0.0f, 0.0f, float(config_.width), float(config_.height), 0.0f, 1.0f};
+    VkRect2D scissor{{0, 0}, {config_.width, config_.height}};
+    VkPipelineViewportStateCreateInfo viewport_state{VK_STRUCTURE_TYPE_PIPELINE_VIEWPORT_STATE_CREATE_INFO};
+    viewport_state.viewportCount = 1;
+    viewport_state.pViewports = &viewport;
+    viewport_state.scissorCount = 1;
+    viewport_state.pScissors = &scissor;
+    VkPipelineRasterizationStateCreateInfo raster{VK_STRUCTURE_TYPE_PIPELINE_RASTERIZATION_STATE_CREATE_INFO};
+    raster.polygonMode = VK_POLYGON_MODE_FILL;
+    raster.cullMode = VK_CULL_MODE_NONE;  // mirrored instances flip winding; draw both sides
+    raster.frontFace = VK_FRONT_FACE_COUNTER_CLOCKWISE;
+    raster.lineWidth = 1.0f;
+    VkPipelineMultisampleStateCreateInfo multisample{VK_STRUCTURE_TYPE_PIPELINE_MULTISAMPLE_STATE_CREATE_INFO};
+    multisample.rasterizationSamples = VK_SAMPLE_COUNT_1_BIT;
+    VkPipelineDepthStencilStateCreateInfo depth{VK_STRUCTURE_TYPE_PIPELINE_DEPTH_STENCIL_STATE_CREATE_INFO};
+    depth.depthTestEnable = VK_TRUE;
+    depth.depthWriteEnable = VK_TRUE;
+    VkPipelineColorBlendAttachmentState blend_attachment{};
+    blend_attachment.colorWriteMask =
+        VK_COLOR_COMPONENT_R_BIT | VK_COLOR_COMPONENT_G_BIT | VK_COLOR_COMPONENT_B_BIT | VK_COLOR_COMPONENT_A_BIT;
+    VkPipelineColorBlendStateCreateInfo blend{VK_STRUCTURE_TYPE_PIPELINE_COLOR_BLEND_STATE_CREATE_INFO};
+    blend.attachmentCount = 1;
+    blend.pAttachments = &blend_attachment;
+    VkGraphicsPipelineCreateInfo info{VK_STRUCTURE_TYPE_GRAPHICS_PIPELINE_CREATE_INFO};
+    info.stageCount = 2;
+    info.pStages = stages;
+    info.pVertexInputState = &vertex_input;
+    info.pInputAssemblyState = &assembly;
+    info.pViewportState = &viewport_state;
+    info.pRasterizationState = &raster;
+    info.pMultisampleState = &multisample;
+    info.pDepthStencilState = &depth;
+    info.pColorBlendState = &blend;
+    info.layout = pipeline_layout_;
+    info.renderPass = render_pass_;
+    info.subpass = 0;
+    for (int reversed = 0; reversed < 2; ++reversed) {
+      depth.depthCompareOp = reversed ? VK_COMPARE_OP_GREATER : VK_COMPARE_OP_LESS;
+      stages[1].module = frag;
+      CULLPIPE_VK_CHECK(vkCreateGraphicsPipelines(dev, VK_NULL_HANDLE, 1, &info, nullptr, &pipeline_[reversed]));
+      stages[1].module = id_frag;
+      CULLPIPE_VK_CHECK(vkCreateGraphicsPipelines(dev, VK_NULL_HANDLE, 1, &info, nullptr, &id_pipeline_[reversed]));
+      // Depth only (the first phase of an occlusion frame): no fragment shader, no colour.
+      info.stageCount = 1;
+      blend_attachment.colorWriteMask = 0;
+      CULLPIPE_VK_CHECK(vkCreateGraphicsPipelines(dev, VK_NULL_HANDLE, 1, &info, nullptr, &depth_pipeline_[reversed]));
+      info.stageCount = 2;
+      blend_attachment.colorWriteMask =
+          VK_COLOR_COMPONENT_R_BIT | VK_COLOR_COMPONENT_G_BIT | VK_COLOR_COMPONENT_B_BIT | VK_COLOR_COMPONENT_A_BIT;
+    }
+  } catch (...) {
+    vkDestroyShaderModule(dev, vert, nullptr);
+    if (frag) vkDestroyShaderModule(dev, frag, nullptr);
+    if (id_frag) vkDestroyShaderModule(dev, id_frag, nullptr);
+    throw;
+  }
+  vkDestroyShaderModule(dev, vert, nullptr);
+  vkDestroyShaderModule(dev, frag, nullptr);
+  vkDestroyShaderModule(dev, id_frag, nullptr);
+}
+
+void Renderer::release() {
+  VkDevice dev = ctx_.device();
+  if (ctx_.owns_device()) vkDeviceWaitIdle(dev);
+  culler_.reset();
+  if (stats_pool_) vkDestroyQueryPool(dev, stats_pool_, nullptr);
+  if (cmd_) vkFreeCommandBuffers(dev, ctx_.command_pool(), 1, &cmd_);
+  for (VkPipeline& p : pipeline_)
+    if (p) vkDestroyPipeline(dev, p, nullptr), p = VK_NULL_HANDLE;
+  for (VkPipeline& p : depth_pipeline_)
+    if (p) vkDestroyPipeline(dev, p, nullptr), p = VK_NULL_HANDLE;
+  for (VkPipeline& p : id_pipeline_)
+    if (p) vkDestroyPipeline(dev, p, nullptr), p = VK_NULL_HANDLE;
+  if (descriptor_pool_) vkDestroyDescriptorPool(dev, descriptor_pool_, nullptr);
+  if (pipeline_layout_) vkDestroyPipelineLayout(dev, pipeline_layout_, nullptr);
+  if (set_layout_) vkDestroyDescriptorSetLayout(dev, set_layout_, nullptr);
+  if (framebuffer_) vkDestroyFramebuffer(dev, framebuffer_, nullptr);
+  if (render_pass_) vkDestroyRenderPass(dev, render_pass_, nullptr);
+  if (color_view_) vkDestroyImageView(dev, color_view_, nullptr);
+  if (depth_view_) vkDestroyImageView(dev, depth_view_, nullptr);
+  if (color_) vkDestroyImage(dev, color_, nullptr);
+  if (depth_) vkDestroyImage(dev, depth_, nullptr);
+  if (color_memory_) vkFreeMemory(dev, color_memory_, nullptr);
+  if (depth_memory_) vkFreeMemory(dev, depth_memory_, nullptr);
+  stats_pool_ = VK_NULL_HANDLE;
+  cmd_ = VK_NULL_HANDLE;
+  descriptor_pool_ = VK_NULL_HANDLE;
+  pipeline_layout_ = VK_NULL_HANDLE;
+  set_layout_ = VK_NULL_HANDLE;
+  framebuffer_ = VK_NULL_HANDLE;
+  render_pass_ = VK_NULL_HANDLE;
+  color_view_ = depth_view_ = VK_NULL_HANDLE;
+  color_ = depth_ = VK_NULL_HANDLE;
+  color_memory_ = depth_memory_ = VK_NULL_HANDLE;
+}
+
+void Renderer::begin_frame() {
+  CULLPIPE_VK_CHECK(vkResetCommandBuffer(cmd_, 0));
+  VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+  begin.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+  CULLPIPE_VK_CHECK(vkBeginCommandBuffer(cmd_, &begin));
+}
+
+void Renderer::record_scene_pass(const Camera& camera, ScenePass pass, const std::function<void()>& draw) {
+  const bool ids = pass == ScenePass::Ids;
+  VkClearValue clears[2];
+  clears[0].color = ids ? VkClearColorValue{{0.0f, 0.0f, 0.0f, 0.0f}} : VkClearColorValue{{0.085f, 0.09f, 0.11f, 1.0f}};
+  clears[1].depthStencil = {camera.reversed_z ? 0.0f : 1.0f, 0};
+  VkRenderPassBeginInfo rp{VK_STRUCTURE_TYPE_RENDER_PASS_BEGIN_INFO};
+  rp.renderPass = render_pass_;
+  rp.framebuffer = framebuffer_;
+  rp.renderArea = {{0, 0}, {config_.width, config_.height}};
+  rp.clearValueCount = 2;
+  rp.pClearValues = clears;
+  vkCmdBeginRenderPass(cmd_, &rp, VK_SUBPASS_CONTENTS_INLINE);
+  const int reversed = camera.reversed_z ? 1 : 0;
+  const VkPipeline pipeline = ids                        ? id_pipeline_[reversed]
+                              : pass == ScenePass::Depth ? depth_pipeline_[reversed]
+                                                         : pipeline_[reversed];
+  vkCmdBindPipeline(cmd_, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline);
+  const VkDescriptorSet set = ids ? id_descriptor_set_ : descriptor_set_;
+  vkCmdBindDescriptorSets(cmd_, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline_layout_, 0, 1, &set, 0, nullptr);
+  const VkDeviceSize zero = 0;
+  VkBuffer vb = vertices_.handle();
+  vkCmdBindVertexBuffers(cmd_, 0, 1, &vb, &zero);
+  vkCmdBindIndexBuffer(cmd_, indices_.handle(), 0, VK_INDEX_TYPE_UINT32);
+  const gpu::RenderParams params{camera.view_proj()};
+  vkCmdPushConstants(cmd_, pipeline_layout_, VK_SHADER_STAGE_VERTEX_BIT, 0, sizeof(params), &params);
+  draw();
+  vkCmdEndRenderPass(cmd_);
+}
+
+Image Renderer::submit_and_read() {
+  VkBufferImageCopy copy{};
+  copy.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
+  copy.imageExtent = {config_.width, config_.height, 1};
+  vkCmdCopyImageToBuffer(cmd_, color_, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, readback_.handle(), 1, &copy);
+  VkMemoryBarrier to_host{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr, VK_ACCESS_TRANSFER_WRITE_BIT,
+                          VK_ACCESS_HOST_READ_BIT};
+  vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &to_host, 0, nullptr, 0,
+                       nullptr);
+  CULLPIPE_VK_CHECK(vkEndCommandBuffer(cmd_));
+  ctx_.submit_and_wait(cmd_);
+  Image image;
+  image.width = config_.width;
+  image.height = config_.height;
+  image.rgba.resize(std::size_t(config_.width) * config_.height * 4);
+  std::memcpy(image.rgba.data(), readback_.data(), image.rgba.size());
+  return image;
+}
+
+std::vector<bool> Renderer::pixel_owners(const Camera& camera) {
+  const std::size_t n = templates_.size();
+  begin_frame();
+  record_scene_pass(camera, ScenePass::Ids, [&] {
+    if (n > 0) vkCmdDrawIndexedIndirect(cmd_, all_draws_.handle(), 0, std::uint32_t(n), sizeof(DrawCommand));
+  });
+  const Image image = submit_and_read();
+  std::vector<bool> owners(n, false);
+  for (std::size_t p = 0; p < image.rgba.size(); p += 4) {
+    const std::uint32_t id =
+        std::uint32_t(image.rgba[p]) | std::uint32_t(image.rgba[p + 1]) << 8 | std::uint32_t(image.rgba[p + 2]) << 16;
+    if (id != 0 && id <= n) owners[id - 1] = true;
+  }
+  return owners;
+}
+
+Image Renderer::render(const Camera& camera, CullMode mode, FrameStats* stats) {
+  const glm::mat4 view_proj = camera.view_proj();
+  const Frustum frustum = Frustum::from_view_proj(view_proj);
+  const std::size_t n = templates_.size();
+  const bool cull = mode != CullMode::None, occlusion = mode == CullMode::Occlusion;
+  gpu::CullOptions options;
+  options.classes = stats != nullptr;
+  options.visible_ids = false;
+  options.ordered = true;  // the draws in object order, as the unculled frame issues them
+  options.draws = true;
+  if (occlusion) {
+    if (!pyramid_) pyramid_ = std::make_unique<gpu::DepthPyramidPass>(ctx_);
+    options.pyramid = pyramid_.get();
+    options.occlusion_views = {occlusion::OcclusionView{view_proj, config_.width, config_.height, camera.reversed_z}};
+    options.occlusion_options = config_.occlusion;
+  }
+  const bool first_phase = occlusion && has_visibility_;
+
+  begin_frame();
+  if (stats_pool_) vkCmdResetQueryPool(cmd_, stats_pool_, 0, 1);
+
+  const auto scene_pass = [&](const std::function<void()>& draw) { record_scene_pass(camera, ScenePass::Image, draw); };
+  // n <= maxDrawIndirectCount (checked at construction): one call either way. The culled count
+  // (view 0's visible_count) cannot exceed the capacity n: maxDrawCount = n.
+  const auto culled_draws = [&] {
+    if (n > 0)
+      vkCmdDrawIndexedIndirectCount(cmd_, culler_->draw_buffer().handle(), 0, culler_->counter_buffer().handle(), 0,
+                                    std::uint32_t(n), sizeof(DrawCommand));
+  };
+
+  std::size_t first_phase_draws = 0;
+  if (occlusion) {
+    // First phase: what the last culled frame kept (its draws, still in the culler's buffers),
+    // for depth; then that depth as a pyramid.
+    if (first_phase) {
+      first_phase_draws =
+          std::min<std::size_t>(culler_->counter_buffer().as<const gpu::ViewCounters>()[0].visible_count, n);
+      record_scene_pass(camera, ScenePass::Depth, culled_draws);  // (its colour is cleared below)
+    } else {
+      record_scene_pass(camera, ScenePass::Depth, [] {});  // nothing drawn: a cleared depth occludes nothing
+    }
+    pyramid_->record(cmd_, depth_source(), camera.reversed_z);
+  }
+  if (cull) culler_->record(cmd_, std::span(&frustum, 1), options);
+  // The image: every object, or what the culling pass kept, in object order.
+  scene_pass([&] {
+    if (stats_pool_) vkCmdBeginQuery(cmd_, stats_pool_, 0, 0);
+    if (cull) {
+      culled_draws();
+    } else if (n > 0) {
+      vkCmdDrawIndexedIndirect(cmd_, all_draws_.handle(), 0, std::uint32_t(n), sizeof(DrawCommand));
+    }
+    if (stats_pool_) vkCmdEndQuery(cmd_, stats_pool_, 0);
+  });
+
+  const Image image = submit_and_read();
+  // The culler's draws are what this frame kept: the next occlusion frame's first phase (any
+  // set of objects would keep its image exact; last frame's visible ones make the pyramid tight).
+  if (cull) has_visibility_ = true;
+  if (stats) {
+    stats->objects = n;
+    stats->first_phase_draws = first_phase_draws;
+    stats->occluded = 0;
+    if (cull) {
+      const gpu::CullResult r = culler_->read_results();
+      stats->draws = std::min<std::size_t>(r.views[0].counts.visible, n);
+      stats->occluded = r.views[0].counts.occluded;
+      stats->classes = r.views[0].classes;
+    } else {
+      stats->draws = n;
+      stats->classes.clear();
+    }
+    stats->primitives = 0;
+    stats->primitives_counted = false;
+    if (stats_pool_) {
+      std::uint64_t prims = 0;
+      CULLPIPE_VK_CHECK(vkGetQueryPoolResults(ctx_.device(), stats_pool_, 0, 1, sizeof(prims), &prims, sizeof(prims),
+                                              VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT));
+      stats->primitives = prims;
+      stats->primitives_counted = true;
+    }
+  }
+  return image;
+}
+
+std::vector<occlusion::OccluderBox> box_occluders(const Scene& scene) {
+  std::vector<occlusion::OccluderBox> occluders;
+  for (const SceneObject& object : scene.objects)
+    if (!object.triangles) occluders.push_back(occlusion::occluder_box(object.local_bounds, object.world));
+  return occluders;
+}
+
+}  // namespace cullpipe::render

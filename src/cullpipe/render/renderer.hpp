@@ -1,0 +1,143 @@
+#pragma once
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <vector>
+
+#include "cullpipe/bounds/aabb_update.hpp"
+#include "cullpipe/cull/occlusion.hpp"
+#include "cullpipe/cull/software_depth.hpp"
+#include "cullpipe/geom/bv_kind.hpp"
+#include "cullpipe/geom/classification.hpp"
+#include "cullpipe/gpu/depth_pyramid_pass.hpp"
+#include "cullpipe/gpu/gpu_culler.hpp"
+#include "cullpipe/render/image.hpp"
+#include "cullpipe/scene/camera.hpp"
+#include "cullpipe/scene/scene.hpp"
+#include "cullpipe/vulkan/buffer.hpp"
+#include "cullpipe/vulkan/context.hpp"
+
+namespace cullpipe::render {
+
+struct RendererConfig {
+  std::uint32_t width = 960;
+  std::uint32_t height = 540;
+  /// How the occlusion test of CullMode::Occlusion frames reads the depth pyramid.
+  occlusion::OcclusionOptions occlusion;
+  BvKind bv = BvKind::Aabb;                                            ///< volume the culling pass tests
+  bounds::AabbUpdate aabb_update = bounds::AabbUpdate::HullRecompute;  ///< world AABBs of mesh objects
+};
+
+/// How a frame culls: not at all, by the frustum, or by the frustum and then occlusion in two
+/// phases (CullMode::Occlusion: Renderer::render says how).
+enum class CullMode { None, Frustum, Occlusion };
+
+/// What one frame drew.
+struct FrameStats {
+  std::size_t objects = 0;
+  /// Draws the GPU issued for the image: the draw count the culling pass wrote (culled frames),
+  /// else objects. With occlusion, the second phase's draws.
+  std::size_t draws = 0;
+  /// Occlusion frames: the first phase's draws (last frame's visible objects, depth for the
+  /// pyramid) and the objects the frustum kept that the pyramid hid.
+  std::size_t first_phase_draws = 0;
+  std::size_t occluded = 0;
+  /// Triangles the input assembler received (pipeline statistics; 0 when the device has none).
+  std::uint64_t primitives = 0;
+  bool primitives_counted = false;
+  std::vector<Classification> classes;  ///< per object, from the culling pass (culled frames)
+};
+
+/// A headless Vulkan rasteriser (offscreen colour + depth, no window) that draws a scene from
+/// the culling pass's output: the pass is recorded into the frame's command buffer with
+/// GpuCuller::record (object-order compaction), and the frame draws with one
+/// vkCmdDrawIndexedIndirectCount from its draw and count buffers. Without culling, the same
+/// draws of every object are issued with vkCmdDrawIndexedIndirect, in the same object order,
+/// so the two images must be identical pixel for pixel. glTF objects are drawn from their
+/// triangles; box objects as their box. Each object gets a fixed colour from its id; shading
+/// is flat from screen-space derivatives. Needs drawIndirectCount and multiDrawIndirect.
+class Renderer {
+ public:
+  Renderer(const vulkan::Context& ctx, const Scene& scene, const RendererConfig& config = {});
+  ~Renderer();
+  Renderer(const Renderer&) = delete;
+  Renderer& operator=(const Renderer&) = delete;
+
+  /// Draws the scene seen by `camera`; waits and reads the image back. With
+  /// CullMode::Occlusion, in two phases: the first draws the objects the last culled frame
+  /// kept (none after construction or forget_visibility()) and reduces that depth to a
+  /// pyramid; the flat pass then culls by the frustum and that pyramid, and the second phase
+  /// clears and draws what it kept, in object order, so the image equals the unculled one pixel
+  /// for pixel (an occluded object is strictly behind every depth it could reach). What it kept
+  /// is the next frame's first phase.
+  Image render(const Camera& camera, CullMode mode, FrameStats* stats = nullptr);
+  Image render(const Camera& camera, bool cull, FrameStats* stats = nullptr) {
+    return render(camera, cull ? CullMode::Frustum : CullMode::None, stats);
+  }
+  /// The depth pyramid of the last occlusion frame (null before the first).
+  const gpu::DepthPyramidPass* pyramid() const { return pyramid_.get(); }
+  /// The depth attachment as a pyramid source: the depth of the last pass drawn (render or
+  /// pixel_owners), in the layout every pass leaves it (the caller waits for nothing: every
+  /// pass has completed when it returns).
+  gpu::DepthSource depth_source() const {
+    return {depth_, VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL, VK_FORMAT_D32_SFLOAT, config_.width,
+            config_.height};
+  }
+  /// The next occlusion frame starts with no visible objects (a camera cut).
+  void forget_visibility() { has_visibility_ = false; }
+
+  /// Which objects own at least one pixel of the unculled image seen by `camera`: every object
+  /// drawn in object order, as render(camera, CullMode::None) draws them, each writing its id;
+  /// the ids left in the image. What no culling may ever drop. (Its pipeline differs from the
+  /// image's in the fragment shader only; Vulkan promises the same positions across pipelines
+  /// only for an `invariant` gl_Position, which Debian 12's validation layer rejects as a
+  /// decoration of gl_PerVertex, so on other drivers treat a disagreement with the image check
+  /// with care.)
+  std::vector<bool> pixel_owners(const Camera& camera);
+
+  /// Triangles of object i (what a draw of it feeds the input assembler).
+  std::uint64_t triangles(std::size_t object) const { return templates_[object].index_count / 3; }
+  std::size_t object_count() const { return templates_.size(); }
+
+ private:
+  void begin_frame();
+  /// One pass of the scene into the colour and depth targets, cleared: the image, the objects'
+  /// ids (the id pass's pipeline and objects), or depth alone; `draw` records the draws.
+  enum class ScenePass { Image, Ids, Depth };
+  void record_scene_pass(const Camera& camera, ScenePass pass, const std::function<void()>& draw);
+  /// Copies the colour image out, ends, submits and waits, and returns the image.
+  Image submit_and_read();
+  void create_targets();
+  void create_pipelines();
+  void release();
+
+  const vulkan::Context& ctx_;
+  RendererConfig config_;
+  std::vector<gpu::DrawCommand> templates_;
+  std::unique_ptr<gpu::GpuCuller> culler_;
+  std::unique_ptr<gpu::DepthPyramidPass> pyramid_;
+  bool has_visibility_ = false;  // the culler's draw buffer holds the last culled frame's draws
+  vulkan::Buffer vertices_, indices_, objects_, id_objects_, all_draws_, readback_;
+  VkImage color_ = VK_NULL_HANDLE, depth_ = VK_NULL_HANDLE;
+  VkDeviceMemory color_memory_ = VK_NULL_HANDLE, depth_memory_ = VK_NULL_HANDLE;
+  VkImageView color_view_ = VK_NULL_HANDLE, depth_view_ = VK_NULL_HANDLE;
+  VkRenderPass render_pass_ = VK_NULL_HANDLE;
+  VkFramebuffer framebuffer_ = VK_NULL_HANDLE;
+  VkDescriptorSetLayout set_layout_ = VK_NULL_HANDLE;
+  VkPipelineLayout pipeline_layout_ = VK_NULL_HANDLE;
+  VkPipeline pipeline_[2] = {VK_NULL_HANDLE, VK_NULL_HANDLE};        // [reversed_z]: depth LESS or GREATER
+  VkPipeline id_pipeline_[2] = {VK_NULL_HANDLE, VK_NULL_HANDLE};     // the id pass's, likewise
+  VkPipeline depth_pipeline_[2] = {VK_NULL_HANDLE, VK_NULL_HANDLE};  // depth only, likewise
+  VkDescriptorSet id_descriptor_set_ = VK_NULL_HANDLE;               // its objects: id_objects_
+  VkDescriptorPool descriptor_pool_ = VK_NULL_HANDLE;
+  VkDescriptorSet descriptor_set_ = VK_NULL_HANDLE;
+  VkCommandBuffer cmd_ = VK_NULL_HANDLE;
+  VkQueryPool stats_pool_ = VK_NULL_HANDLE;
+};
+
+/// The CPU occlusion path's occluders for `scene`: its objects the renderer draws as boxes (those
+/// without triangles), as it draws them (occlusion::occluder_box of the local box and the world
+/// transform). Mesh objects are left out: their boxes are not inside them.
+std::vector<occlusion::OccluderBox> box_occluders(const Scene& scene);
+
+}  // namespace cullpipe::render

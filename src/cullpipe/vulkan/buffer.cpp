@@ -1,0 +1,69 @@
+#include "cullpipe/vulkan/buffer.hpp"
+
+#include <string>
+
+#include "cullpipe/vulkan/check.hpp"
+
+namespace cullpipe::vulkan {
+
+Buffer::Buffer(const Context& ctx, VkDeviceSize size, VkBufferUsageFlags usage, const char* what)
+    : ctx_(&ctx), device_(ctx.device()), size_(size) {
+  const std::string context = std::string(what) + " (" + std::to_string(size) + " bytes)";
+  VkBufferCreateInfo info{VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO};
+  info.size = size;
+  info.usage = usage;
+  info.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
+  VkResult r = vkCreateBuffer(device_, &info, nullptr, &buffer_);
+  if (r != VK_SUCCESS) throw Error("creating " + context + " failed: " + result_name(r), r);
+
+  VkMemoryRequirements req{};
+  vkGetBufferMemoryRequirements(device_, buffer_, &req);
+  try {
+    ctx.reserve_memory(req.size, context);
+    reserved_ = req.size;
+    VkMemoryAllocateInfo alloc{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
+    alloc.allocationSize = req.size;
+    alloc.memoryTypeIndex = ctx.find_memory_type(
+        req.memoryTypeBits, VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT,
+        VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+    r = vkAllocateMemory(device_, &alloc, nullptr, &memory_);
+    if (r != VK_SUCCESS) throw Error("allocating memory for " + context + " failed: " + result_name(r), r);
+    r = vkBindBufferMemory(device_, buffer_, memory_, 0);
+    if (r != VK_SUCCESS) throw Error("binding memory of " + context + " failed: " + result_name(r), r);
+    r = vkMapMemory(device_, memory_, 0, VK_WHOLE_SIZE, 0, &mapped_);
+    if (r != VK_SUCCESS) throw Error("mapping " + context + " failed: " + result_name(r), r);
+  } catch (...) {
+    reset();
+    throw;
+  }
+}
+
+Buffer& Buffer::operator=(Buffer&& o) noexcept {
+  if (this != &o) {
+    reset();
+    std::swap(ctx_, o.ctx_);
+    std::swap(reserved_, o.reserved_);
+    std::swap(device_, o.device_);
+    std::swap(buffer_, o.buffer_);
+    std::swap(memory_, o.memory_);
+    std::swap(size_, o.size_);
+    std::swap(mapped_, o.mapped_);
+  }
+  return *this;
+}
+
+void Buffer::reset() {
+  if (memory_) {
+    if (mapped_) vkUnmapMemory(device_, memory_);
+    vkFreeMemory(device_, memory_, nullptr);
+  }
+  if (buffer_) vkDestroyBuffer(device_, buffer_, nullptr);
+  if (ctx_ && reserved_) ctx_->release_memory(reserved_);
+  reserved_ = 0;
+  buffer_ = VK_NULL_HANDLE;
+  memory_ = VK_NULL_HANDLE;
+  mapped_ = nullptr;
+  size_ = 0;
+}
+
+}  // namespace cullpipe::vulkan
