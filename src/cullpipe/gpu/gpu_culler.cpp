@@ -1,6 +1,7 @@
 #include "cullpipe/gpu/gpu_culler.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cstring>
 #include <limits>
 #include <stdexcept>
@@ -17,6 +18,7 @@
 #include "compact_scan.spv.h"
 #include "compact_scatter.spv.h"
 #include "cull_flat.spv.h"
+#include "place_instances.spv.h"
 
 namespace cullpipe::gpu {
 namespace {
@@ -28,7 +30,11 @@ constexpr std::uint32_t kBindingCount = CULL_BINDING_COUNT;  // one descriptor s
 // The views and the AABBs' centre bounds too (see GpuFrustum, BINDING_CENTRES).
 constexpr std::uint32_t kTexelBindings =
     1u << BINDING_BOUNDS | 1u << BINDING_VIEWS | 1u << BINDING_CENTRES | 1u << BINDING_OCCLUSION_VIEWS;
-constexpr VkBufferUsageFlags kBoundsUsage = VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT;
+// Storage too: the placing pass writes instances' world volumes and centres into them.
+constexpr VkBufferUsageFlags kBoundsUsage =
+    VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
+constexpr std::uint32_t kPlaceTexelBindings =
+    1u << PLACE_BINDING_INSTANCES | 1u << PLACE_BINDING_MESHES | 1u << PLACE_BINDING_SLOTS;
 constexpr std::size_t kUploadChunk = 16384;  // objects per upload task
 
 std::uint32_t kind_index(BvKind k) { return static_cast<std::uint32_t>(k); }
@@ -109,6 +115,9 @@ void GpuCuller::upload_volumes(BvKind kind, std::size_t count, std::size_t bytes
   detail::check_allocation_size(ctx_, bytes, what);
   if (centres) detail::check_allocation_size(ctx_, centre_bytes, what + " (centre bounds)");
   object_count_ = 0;  // stays 0 if an allocation below fails: no pass on half-written buffers
+  instanced_ = false;
+  place_count_ = 0;
+  pending_slots_.clear();
   bytes_per_object_ = bytes_per_object;
   descriptors_dirty_ = true;  // segment ranges depend on the object size and count
   if (centres)
@@ -165,6 +174,178 @@ void GpuCuller::upload(std::span<const Sphere> volumes) {
     GpuSphere* out = bounds_.as<GpuSphere>().data();
     for (std::size_t i = first; i < end; ++i) out[i] = pack(volumes[i]);
   });
+}
+
+namespace {
+
+template <class Volume>
+constexpr BvKind instance_kind() {
+  return std::is_same_v<Volume, Aabb> ? BvKind::Aabb : BvKind::Sphere;
+}
+
+GpuInstance pack_instance(const Transform3x4& t, std::uint32_t mesh, float scale) {
+  return {{t.rows[0], t.rows[1], t.rows[2]}, uvec4(mesh, std::bit_cast<std::uint32_t>(scale), 0u, 0u)};
+}
+
+template <class Volume>
+std::vector<std::uint32_t> mesh_words(const InstanceSet<Volume>& set) {
+  std::vector<std::uint32_t> words;
+  for (const Volume& v : set.meshes()) {
+    const auto packed = pack(v);
+    const auto* w = reinterpret_cast<const std::uint32_t*>(&packed);
+    words.insert(words.end(), w, w + sizeof(packed) / sizeof(std::uint32_t));
+  }
+  return words;
+}
+
+}  // namespace
+
+template <class Volume>
+void GpuCuller::upload_instances(const InstanceSet<Volume>& set) {
+  constexpr BvKind kind = instance_kind<Volume>();
+  const std::size_t count = set.size();
+  // Room for growth by later updates: half again, so a scene that grows a little at a time
+  // reallocates (and sends every object again) a logarithmic number of times.
+  const std::size_t capacity = std::max<std::size_t>({count, instance_capacity_ > count ? instance_capacity_ : 0, 256});
+  const std::string what = std::to_string(capacity) + " " + std::string(to_string(kind)) + " instances";
+  if (capacity > std::numeric_limits<std::uint32_t>::max())
+    throw std::length_error(what + ": object ids are 32-bit (at most 4294967295 objects)");
+  const std::size_t bytes_per_object = kind == BvKind::Aabb ? sizeof(GpuAabb) : sizeof(GpuSphere);
+  const std::vector<std::uint32_t> words = mesh_words(set);
+  const VkDeviceSize bound_bytes = VkDeviceSize(capacity) * bytes_per_object,
+                     centre_bytes = kind == BvKind::Aabb ? VkDeviceSize(capacity) * sizeof(glm::vec4) : 0,
+                     instance_bytes = VkDeviceSize(capacity) * sizeof(GpuInstance),
+                     mesh_bytes = VkDeviceSize(words.size()) * sizeof(std::uint32_t),
+                     slot_bytes = (VkDeviceSize(capacity) * sizeof(std::uint32_t) + 15) / 16 * 16;
+  // Every check before anything changes. The placing pass binds whole buffers: the outputs as one
+  // storage buffer range each, the inputs as one texel buffer view each.
+  detail::check_allocation_size(ctx_, instance_bytes, what);
+  detail::check_storage_range(ctx_, bound_bytes, what + " (world volumes written by the placing pass)");
+  detail::check_storage_range(ctx_, centre_bytes, what + " (centre bounds written by the placing pass)");
+  detail::check_texel_range(ctx_, instance_bytes, what + " (transforms)");
+  detail::check_texel_range(ctx_, mesh_bytes, std::to_string(set.meshes().size()) + " meshes");
+  detail::check_texel_range(ctx_, slot_bytes, what + " (placing list)");
+  const vulkan::ComputePipeline& place = place_pipeline(kind);  // built now, not while recording
+
+  object_count_ = 0;  // stays 0 if an allocation below fails: no pass on half-written buffers
+  instanced_ = false;
+  place_count_ = 0;
+  pending_slots_.clear();
+  bytes_per_object_ = bytes_per_object;
+  descriptors_dirty_ = place_descriptors_dirty_ = true;
+  if (kind == BvKind::Aabb)
+    detail::ensure_buffer(ctx_, centres_, centre_bytes, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
+  detail::ensure_buffer(ctx_, bounds_, bound_bytes, kBoundsUsage, "bounds buffer", descriptors_dirty_);
+  bool unused = false;
+  detail::ensure_buffer(ctx_, instances_, instance_bytes, kBoundsUsage, "instance buffer", unused);
+  detail::ensure_buffer(ctx_, meshes_, mesh_bytes, kBoundsUsage, "mesh volume buffer", unused);
+  detail::ensure_buffer(ctx_, place_slots_, slot_bytes, kBoundsUsage, "placing list buffer", unused);
+  if (!place_resources_)
+    place_resources_ =
+        std::make_unique<detail::PassResources>(ctx_, place.set_layout(), PLACE_BINDING_COUNT, kPlaceTexelBindings);
+  if (mesh_bytes) std::memcpy(meshes_.data(), words.data(), mesh_bytes);
+  mesh_words_ = words;
+  GpuInstance* records = instances_.as<GpuInstance>().data();
+  std::uint32_t* list = place_slots_.as<std::uint32_t>().data();
+  for (std::size_t i = 0; i < count; ++i) {
+    records[i] = pack_instance(set.transforms()[i], set.mesh_indices()[i], set.scales()[i]);
+    list[i] = static_cast<std::uint32_t>(i);
+  }
+  instance_capacity_ = capacity;
+  kind_ = kind;
+  object_count_ = count;
+  place_count_ = count;
+  pending_slots_.assign(list, list + count);
+  instanced_ = true;
+}
+
+template <class Volume>
+void GpuCuller::update_instances(const InstanceSet<Volume>& set, std::span<const std::uint32_t> slots) {
+  if (!instanced_ || kind_ != instance_kind<Volume>())
+    throw std::invalid_argument("GpuCuller::update: no " + std::string(to_string(instance_kind<Volume>())) +
+                                " instances were uploaded (call upload(instances) first)");
+  if (mesh_words(set) != mesh_words_)
+    throw std::invalid_argument("GpuCuller::update: the set's " + std::to_string(set.meshes().size()) +
+                                " meshes are not the ones uploaded (upload the set instead)");
+  for (std::size_t k = 0; k < slots.size(); ++k) {
+    if (slots[k] >= set.size())
+      throw std::invalid_argument("GpuCuller::update: slot " + std::to_string(slots[k]) + " is out of range (" +
+                                  std::to_string(set.size()) + " objects)");
+    if (k > 0 && slots[k] <= slots[k - 1])
+      throw std::invalid_argument("GpuCuller::update: slots are not ascending (slot " + std::to_string(slots[k]) +
+                                  " after " + std::to_string(slots[k - 1]) + ")");
+  }
+  if (set.size() > instance_capacity_) {
+    // Grown past the buffers: larger ones by half again, every object sent and placed.
+    const std::size_t old = instance_capacity_;
+    instance_capacity_ = std::max(set.size(), old + old / 2);
+    try {
+      upload_instances(set);
+    } catch (...) {
+      instance_capacity_ = old;
+      throw;
+    }
+    return;
+  }
+  // The pending list: what earlier updates sent and no pass has placed yet, with these slots,
+  // without the slots past the new end.
+  std::vector<std::uint32_t> pending;
+  pending.reserve(pending_slots_.size() + slots.size());
+  std::set_union(pending_slots_.begin(), pending_slots_.end(), slots.begin(), slots.end(), std::back_inserter(pending));
+  pending.erase(std::lower_bound(pending.begin(), pending.end(), static_cast<std::uint32_t>(set.size())),
+                pending.end());
+  GpuInstance* records = instances_.as<GpuInstance>().data();
+  for (const std::uint32_t s : slots)
+    records[s] = pack_instance(set.transforms()[s], set.mesh_indices()[s], set.scales()[s]);
+  if (!pending.empty()) std::memcpy(place_slots_.data(), pending.data(), pending.size() * sizeof(std::uint32_t));
+  if (set.size() != object_count_) descriptors_dirty_ = true;  // segment ranges follow the object count
+  object_count_ = set.size();
+  place_count_ = pending.size();
+  pending_slots_ = std::move(pending);
+}
+
+void GpuCuller::upload(const InstanceSet<Aabb>& instances) { upload_instances(instances); }
+void GpuCuller::upload(const InstanceSet<Sphere>& instances) { upload_instances(instances); }
+void GpuCuller::update(const InstanceSet<Aabb>& instances, std::span<const std::uint32_t> slots) {
+  update_instances(instances, slots);
+}
+void GpuCuller::update(const InstanceSet<Sphere>& instances, std::span<const std::uint32_t> slots) {
+  update_instances(instances, slots);
+}
+
+const vulkan::ComputePipeline& GpuCuller::place_pipeline(BvKind kind) {
+  auto& slot = place_pipelines_[kind == BvKind::Aabb ? 0 : 1];
+  if (!slot) {
+    const std::uint32_t spec[1] = {kind_index(kind)};
+    const std::string name = "instance placing (" + std::string(to_string(kind)) + ")";
+    slot = std::make_unique<vulkan::ComputePipeline>(
+        ctx_, vulkan::ComputePipelineDesc{cullpipe_place_instances_spv, PLACE_BINDING_COUNT, sizeof(PlaceParams), spec,
+                                          name.c_str(), kPlaceTexelBindings});
+  }
+  return *slot;
+}
+
+void GpuCuller::record_placement(VkCommandBuffer cmd) {
+  if (place_count_ == 0) return;
+  const vulkan::ComputePipeline& place = place_pipeline(kind_);
+  if (place_descriptors_dirty_) {
+    const vulkan::Buffer* buffers[PLACE_BINDING_COUNT] = {&instances_, &meshes_, &place_slots_, &bounds_, &centres_};
+    place_resources_->write(buffers);
+    place_descriptors_dirty_ = false;
+  }
+  const VkDescriptorSet set = place_resources_->set();
+  vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, place.pipeline());
+  vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, place.layout(), 0, 1, &set, 0, nullptr);
+  const std::uint64_t per_dispatch = std::uint64_t(max_groups_) * PLACE_GROUP_SIZE;
+  for (std::uint64_t first = 0; first < place_count_; first += per_dispatch) {
+    const PlaceParams params{std::uint32_t(place_count_), std::uint32_t(first)};
+    vkCmdPushConstants(cmd, place.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
+    vkCmdDispatch(
+        cmd, vulkan::group_count(std::min<std::uint64_t>(per_dispatch, place_count_ - first), PLACE_GROUP_SIZE), 1, 1);
+  }
+  detail::record_compute_to_compute(cmd);  // the culling passes read what it wrote
+  place_count_ = 0;
+  pending_slots_.clear();
 }
 
 void GpuCuller::upload_draws(std::span<const DrawCommand> templates) {
@@ -330,6 +511,7 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
     vkCmdFillBuffer(cmd, group_counts_.handle(), 0, group_count_bytes(view_count), 0);
   detail::record_transfer_to_compute(cmd);
   if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, timestamps, 0);
+  record_placement(cmd);  // instances that changed, placed before anything reads them
 
   auto compute_to_compute = [&] { detail::record_compute_to_compute(cmd); };
   const VkDescriptorSet set = resources_->set();

@@ -5,6 +5,7 @@
 #include <span>
 #include <vector>
 
+#include "cullpipe/cull/instances.hpp"
 #include "cullpipe/cull/occlusion.hpp"
 #include "cullpipe/cull/reference.hpp"
 #include "cullpipe/geom/aabb.hpp"
@@ -132,6 +133,26 @@ class GpuCuller {
   void upload(std::span<const Obb> volumes);
   void upload(std::span<const Sphere> volumes);
 
+  /// Uploads a scene of instances, replacing any earlier upload: the meshes' local volumes once,
+  /// and per object its transform and mesh index. The next pass first places every object in
+  /// the world on the GPU (shaders/shared/instance.glsl: the floats instance_volume computes on
+  /// the CPU, bit for bit), then culls the placed volumes as upload(world volumes) would, so its
+  /// answers are the reference's on instances.world_volumes(), object by object; objects are
+  /// reported by slot. Throws as upload(volumes) does when the buffers cannot hold them.
+  void upload(const InstanceSet<Aabb>& instances);
+  void upload(const InstanceSet<Sphere>& instances);
+  /// Sends what changed in the set uploaded last: the transforms and mesh indices of `slots`
+  /// (InstanceSet::changed_slots(), ascending), and its new size after adds and removes. Only
+  /// those objects are placed again, by the next pass; the others keep their placed volumes.
+  /// Buffers grow here, by half again, when the set outgrew them (then every object is sent and
+  /// placed), never inside record(). Throws std::invalid_argument when the set's meshes are not
+  /// the ones uploaded, a slot is out of range or the slots are not ascending, and nothing
+  /// changes.
+  void update(const InstanceSet<Aabb>& instances, std::span<const std::uint32_t> slots);
+  void update(const InstanceSet<Sphere>& instances, std::span<const std::uint32_t> slots);
+  /// Objects the next pass places before culling (0 after a pass, or for world volumes).
+  std::size_t pending_placements() const { return place_count_; }
+
   /// One draw template per object, in object order (object_id is ignored): the indirect draw
   /// each visible object gets. Needed before a pass with CullOptions::draws; must match the
   /// object count of the volumes culled then.
@@ -179,6 +200,14 @@ class GpuCuller {
  private:
   template <class Fill>
   void upload_volumes(BvKind kind, std::size_t count, std::size_t bytes_per_object, bool centres, Fill&& fill);
+  template <class Volume>
+  void upload_instances(const InstanceSet<Volume>& instances);
+  template <class Volume>
+  void update_instances(const InstanceSet<Volume>& instances, std::span<const std::uint32_t> slots);
+  template <class Volume>
+  void write_instances(const InstanceSet<Volume>& instances, std::span<const std::uint32_t> slots);
+  void record_placement(VkCommandBuffer cmd);
+  const vulkan::ComputePipeline& place_pipeline(BvKind kind);
   void ensure_outputs(std::size_t view_count, std::size_t visible_capacity, bool draws, bool ordered);
   VkDeviceSize group_count_bytes(std::size_t view_count) const;  // the ordered passes' workgroup counts
   struct SegmentPlan {
@@ -244,6 +273,17 @@ class GpuCuller {
   CullOptions last_options_;
   std::unique_ptr<detail::PassResources> resources_;  // descriptor set, command buffer, timestamps
   bool descriptors_dirty_ = true;
+  // Instances (upload(InstanceSet)): GpuInstance per object, the meshes' local volumes, the
+  // slots the next pass places (four per texel), and the placing pass's pipeline and set.
+  vulkan::Buffer instances_, meshes_, place_slots_;
+  std::vector<std::uint32_t> mesh_words_;  // the uploaded meshes, to recognise their set in update()
+  std::size_t instance_capacity_ = 0;      // objects the instance, bounds and centre buffers hold
+  std::size_t place_count_ = 0;
+  std::vector<std::uint32_t> pending_slots_;  // ascending: what the next pass places
+  bool instanced_ = false;
+  std::unique_ptr<vulkan::ComputePipeline> place_pipelines_[2];  // boxes, spheres
+  std::unique_ptr<detail::PassResources> place_resources_;
+  bool place_descriptors_dirty_ = true;
 };
 
 }  // namespace cullpipe::gpu
