@@ -3,12 +3,15 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <glm/ext/matrix_clip_space.hpp>
 #include <glm/ext/matrix_transform.hpp>
 #include <glm/gtc/quaternion.hpp>
 #include <random>
 #include <stdexcept>
 
+#include "cullpipe/cull/cpu_culler.hpp"
 #include "cullpipe/cull/instances.hpp"
+#include "cullpipe/cull/reference.hpp"
 #include "cullpipe/geom/instance.hpp"
 #include "cullpipe/geom/validate.hpp"
 
@@ -212,6 +215,73 @@ TEST(InstanceSet, BadInputIsRefusedAndChangesNothing) {
   expect_error([&] { set.set_transforms(ids, moves); }, "instance 1: transform row 1 column 3 is NaN");
   expect_error([&] { set.remove(5); }, "no instance has id 5");
   expect_unchanged();
+}
+
+// The fast CPU path on instances, every instruction set: its classes equal the reference's on the
+// set's placed volumes after each frame's moves, adds and removes.
+template <class Volume>
+void cpu_frames(const std::vector<Volume>& meshes, std::uint32_t seed) {
+  for (const fast::Isa isa : fast::supported_isas()) {
+    SCOPED_TRACE(std::string(fast::to_string(isa)));
+    std::mt19937 rng(seed);
+    fast::CpuCuller culler({.threads = 2, .isa = isa, .chunk_objects = 1024});
+    InstanceSet<Volume> set(meshes);
+    std::vector<InstanceId> live;
+    auto place = [&] {
+      Transform3x4 t = random_transform(rng, glm::vec3(0.0f));
+      for (auto& row : t.rows) row.w = std::fmod(row.w, 20.0f);  // within the views
+      return t;
+    };
+    for (int i = 0; i < 5000; ++i) live.push_back(set.add(static_cast<std::uint32_t>(rng() % meshes.size()), place()));
+    culler.upload(set);
+    set.clear_changes();
+    for (int frame = 0; frame < 6; ++frame) {
+      glm::mat4 proj = glm::perspectiveRH_ZO(glm::radians(uniform(rng, 40, 90)), 1.5f, 0.5f, 40.0f);
+      const glm::vec3 eye(uniform(rng, -10, 10), uniform(rng, -10, 10), uniform(rng, 10, 30));
+      const Frustum view = Frustum::from_view_proj(proj * glm::lookAtRH(eye, glm::vec3(0.0f), glm::vec3(0, 1, 0)));
+      const std::vector<fast::CpuViewResult> results = culler.cull(std::span<const Frustum>(&view, 1));
+      std::vector<Volume> world(set.size());
+      set.world_volumes(world);
+      std::vector<Classification> cpu(world.size());
+      reference::classify_all(std::span<const Volume>(world), view, cpu);
+      for (std::size_t s = 0; s < world.size(); ++s)
+        ASSERT_EQ(results[0].classes[s], cpu[s]) << "frame " << frame << ", slot " << s << " (id " << set.ids()[s]
+                                                 << ", mesh " << set.mesh_indices()[s] << ")";
+      for (int k = 0; k < 500; ++k) set.set_transform(live[rng() % live.size()], place());
+      if (frame == 3) {
+        for (int k = 0; k < 300; ++k) {
+          const std::size_t r = rng() % live.size();
+          set.remove(live[r]);
+          live[r] = live.back();
+          live.pop_back();
+        }
+        for (int k = 0; k < 100; ++k) live.push_back(set.add(0, place()));
+      }
+      culler.update(set, set.changed_slots());
+      set.clear_changes();
+    }
+  }
+}
+
+TEST(InstanceSet, FastCpuPathAgreesWithTheReferenceOnEveryFrame) {
+  cpu_frames<Aabb>(
+      {Aabb{glm::vec3(-1, -2, -0.5f), glm::vec3(1, 0.5f, 0.5f)}, Aabb{glm::vec3(0), glm::vec3(0.1f, 3, 0)}}, 1);
+  if (HasFatalFailure()) return;
+  cpu_frames<Sphere>({Sphere{glm::vec3(0.5f, 0, 0), 1.0f}, Sphere{glm::vec3(0), 0.0f}}, 2);
+}
+
+TEST(InstanceSet, FastCpuPathRefusesBadUpdates) {
+  fast::CpuCuller culler({.threads = 1});
+  InstanceSet<Aabb> set({Aabb{glm::vec3(-1), glm::vec3(1)}});
+  for (int i = 0; i < 10; ++i) set.add(0, translation(float(i)));
+  const std::uint32_t slots[2] = {4, 2};
+  EXPECT_THROW(culler.update(set, std::span<const std::uint32_t>(slots, 1)),
+               std::invalid_argument);  // nothing uploaded
+  culler.upload(set);
+  EXPECT_THROW(culler.update(set, slots), std::invalid_argument);  // descending
+  const std::uint32_t past[1] = {10};
+  EXPECT_THROW(culler.update(set, past), std::invalid_argument);
+  EXPECT_EQ(culler.object_count(), 10u);
 }
 
 }  // namespace

@@ -225,23 +225,39 @@ void CpuCuller::upload_columns(std::span<const Volume> volumes, Store store) {
   count_ = volumes.size();
 }
 
+namespace {
+
+// How upload() stores object i of each kind: its centre and packed plane bound in the arrays,
+// the rest in its record (as the kernels read them).
+constexpr std::size_t kAabbColumns = 4, kSphereColumns = 5;
+void store_aabb(const Aabb& b, float* const* c, std::size_t i) {
+  glm::vec3 centre;
+  c[3][i] = plane_bounds::pack_lower(plane_bounds::aabb_plane_bound(b, centre), plane_bounds::aabb_lower(b));
+  c[0][i] = centre.x, c[1][i] = centre.y, c[2][i] = centre.z;
+  float* record = c[4] + i * detail::kAabbRecordFloats;  // as cull_aabb's resolve reads it
+  for (int a = 0; a < 3; ++a) {
+    record[a] = b.min[a];
+    record[3 + a] = b.max[a];
+  }
+  record[6] = record[7] = 0.0f;
+}
+void store_sphere(const Sphere& s, float* const* c, std::size_t i) {
+  c[0][i] = s.center.x, c[1][i] = s.center.y, c[2][i] = s.center.z;
+  c[3][i] = plane_bounds::pack_lower(plane_bounds::sphere_plane_bound(s), plane_bounds::sphere_lower(s));
+  c[4][i] = s.radius;
+}
+
+}  // namespace
+
 void CpuCuller::upload(std::span<const Aabb> volumes) {
   static_assert(detail::kAabbRecordFloats == 8);
-  upload_columns<4, detail::kAabbRecordFloats>(volumes, [](const Aabb& b, float* const* c, std::size_t i) {
-    glm::vec3 centre;
-    c[3][i] = plane_bounds::pack_lower(plane_bounds::aabb_plane_bound(b, centre), plane_bounds::aabb_lower(b));
-    c[0][i] = centre.x, c[1][i] = centre.y, c[2][i] = centre.z;
-    float* record = c[4] + i * detail::kAabbRecordFloats;  // as cull_aabb's resolve reads it
-    for (int a = 0; a < 3; ++a) {
-      record[a] = b.min[a];
-      record[3 + a] = b.max[a];
-    }
-    record[6] = record[7] = 0.0f;
-  });
+  upload_columns<kAabbColumns, detail::kAabbRecordFloats>(volumes, store_aabb);
+  instanced_ = false;
 }
 
 void CpuCuller::upload(std::span<const Obb> volumes) {
   static_assert(detail::kObbRecordFloats == 16);
+  instanced_ = false;
   upload_columns<4, detail::kObbRecordFloats>(volumes, [](const Obb& b, float* const* c, std::size_t i) {
     c[0][i] = b.center.x, c[1][i] = b.center.y, c[2][i] = b.center.z;
     c[3][i] = plane_bounds::pack_lower(plane_bounds::obb_plane_bound(b), plane_bounds::obb_lower(b));
@@ -258,11 +274,71 @@ void CpuCuller::upload(std::span<const Obb> volumes) {
 }
 
 void CpuCuller::upload(std::span<const Sphere> volumes) {
-  upload_columns<5, 0>(volumes, [](const Sphere& s, float* const* c, std::size_t i) {
-    c[0][i] = s.center.x, c[1][i] = s.center.y, c[2][i] = s.center.z;
-    c[3][i] = plane_bounds::pack_lower(plane_bounds::sphere_plane_bound(s), plane_bounds::sphere_lower(s));
-    c[4][i] = s.radius;
+  upload_columns<kSphereColumns, 0>(volumes, store_sphere);
+  instanced_ = false;
+}
+
+template <class Volume>
+void CpuCuller::place(const InstanceSet<Volume>& set, std::span<const std::uint32_t> slots) {
+  constexpr bool boxes = std::is_same_v<Volume, Aabb>;
+  constexpr std::size_t columns = boxes ? kAabbColumns : kSphereColumns;
+  float* c[columns + 1];
+  for (std::size_t k = 0; k < columns; ++k) c[k] = impl_->column(k);
+  c[columns] = impl_->records;
+  const std::size_t n = slots.empty() ? set.size() : slots.size(), per_task = impl_->chunk;
+  impl_->pool.parallel_for((n + per_task - 1) / per_task, [&](std::size_t t) {
+    const plane_bounds::NearestNoFlush mode;
+    const std::size_t end = std::min(n, (t + 1) * per_task);
+    for (std::size_t k = t * per_task; k < end; ++k) {
+      const std::size_t i = slots.empty() ? k : slots[k];
+      if constexpr (boxes)
+        store_aabb(set.world_volume(i), c, i);
+      else
+        store_sphere(set.world_volume(i), c, i);
+    }
   });
+}
+
+template <class Volume>
+void CpuCuller::upload_instances(const InstanceSet<Volume>& set) {
+  constexpr bool boxes = std::is_same_v<Volume, Aabb>;
+  check_count(set.size());
+  count_ = 0;  // stays 0 if the allocation fails
+  instanced_ = false;
+  impl_->reserve(boxes ? kAabbColumns : kSphereColumns, set.size(), boxes ? detail::kAabbRecordFloats : 0);
+  place(set, {});
+  kind_ = kind_of<Volume>();
+  count_ = set.size();
+  instanced_ = true;
+}
+
+template <class Volume>
+void CpuCuller::update_instances(const InstanceSet<Volume>& set, std::span<const std::uint32_t> slots) {
+  if (!instanced_ || kind_ != kind_of<Volume>())
+    throw std::invalid_argument("CpuCuller::update: no " + std::string(cullpipe::to_string(kind_of<Volume>())) +
+                                " instances were uploaded (call upload(instances) first)");
+  for (std::size_t k = 0; k < slots.size(); ++k) {
+    if (slots[k] >= set.size())
+      throw std::invalid_argument("CpuCuller::update: slot " + std::to_string(slots[k]) + " is out of range (" +
+                                  std::to_string(set.size()) + " objects)");
+    if (k > 0 && slots[k] <= slots[k - 1])
+      throw std::invalid_argument("CpuCuller::update: slots are not ascending (slot " + std::to_string(slots[k]) +
+                                  " after " + std::to_string(slots[k - 1]) + ")");
+  }
+  if (set.size() != count_) {  // the arrays' stride follows the count: every object again
+    upload_instances(set);
+    return;
+  }
+  if (!slots.empty()) place(set, slots);
+}
+
+void CpuCuller::upload(const InstanceSet<Aabb>& instances) { upload_instances(instances); }
+void CpuCuller::upload(const InstanceSet<Sphere>& instances) { upload_instances(instances); }
+void CpuCuller::update(const InstanceSet<Aabb>& instances, std::span<const std::uint32_t> slots) {
+  update_instances(instances, slots);
+}
+void CpuCuller::update(const InstanceSet<Sphere>& instances, std::span<const std::uint32_t> slots) {
+  update_instances(instances, slots);
 }
 
 std::size_t CpuCuller::bytes_per_object() const { return (impl_->arrays.size() + impl_->record_size) * sizeof(float); }

@@ -7,6 +7,7 @@
 #include <string_view>
 #include <vector>
 
+#include "cullpipe/cull/instances.hpp"
 #include "cullpipe/cull/reference.hpp"
 #include "cullpipe/geom/aabb.hpp"
 #include "cullpipe/geom/bv_kind.hpp"
@@ -76,6 +77,18 @@ class CpuCuller {
   void upload(std::span<const Obb> volumes);
   void upload(std::span<const Sphere> volumes);
 
+  /// Instances (cull/instances.hpp): every object placed by instance_volume on the culling
+  /// threads and stored as upload(volumes) stores it, so the answers are the reference's on
+  /// instances.world_volumes(); objects are reported by slot.
+  void upload(const InstanceSet<Aabb>& instances);
+  void upload(const InstanceSet<Sphere>& instances);
+  /// Places again only `slots` (InstanceSet::changed_slots(), ascending) of the set uploaded
+  /// last; when its size has changed, every object (the arrays' layout follows the count).
+  /// Throws std::invalid_argument, changing nothing, when no instances of the kind were
+  /// uploaded, a slot is out of range or the slots are not ascending.
+  void update(const InstanceSet<Aabb>& instances, std::span<const std::uint32_t> slots);
+  void update(const InstanceSet<Sphere>& instances, std::span<const std::uint32_t> slots);
+
   /// One result per view, each as a pass of its own would give. Several views (a camera and
   /// its shadow cascades, two eyes) share the pass: each chunk of objects is read from memory
   /// once and culled for every view while it is in the cache.
@@ -115,8 +128,16 @@ class CpuCuller {
   template <std::size_t Columns, std::size_t RecordFloats, class Volume, class Store>
   void upload_columns(std::span<const Volume> volumes, Store store);
 
+  template <class Volume>
+  void place(const InstanceSet<Volume>& set, std::span<const std::uint32_t> slots);  // empty: every slot
+  template <class Volume>
+  void upload_instances(const InstanceSet<Volume>& set);
+  template <class Volume>
+  void update_instances(const InstanceSet<Volume>& set, std::span<const std::uint32_t> slots);
+
   struct Impl;
   std::unique_ptr<Impl> impl_;
+  bool instanced_ = false;
   BvKind kind_ = BvKind::Aabb;
   std::size_t count_ = 0;
   Isa isa_ = Isa::Portable;
