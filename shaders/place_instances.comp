@@ -1,8 +1,10 @@
 #version 460
-// Places instances in the world: for each listed slot, its mesh's local volume under its
-// transform (shared/instance.glsl, bit for bit src/cullpipe/geom/instance.cpp), written into the
-// bounds buffer the culling passes read, and for boxes their centre and settling bound. Only the
-// objects that changed are listed; the others keep the volumes placed before.
+// Places instances in the world: for each entry of the list (an object's transform, mesh and
+// slot), its mesh's local volume under its transform (shared/instance.glsl, bit for bit
+// src/cullpipe/geom/instance.cpp), written into the bounds buffer the culling passes read at its
+// slot, and for boxes their centre and settling bound. Only the objects that changed are listed,
+// each once; the others keep the volumes placed before. The list is read in order and only the
+// outputs are scattered.
 #extension GL_GOOGLE_include_directive : require
 
 #include "cullpipe/gpu/cull_types.h"
@@ -11,9 +13,8 @@
 layout(local_size_x = PLACE_GROUP_SIZE) in;
 layout(constant_id = 0) const uint BV_KIND = BV_KIND_AABB;  // BV_KIND_AABB or BV_KIND_SPHERE
 
-layout(set = 0, binding = PLACE_BINDING_INSTANCES) uniform usamplerBuffer instances;
+layout(set = 0, binding = PLACE_BINDING_LIST) uniform usamplerBuffer list;
 layout(set = 0, binding = PLACE_BINDING_MESHES) uniform usamplerBuffer meshes;
-layout(set = 0, binding = PLACE_BINDING_SLOTS) uniform usamplerBuffer slots;
 layout(std430, set = 0, binding = PLACE_BINDING_BOUNDS) writeonly buffer Bounds { vec4 bound_words[]; };
 layout(std430, set = 0, binding = PLACE_BINDING_CENTRES) writeonly buffer Centres { vec4 centres[]; };
 layout(push_constant) uniform Push { PlaceParams params; };
@@ -35,10 +36,10 @@ float box_bound(vec3 c, vec3 e) {
 void main() {
   uint k = params.first + gl_GlobalInvocationID.x;
   if (k >= params.count) return;
-  uint slot = texelFetch(slots, int(k >> 2))[k & 3u];
-  uint base = slot * INSTANCE_TEXELS;
-  vec4 rows[3] = vec4[3](word(instances, base), word(instances, base + 1u), word(instances, base + 2u));
-  uvec4 info = texelFetch(instances, int(base + 3u));
+  uint base = k * INSTANCE_TEXELS;
+  vec4 rows[3] = vec4[3](word(list, base), word(list, base + 1u), word(list, base + 2u));
+  uvec4 info = texelFetch(list, int(base + 3u));
+  uint slot = info.z;
   if (BV_KIND == BV_KIND_AABB) {
     vec3 wmin, wmax;
     instance_aabb(rows, word(meshes, 2u * info.x).xyz, word(meshes, 2u * info.x + 1u).xyz, wmin, wmax);

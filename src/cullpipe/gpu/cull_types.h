@@ -63,8 +63,9 @@ struct GpuSphere {
   vec4 center_radius;
 };
 
-// An instance: the rows of its 3x4 transform (Transform3x4: row i = (m_i0, m_i1, m_i2, t_i)),
-// then info.x = its mesh's index, info.y = the bits of max_scale (spheres' radius factor).
+// An object to place: the rows of its 3x4 transform (Transform3x4: row i = (m_i0, m_i1, m_i2,
+// t_i)), then info.x = its mesh's index, info.y = the bits of max_scale (spheres' radius
+// factor), info.z = its slot (where its world volume goes).
 struct GpuInstance {
   vec4 rows[3];
   uvec4 info;
@@ -73,15 +74,14 @@ CP_CONST INSTANCE_TEXELS = 4u;
 
 // The placing pass (place_instances.comp): world volumes of the listed instances, written where
 // the culling passes read them. Uniform texel buffers, except the two outputs.
-CP_CONST PLACE_BINDING_INSTANCES = 0u;  // GpuInstance per object, INSTANCE_TEXELS texels each
-CP_CONST PLACE_BINDING_MESHES = 1u;     // the meshes' local volumes (GpuAabb or GpuSphere)
-CP_CONST PLACE_BINDING_SLOTS = 2u;      // the objects to place, four per texel
-CP_CONST PLACE_BINDING_BOUNDS = 3u;     // out: vec4 words of the world volumes (BINDING_BOUNDS' buffer)
-CP_CONST PLACE_BINDING_CENTRES = 4u;    // out: AABBs' centre and bound (BINDING_CENTRES' buffer)
-CP_CONST PLACE_BINDING_COUNT = 5u;
+CP_CONST PLACE_BINDING_LIST = 0u;     // GpuInstance per object to place, INSTANCE_TEXELS texels each
+CP_CONST PLACE_BINDING_MESHES = 1u;   // the meshes' local volumes (GpuAabb or GpuSphere)
+CP_CONST PLACE_BINDING_BOUNDS = 2u;   // out: vec4 words of the world volumes (BINDING_BOUNDS' buffer)
+CP_CONST PLACE_BINDING_CENTRES = 3u;  // out: AABBs' centre and bound (BINDING_CENTRES' buffer)
+CP_CONST PLACE_BINDING_COUNT = 4u;
 CP_CONST PLACE_GROUP_SIZE = 64u;
 
-// Push constants of the placing pass: slots [first, count) of the list.
+// Push constants of the placing pass: entries [first, count) of the list.
 struct PlaceParams {
   uint count;
   uint first;

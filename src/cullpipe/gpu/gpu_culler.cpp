@@ -33,8 +33,7 @@ constexpr std::uint32_t kTexelBindings =
 // Storage too: the placing pass writes instances' world volumes and centres into them.
 constexpr VkBufferUsageFlags kBoundsUsage =
     VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
-constexpr std::uint32_t kPlaceTexelBindings =
-    1u << PLACE_BINDING_INSTANCES | 1u << PLACE_BINDING_MESHES | 1u << PLACE_BINDING_SLOTS;
+constexpr std::uint32_t kPlaceTexelBindings = 1u << PLACE_BINDING_LIST | 1u << PLACE_BINDING_MESHES;
 constexpr std::size_t kUploadChunk = 16384;  // objects per upload task
 
 std::uint32_t kind_index(BvKind k) { return static_cast<std::uint32_t>(k); }
@@ -123,6 +122,13 @@ void GpuCuller::upload_volumes(BvKind kind, std::size_t count, std::size_t bytes
   if (centres)
     detail::ensure_buffer(ctx_, centres_, centre_bytes, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
   detail::ensure_buffer(ctx_, bounds_, bytes, kBoundsUsage, "bounds buffer", descriptors_dirty_);
+  run_upload_tasks(count, fill);
+  kind_ = kind;
+  object_count_ = count;
+}
+
+template <class Fill>
+void GpuCuller::run_upload_tasks(std::size_t count, Fill&& fill) {
   const std::size_t tasks = (count + kUploadChunk - 1) / kUploadChunk;
   auto task = [&](std::size_t t) { fill(t * kUploadChunk, std::min(count, (t + 1) * kUploadChunk)); };
   if (tasks > 1 && upload_threads_ != 1 && !upload_pool_) {
@@ -136,8 +142,6 @@ void GpuCuller::upload_volumes(BvKind kind, std::size_t count, std::size_t bytes
   } else {
     for (std::size_t t = 0; t < tasks; ++t) task(t);
   }
-  kind_ = kind;
-  object_count_ = count;
 }
 
 void GpuCuller::upload(std::span<const Aabb> volumes) {
@@ -183,8 +187,12 @@ constexpr BvKind instance_kind() {
   return std::is_same_v<Volume, Aabb> ? BvKind::Aabb : BvKind::Sphere;
 }
 
-GpuInstance pack_instance(const Transform3x4& t, std::uint32_t mesh, float scale) {
-  return {{t.rows[0], t.rows[1], t.rows[2]}, uvec4(mesh, std::bit_cast<std::uint32_t>(scale), 0u, 0u)};
+// Slot s of `set` as an entry of the placing list.
+template <class Volume>
+GpuInstance list_entry(const InstanceSet<Volume>& set, std::uint32_t s) {
+  const Transform3x4& t = set.transforms()[s];
+  return {{t.rows[0], t.rows[1], t.rows[2]},
+          uvec4(set.mesh_indices()[s], std::bit_cast<std::uint32_t>(set.scales()[s]), s, 0u)};
 }
 
 template <class Volume>
@@ -214,17 +222,15 @@ void GpuCuller::upload_instances(const InstanceSet<Volume>& set) {
   const std::vector<std::uint32_t> words = mesh_words(set);
   const VkDeviceSize bound_bytes = VkDeviceSize(capacity) * bytes_per_object,
                      centre_bytes = kind == BvKind::Aabb ? VkDeviceSize(capacity) * sizeof(glm::vec4) : 0,
-                     instance_bytes = VkDeviceSize(capacity) * sizeof(GpuInstance),
-                     mesh_bytes = VkDeviceSize(words.size()) * sizeof(std::uint32_t),
-                     slot_bytes = (VkDeviceSize(capacity) * sizeof(std::uint32_t) + 15) / 16 * 16;
+                     list_bytes = VkDeviceSize(capacity) * sizeof(GpuInstance),
+                     mesh_bytes = VkDeviceSize(words.size()) * sizeof(std::uint32_t);
   // Every check before anything changes. The placing pass binds whole buffers: the outputs as one
   // storage buffer range each, the inputs as one texel buffer view each.
-  detail::check_allocation_size(ctx_, instance_bytes, what);
+  detail::check_allocation_size(ctx_, list_bytes, what);
   detail::check_storage_range(ctx_, bound_bytes, what + " (world volumes written by the placing pass)");
   detail::check_storage_range(ctx_, centre_bytes, what + " (centre bounds written by the placing pass)");
-  detail::check_texel_range(ctx_, instance_bytes, what + " (transforms)");
+  detail::check_texel_range(ctx_, list_bytes, what + " (placing list)");
   detail::check_texel_range(ctx_, mesh_bytes, std::to_string(set.meshes().size()) + " meshes");
-  detail::check_texel_range(ctx_, slot_bytes, what + " (placing list)");
   const vulkan::ComputePipeline& place = place_pipeline(kind);  // built now, not while recording
 
   object_count_ = 0;  // stays 0 if an allocation below fails: no pass on half-written buffers
@@ -237,25 +243,25 @@ void GpuCuller::upload_instances(const InstanceSet<Volume>& set) {
     detail::ensure_buffer(ctx_, centres_, centre_bytes, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
   detail::ensure_buffer(ctx_, bounds_, bound_bytes, kBoundsUsage, "bounds buffer", descriptors_dirty_);
   bool unused = false;
-  detail::ensure_buffer(ctx_, instances_, instance_bytes, kBoundsUsage, "instance buffer", unused);
+  detail::ensure_buffer(ctx_, place_list_, list_bytes, kBoundsUsage, "placing list buffer", unused);
   detail::ensure_buffer(ctx_, meshes_, mesh_bytes, kBoundsUsage, "mesh volume buffer", unused);
-  detail::ensure_buffer(ctx_, place_slots_, slot_bytes, kBoundsUsage, "placing list buffer", unused);
   if (!place_resources_)
     place_resources_ =
         std::make_unique<detail::PassResources>(ctx_, place.set_layout(), PLACE_BINDING_COUNT, kPlaceTexelBindings);
   if (mesh_bytes) std::memcpy(meshes_.data(), words.data(), mesh_bytes);
   mesh_words_ = words;
-  GpuInstance* records = instances_.as<GpuInstance>().data();
-  std::uint32_t* list = place_slots_.as<std::uint32_t>().data();
-  for (std::size_t i = 0; i < count; ++i) {
-    records[i] = pack_instance(set.transforms()[i], set.mesh_indices()[i], set.scales()[i]);
-    list[i] = static_cast<std::uint32_t>(i);
-  }
+  GpuInstance* list = place_list_.as<GpuInstance>().data();
+  pending_slots_.resize(count);
+  run_upload_tasks(count, [&](std::size_t first, std::size_t end) {
+    for (std::size_t i = first; i < end; ++i) {
+      list[i] = list_entry(set, static_cast<std::uint32_t>(i));
+      pending_slots_[i] = static_cast<std::uint32_t>(i);
+    }
+  });
   instance_capacity_ = capacity;
   kind_ = kind;
   object_count_ = count;
   place_count_ = count;
-  pending_slots_.assign(list, list + count);
   instanced_ = true;
 }
 
@@ -287,17 +293,24 @@ void GpuCuller::update_instances(const InstanceSet<Volume>& set, std::span<const
     }
     return;
   }
-  // The pending list: what earlier updates sent and no pass has placed yet, with these slots,
-  // without the slots past the new end.
+  // The list: what earlier updates sent and no pass has placed yet, with these slots, each once
+  // (two entries for one slot would race) and as the set has it now, without slots past its end.
+  // Written in order into the mapped list: sequential stores, where writing each object's entry
+  // at its own slot would miss the cache once per object.
   std::vector<std::uint32_t> pending;
-  pending.reserve(pending_slots_.size() + slots.size());
-  std::set_union(pending_slots_.begin(), pending_slots_.end(), slots.begin(), slots.end(), std::back_inserter(pending));
-  pending.erase(std::lower_bound(pending.begin(), pending.end(), static_cast<std::uint32_t>(set.size())),
-                pending.end());
-  GpuInstance* records = instances_.as<GpuInstance>().data();
-  for (const std::uint32_t s : slots)
-    records[s] = pack_instance(set.transforms()[s], set.mesh_indices()[s], set.scales()[s]);
-  if (!pending.empty()) std::memcpy(place_slots_.data(), pending.data(), pending.size() * sizeof(std::uint32_t));
+  if (pending_slots_.empty()) {
+    pending.assign(slots.begin(), slots.end());
+  } else {
+    pending.reserve(pending_slots_.size() + slots.size());
+    std::set_union(pending_slots_.begin(), pending_slots_.end(), slots.begin(), slots.end(),
+                   std::back_inserter(pending));
+    pending.erase(std::lower_bound(pending.begin(), pending.end(), static_cast<std::uint32_t>(set.size())),
+                  pending.end());
+  }
+  GpuInstance* list = place_list_.as<GpuInstance>().data();
+  run_upload_tasks(pending.size(), [&](std::size_t first, std::size_t end) {
+    for (std::size_t k = first; k < end; ++k) list[k] = list_entry(set, pending[k]);
+  });
   if (set.size() != object_count_) descriptors_dirty_ = true;  // segment ranges follow the object count
   object_count_ = set.size();
   place_count_ = pending.size();
@@ -329,7 +342,7 @@ void GpuCuller::record_placement(VkCommandBuffer cmd) {
   if (place_count_ == 0) return;
   const vulkan::ComputePipeline& place = place_pipeline(kind_);
   if (place_descriptors_dirty_) {
-    const vulkan::Buffer* buffers[PLACE_BINDING_COUNT] = {&instances_, &meshes_, &place_slots_, &bounds_, &centres_};
+    const vulkan::Buffer* buffers[PLACE_BINDING_COUNT] = {&place_list_, &meshes_, &bounds_, &centres_};
     place_resources_->write(buffers);
     place_descriptors_dirty_ = false;
   }

@@ -200,6 +200,9 @@ class GpuCuller {
  private:
   template <class Fill>
   void upload_volumes(BvKind kind, std::size_t count, std::size_t bytes_per_object, bool centres, Fill&& fill);
+  // fill(first, end) for objects [0, count), in chunks on the upload threads.
+  template <class Fill>
+  void run_upload_tasks(std::size_t count, Fill&& fill);
   template <class Volume>
   void upload_instances(const InstanceSet<Volume>& instances);
   template <class Volume>
@@ -273,9 +276,9 @@ class GpuCuller {
   CullOptions last_options_;
   std::unique_ptr<detail::PassResources> resources_;  // descriptor set, command buffer, timestamps
   bool descriptors_dirty_ = true;
-  // Instances (upload(InstanceSet)): GpuInstance per object, the meshes' local volumes, the
-  // slots the next pass places (four per texel), and the placing pass's pipeline and set.
-  vulkan::Buffer instances_, meshes_, place_slots_;
+  // Instances (upload(InstanceSet)): the objects the next pass places (GpuInstance each: its
+  // transform, mesh and slot), the meshes' local volumes, and the placing pass's pipeline and set.
+  vulkan::Buffer place_list_, meshes_;
   std::vector<std::uint32_t> mesh_words_;  // the uploaded meshes, to recognise their set in update()
   std::size_t instance_capacity_ = 0;      // objects the instance, bounds and centre buffers hold
   std::size_t place_count_ = 0;
