@@ -16,6 +16,7 @@
 #include "cullpipe/cull/instances.hpp"
 #include "cullpipe/cull/reference.hpp"
 #include "cullpipe/gpu/gpu_culler.hpp"
+#include "cullpipe/vulkan/context.hpp"
 #include "gpu_test_env.hpp"
 #include "test_util.hpp"
 
@@ -184,6 +185,105 @@ TEST_F(GpuInstances, SpheresAgreeWithTheReferenceOnEveryFrame) {
     run_frames<Sphere>(culler(), sphere_meshes(rng, 5), n, static_cast<std::uint32_t>(n) + 7);
     if (HasFatalFailure()) return;
   }
+}
+
+// Two frames in flight over one scene: a culler per frame, sharing the placed volumes; each
+// frame's moves go to that frame's culler, recorded into its own command buffer and submitted
+// while the other frame may still run. Every frame's classes equal the reference's on the volumes
+// as placed when it was recorded; synchronization validation watches the shared buffers.
+TEST_F(GpuInstances, TwoFramesInFlightShareOneScene) {
+  const vulkan::Context& ctx = *GpuEnvironment::context;
+  std::mt19937 rng(12);
+  InstanceSet<Aabb> set(box_meshes(rng, 9));
+  std::vector<InstanceId> live;
+  for (int i = 0; i < 5000; ++i)
+    live.push_back(set.add(static_cast<std::uint32_t>(i % 9), random_placement(rng, 15.0f)));
+  gpu::GpuCuller first(ctx), second(ctx);
+  second.share_scene(first);
+  first.upload(set);
+  first.reserve_instances(set, 6000);  // room for the adds below: no update grows the buffers
+  set.clear_changes();
+  EXPECT_EQ(second.object_count(), set.size());
+  EXPECT_EQ(second.instance_capacity(), 6000u);
+  gpu::GpuCuller* cullers[2] = {&first, &second};
+
+  VkDevice dev = ctx.device();
+  VkCommandPoolCreateInfo pool_info{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
+  pool_info.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
+  pool_info.queueFamilyIndex = ctx.queue_family();
+  VkCommandPool pool = VK_NULL_HANDLE;
+  ASSERT_EQ(vkCreateCommandPool(dev, &pool_info, nullptr, &pool), VK_SUCCESS);
+  VkCommandBufferAllocateInfo alloc{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO, nullptr, pool,
+                                    VK_COMMAND_BUFFER_LEVEL_PRIMARY, 2};
+  VkCommandBuffer cmds[2] = {};
+  ASSERT_EQ(vkAllocateCommandBuffers(dev, &alloc, cmds), VK_SUCCESS);
+  VkFence fences[2] = {};
+  for (VkFence& f : fences) {
+    VkFenceCreateInfo fence_info{VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
+    fence_info.flags = VK_FENCE_CREATE_SIGNALED_BIT;
+    ASSERT_EQ(vkCreateFence(dev, &fence_info, nullptr, &f), VK_SUCCESS);
+  }
+  struct InFlight {
+    bool pending = false;
+    std::vector<Aabb> world;  // the volumes as placed for this frame
+    std::vector<Frustum> views;
+    int frame = 0;
+  } in_flight[2];
+  auto check = [&](int f) {
+    InFlight& slot = in_flight[f];
+    if (!slot.pending) return;
+    ASSERT_EQ(vkWaitForFences(dev, 1, &fences[f], VK_TRUE, UINT64_MAX), VK_SUCCESS);
+    const gpu::CullResult result = cullers[f]->read_results();
+    for (std::size_t v = 0; v < slot.views.size(); ++v) {
+      std::vector<Classification> cpu(slot.world.size());
+      reference::classify_all(std::span<const Aabb>(slot.world), slot.views[v], cpu);
+      const std::size_t s = first_mismatch(cpu, result.views.at(v).classes);
+      ASSERT_EQ(s, npos) << "frame " << slot.frame << ", view " << v << ": slot " << s << " placed "
+                         << cullpipe::describe(slot.world[s]) << "; cpu says " << to_string(cpu[s]) << ", gpu says "
+                         << to_string(result.views[v].classes[s]);
+    }
+    slot.pending = false;
+  };
+  for (int frame = 0; frame < 12; ++frame) {
+    const int f = frame % 2;
+    check(f);  // the frame that used this culler two frames ago
+    if (HasFatalFailure()) break;
+    for (int k = 0; k < 400; ++k) set.set_transform(live[rng() % live.size()], random_placement(rng, 15.0f));
+    if (frame % 3 == 2) {
+      for (int k = 0; k < 60; ++k) {
+        const std::size_t r = rng() % live.size();
+        set.remove(live[r]);
+        live[r] = live.back();
+        live.pop_back();
+      }
+      for (int k = 0; k < 90; ++k)
+        live.push_back(set.add(static_cast<std::uint32_t>(k % 9), random_placement(rng, 15.0f)));
+    }
+    ASSERT_LE(set.size(), first.instance_capacity());
+    cullers[f]->update(set, set.changed_slots());
+    set.clear_changes();
+    InFlight& slot = in_flight[f];
+    slot.world.resize(set.size());
+    set.world_volumes(slot.world);
+    slot.views = views_for<Aabb>(rng, slot.world);
+    slot.frame = frame;
+    ASSERT_EQ(vkResetFences(dev, 1, &fences[f]), VK_SUCCESS);
+    ASSERT_EQ(vkResetCommandBuffer(cmds[f], 0), VK_SUCCESS);
+    VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+    ASSERT_EQ(vkBeginCommandBuffer(cmds[f], &begin), VK_SUCCESS);
+    cullers[f]->record(cmds[f], slot.views);
+    ASSERT_EQ(vkEndCommandBuffer(cmds[f]), VK_SUCCESS);
+    VkSubmitInfo submit{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+    submit.commandBufferCount = 1;
+    submit.pCommandBuffers = &cmds[f];
+    ASSERT_EQ(vkQueueSubmit(ctx.queue(), 1, &submit, fences[f]), VK_SUCCESS);
+    slot.pending = true;
+  }
+  check(0);
+  check(1);
+  vkDeviceWaitIdle(dev);
+  for (VkFence f : fences) vkDestroyFence(dev, f, nullptr);
+  vkDestroyCommandPool(dev, pool, nullptr);
 }
 
 TEST_F(GpuInstances, AnEmptySetCullsNothing) {

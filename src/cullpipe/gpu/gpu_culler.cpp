@@ -113,18 +113,19 @@ void GpuCuller::upload_volumes(BvKind kind, std::size_t count, std::size_t bytes
   // Both sizes are checked before anything changes: a scene that cannot fit keeps the old one.
   detail::check_allocation_size(ctx_, bytes, what);
   if (centres) detail::check_allocation_size(ctx_, centre_bytes, what + " (centre bounds)");
-  object_count_ = 0;  // stays 0 if an allocation below fails: no pass on half-written buffers
-  instanced_ = false;
+  scene_->object_count = 0;  // stays 0 if an allocation below fails: no pass on half-written buffers
+  scene_->instanced = false;
   place_count_ = 0;
   pending_slots_.clear();
-  bytes_per_object_ = bytes_per_object;
+  scene_->bytes_per_object = bytes_per_object;
   descriptors_dirty_ = true;  // segment ranges depend on the object size and count
+  ++scene_->generation;
   if (centres)
-    detail::ensure_buffer(ctx_, centres_, centre_bytes, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
-  detail::ensure_buffer(ctx_, bounds_, bytes, kBoundsUsage, "bounds buffer", descriptors_dirty_);
+    detail::ensure_buffer(ctx_, scene_->centres, centre_bytes, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
+  detail::ensure_buffer(ctx_, scene_->bounds, bytes, kBoundsUsage, "bounds buffer", descriptors_dirty_);
   run_upload_tasks(count, fill);
-  kind_ = kind;
-  object_count_ = count;
+  scene_->kind = kind;
+  scene_->object_count = count;
 }
 
 template <class Fill>
@@ -149,16 +150,16 @@ void GpuCuller::upload(std::span<const Aabb> volumes) {
   // of geom/plane_bounds.hpp, as the CPU kernels use them; proof: docs/numerics.md, Settling
   // bounds); only the boxes it leaves open are read in full.
   upload_volumes(BvKind::Aabb, volumes.size(), sizeof(GpuAabb), true, [&](std::size_t first, std::size_t end) {
-    GpuAabb* out = bounds_.as<GpuAabb>().data();
+    GpuAabb* out = scene_->bounds.as<GpuAabb>().data();
     for (std::size_t i = first; i < end; ++i) out[i] = pack(volumes[i]);
     plane_bounds::aabb_centre_bounds(volumes.subspan(first, end - first),
-                                     centres_.as<glm::vec4>().subspan(first, end - first));
+                                     scene_->centres.as<glm::vec4>().subspan(first, end - first));
   });
 }
 
 void GpuCuller::upload(std::span<const Obb> volumes) {
   upload_volumes(BvKind::Obb, volumes.size(), sizeof(GpuObb), false, [&](std::size_t first, std::size_t end) {
-    GpuObb* out = bounds_.as<GpuObb>().data();
+    GpuObb* out = scene_->bounds.as<GpuObb>().data();
     constexpr std::size_t kBatch = 256;  // bounds on the stack (upload threads may be small-stack job threads)
     float bounds[kBatch];
     for (std::size_t b = first; b < end; b += kBatch) {
@@ -175,7 +176,7 @@ void GpuCuller::upload(std::span<const Obb> volumes) {
 
 void GpuCuller::upload(std::span<const Sphere> volumes) {
   upload_volumes(BvKind::Sphere, volumes.size(), sizeof(GpuSphere), false, [&](std::size_t first, std::size_t end) {
-    GpuSphere* out = bounds_.as<GpuSphere>().data();
+    GpuSphere* out = scene_->bounds.as<GpuSphere>().data();
     for (std::size_t i = first; i < end; ++i) out[i] = pack(volumes[i]);
   });
 }
@@ -214,7 +215,8 @@ void GpuCuller::upload_instances(const InstanceSet<Volume>& set) {
   const std::size_t count = set.size();
   // Room for growth by later updates: half again, so a scene that grows a little at a time
   // reallocates (and sends every object again) a logarithmic number of times.
-  const std::size_t capacity = std::max<std::size_t>({count, instance_capacity_ > count ? instance_capacity_ : 0, 256});
+  const std::size_t capacity =
+      std::max<std::size_t>({count, scene_->instance_capacity > count ? scene_->instance_capacity : 0, 256});
   const std::string what = std::to_string(capacity) + " " + std::string(to_string(kind)) + " instances";
   if (capacity > std::numeric_limits<std::uint32_t>::max())
     throw std::length_error(what + ": object ids are 32-bit (at most 4294967295 objects)");
@@ -231,25 +233,23 @@ void GpuCuller::upload_instances(const InstanceSet<Volume>& set) {
   detail::check_storage_range(ctx_, centre_bytes, what + " (centre bounds written by the placing pass)");
   detail::check_texel_range(ctx_, list_bytes, what + " (placing list)");
   detail::check_texel_range(ctx_, mesh_bytes, std::to_string(set.meshes().size()) + " meshes");
-  const vulkan::ComputePipeline& place = place_pipeline(kind);  // built now, not while recording
+  ensure_place_resources(kind);  // the pipeline built now, not while recording
 
-  object_count_ = 0;  // stays 0 if an allocation below fails: no pass on half-written buffers
-  instanced_ = false;
+  scene_->object_count = 0;  // stays 0 if an allocation below fails: no pass on half-written buffers
+  scene_->instanced = false;
   place_count_ = 0;
   pending_slots_.clear();
-  bytes_per_object_ = bytes_per_object;
+  scene_->bytes_per_object = bytes_per_object;
   descriptors_dirty_ = place_descriptors_dirty_ = true;
+  ++scene_->generation;
   if (kind == BvKind::Aabb)
-    detail::ensure_buffer(ctx_, centres_, centre_bytes, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
-  detail::ensure_buffer(ctx_, bounds_, bound_bytes, kBoundsUsage, "bounds buffer", descriptors_dirty_);
+    detail::ensure_buffer(ctx_, scene_->centres, centre_bytes, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
+  detail::ensure_buffer(ctx_, scene_->bounds, bound_bytes, kBoundsUsage, "bounds buffer", descriptors_dirty_);
   bool unused = false;
   detail::ensure_buffer(ctx_, place_list_, list_bytes, kBoundsUsage, "placing list buffer", unused);
-  detail::ensure_buffer(ctx_, meshes_, mesh_bytes, kBoundsUsage, "mesh volume buffer", unused);
-  if (!place_resources_)
-    place_resources_ =
-        std::make_unique<detail::PassResources>(ctx_, place.set_layout(), PLACE_BINDING_COUNT, kPlaceTexelBindings);
-  if (mesh_bytes) std::memcpy(meshes_.data(), words.data(), mesh_bytes);
-  mesh_words_ = words;
+  detail::ensure_buffer(ctx_, scene_->meshes, mesh_bytes, kBoundsUsage, "mesh volume buffer", unused);
+  if (mesh_bytes) std::memcpy(scene_->meshes.data(), words.data(), mesh_bytes);
+  scene_->mesh_words = words;
   GpuInstance* list = place_list_.as<GpuInstance>().data();
   pending_slots_.resize(count);
   run_upload_tasks(count, [&](std::size_t first, std::size_t end) {
@@ -258,19 +258,19 @@ void GpuCuller::upload_instances(const InstanceSet<Volume>& set) {
       pending_slots_[i] = static_cast<std::uint32_t>(i);
     }
   });
-  instance_capacity_ = capacity;
-  kind_ = kind;
-  object_count_ = count;
+  scene_->instance_capacity = capacity;
+  scene_->kind = kind;
+  scene_->object_count = count;
   place_count_ = count;
-  instanced_ = true;
+  scene_->instanced = true;
 }
 
 template <class Volume>
 void GpuCuller::update_instances(const InstanceSet<Volume>& set, std::span<const std::uint32_t> slots) {
-  if (!instanced_ || kind_ != instance_kind<Volume>())
+  if (!scene_->instanced || scene_->kind != instance_kind<Volume>())
     throw std::invalid_argument("GpuCuller::update: no " + std::string(to_string(instance_kind<Volume>())) +
                                 " instances were uploaded (call upload(instances) first)");
-  if (mesh_words(set) != mesh_words_)
+  if (mesh_words(set) != scene_->mesh_words)
     throw std::invalid_argument("GpuCuller::update: the set's " + std::to_string(set.meshes().size()) +
                                 " meshes are not the ones uploaded (upload the set instead)");
   for (std::size_t k = 0; k < slots.size(); ++k) {
@@ -281,14 +281,14 @@ void GpuCuller::update_instances(const InstanceSet<Volume>& set, std::span<const
       throw std::invalid_argument("GpuCuller::update: slots are not ascending (slot " + std::to_string(slots[k]) +
                                   " after " + std::to_string(slots[k - 1]) + ")");
   }
-  if (set.size() > instance_capacity_) {
+  if (set.size() > scene_->instance_capacity) {
     // Grown past the buffers: larger ones by half again, every object sent and placed.
-    const std::size_t old = instance_capacity_;
-    instance_capacity_ = std::max(set.size(), old + old / 2);
+    const std::size_t old = scene_->instance_capacity;
+    scene_->instance_capacity = std::max(set.size(), old + old / 2);
     try {
       upload_instances(set);
     } catch (...) {
-      instance_capacity_ = old;
+      scene_->instance_capacity = old;
       throw;
     }
     return;
@@ -307,14 +307,61 @@ void GpuCuller::update_instances(const InstanceSet<Volume>& set, std::span<const
     pending.erase(std::lower_bound(pending.begin(), pending.end(), static_cast<std::uint32_t>(set.size())),
                   pending.end());
   }
+  ensure_place_resources(scene_->kind);  // a culler sharing the scene may not have them yet
+  const VkDeviceSize list_bytes = VkDeviceSize(pending.size()) * sizeof(GpuInstance);
+  if (place_list_.size() < list_bytes) {
+    const VkDeviceSize grown = std::max(list_bytes, VkDeviceSize(scene_->instance_capacity) * sizeof(GpuInstance));
+    detail::check_texel_range(ctx_, grown, std::to_string(pending.size()) + " objects to place");
+    detail::ensure_buffer(ctx_, place_list_, grown, kBoundsUsage, "placing list buffer", place_descriptors_dirty_);
+  }
   GpuInstance* list = place_list_.as<GpuInstance>().data();
   run_upload_tasks(pending.size(), [&](std::size_t first, std::size_t end) {
     for (std::size_t k = first; k < end; ++k) list[k] = list_entry(set, pending[k]);
   });
-  if (set.size() != object_count_) descriptors_dirty_ = true;  // segment ranges follow the object count
-  object_count_ = set.size();
+  if (set.size() != scene_->object_count) ++scene_->generation;  // segment ranges follow the object count
+  scene_->object_count = set.size();
   place_count_ = pending.size();
   pending_slots_ = std::move(pending);
+}
+
+void GpuCuller::ensure_place_resources(BvKind kind) {
+  const vulkan::ComputePipeline& place = place_pipeline(kind);
+  if (!place_resources_)
+    place_resources_ =
+        std::make_unique<detail::PassResources>(ctx_, place.set_layout(), PLACE_BINDING_COUNT, kPlaceTexelBindings);
+}
+
+template <class Volume>
+void GpuCuller::reserve(const InstanceSet<Volume>& set, std::size_t objects) {
+  if (!scene_->instanced || scene_->kind != instance_kind<Volume>())
+    throw std::invalid_argument("GpuCuller::reserve_instances: no " + std::string(to_string(instance_kind<Volume>())) +
+                                " instances were uploaded (call upload(instances) first)");
+  if (objects <= scene_->instance_capacity) return;
+  const std::size_t old = scene_->instance_capacity;
+  scene_->instance_capacity = objects;
+  try {
+    upload_instances(set);
+  } catch (...) {
+    scene_->instance_capacity = old;
+    throw;
+  }
+}
+
+void GpuCuller::reserve_instances(const InstanceSet<Aabb>& instances, std::size_t objects) {
+  reserve(instances, objects);
+}
+void GpuCuller::reserve_instances(const InstanceSet<Sphere>& instances, std::size_t objects) {
+  reserve(instances, objects);
+}
+
+void GpuCuller::share_scene(const GpuCuller& other) {
+  if (&other.ctx_ != &ctx_)
+    throw std::invalid_argument("GpuCuller::share_scene: the cullers are on different contexts");
+  if (other.scene_ == scene_) return;
+  scene_ = other.scene_;
+  place_count_ = 0;
+  pending_slots_.clear();
+  descriptors_dirty_ = place_descriptors_dirty_ = true;
 }
 
 void GpuCuller::upload(const InstanceSet<Aabb>& instances) { upload_instances(instances); }
@@ -340,11 +387,13 @@ const vulkan::ComputePipeline& GpuCuller::place_pipeline(BvKind kind) {
 
 void GpuCuller::record_placement(VkCommandBuffer cmd) {
   if (place_count_ == 0) return;
-  const vulkan::ComputePipeline& place = place_pipeline(kind_);
-  if (place_descriptors_dirty_) {
-    const vulkan::Buffer* buffers[PLACE_BINDING_COUNT] = {&place_list_, &meshes_, &bounds_, &centres_};
+  const vulkan::ComputePipeline& place = place_pipeline(scene_->kind);
+  if (place_descriptors_dirty_ || written_place_generation_ != scene_->generation) {
+    const vulkan::Buffer* buffers[PLACE_BINDING_COUNT] = {&place_list_, &scene_->meshes, &scene_->bounds,
+                                                          &scene_->centres};
     place_resources_->write(buffers);
     place_descriptors_dirty_ = false;
+    written_place_generation_ = scene_->generation;
   }
   const VkDescriptorSet set = place_resources_->set();
   vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, place.pipeline());
@@ -364,23 +413,25 @@ void GpuCuller::record_placement(VkCommandBuffer cmd) {
 void GpuCuller::upload_draws(std::span<const DrawCommand> templates) {
   const VkDeviceSize bytes = VkDeviceSize(templates.size()) * sizeof(DrawCommand);
   detail::check_allocation_size(ctx_, bytes, std::to_string(templates.size()) + " draw templates");
-  template_count_ = 0;
+  scene_->template_count = 0;
   descriptors_dirty_ = true;  // segment ranges of the templates
-  detail::ensure_buffer(ctx_, templates_, bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "draw template buffer",
+  ++scene_->generation;
+  detail::ensure_buffer(ctx_, scene_->templates, bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "draw template buffer",
                         descriptors_dirty_);
-  if (bytes) std::memcpy(templates_.data(), templates.data(), bytes);
-  template_count_ = templates.size();
+  if (bytes) std::memcpy(scene_->templates.data(), templates.data(), bytes);
+  scene_->template_count = templates.size();
 }
 
 void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capacity, bool draws, bool ordered) {
-  const VkDeviceSize outputs = VkDeviceSize(object_count_) * view_count * sizeof(std::uint32_t);
+  const VkDeviceSize outputs = VkDeviceSize(scene_->object_count) * view_count * sizeof(std::uint32_t);
   const VkDeviceSize visible = VkDeviceSize(visible_capacity) * view_count * sizeof(std::uint32_t);
   const VkDeviceSize draw_bytes = draws ? VkDeviceSize(visible_capacity) * view_count * sizeof(DrawCommand) : 0;
   const VkDeviceSize groups = ordered ? group_count_bytes(view_count) : 0;
   // Classes are bound per segment (plan_segments keeps each within range); all of them must
   // still fit one allocation.
   detail::check_allocation_size(
-      ctx_, outputs, std::to_string(view_count) + " views x " + std::to_string(object_count_) + " objects of output");
+      ctx_, outputs,
+      std::to_string(view_count) + " views x " + std::to_string(scene_->object_count) + " objects of output");
   detail::check_storage_range(
       ctx_, visible, std::to_string(view_count) + " views x " + std::to_string(visible_capacity) + " visible ids");
   detail::check_storage_range(
@@ -388,7 +439,7 @@ void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capac
   detail::check_texel_range(ctx_, VkDeviceSize(view_count) * sizeof(GpuFrustum), std::to_string(view_count) + " views");
   detail::check_storage_range(
       ctx_, groups,
-      std::to_string(view_count) + " views x " + std::to_string(object_count_) + " objects of workgroup counts");
+      std::to_string(view_count) + " views x " + std::to_string(scene_->object_count) + " objects of workgroup counts");
   constexpr VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
   bool& dirty = descriptors_dirty_;
   detail::ensure_buffer(ctx_, classes_, outputs, storage, "classification buffer", dirty);
@@ -398,15 +449,15 @@ void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capac
                         "counter buffer", dirty);
   detail::ensure_buffer(ctx_, views_, view_count * sizeof(GpuFrustum), kBoundsUsage, "view buffer", dirty);
   detail::ensure_buffer(ctx_, draws_, draw_bytes, storage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "draw buffer", dirty);
-  detail::ensure_buffer(ctx_, templates_, 0, storage, "draw template buffer", dirty);
+  detail::ensure_buffer(ctx_, scene_->templates, 0, storage, "draw template buffer", dirty);
   detail::ensure_buffer(ctx_, group_counts_, groups, storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, "group count buffer",
                         dirty);
 }
 
 VkDeviceSize GpuCuller::group_count_bytes(std::size_t view_count) const {
   // Ordered passes: a visible and an INSIDE count per workgroup and view.
-  return 2 * VkDeviceSize(vulkan::group_count(object_count_, group_size_ * objects_per_invocation_)) * view_count *
-         sizeof(std::uint32_t);
+  return 2 * VkDeviceSize(vulkan::group_count(scene_->object_count, group_size_ * objects_per_invocation_)) *
+         view_count * sizeof(std::uint32_t);
 }
 
 GpuCuller::SegmentPlan GpuCuller::plan_segments(std::size_t view_count, bool ordered) const {
@@ -415,22 +466,23 @@ GpuCuller::SegmentPlan GpuCuller::plan_segments(std::size_t view_count, bool ord
   // buffer is a multiple of 256 x (bytes per object) >= 1 KiB, and so of any minStorageBufferOffsetAlignment (at most
   // 256 bytes by the Vulkan spec).
   const VkDeviceSize range = ctx_.properties().limits.maxStorageBufferRange;
-  std::size_t s = object_count_;
-  s = std::min<std::size_t>(s, detail::texel_range(ctx_) / bytes_per_object_);
+  std::size_t s = scene_->object_count;
+  s = std::min<std::size_t>(s, detail::texel_range(ctx_) / scene_->bytes_per_object);
   s = std::min<std::size_t>(s, range / (sizeof(std::uint32_t) * std::max<std::size_t>(view_count, 1)));
-  if (template_count_) s = std::min<std::size_t>(s, range / sizeof(DrawCommand));
+  if (scene_->template_count) s = std::min<std::size_t>(s, range / sizeof(DrawCommand));
   if (max_segment_objects_) s = std::min(s, max_segment_objects_);
-  if (s < object_count_) s = std::max<std::size_t>(256, s / 256 * 256);
-  const SegmentPlan plan{s, object_count_ && s ? (object_count_ + s - 1) / s : 1};
+  if (s < scene_->object_count) s = std::max<std::size_t>(256, s / 256 * 256);
+  const SegmentPlan plan{s, scene_->object_count && s ? (scene_->object_count + s - 1) / s : 1};
   if (plan.count > 1 && ordered)
     throw std::length_error("object-order output (CullOptions::ordered) is limited to one storage buffer of objects; " +
-                            std::to_string(object_count_) + " objects need " + std::to_string(plan.count) +
+                            std::to_string(scene_->object_count) + " objects need " + std::to_string(plan.count) +
                             " segments of " + std::to_string(s) + " on " + ctx_.info().name + " (use arrival order)");
   return plan;
 }
 
 void GpuCuller::update_descriptors() {
-  if (!descriptors_dirty_ && written_segment_objects_ == segment_objects_ && written_view_count_ == last_view_count_ &&
+  if (!descriptors_dirty_ && written_generation_ == scene_->generation &&
+      written_segment_objects_ == segment_objects_ && written_view_count_ == last_view_count_ &&
       resources_->set_count() >= segment_count_ && written_pyramid_ == pyramid_generation_)
     return;
   static_assert(BINDING_BOUNDS == 0 && BINDING_CLASSES == 1 && BINDING_VISIBLE == 2 && BINDING_COUNTERS == 3 &&
@@ -450,39 +502,45 @@ void GpuCuller::update_descriptors() {
           &b, 0,
           std::min<VkDeviceSize>(b.size(), detail::texel_range(ctx_)) / detail::kTexelBytes * detail::kTexelBytes};
     };
-    Range ranges[kBindingCount] = {texels(bounds_),  whole(classes_),   whole(visible_),         whole(counters_),
-                                   texels(views_),   whole(templates_), whole(draws_),           whole(group_counts_),
-                                   texels(centres_), whole(*pyramid_),  texels(occlusion_views_)};
+    Range ranges[kBindingCount] = {texels(scene_->bounds), whole(classes_),         whole(visible_),
+                                   whole(counters_),       texels(views_),          whole(scene_->templates),
+                                   whole(draws_),          whole(group_counts_),    texels(scene_->centres),
+                                   whole(*pyramid_),       texels(occlusion_views_)};
     if (segment_count_ > 1) {  // one segment binds whole buffers
       const VkDeviceSize first = VkDeviceSize(seg) * segment_objects_;
-      const VkDeviceSize n = std::min<VkDeviceSize>(segment_objects_, object_count_ - first);
-      ranges[BINDING_BOUNDS] = {&bounds_, first * bytes_per_object_, n * bytes_per_object_};
+      const VkDeviceSize n = std::min<VkDeviceSize>(segment_objects_, scene_->object_count - first);
+      ranges[BINDING_BOUNDS] = {&scene_->bounds, first * scene_->bytes_per_object, n * scene_->bytes_per_object};
       ranges[BINDING_CLASSES] = {&classes_, first * views * sizeof(std::uint32_t), n * views * sizeof(std::uint32_t)};
-      if (kind_ == BvKind::Aabb)
-        ranges[BINDING_CENTRES] = {&centres_, first * sizeof(glm::vec4), n * sizeof(glm::vec4)};
-      if (template_count_ == object_count_)
-        ranges[BINDING_DRAW_TEMPLATES] = {&templates_, first * sizeof(DrawCommand), n * sizeof(DrawCommand)};
+      if (scene_->kind == BvKind::Aabb)
+        ranges[BINDING_CENTRES] = {&scene_->centres, first * sizeof(glm::vec4), n * sizeof(glm::vec4)};
+      if (scene_->template_count == scene_->object_count)
+        ranges[BINDING_DRAW_TEMPLATES] = {&scene_->templates, first * sizeof(DrawCommand), n * sizeof(DrawCommand)};
     }
     resources_->write(seg, ranges);
   }
   written_segment_objects_ = segment_objects_;
   written_view_count_ = views;
   written_pyramid_ = pyramid_generation_;
+  written_generation_ = scene_->generation;
   descriptors_dirty_ = false;
 }
 
 void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& options) {
-  const std::size_t capacity = options.visible_capacity ? options.visible_capacity : object_count_;
-  if (options.draws && template_count_ != object_count_)
-    throw std::invalid_argument("draw commands requested, but " + std::to_string(template_count_) +
-                                " draw templates were uploaded for " + std::to_string(object_count_) +
+  const std::size_t capacity = options.visible_capacity ? options.visible_capacity : scene_->object_count;
+  if (options.draws && scene_->template_count != scene_->object_count)
+    throw std::invalid_argument("draw commands requested, but " + std::to_string(scene_->template_count) +
+                                " draw templates were uploaded for " + std::to_string(scene_->object_count) +
                                 " objects (call upload_draws)");
   if (views.size() > ctx_.properties().limits.maxComputeWorkGroupCount[1])
     throw std::length_error(std::to_string(views.size()) + " views exceed the device's dispatch limit of " +
                             std::to_string(ctx_.properties().limits.maxComputeWorkGroupCount[1]));
   detail::check_occlusion(ctx_, options, views.size());
-  detail::ensure_buffer(ctx_, bounds_, 0, kBoundsUsage, "bounds buffer", descriptors_dirty_);
-  detail::ensure_buffer(ctx_, centres_, 0, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
+  bool created = false;  // a scene's first pass, before any upload
+  detail::ensure_buffer(ctx_, scene_->bounds, 0, kBoundsUsage, "bounds buffer", created);
+  detail::ensure_buffer(ctx_, scene_->centres, 0, kBoundsUsage, "centre bound buffer", created);
+  detail::ensure_buffer(ctx_, scene_->templates, 0, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "draw template buffer",
+                        created);
+  if (created) ++scene_->generation;
   detail::ensure_buffer(ctx_, no_pyramid_, 16, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "empty pyramid buffer",
                         descriptors_dirty_);
   detail::ensure_buffer(ctx_, occlusion_views_, (options.pyramid ? views.size() : 1) * sizeof(GpuOcclusionView),
@@ -493,6 +551,7 @@ void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   segment_objects_ = plan.objects;
   segment_count_ = plan.count;
   last_view_count_ = views.size();
+  last_object_count_ = scene_->object_count;  // a culler sharing the scene may change it before the readback
   pyramid_ = options.pyramid ? &options.pyramid->texels() : &no_pyramid_;
   pyramid_generation_ = options.pyramid ? options.pyramid->generation() : 0;
   update_descriptors();
@@ -520,7 +579,7 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
 
   detail::record_entry_barrier(ctx_, cmd);
   vkCmdFillBuffer(cmd, counters_.handle(), 0, view_count * sizeof(ViewCounters), 0);
-  if (options.ordered && object_count_ > 0)  // the per-workgroup counts the first pass adds to
+  if (options.ordered && scene_->object_count > 0)  // the per-workgroup counts the first pass adds to
     vkCmdFillBuffer(cmd, group_counts_.handle(), 0, group_count_bytes(view_count), 0);
   detail::record_transfer_to_compute(cmd);
   if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, timestamps, 0);
@@ -530,7 +589,7 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
   const VkDescriptorSet set = resources_->set();
   // The ordered passes always write classes (the scatter pass reads them); the arrival-order
   // pass only when they are read back (a pipeline of its own, see WRITE_CLASSES in cull_flat.comp).
-  const FlatCullParams base_params{std::uint32_t(object_count_), 0, std::uint32_t(view_count),
+  const FlatCullParams base_params{std::uint32_t(scene_->object_count), 0, std::uint32_t(view_count),
                                    std::uint32_t(last_capacity_), 0};
   // One pass over every object: per segment (its own descriptor set), in chunks of at most
   // max_groups_ workgroups.
@@ -543,7 +602,8 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
       vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.layout(), 0, 1, &segment_set, 0, nullptr);
       const std::uint64_t segment_first = std::uint64_t(seg) * segment_objects_;
       const std::uint64_t segment_count =
-          segment_count_ > 1 ? std::min<std::uint64_t>(segment_objects_, object_count_ - segment_first) : object_count_;
+          segment_count_ > 1 ? std::min<std::uint64_t>(segment_objects_, scene_->object_count - segment_first)
+                             : scene_->object_count;
       for (std::uint64_t first = 0; first < segment_count; first += objects_per_dispatch) {
         if (first > 0 || seg > 0) compute_to_compute();  // successive dispatches update the same counters
         const std::uint64_t count = std::min<std::uint64_t>(objects_per_dispatch, segment_count - first);
@@ -559,7 +619,7 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
   };
   if (!options.ordered) {
     object_pass(pipeline(arrival_key(options)), objects_per_invocation_);
-  } else if (object_count_ > 0) {
+  } else if (scene_->object_count > 0) {
     // Count per workgroup, scan the counts per view, scatter in object order.
     object_pass(pipeline(ordered_key(options)), objects_per_invocation_);
     compute_to_compute();
@@ -582,9 +642,10 @@ void GpuCuller::record(VkCommandBuffer cmd, std::span<const Frustum> views, cons
 }
 
 CullResult GpuCuller::read_results() const {
-  CullResult result = detail::read_outputs({counters_, classes_, visible_, draws_}, object_count_, last_view_count_,
-                                           last_capacity_, last_options_, segment_count_ > 1 ? segment_objects_ : 0);
-  for (ViewResult& view : result.views) view.object_tests = object_count_;  // flat: every object, no nodes
+  CullResult result =
+      detail::read_outputs({counters_, classes_, visible_, draws_}, last_object_count_, last_view_count_,
+                           last_capacity_, last_options_, segment_count_ > 1 ? segment_objects_ : 0);
+  for (ViewResult& view : result.views) view.object_tests = last_object_count_;  // flat: every object, no nodes
   return result;
 }
 

@@ -29,7 +29,27 @@ namespace cullpipe::gpu {
 
 namespace detail {
 class PassResources;
-}
+
+/// A scene on the device: what every culler that culls it reads (GpuCuller::share_scene).
+struct SceneBuffers {
+  BvKind kind = BvKind::Aabb;
+  std::size_t object_count = 0;
+  std::size_t bytes_per_object = sizeof(GpuAabb);
+  vulkan::Buffer bounds;     // the volumes, world space (BINDING_BOUNDS)
+  vulkan::Buffer centres;    // AABBs: centre and bound per object (BINDING_CENTRES)
+  vulkan::Buffer templates;  // draw templates (BINDING_DRAW_TEMPLATES)
+  std::size_t template_count = 0;
+  // Instances: the meshes' local volumes, their words (to recognise their set in update()), and
+  // the objects the bounds and centre buffers hold.
+  vulkan::Buffer meshes;
+  std::vector<std::uint32_t> mesh_words;
+  std::size_t instance_capacity = 0;
+  bool instanced = false;
+  /// Changes whenever a buffer above is replaced or the object count changes, so every culler
+  /// sharing the scene writes its descriptors again.
+  std::uint64_t generation = 1;
+};
+}  // namespace detail
 
 /// One view's result of a GPU culling pass.
 struct ViewResult {
@@ -152,6 +172,23 @@ class GpuCuller {
   void update(const InstanceSet<Sphere>& instances, std::span<const std::uint32_t> slots);
   /// Objects the next pass places before culling (0 after a pass, or for world volumes).
   std::size_t pending_placements() const { return place_count_; }
+  /// Objects the scene's buffers hold before an update() must grow them (instances).
+  std::size_t instance_capacity() const { return scene_->instance_capacity; }
+  /// Grows the scene's buffers to hold `objects` instances now (every object is sent and placed
+  /// again), so that no later update() grows them: an engine calls it when no pass using the
+  /// scene is in flight. Throws std::invalid_argument without instances uploaded.
+  void reserve_instances(const InstanceSet<Aabb>& instances, std::size_t objects);
+  void reserve_instances(const InstanceSet<Sphere>& instances, std::size_t objects);
+
+  /// Culls the scene `other` culls, stored once: the volumes, instances and draw templates, and
+  /// every upload and update made through either culler (both on one context). Each culler
+  /// keeps its own outputs, so an engine keeps one culler per frame in flight over one scene,
+  /// and sends each frame's changes to that frame's culler: its pass places them in the shared
+  /// buffers, in queue order before the next frame's pass reads them. Uploads, and updates that
+  /// grow the buffers, replace buffers that passes in flight may still read: make them when no
+  /// pass using the scene is in flight (or reserve_instances first). Throws
+  /// std::invalid_argument when the cullers are on different contexts.
+  void share_scene(const GpuCuller& other);
 
   /// One draw template per object, in object order (object_id is ignored): the indirect draw
   /// each visible object gets. Needed before a pass with CullOptions::draws; must match the
@@ -189,12 +226,12 @@ class GpuCuller {
   void record(VkCommandBuffer cmd, std::span<const Frustum> views, const CullOptions& options = {});
   CullResult read_results() const;
 
-  BvKind kind() const { return kind_; }
+  BvKind kind() const { return scene_->kind; }
   std::uint32_t group_size() const { return group_size_; }
   std::uint32_t objects_per_invocation() const { return objects_per_invocation_; }
   /// Segments of the last pass (1 unless the scene exceeds one storage buffer).
   std::size_t last_segment_count() const { return segment_count_; }
-  std::size_t object_count() const { return object_count_; }
+  std::size_t object_count() const { return scene_->object_count; }
   const vulkan::Context& context() const { return ctx_; }
 
  private:
@@ -208,7 +245,8 @@ class GpuCuller {
   template <class Volume>
   void update_instances(const InstanceSet<Volume>& instances, std::span<const std::uint32_t> slots);
   template <class Volume>
-  void write_instances(const InstanceSet<Volume>& instances, std::span<const std::uint32_t> slots);
+  void reserve(const InstanceSet<Volume>& instances, std::size_t objects);
+  void ensure_place_resources(BvKind kind);
   void record_placement(VkCommandBuffer cmd);
   const vulkan::ComputePipeline& place_pipeline(BvKind kind);
   void ensure_outputs(std::size_t view_count, std::size_t visible_capacity, bool draws, bool ordered);
@@ -236,10 +274,11 @@ class GpuCuller {
   const vulkan::ComputePipeline& pipeline(PipelineKey key);
   /// The cull pass in arrival order; the ordered passes' counting cull and their scatter.
   PipelineKey arrival_key(const CullOptions& o) const {
-    return {.kind = kind_, .draws = o.draws, .classes = o.classes, .occlusion_texels = detail::occlusion_texels(o)};
+    return {
+        .kind = scene_->kind, .draws = o.draws, .classes = o.classes, .occlusion_texels = detail::occlusion_texels(o)};
   }
   PipelineKey ordered_key(const CullOptions& o) const {
-    return {.kind = kind_, .ordered = true, .classes = true, .occlusion_texels = detail::occlusion_texels(o)};
+    return {.kind = scene_->kind, .ordered = true, .classes = true, .occlusion_texels = detail::occlusion_texels(o)};
   }
   static PipelineKey scatter_key(const CullOptions& o) {
     return {.shader = PipelineKey::Shader::CompactScatter, .draws = o.draws};
@@ -253,7 +292,6 @@ class GpuCuller {
   std::size_t max_segment_objects_ = 0;
   unsigned upload_threads_ = 0;
   std::unique_ptr<ThreadPool> upload_pool_;  // started by the first upload of several chunks
-  std::size_t bytes_per_object_ = sizeof(GpuAabb);
   // Segments of the current pass: objects per segment and their count (1 when all fit).
   std::size_t segment_objects_ = 0;
   std::size_t segment_count_ = 1;
@@ -262,28 +300,24 @@ class GpuCuller {
   // The pyramid buffer the descriptors hold, by DepthPyramidPass::generation() (0: none; a
   // handle could be reused by a later buffer, a generation is not).
   std::uint64_t written_pyramid_ = ~std::uint64_t{0}, pyramid_generation_ = 0;
-  BvKind kind_ = BvKind::Aabb;
-  std::size_t object_count_ = 0;
   detail::PipelineCache<PipelineKey> pipelines_;
-  vulkan::Buffer bounds_, classes_, visible_, counters_, views_, templates_, draws_, group_counts_;
+  vulkan::Buffer classes_, visible_, counters_, views_, draws_, group_counts_;
   vulkan::Buffer occlusion_views_;           // GpuOcclusionView per view (BINDING_OCCLUSION_VIEWS)
   vulkan::Buffer no_pyramid_;                // bound to BINDING_PYRAMID in passes without occlusion
   const vulkan::Buffer* pyramid_ = nullptr;  // the buffer bound to BINDING_PYRAMID
-  vulkan::Buffer centres_;                   // AABBs: centre and bound per object (BINDING_CENTRES)
-  std::size_t template_count_ = 0;
   std::size_t last_capacity_ = 0;
   std::size_t last_view_count_ = 0;
+  std::size_t last_object_count_ = 0;
   CullOptions last_options_;
   std::unique_ptr<detail::PassResources> resources_;  // descriptor set, command buffer, timestamps
   bool descriptors_dirty_ = true;
+  std::shared_ptr<detail::SceneBuffers> scene_ = std::make_shared<detail::SceneBuffers>();
+  std::uint64_t written_generation_ = 0, written_place_generation_ = 0;  // the scene's, in the descriptors
   // Instances (upload(InstanceSet)): the objects the next pass places (GpuInstance each: its
   // transform, mesh and slot), the meshes' local volumes, and the placing pass's pipeline and set.
-  vulkan::Buffer place_list_, meshes_;
-  std::vector<std::uint32_t> mesh_words_;  // the uploaded meshes, to recognise their set in update()
-  std::size_t instance_capacity_ = 0;      // objects the instance, bounds and centre buffers hold
+  vulkan::Buffer place_list_;
   std::size_t place_count_ = 0;
-  std::vector<std::uint32_t> pending_slots_;  // ascending: what the next pass places
-  bool instanced_ = false;
+  std::vector<std::uint32_t> pending_slots_;                     // ascending: what the next pass places
   std::unique_ptr<vulkan::ComputePipeline> place_pipelines_[2];  // boxes, spheres
   std::unique_ptr<detail::PassResources> place_resources_;
   bool place_descriptors_dirty_ = true;
