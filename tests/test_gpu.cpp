@@ -761,7 +761,19 @@ TEST_F(Gpu, RecordsIntoTheCallersCommandBufferOnABorrowedDevice) {
   const gpu::CullOptions options{true, true, 0, true, true};
   VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
   ASSERT_EQ(vkBeginCommandBuffer(cmd, &begin), VK_SUCCESS);
+  // record() never makes room for its outputs: it says what to reserve, and changes nothing.
+  try {
+    engine_culler.record(cmd, frusta, options);
+    ADD_FAILURE() << "record made room for its outputs";
+  } catch (const std::logic_error& e) {
+    EXPECT_NE(std::string(e.what()).find("reserve_outputs(2, options)"), std::string::npos) << e.what();
+  }
+  engine_culler.reserve_outputs(frusta.size(), options);
+  const VkBuffer draw_handle = engine_culler.draw_buffer().handle(),
+                 counter_handle = engine_culler.counter_buffer().handle();
   engine_culler.record(cmd, frusta, options);
+  EXPECT_EQ(engine_culler.draw_buffer().handle(), draw_handle);  // what the engine binds stays
+  EXPECT_EQ(engine_culler.counter_buffer().handle(), counter_handle);
   ASSERT_EQ(vkEndCommandBuffer(cmd), VK_SUCCESS);
   VkSubmitInfo submit{VK_STRUCTURE_TYPE_SUBMIT_INFO};
   submit.commandBufferCount = 1;

@@ -206,18 +206,30 @@ TEST_F(GpuInstances, TwoFramesInFlightShareOneScene) {
   EXPECT_EQ(second.object_count(), set.size());
   EXPECT_EQ(second.instance_capacity(), 6000u);
   gpu::GpuCuller* cullers[2] = {&first, &second};
+  for (gpu::GpuCuller* c : cullers) c->reserve_outputs(4, {}, 6000);  // views_for gives four views
 
   VkDevice dev = ctx.device();
   VkCommandPoolCreateInfo pool_info{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
   pool_info.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
   pool_info.queueFamilyIndex = ctx.queue_family();
   VkCommandPool pool = VK_NULL_HANDLE;
+  VkFence fences[2] = {};
+  struct Release {  // the engine's objects, gone however the test ends
+    VkDevice dev;
+    VkCommandPool& pool;
+    VkFence* fences;
+    ~Release() {
+      vkDeviceWaitIdle(dev);
+      for (int f = 0; f < 2; ++f)
+        if (fences[f]) vkDestroyFence(dev, fences[f], nullptr);
+      if (pool) vkDestroyCommandPool(dev, pool, nullptr);
+    }
+  } release{dev, pool, fences};
   ASSERT_EQ(vkCreateCommandPool(dev, &pool_info, nullptr, &pool), VK_SUCCESS);
   VkCommandBufferAllocateInfo alloc{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO, nullptr, pool,
                                     VK_COMMAND_BUFFER_LEVEL_PRIMARY, 2};
   VkCommandBuffer cmds[2] = {};
   ASSERT_EQ(vkAllocateCommandBuffers(dev, &alloc, cmds), VK_SUCCESS);
-  VkFence fences[2] = {};
   for (VkFence& f : fences) {
     VkFenceCreateInfo fence_info{VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
     fence_info.flags = VK_FENCE_CREATE_SIGNALED_BIT;
@@ -281,9 +293,6 @@ TEST_F(GpuInstances, TwoFramesInFlightShareOneScene) {
   }
   check(0);
   check(1);
-  vkDeviceWaitIdle(dev);
-  for (VkFence f : fences) vkDestroyFence(dev, f, nullptr);
-  vkDestroyCommandPool(dev, pool, nullptr);
 }
 
 TEST_F(GpuInstances, AnEmptySetCullsNothing) {

@@ -126,6 +126,10 @@ int frame_loop(const EngineDevice& engine, const cullpipe::vulkan::Context& ctx,
   std::vector<gpu::DrawCommand> draws(set.size());
   for (std::uint32_t i = 0; i < draws.size(); ++i) draws[i] = {36, 1, 0, 0, i, 0};
   cullers[0].upload_draws(draws);
+  gpu::CullOptions options;
+  options.ordered = true;
+  options.draws = true;
+  for (gpu::GpuCuller& culler : cullers) culler.reserve_outputs(1, options);  // each frame's own outputs
 
   VkCommandPoolCreateInfo pi{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
   pi.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
@@ -193,9 +197,6 @@ int frame_loop(const EngineDevice& engine, const cullpipe::vulkan::Context& ctx,
     check(vkResetCommandBuffer(cmds[f], 0), "vkResetCommandBuffer");
     VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
     check(vkBeginCommandBuffer(cmds[f], &begin), "vkBeginCommandBuffer");
-    gpu::CullOptions options;
-    options.ordered = true;
-    options.draws = true;
     cullers[f].record(cmds[f], std::span(&frame.view, 1), options);
     // ... the frame's render pass would draw from cullers[f].draw_buffer() here.
     check(vkEndCommandBuffer(cmds[f]), "vkEndCommandBuffer");
@@ -251,6 +252,7 @@ int main(int argc, char** argv) try {
   gpu::CullOptions options;
   options.ordered = true;  // draws in object order
   options.draws = true;
+  culler.reserve_outputs(1, options);  // the draw and count buffers, made once (record never replaces them)
   culler.record(cmd, std::span(&frustum, 1), options);
   // ... here an engine would begin its render pass and call
   // vkCmdDrawIndexedIndirectCount(cmd, culler.draw_buffer().handle(), 0,

@@ -422,7 +422,8 @@ void GpuCuller::upload_draws(std::span<const DrawCommand> templates) {
   scene_->template_count = templates.size();
 }
 
-void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capacity, bool draws, bool ordered) {
+void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capacity, bool draws, bool ordered,
+                               bool may_grow) {
   const VkDeviceSize outputs = VkDeviceSize(scene_->object_count) * view_count * sizeof(std::uint32_t);
   const VkDeviceSize visible = VkDeviceSize(visible_capacity) * view_count * sizeof(std::uint32_t);
   const VkDeviceSize draw_bytes = draws ? VkDeviceSize(visible_capacity) * view_count * sizeof(DrawCommand) : 0;
@@ -440,6 +441,25 @@ void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capac
   detail::check_storage_range(
       ctx_, groups,
       std::to_string(view_count) + " views x " + std::to_string(scene_->object_count) + " objects of workgroup counts");
+  // What an engine binds or reads (draws, counts, the visible list, the classes) is never
+  // replaced by record(): it must have been made large enough first (reserve_outputs, or an
+  // earlier pass as large), so its handles stay the ones the engine recorded.
+  if (!may_grow) {
+    auto fits = [&](const vulkan::Buffer& b, VkDeviceSize bytes, const char* what, const std::string& holds) {
+      if (b && b.size() >= std::max<VkDeviceSize>(bytes, 1)) return;
+      throw std::logic_error("GpuCuller::record: the " + std::string(what) + " (" + std::to_string(b ? b.size() : 0) +
+                             " bytes) cannot hold " + holds + " (" + std::to_string(bytes) +
+                             " bytes); record never replaces the outputs an engine binds: call reserve_outputs(" +
+                             std::to_string(view_count) + ", options) first");
+    };
+    const std::string per_view = std::to_string(view_count) + " views x " + std::to_string(visible_capacity);
+    fits(classes_, outputs, "classification buffer",
+         std::to_string(view_count) + " views x " + std::to_string(scene_->object_count) + " objects of classes");
+    fits(visible_, visible, "visible-id buffer", per_view + " visible ids");
+    fits(counters_, view_count * sizeof(ViewCounters), "counter buffer",
+         std::to_string(view_count) + " views' counters");
+    if (draws) fits(draws_, draw_bytes, "draw buffer", per_view + " draw commands");
+  }
   constexpr VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
   bool& dirty = descriptors_dirty_;
   detail::ensure_buffer(ctx_, classes_, outputs, storage, "classification buffer", dirty);
@@ -525,7 +545,23 @@ void GpuCuller::update_descriptors() {
   descriptors_dirty_ = false;
 }
 
-void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& options) {
+void GpuCuller::reserve_outputs(std::size_t view_count, const CullOptions& options, std::size_t objects) {
+  if (view_count == 0) throw std::invalid_argument("GpuCuller::reserve_outputs: no views");
+  // For `objects` objects (a scene that will grow to it), or the scene as it is.
+  const std::size_t current = scene_->object_count;
+  scene_->object_count = std::max(current, objects);
+  try {
+    const std::size_t capacity = options.visible_capacity ? options.visible_capacity : scene_->object_count;
+    plan_segments(view_count, options.ordered);  // throws where a pass could not run
+    ensure_outputs(view_count, capacity, options.draws, options.ordered, true);
+  } catch (...) {
+    scene_->object_count = current;
+    throw;
+  }
+  scene_->object_count = current;
+}
+
+void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& options, bool may_grow) {
   const std::size_t capacity = options.visible_capacity ? options.visible_capacity : scene_->object_count;
   if (options.draws && scene_->template_count != scene_->object_count)
     throw std::invalid_argument("draw commands requested, but " + std::to_string(scene_->template_count) +
@@ -547,7 +583,7 @@ void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
                         kBoundsUsage, "occlusion view buffer", descriptors_dirty_);
   // Nothing of the pass's state changes until every check and allocation has passed.
   const SegmentPlan plan = plan_segments(views.size(), options.ordered);
-  ensure_outputs(views.size(), capacity, options.draws, options.ordered);
+  ensure_outputs(views.size(), capacity, options.draws, options.ordered, may_grow);
   segment_objects_ = plan.objects;
   segment_count_ = plan.count;
   last_view_count_ = views.size();
@@ -637,7 +673,7 @@ void GpuCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
 
 void GpuCuller::record(VkCommandBuffer cmd, std::span<const Frustum> views, const CullOptions& options) {
   if (views.empty()) throw std::invalid_argument("GpuCuller::record: no views");
-  prepare(views, options);
+  prepare(views, options, false);
   record_passes(cmd, VK_NULL_HANDLE);
 }
 
@@ -652,7 +688,7 @@ CullResult GpuCuller::read_results() const {
 CullResult GpuCuller::cull(std::span<const Frustum> views, const CullOptions& options) {
   if (views.empty()) return {};
   return detail::timed_pass(
-      *resources_, [&] { prepare(views, options); },
+      *resources_, [&] { prepare(views, options, true); },
       [&](VkCommandBuffer cmd, VkQueryPool timestamps) { record_passes(cmd, timestamps); },
       [&] { return read_results(); });
 }

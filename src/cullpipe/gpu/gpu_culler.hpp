@@ -206,17 +206,30 @@ class GpuCuller {
   const vulkan::Buffer& counter_buffer() const { return counters_; }
   std::size_t last_visible_capacity() const { return last_capacity_; }
 
-  /// Classifies the uploaded volumes against every view in one submission and waits.
-  /// Throws std::length_error when the visible lists or draws (views x capacity) exceed a
-  /// storage buffer, or when `ordered` output is asked of more than one segment of objects.
+  /// Makes the outputs (classes, visible ids, counters, draws) large enough for passes of
+  /// `view_count` views with `options` (its capacity, draws, order) over `objects` objects (0 or
+  /// fewer than uploaded: the objects uploaded now; more: room for a scene of instances that will
+  /// grow to that), replacing buffers that are too small. record() never replaces them, so the handles of
+  /// draw_buffer() and counter_buffer() an engine binds stay the same from frame to frame until
+  /// it calls this again (when no pass of this culler is in flight). Throws as cull() does for
+  /// passes that cannot run.
+  void reserve_outputs(std::size_t view_count, const CullOptions& options = {}, std::size_t objects = 0);
+
+  /// Classifies the uploaded volumes against every view in one submission and waits, growing
+  /// the outputs as the pass needs. Throws std::length_error when the visible lists or draws
+  /// (views x capacity) exceed a storage buffer, or when `ordered` output is asked of more than
+  /// one segment of objects.
   CullResult cull(std::span<const Frustum> views, const CullOptions& options = {});
 
   /// The engine path: records the whole pass (counter reset, dispatches, barriers) into the
   /// caller's command buffer, which must be recording, outside a render pass, for a queue of
-  /// the context's queue family. Nothing is submitted. The views are written to a host-visible
-  /// buffer now and buffers and descriptors may be (re)allocated, so one GpuCuller serves one
-  /// recorded pass at a time: record again (or cull, or upload) only after the submission of
-  /// the previous recording has completed; use one GpuCuller per frame in flight. The
+  /// the context's queue family. Nothing is submitted. The outputs are never replaced here: when
+  /// they are too small for the pass (more objects, views or capacity than reserve_outputs or an
+  /// earlier pass made room for) it throws std::logic_error saying what to reserve. The views
+  /// are written to a host-visible buffer now and descriptors may be written, so one GpuCuller
+  /// serves one recorded pass at a time: record again (or cull, or upload) only after the
+  /// submission of the previous recording has completed; use one GpuCuller per frame in flight
+  /// (over one scene: share_scene). The
   /// recording starts with a barrier after earlier readers of the outputs (indirect draws,
   /// shaders, transfers) and ends with one that makes draw_buffer() and counter_buffer() ready
   /// for vkCmdDrawIndexedIndirectCount (DRAW_INDIRECT stage), vertex shaders (on graphics
@@ -249,14 +262,14 @@ class GpuCuller {
   void ensure_place_resources(BvKind kind);
   void record_placement(VkCommandBuffer cmd);
   const vulkan::ComputePipeline& place_pipeline(BvKind kind);
-  void ensure_outputs(std::size_t view_count, std::size_t visible_capacity, bool draws, bool ordered);
+  void ensure_outputs(std::size_t view_count, std::size_t visible_capacity, bool draws, bool ordered, bool may_grow);
   VkDeviceSize group_count_bytes(std::size_t view_count) const;  // the ordered passes' workgroup counts
   struct SegmentPlan {
     std::size_t objects = 0;  // per segment
     std::size_t count = 1;
   };
   SegmentPlan plan_segments(std::size_t view_count, bool ordered) const;
-  void prepare(std::span<const Frustum> views, const CullOptions& options);
+  void prepare(std::span<const Frustum> views, const CullOptions& options, bool may_grow);
   void record_passes(VkCommandBuffer cmd, VkQueryPool timestamps);
   /// One variant of the flat pass's shaders; fields a shader does not read stay at their defaults.
   struct PipelineKey {

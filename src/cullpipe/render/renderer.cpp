@@ -154,6 +154,11 @@ Renderer::Renderer(const vulkan::Context& ctx, const Scene& scene, const Rendere
       }
     }
     culler_->upload_draws(templates_);
+    // The frames draw from the culler's draw and count buffers: made once, never replaced.
+    gpu::CullOptions frame_options;
+    frame_options.ordered = true;
+    frame_options.draws = true;
+    culler_->reserve_outputs(1, frame_options);
 
     create_targets();
     create_pipelines();
