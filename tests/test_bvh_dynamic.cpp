@@ -4,10 +4,13 @@
 #include <chrono>
 #include <cstdio>
 #include <cstring>
+#include <random>
 #include <string>
+#include <thread>
 
 #include "bvh_test_util.hpp"
 #include "cullpipe/bvh/builders.hpp"
+#include "cullpipe/bvh/dynamic.hpp"
 #include "cullpipe/core/thread_pool.hpp"
 #include "cullpipe/cull/reference.hpp"
 #include "cullpipe/scene/generators.hpp"
@@ -518,6 +521,53 @@ TEST(BvhDynamic, LargeAndPathologicalSetsFinish) {
     const bvh::Tree tree = build(b, equal, 4);
     EXPECT_EQ(bvh::check_tree(tree, equal), "") << b.name;
   }
+}
+
+// Objects scatter by a random walk: the refitted tree degrades, a rebuild starts on its own
+// thread while frames go on, and is swapped in; every frame's tree is valid over that frame's
+// boxes, and a swapped tree is better than the one it replaces.
+TEST(BvhDynamic, DegradedTreeIsRebuiltInTheBackgroundAndSwappedIn) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> coord(-10.0f, 10.0f), step(-0.05f, 0.05f);
+  std::vector<Aabb> boxes(20000);
+  for (Aabb& b : boxes) {
+    const glm::vec3 c(coord(rng), coord(rng), coord(rng));
+    b = {c - glm::vec3(0.1f), c + glm::vec3(0.1f)};
+  }
+  bvh::DynamicTree dynamic(boxes, {.rebuild_ratio = 1.2});
+  EXPECT_DOUBLE_EQ(dynamic.quality(), 1.0);
+  bool started = false, swapped = false;
+  for (int frame = 0; frame < 3000 && !swapped; ++frame) {
+    for (Aabb& b : boxes) {
+      const glm::vec3 d(step(rng), step(rng), step(rng));
+      b.min += d;
+      b.max += d;
+    }
+    bvh::Tree kept = dynamic.tree();  // what the frame would cull without a swap
+    const bvh::TreeStep s = dynamic.update(boxes);
+    ASSERT_EQ(bvh::check_tree(dynamic.tree(), boxes), "") << "frame " << frame;
+    if (s == bvh::TreeStep::RebuildStarted) {
+      EXPECT_FALSE(started) << "a second rebuild started while one was under way";
+      EXPECT_GT(dynamic.quality(), 1.2);
+      started = true;
+    }
+    if (s == bvh::TreeStep::Swapped) {
+      EXPECT_TRUE(started);
+      bvh::refit(kept, boxes);
+      EXPECT_LT(bvh::metrics(dynamic.tree()).sah_cost, bvh::metrics(kept).sah_cost) << "frame " << frame;
+      swapped = true;
+    }
+    if (dynamic.rebuilding()) std::this_thread::sleep_for(std::chrono::milliseconds(1));  // frames take time
+  }
+  EXPECT_TRUE(swapped) << "no rebuild was swapped in";
+  EXPECT_EQ(dynamic.rebuilds(), 1u);
+  EXPECT_EQ(dynamic.last_error(), "");
+  // A changed object count rebuilds at once.
+  boxes.resize(15000);
+  EXPECT_EQ(dynamic.update(boxes), bvh::TreeStep::Rebuilt);
+  EXPECT_EQ(bvh::check_tree(dynamic.tree(), boxes), "");
+  EXPECT_DOUBLE_EQ(dynamic.quality(), 1.0);
+  EXPECT_THROW(bvh::DynamicTree(boxes, {.builder = "no-such-builder"}), std::invalid_argument);
 }
 
 }  // namespace
