@@ -862,3 +862,80 @@ TEST(GpuValidation, InvalidCallIsReported) {
 
 }  // namespace
 }  // namespace cullpipe
+
+namespace cullpipe {
+namespace {
+
+// An engine's allocator, as a test needs it: one mapped block of device memory handed out from
+// the front, counting what is outstanding.
+class BlockAllocator final : public vulkan::Allocator {
+ public:
+  BlockAllocator(const vulkan::Context& ctx, VkDeviceSize size) : device_(ctx.device()), size_(size) {
+    VkMemoryAllocateInfo info{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
+    info.allocationSize = size;
+    info.memoryTypeIndex =
+        ctx.find_memory_type(~0u, VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT, 0);
+    vulkan::check(vkAllocateMemory(device_, &info, nullptr, &block_), "test block");
+    vulkan::check(vkMapMemory(device_, block_, 0, VK_WHOLE_SIZE, 0, &mapped_), "test block map");
+  }
+  ~BlockAllocator() override {
+    vkUnmapMemory(device_, block_);
+    vkFreeMemory(device_, block_, nullptr);
+  }
+  vulkan::Allocation allocate(const VkMemoryRequirements& req, VkMemoryPropertyFlags, VkMemoryPropertyFlags,
+                              const char* what) override {
+    const VkDeviceSize offset = (next_ + req.alignment - 1) / req.alignment * req.alignment;
+    if (offset + req.size > size_) throw std::runtime_error(std::string("test block is full: ") + what);
+    next_ = offset + req.size;
+    ++allocated_;
+    ++outstanding_;
+    return {block_, offset, static_cast<char*>(mapped_) + offset, nullptr};
+  }
+  void free(const vulkan::Allocation& a) noexcept override {
+    if (a.memory == block_) --outstanding_;
+  }
+  int allocated() const { return allocated_; }
+  int outstanding() const { return outstanding_; }
+
+ private:
+  VkDevice device_;
+  VkDeviceSize size_, next_ = 0;
+  VkDeviceMemory block_ = VK_NULL_HANDLE;
+  void* mapped_ = nullptr;
+  int allocated_ = 0, outstanding_ = 0;
+};
+
+// With an engine's allocator set, every buffer of a culler takes its memory from it and gives
+// it back, and the answers are the reference's; an allocator that fails fails the upload with its
+// error, and the culler stays usable.
+TEST_F(Gpu, BuffersTakeTheirMemoryFromTheEngineAllocator) {
+  vulkan::Context& ctx = *GpuEnvironment::context;
+  BlockAllocator block(ctx, 64u << 20);
+  ctx.set_allocator(&block);
+  struct Unset {
+    vulkan::Context& ctx;
+    ~Unset() { ctx.set_allocator(nullptr); }
+  } unset{ctx};
+  {
+    gpu::GpuCuller culler(ctx);
+    test::Rng rng(5);
+    std::vector<Aabb> boxes(20000);
+    for (Aabb& b : boxes) b = test::random_aabb(rng, 30.0f, 2.0f);
+    expect_agreement(culler, boxes, test_frusta());
+    EXPECT_GT(block.allocated(), 5);
+    EXPECT_GT(block.outstanding(), 5);                                         // the culler's buffers, held
+    std::vector<Aabb> too_many(2'000'000, Aabb{glm::vec3(-1), glm::vec3(1)});  // 96 MB: past the block
+    try {
+      culler.upload(std::span<const Aabb>(too_many));
+      ADD_FAILURE() << "an upload past the allocator's block succeeded";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find("test block is full"), std::string::npos) << e.what();
+    }
+    ctx.set_allocator(nullptr);  // the culler goes on with its own memory
+    expect_agreement(culler, boxes, test_frusta());
+  }
+  EXPECT_EQ(block.outstanding(), 0) << "buffers not given back to the allocator";
+}
+
+}  // namespace
+}  // namespace cullpipe

@@ -21,17 +21,33 @@ Buffer::Buffer(const Context& ctx, VkDeviceSize size, VkBufferUsageFlags usage, 
   try {
     ctx.reserve_memory(req.size, context);
     reserved_ = req.size;
-    VkMemoryAllocateInfo alloc{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
-    alloc.allocationSize = req.size;
-    alloc.memoryTypeIndex = ctx.find_memory_type(
-        req.memoryTypeBits, VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT,
-        VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
-    r = vkAllocateMemory(device_, &alloc, nullptr, &memory_);
-    if (r != VK_SUCCESS) throw Error("allocating memory for " + context + " failed: " + result_name(r), r);
-    r = vkBindBufferMemory(device_, buffer_, memory_, 0);
-    if (r != VK_SUCCESS) throw Error("binding memory of " + context + " failed: " + result_name(r), r);
-    r = vkMapMemory(device_, memory_, 0, VK_WHOLE_SIZE, 0, &mapped_);
-    if (r != VK_SUCCESS) throw Error("mapping " + context + " failed: " + result_name(r), r);
+    constexpr VkMemoryPropertyFlags required =
+                                        VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT,
+                                    preferred = VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT;
+    if (Allocator* allocator = ctx.allocator()) {
+      allocation_ = allocator->allocate(req, required, preferred, what);
+      allocator_ = allocator;  // from here on reset() gives it back
+      if (!allocation_.memory || !allocation_.mapped)
+        throw Error("the allocator gave " + context + (allocation_.memory ? " unmapped memory" : " no memory"),
+                    VK_ERROR_MEMORY_MAP_FAILED);
+      if (req.alignment && allocation_.offset % req.alignment)
+        throw Error("the allocator gave " + context + " memory at offset " + std::to_string(allocation_.offset) +
+                        ", not a multiple of its alignment " + std::to_string(req.alignment),
+                    VK_ERROR_VALIDATION_FAILED_EXT);
+      r = vkBindBufferMemory(device_, buffer_, allocation_.memory, allocation_.offset);
+      if (r != VK_SUCCESS) throw Error("binding memory of " + context + " failed: " + result_name(r), r);
+      mapped_ = allocation_.mapped;
+    } else {
+      VkMemoryAllocateInfo alloc{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
+      alloc.allocationSize = req.size;
+      alloc.memoryTypeIndex = ctx.find_memory_type(req.memoryTypeBits, required, preferred);
+      r = vkAllocateMemory(device_, &alloc, nullptr, &memory_);
+      if (r != VK_SUCCESS) throw Error("allocating memory for " + context + " failed: " + result_name(r), r);
+      r = vkBindBufferMemory(device_, buffer_, memory_, 0);
+      if (r != VK_SUCCESS) throw Error("binding memory of " + context + " failed: " + result_name(r), r);
+      r = vkMapMemory(device_, memory_, 0, VK_WHOLE_SIZE, 0, &mapped_);
+      if (r != VK_SUCCESS) throw Error("mapping " + context + " failed: " + result_name(r), r);
+    }
   } catch (...) {
     reset();
     throw;
@@ -48,6 +64,8 @@ Buffer& Buffer::operator=(Buffer&& o) noexcept {
     std::swap(memory_, o.memory_);
     std::swap(size_, o.size_);
     std::swap(mapped_, o.mapped_);
+    std::swap(allocator_, o.allocator_);
+    std::swap(allocation_, o.allocation_);
   }
   return *this;
 }
@@ -58,6 +76,9 @@ void Buffer::reset() {
     vkFreeMemory(device_, memory_, nullptr);
   }
   if (buffer_) vkDestroyBuffer(device_, buffer_, nullptr);
+  if (allocator_) allocator_->free(allocation_);
+  allocator_ = nullptr;
+  allocation_ = {};
   if (ctx_ && reserved_) ctx_->release_memory(reserved_);
   reserved_ = 0;
   buffer_ = VK_NULL_HANDLE;

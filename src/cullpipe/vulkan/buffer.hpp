@@ -11,7 +11,8 @@ namespace cullpipe::vulkan {
 
 /// A VkBuffer with its own host-visible, coherent memory, persistently mapped. Prefers memory
 /// that is also device-local (integrated GPUs, lavapipe, resizable BAR); falls back to plain
-/// host memory that the device reads over the bus. Move-only.
+/// host memory that the device reads over the bus. The memory comes from the context's
+/// Allocator when one is set, else from vkAllocateMemory. Move-only.
 class Buffer {
  public:
   Buffer() = default;
@@ -41,6 +42,8 @@ class Buffer {
   VkDeviceMemory memory_ = VK_NULL_HANDLE;
   VkDeviceSize size_ = 0;
   void* mapped_ = nullptr;
+  Allocator* allocator_ = nullptr;  // where memory_ came from (null: vkAllocateMemory)
+  Allocation allocation_;
 };
 
 }  // namespace cullpipe::vulkan

@@ -12,6 +12,32 @@
 namespace cullpipe::vulkan {
 
 /// How to create a Context.
+/// Memory for one buffer, as an engine's allocator hands it out: a block of device memory, the
+/// offset of the buffer's range in it (a multiple of the buffer's alignment), and the host
+/// address of that offset (cullpipe's buffers are written and read by the host).
+struct Allocation {
+  VkDeviceMemory memory = VK_NULL_HANDLE;
+  VkDeviceSize offset = 0;
+  void* mapped = nullptr;
+  void* user = nullptr;  ///< the allocator's own handle for it (a VmaAllocation, say)
+};
+
+/// An engine's allocator (over VMA, say): set on a Context (Context::set_allocator), it supplies
+/// the memory of every buffer cullpipe creates there instead of vkAllocateMemory, and gets it
+/// back when the buffer goes. Called from the thread that creates or destroys the buffer.
+class Allocator {
+ public:
+  virtual ~Allocator() = default;
+  /// Memory meeting `requirements` (size, alignment, memory type bits) of a type with every
+  /// `required` flag (host-visible and coherent), preferably also `preferred` (device-local),
+  /// mapped. `what` names the buffer ("bounds buffer"). Throws on failure (any exception; the
+  /// buffer is not created).
+  virtual Allocation allocate(const VkMemoryRequirements& requirements, VkMemoryPropertyFlags required,
+                              VkMemoryPropertyFlags preferred, const char* what) = 0;
+  /// Takes back what allocate() gave; the buffer bound to it is already destroyed.
+  virtual void free(const Allocation& allocation) noexcept = 0;
+};
+
 struct ContextOptions {
   /// Enable VK_LAYER_KHRONOS_validation with synchronization validation. Every message it
   /// reports is counted and passed to `on_message`.
@@ -117,6 +143,12 @@ class Context {
   void reserve_memory(VkDeviceSize bytes, const std::string& what) const;
   void release_memory(VkDeviceSize bytes) const { memory_in_use_ -= bytes; }
 
+  /// The allocator buffers created from now on take their memory from (nullptr: cullpipe
+  /// allocates it). Not owned: it must outlive every buffer it allocated for (each buffer
+  /// returns its memory to the allocator it came from, whatever is set later).
+  void set_allocator(Allocator* allocator) { allocator_ = allocator; }
+  Allocator* allocator() const { return allocator_; }
+
  private:
   static VKAPI_ATTR VkBool32 VKAPI_CALL debug_callback(VkDebugUtilsMessageSeverityFlagBitsEXT severity,
                                                        VkDebugUtilsMessageTypeFlagsEXT types,
@@ -145,6 +177,7 @@ class Context {
 
   std::function<void(std::string_view)> on_message_;
   std::atomic<std::size_t> message_count_{0};
+  Allocator* allocator_ = nullptr;
   std::atomic<VkDeviceSize> memory_budget_{0};
   mutable std::atomic<VkDeviceSize> memory_in_use_{0};
   std::mutex messages_mutex_;
