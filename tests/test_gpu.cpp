@@ -937,5 +937,69 @@ TEST_F(Gpu, BuffersTakeTheirMemoryFromTheEngineAllocator) {
   EXPECT_EQ(block.outstanding(), 0) << "buffers not given back to the allocator";
 }
 
+// The pass writes its draws, counters and visible ids into buffers the engine owns: the same
+// answers as into its own, draw_buffer() names the engine's buffer, one too small is refused
+// with the size it needs, and the culler's own buffers come back on request.
+TEST_F(Gpu, OutputsGoIntoTheEnginesBuffers) {
+  const vulkan::Context& ctx = *GpuEnvironment::context;
+  test::Rng rng(8);
+  std::vector<Aabb> boxes(5000);
+  for (Aabb& b : boxes) b = test::random_aabb(rng, 30.0f, 2.0f);
+  std::vector<gpu::DrawCommand> templates(boxes.size());
+  for (std::uint32_t i = 0; i < templates.size(); ++i) templates[i] = {36, 1, 0, 0, i, 0};
+  const std::vector<Frustum> frusta = test_frusta();
+  const gpu::CullOptions options{true, true, 0, true, true};
+  gpu::GpuCuller& c = culler();
+  c.upload(std::span<const Aabb>(boxes));
+  c.upload_draws(templates);
+  const gpu::CullResult own = c.cull(frusta, options);
+
+  constexpr VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
+  const std::size_t per_view = boxes.size();
+  vulkan::Buffer draws(ctx, frusta.size() * per_view * sizeof(gpu::DrawCommand),
+                       storage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "engine draws");
+  vulkan::Buffer counters(ctx, frusta.size() * sizeof(gpu::ViewCounters),
+                          storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT,
+                          "engine counters");
+  vulkan::Buffer visible(ctx, frusta.size() * per_view * sizeof(std::uint32_t), storage, "engine visible ids");
+  gpu::EngineOutputs outputs{draws.handle(),  draws.size(),     draws.data(),   counters.handle(), counters.size(),
+                             counters.data(), visible.handle(), visible.size(), visible.data()};
+  struct OwnAgain {  // the shared culler never keeps this test's buffers, however it ends
+    gpu::GpuCuller& c;
+    ~OwnAgain() { c.use_own_outputs(); }
+  } own_again{c};
+  c.use_engine_outputs(outputs);
+  EXPECT_EQ(c.draw_buffer().handle(), draws.handle());
+  EXPECT_EQ(c.counter_buffer().handle(), counters.handle());
+  const gpu::CullResult engine = c.cull(frusta, options);
+  for (std::size_t v = 0; v < frusta.size(); ++v) {
+    EXPECT_EQ(engine.views[v].classes, own.views[v].classes) << "view " << v;
+    EXPECT_EQ(engine.views[v].visible_ids, own.views[v].visible_ids) << "view " << v;
+    EXPECT_EQ(engine.views[v].counts, own.views[v].counts) << "view " << v;
+    EXPECT_EQ(counters.as<const gpu::ViewCounters>()[v].visible_count, own.views[v].counts.visible);
+    ASSERT_EQ(engine.views[v].draws.size(), own.views[v].draws.size());
+    EXPECT_EQ(std::memcmp(engine.views[v].draws.data(), own.views[v].draws.data(),
+                          engine.views[v].draws.size() * sizeof(gpu::DrawCommand)),
+              0);
+  }
+  // Too small for the pass: refused with the size it needs, never replaced.
+  outputs.draws_size = 100 * sizeof(gpu::DrawCommand);
+  c.use_engine_outputs(outputs);
+  try {
+    c.cull(frusta, options);
+    ADD_FAILURE() << "a pass wrote past the engine's draw buffer";
+  } catch (const std::length_error& e) {
+    EXPECT_NE(std::string(e.what()).find("engine's draw buffer"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(c.draw_buffer().handle(), draws.handle());
+  // Without host addresses the results stay on the engine's side.
+  c.use_engine_outputs({draws.handle(), draws.size(), nullptr, counters.handle(), counters.size(), nullptr});
+  EXPECT_THROW(c.cull(frusta, options), std::logic_error);
+  c.use_own_outputs();
+  EXPECT_NE(c.draw_buffer().handle(), draws.handle());
+  const gpu::CullResult back = c.cull(frusta, options);
+  EXPECT_EQ(back.views[0].visible_ids, own.views[0].visible_ids);
+}
+
 }  // namespace
 }  // namespace cullpipe

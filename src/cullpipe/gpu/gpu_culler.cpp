@@ -455,20 +455,36 @@ void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capac
     const std::string per_view = std::to_string(view_count) + " views x " + std::to_string(visible_capacity);
     fits(classes_, outputs, "classification buffer",
          std::to_string(view_count) + " views x " + std::to_string(scene_->object_count) + " objects of classes");
-    fits(visible_, visible, "visible-id buffer", per_view + " visible ids");
-    fits(counters_, view_count * sizeof(ViewCounters), "counter buffer",
-         std::to_string(view_count) + " views' counters");
-    if (draws) fits(draws_, draw_bytes, "draw buffer", per_view + " draw commands");
+    if (!engine_visible_) fits(visible_, visible, "visible-id buffer", per_view + " visible ids");
+    if (!engine_counters_)
+      fits(counters_, view_count * sizeof(ViewCounters), "counter buffer",
+           std::to_string(view_count) + " views' counters");
+    if (draws && !engine_draws_) fits(draws_, draw_bytes, "draw buffer", per_view + " draw commands");
   }
   constexpr VkBufferUsageFlags storage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
   bool& dirty = descriptors_dirty_;
+  // The engine's buffers are used as they are: too small is an error, never a new buffer.
+  auto engine_fits = [&](const vulkan::Buffer& b, VkDeviceSize bytes, const char* what, const std::string& holds) {
+    if (b.size() >= bytes) return;
+    throw std::length_error("the engine's " + std::string(what) + " (" + std::to_string(b.size()) +
+                            " bytes) cannot hold " + holds + " (" + std::to_string(bytes) + " bytes)");
+  };
+  const std::string per_view = std::to_string(view_count) + " views x " + std::to_string(visible_capacity);
+  if (engine_visible_) engine_fits(visible_, visible, "visible-id buffer", per_view + " visible ids");
+  if (engine_counters_)
+    engine_fits(counters_, view_count * sizeof(ViewCounters), "counter buffer",
+                std::to_string(view_count) + " views' counters");
+  if (engine_draws_ && draws) engine_fits(draws_, draw_bytes, "draw buffer", per_view + " draw commands");
   detail::ensure_buffer(ctx_, classes_, outputs, storage, "classification buffer", dirty);
-  detail::ensure_buffer(ctx_, visible_, visible, storage, "visible-id buffer", dirty);
-  detail::ensure_buffer(ctx_, counters_, view_count * sizeof(ViewCounters),
-                        storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT,
-                        "counter buffer", dirty);
+  if (!engine_visible_) detail::ensure_buffer(ctx_, visible_, visible, storage, "visible-id buffer", dirty);
+  if (!engine_counters_)
+    detail::ensure_buffer(ctx_, counters_, view_count * sizeof(ViewCounters),
+                          storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT,
+                          "counter buffer", dirty);
   detail::ensure_buffer(ctx_, views_, view_count * sizeof(GpuFrustum), kBoundsUsage, "view buffer", dirty);
-  detail::ensure_buffer(ctx_, draws_, draw_bytes, storage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "draw buffer", dirty);
+  if (!engine_draws_)
+    detail::ensure_buffer(ctx_, draws_, draw_bytes, storage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "draw buffer",
+                          dirty);
   detail::ensure_buffer(ctx_, scene_->templates, 0, storage, "draw template buffer", dirty);
   detail::ensure_buffer(ctx_, group_counts_, groups, storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, "group count buffer",
                         dirty);
@@ -543,6 +559,26 @@ void GpuCuller::update_descriptors() {
   written_pyramid_ = pyramid_generation_;
   written_generation_ = scene_->generation;
   descriptors_dirty_ = false;
+}
+
+void GpuCuller::use_engine_outputs(const EngineOutputs& o) {
+  use_own_outputs();
+  if (o.draws) draws_ = vulkan::Buffer::borrow(o.draws, o.draws_size, const_cast<void*>(o.draws_host));
+  if (o.counters) counters_ = vulkan::Buffer::borrow(o.counters, o.counters_size, const_cast<void*>(o.counters_host));
+  if (o.visible) visible_ = vulkan::Buffer::borrow(o.visible, o.visible_size, const_cast<void*>(o.visible_host));
+  engine_draws_ = o.draws != VK_NULL_HANDLE;
+  engine_counters_ = o.counters != VK_NULL_HANDLE;
+  engine_visible_ = o.visible != VK_NULL_HANDLE;
+  descriptors_dirty_ = true;
+}
+
+void GpuCuller::use_own_outputs() {
+  // A borrowed buffer is forgotten, not destroyed; cullpipe's own are made again as passes need.
+  if (engine_draws_) draws_ = vulkan::Buffer();
+  if (engine_counters_) counters_ = vulkan::Buffer();
+  if (engine_visible_) visible_ = vulkan::Buffer();
+  engine_draws_ = engine_counters_ = engine_visible_ = false;
+  descriptors_dirty_ = true;
 }
 
 void GpuCuller::reserve_outputs(std::size_t view_count, const CullOptions& options, std::size_t objects) {
@@ -678,6 +714,11 @@ void GpuCuller::record(VkCommandBuffer cmd, std::span<const Frustum> views, cons
 }
 
 CullResult GpuCuller::read_results() const {
+  if ((engine_counters_ && !counters_.data()) || (engine_visible_ && last_options_.visible_ids && !visible_.data()) ||
+      (engine_draws_ && last_options_.draws && !draws_.data()))
+    throw std::logic_error(
+        "GpuCuller::read_results: the pass wrote into the engine's buffers, and no host address of "
+        "them was given (EngineOutputs::*_host): read them from the engine's side");
   CullResult result =
       detail::read_outputs({counters_, classes_, visible_, draws_}, last_object_count_, last_view_count_,
                            last_capacity_, last_options_, segment_count_ > 1 ? segment_objects_ : 0);

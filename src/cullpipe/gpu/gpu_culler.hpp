@@ -112,6 +112,23 @@ inline std::uint32_t occlusion_texels(const CullOptions& options) {
 }
 }  // namespace detail
 
+/// Buffers an engine owns for a pass's outputs (GpuCuller::use_engine_outputs): the pass writes
+/// into them instead of its own, from their first byte, in the layout draw_buffer(),
+/// counter_buffer() and the visible lists have. A null handle keeps cullpipe's own buffer for
+/// that output. The `*_host` pointers, where the engine's memory is mapped, let read_results()
+/// and cull() read them back; without one they cannot, and say so.
+struct EngineOutputs {
+  VkBuffer draws = VK_NULL_HANDLE;  ///< usage STORAGE_BUFFER | INDIRECT_BUFFER
+  VkDeviceSize draws_size = 0;
+  const void* draws_host = nullptr;
+  VkBuffer counters = VK_NULL_HANDLE;  ///< usage STORAGE_BUFFER | TRANSFER_DST | INDIRECT_BUFFER
+  VkDeviceSize counters_size = 0;
+  const void* counters_host = nullptr;
+  VkBuffer visible = VK_NULL_HANDLE;  ///< usage STORAGE_BUFFER
+  VkDeviceSize visible_size = 0;
+  const void* visible_host = nullptr;
+};
+
 /// How a GpuCuller is set up.
 struct GpuCullerConfig {
   /// Invocations per workgroup; lowered to the device's limits when larger.
@@ -205,6 +222,15 @@ class GpuCuller {
   const vulkan::Buffer& draw_buffer() const { return draws_; }
   const vulkan::Buffer& counter_buffer() const { return counters_; }
   std::size_t last_visible_capacity() const { return last_capacity_; }
+
+  /// Writes the draws, counters and visible ids of every later pass into the engine's buffers
+  /// (the engine keeps its indirect arguments where it wants them); draw_buffer() and
+  /// counter_buffer() then name them. A pass they are too small for throws std::length_error
+  /// naming the size it needs; they are never replaced. The barriers around a pass cover them
+  /// as they cover cullpipe's own. Call when no pass of this culler is in flight.
+  void use_engine_outputs(const EngineOutputs& outputs);
+  /// Back to cullpipe's own output buffers.
+  void use_own_outputs();
 
   /// Makes the outputs (classes, visible ids, counters, draws) large enough for passes of
   /// `view_count` views with `options` (its capacity, draws, order) over `objects` objects (0 or
@@ -315,6 +341,7 @@ class GpuCuller {
   std::uint64_t written_pyramid_ = ~std::uint64_t{0}, pyramid_generation_ = 0;
   detail::PipelineCache<PipelineKey> pipelines_;
   vulkan::Buffer classes_, visible_, counters_, views_, draws_, group_counts_;
+  bool engine_draws_ = false, engine_counters_ = false, engine_visible_ = false;  // borrowed
   vulkan::Buffer occlusion_views_;           // GpuOcclusionView per view (BINDING_OCCLUSION_VIEWS)
   vulkan::Buffer no_pyramid_;                // bound to BINDING_PYRAMID in passes without occlusion
   const vulkan::Buffer* pyramid_ = nullptr;  // the buffer bound to BINDING_PYRAMID

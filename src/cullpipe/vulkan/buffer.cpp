@@ -54,6 +54,15 @@ Buffer::Buffer(const Context& ctx, VkDeviceSize size, VkBufferUsageFlags usage, 
   }
 }
 
+Buffer Buffer::borrow(VkBuffer handle, VkDeviceSize size, void* mapped) {
+  Buffer b;
+  b.buffer_ = handle;
+  b.size_ = size;
+  b.mapped_ = mapped;
+  b.borrowed_ = true;
+  return b;
+}
+
 Buffer& Buffer::operator=(Buffer&& o) noexcept {
   if (this != &o) {
     reset();
@@ -66,6 +75,7 @@ Buffer& Buffer::operator=(Buffer&& o) noexcept {
     std::swap(mapped_, o.mapped_);
     std::swap(allocator_, o.allocator_);
     std::swap(allocation_, o.allocation_);
+    std::swap(borrowed_, o.borrowed_);
   }
   return *this;
 }
@@ -75,7 +85,8 @@ void Buffer::reset() {
     if (mapped_) vkUnmapMemory(device_, memory_);
     vkFreeMemory(device_, memory_, nullptr);
   }
-  if (buffer_) vkDestroyBuffer(device_, buffer_, nullptr);
+  if (buffer_ && !borrowed_) vkDestroyBuffer(device_, buffer_, nullptr);
+  borrowed_ = false;
   if (allocator_) allocator_->free(allocation_);
   allocator_ = nullptr;
   allocation_ = {};

@@ -18,6 +18,10 @@ class Buffer {
   Buffer() = default;
   /// Throws vulkan::Error on failure, naming `what` (e.g. "bounds buffer") and the size.
   Buffer(const Context& ctx, VkDeviceSize size, VkBufferUsageFlags usage, const char* what);
+  /// A buffer someone else owns (an engine's), `size` bytes from its start, mapped at `mapped`
+  /// or not at all (nullptr): used as it is, never destroyed here.
+  static Buffer borrow(VkBuffer handle, VkDeviceSize size, void* mapped = nullptr);
+  bool borrowed() const { return borrowed_; }
   ~Buffer() { reset(); }
   Buffer(Buffer&& o) noexcept { *this = std::move(o); }
   Buffer& operator=(Buffer&& o) noexcept;
@@ -43,6 +47,7 @@ class Buffer {
   VkDeviceSize size_ = 0;
   void* mapped_ = nullptr;
   Allocator* allocator_ = nullptr;  // where memory_ came from (null: vkAllocateMemory)
+  bool borrowed_ = false;           // buffer_ is someone else's
   Allocation allocation_;
 };
 
