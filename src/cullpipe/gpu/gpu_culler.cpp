@@ -33,6 +33,11 @@ constexpr std::uint32_t kTexelBindings =
 // Storage too: the placing pass writes instances' world volumes and centres into them.
 constexpr VkBufferUsageFlags kBoundsUsage =
     VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT | VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
+// Scene buffers (volumes, centre bounds, meshes, draw templates): device-local, written by
+// uploads straight where the host can map that memory, else through a staging copy.
+constexpr VkBufferUsageFlags kSceneUsage = kBoundsUsage | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+constexpr VkBufferUsageFlags kTemplateUsage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+constexpr vulkan::MemoryUse kScene = vulkan::MemoryUse::Device;
 constexpr std::uint32_t kPlaceTexelBindings = 1u << PLACE_BINDING_LIST | 1u << PLACE_BINDING_MESHES;
 constexpr std::size_t kUploadChunk = 16384;  // objects per upload task
 
@@ -121,9 +126,27 @@ void GpuCuller::upload_volumes(BvKind kind, std::size_t count, std::size_t bytes
   descriptors_dirty_ = true;  // segment ranges depend on the object size and count
   ++scene_->generation;
   if (centres)
-    detail::ensure_buffer(ctx_, scene_->centres, centre_bytes, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
-  detail::ensure_buffer(ctx_, scene_->bounds, bytes, kBoundsUsage, "bounds buffer", descriptors_dirty_);
+    detail::ensure_buffer(ctx_, scene_->centres, centre_bytes, kSceneUsage, "centre bound buffer", descriptors_dirty_,
+                          kScene);
+  detail::ensure_buffer(ctx_, scene_->bounds, bytes, kSceneUsage, "bounds buffer", descriptors_dirty_, kScene);
+  // The fill writes at upload_bounds_ and upload_centres_: the scene buffers themselves where
+  // mapped, else staging buffers copied into them afterwards.
+  const bool direct = scene_->bounds.mapped() && (!centres || scene_->centres.mapped());
+  vulkan::Buffer bounds_staging, centres_staging;
+  if (!direct) {
+    bounds_staging = vulkan::Buffer(ctx_, std::max<VkDeviceSize>(bytes, 16), VK_BUFFER_USAGE_TRANSFER_SRC_BIT,
+                                    "bounds staging buffer");
+    if (centres)
+      centres_staging = vulkan::Buffer(ctx_, std::max<VkDeviceSize>(centre_bytes, 16), VK_BUFFER_USAGE_TRANSFER_SRC_BIT,
+                                       "centre bound staging buffer");
+  }
+  upload_bounds_ = direct ? scene_->bounds.data() : bounds_staging.data();
+  upload_centres_ = centres ? (direct ? scene_->centres.data() : centres_staging.data()) : nullptr;
   run_upload_tasks(count, fill);
+  if (!direct && bytes) {
+    vulkan::copy_buffer(ctx_, bounds_staging, scene_->bounds, bytes);
+    if (centres) vulkan::copy_buffer(ctx_, centres_staging, scene_->centres, centre_bytes);
+  }
   scene_->kind = kind;
   scene_->object_count = count;
 }
@@ -150,16 +173,17 @@ void GpuCuller::upload(std::span<const Aabb> volumes) {
   // of geom/plane_bounds.hpp, as the CPU kernels use them; proof: docs/numerics.md, Settling
   // bounds); only the boxes it leaves open are read in full.
   upload_volumes(BvKind::Aabb, volumes.size(), sizeof(GpuAabb), true, [&](std::size_t first, std::size_t end) {
-    GpuAabb* out = scene_->bounds.as<GpuAabb>().data();
+    GpuAabb* out = static_cast<GpuAabb*>(upload_bounds_);
     for (std::size_t i = first; i < end; ++i) out[i] = pack(volumes[i]);
-    plane_bounds::aabb_centre_bounds(volumes.subspan(first, end - first),
-                                     scene_->centres.as<glm::vec4>().subspan(first, end - first));
+    plane_bounds::aabb_centre_bounds(
+        volumes.subspan(first, end - first),
+        std::span<glm::vec4>(static_cast<glm::vec4*>(upload_centres_) + first, end - first));
   });
 }
 
 void GpuCuller::upload(std::span<const Obb> volumes) {
   upload_volumes(BvKind::Obb, volumes.size(), sizeof(GpuObb), false, [&](std::size_t first, std::size_t end) {
-    GpuObb* out = scene_->bounds.as<GpuObb>().data();
+    GpuObb* out = static_cast<GpuObb*>(upload_bounds_);
     constexpr std::size_t kBatch = 256;  // bounds on the stack (upload threads may be small-stack job threads)
     float bounds[kBatch];
     for (std::size_t b = first; b < end; b += kBatch) {
@@ -176,7 +200,7 @@ void GpuCuller::upload(std::span<const Obb> volumes) {
 
 void GpuCuller::upload(std::span<const Sphere> volumes) {
   upload_volumes(BvKind::Sphere, volumes.size(), sizeof(GpuSphere), false, [&](std::size_t first, std::size_t end) {
-    GpuSphere* out = scene_->bounds.as<GpuSphere>().data();
+    GpuSphere* out = static_cast<GpuSphere*>(upload_bounds_);
     for (std::size_t i = first; i < end; ++i) out[i] = pack(volumes[i]);
   });
 }
@@ -243,12 +267,14 @@ void GpuCuller::upload_instances(const InstanceSet<Volume>& set) {
   descriptors_dirty_ = place_descriptors_dirty_ = true;
   ++scene_->generation;
   if (kind == BvKind::Aabb)
-    detail::ensure_buffer(ctx_, scene_->centres, centre_bytes, kBoundsUsage, "centre bound buffer", descriptors_dirty_);
-  detail::ensure_buffer(ctx_, scene_->bounds, bound_bytes, kBoundsUsage, "bounds buffer", descriptors_dirty_);
+    detail::ensure_buffer(ctx_, scene_->centres, centre_bytes, kSceneUsage, "centre bound buffer", descriptors_dirty_,
+                          kScene);
+  detail::ensure_buffer(ctx_, scene_->bounds, bound_bytes, kSceneUsage, "bounds buffer", descriptors_dirty_, kScene);
   bool unused = false;
   detail::ensure_buffer(ctx_, place_list_, list_bytes, kBoundsUsage, "placing list buffer", unused);
-  detail::ensure_buffer(ctx_, scene_->meshes, mesh_bytes, kBoundsUsage, "mesh volume buffer", unused);
-  if (mesh_bytes) std::memcpy(scene_->meshes.data(), words.data(), mesh_bytes);
+  detail::ensure_buffer(ctx_, scene_->meshes, mesh_bytes, kSceneUsage, "mesh volume buffer", unused, kScene);
+  vulkan::write_through_staging(ctx_, scene_->meshes, mesh_bytes,
+                                [&](void* host) { std::memcpy(host, words.data(), mesh_bytes); });
   scene_->mesh_words = words;
   GpuInstance* list = place_list_.as<GpuInstance>().data();
   pending_slots_.resize(count);
@@ -416,9 +442,10 @@ void GpuCuller::upload_draws(std::span<const DrawCommand> templates) {
   scene_->template_count = 0;
   descriptors_dirty_ = true;  // segment ranges of the templates
   ++scene_->generation;
-  detail::ensure_buffer(ctx_, scene_->templates, bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "draw template buffer",
-                        descriptors_dirty_);
-  if (bytes) std::memcpy(scene_->templates.data(), templates.data(), bytes);
+  detail::ensure_buffer(ctx_, scene_->templates, bytes, kTemplateUsage, "draw template buffer", descriptors_dirty_,
+                        kScene);
+  vulkan::write_through_staging(ctx_, scene_->templates, bytes,
+                                [&](void* host) { std::memcpy(host, templates.data(), bytes); });
   scene_->template_count = templates.size();
 }
 
@@ -485,7 +512,7 @@ void GpuCuller::ensure_outputs(std::size_t view_count, std::size_t visible_capac
   if (!engine_draws_)
     detail::ensure_buffer(ctx_, draws_, draw_bytes, storage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "draw buffer",
                           dirty);
-  detail::ensure_buffer(ctx_, scene_->templates, 0, storage, "draw template buffer", dirty);
+  detail::ensure_buffer(ctx_, scene_->templates, 0, kTemplateUsage, "draw template buffer", dirty, kScene);
   detail::ensure_buffer(ctx_, group_counts_, groups, storage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, "group count buffer",
                         dirty);
 }
@@ -608,10 +635,9 @@ void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
                             std::to_string(ctx_.properties().limits.maxComputeWorkGroupCount[1]));
   detail::check_occlusion(ctx_, options, views.size());
   bool created = false;  // a scene's first pass, before any upload
-  detail::ensure_buffer(ctx_, scene_->bounds, 0, kBoundsUsage, "bounds buffer", created);
-  detail::ensure_buffer(ctx_, scene_->centres, 0, kBoundsUsage, "centre bound buffer", created);
-  detail::ensure_buffer(ctx_, scene_->templates, 0, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "draw template buffer",
-                        created);
+  detail::ensure_buffer(ctx_, scene_->bounds, 0, kSceneUsage, "bounds buffer", created, kScene);
+  detail::ensure_buffer(ctx_, scene_->centres, 0, kSceneUsage, "centre bound buffer", created, kScene);
+  detail::ensure_buffer(ctx_, scene_->templates, 0, kTemplateUsage, "draw template buffer", created, kScene);
   if (created) ++scene_->generation;
   detail::ensure_buffer(ctx_, no_pyramid_, 16, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "empty pyramid buffer",
                         descriptors_dirty_);

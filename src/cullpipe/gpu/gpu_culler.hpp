@@ -351,6 +351,8 @@ class GpuCuller {
   CullOptions last_options_;
   std::unique_ptr<detail::PassResources> resources_;  // descriptor set, command buffer, timestamps
   bool descriptors_dirty_ = true;
+  void* upload_bounds_ = nullptr;   // where an upload's fill writes the volumes
+  void* upload_centres_ = nullptr;  // and the boxes' centre bounds
   std::shared_ptr<detail::SceneBuffers> scene_ = std::make_shared<detail::SceneBuffers>();
   std::uint64_t written_generation_ = 0, written_place_generation_ = 0;  // the scene's, in the descriptors
   // Instances (upload(InstanceSet)): the objects the next pass places (GpuInstance each: its

@@ -90,12 +90,12 @@ void check_texel_format(const vulkan::Context& ctx, const std::string& who) {
 }
 
 void ensure_buffer(const vulkan::Context& ctx, vulkan::Buffer& buffer, VkDeviceSize bytes, VkBufferUsageFlags usage,
-                   const char* what, bool& dirty) {
+                   const char* what, bool& dirty, vulkan::MemoryUse use) {
   bytes = std::max(bytes, kMinBufferSize);
   if (buffer && buffer.size() >= bytes) return;
   dirty = true;
   buffer = vulkan::Buffer();  // free first, so peak memory is not old + new
-  buffer = vulkan::Buffer(ctx, bytes, usage, what);
+  buffer = vulkan::Buffer(ctx, bytes, usage, what, use);
 }
 
 void record_entry_barrier(const vulkan::Context& ctx, VkCommandBuffer cmd) {

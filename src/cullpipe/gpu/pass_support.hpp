@@ -55,7 +55,7 @@ void check_record_format(const vulkan::Context& ctx, const std::string& who);
 /// rewritten) before the old buffer is freed, so a failed allocation cannot leave a descriptor
 /// pointing at a destroyed buffer.
 void ensure_buffer(const vulkan::Context& ctx, vulkan::Buffer& buffer, VkDeviceSize bytes, VkBufferUsageFlags usage,
-                   const char* what, bool& dirty);
+                   const char* what, bool& dirty, vulkan::MemoryUse use = vulkan::MemoryUse::Host);
 
 /// Before a recorded pass: earlier work in the same command buffer or queue may still read its
 /// outputs (indirect draws, vertex and compute shaders, copies); finish those reads first.

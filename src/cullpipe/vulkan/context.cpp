@@ -202,7 +202,9 @@ void Context::reserve_memory(VkDeviceSize bytes, const std::string& what) const 
 }
 
 Context::Context(const ContextOptions& options)
-    : on_message_(options.on_message), memory_budget_(options.memory_budget) {
+    : on_message_(options.on_message),
+      map_device_memory_(options.map_device_memory),
+      memory_budget_(options.memory_budget) {
   try {
     VkDebugUtilsMessengerCreateInfoEXT info{VK_STRUCTURE_TYPE_DEBUG_UTILS_MESSENGER_CREATE_INFO_EXT};
     info.messageSeverity =

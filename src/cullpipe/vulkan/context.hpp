@@ -14,7 +14,8 @@ namespace cullpipe::vulkan {
 /// How to create a Context.
 /// Memory for one buffer, as an engine's allocator hands it out: a block of device memory, the
 /// offset of the buffer's range in it (a multiple of the buffer's alignment), and the host
-/// address of that offset (cullpipe's buffers are written and read by the host).
+/// address of that offset, or nullptr for memory the host cannot map (device-local scene
+/// buffers on a device with separate memory, written through a staging copy).
 struct Allocation {
   VkDeviceMemory memory = VK_NULL_HANDLE;
   VkDeviceSize offset = 0;
@@ -29,8 +30,10 @@ class Allocator {
  public:
   virtual ~Allocator() = default;
   /// Memory meeting `requirements` (size, alignment, memory type bits) of a type with every
-  /// `required` flag (host-visible and coherent), preferably also `preferred` (device-local),
-  /// mapped. `what` names the buffer ("bounds buffer"). Throws on failure (any exception; the
+  /// `required` flag, preferably also `preferred`: host-visible and coherent required, mapped,
+  /// for what the host writes each frame or reads back (preferring device-local); device-local
+  /// required for scene buffers (preferring host-visible and coherent, then mapped; otherwise
+  /// `mapped` may be nullptr). `what` names the buffer ("bounds buffer"). Throws on failure (any exception; the
   /// buffer is not created).
   virtual Allocation allocate(const VkMemoryRequirements& requirements, VkMemoryPropertyFlags required,
                               VkMemoryPropertyFlags preferred, const char* what) = 0;
@@ -53,6 +56,11 @@ struct ContextOptions {
   /// memory (vulkan::Error with VK_ERROR_OUT_OF_DEVICE_MEMORY), naming the budget. See
   /// Context::set_memory_budget.
   VkDeviceSize memory_budget = 0;
+  /// Map device-local scene buffers when their memory is host-visible too (unified memory, as
+  /// on lavapipe and integrated GPUs), writing uploads straight into them. false writes every
+  /// upload through a staging buffer and a copy, as on a device whose device-local memory the
+  /// host cannot map; tests use it to cover that path on any device.
+  bool map_device_memory = true;
 };
 
 /// Handles of a device the caller already has (an engine's own device). The Context borrows
@@ -147,6 +155,14 @@ class Context {
   /// allocates it). Not owned: it must outlive every buffer it allocated for (each buffer
   /// returns its memory to the allocator it came from, whatever is set later).
   void set_allocator(Allocator* allocator) { allocator_ = allocator; }
+  bool map_device_memory() const { return map_device_memory_; }
+  /// Bytes uploads have copied through staging buffers so far (vulkan::copy_buffer).
+  VkDeviceSize staged_bytes() const { return staged_bytes_.load(); }
+  void count_staged(VkDeviceSize bytes) const { staged_bytes_ += bytes; }
+  /// The property flags of memory type `index`.
+  VkMemoryPropertyFlags memory_type_flags(std::uint32_t index) const {
+    return memory_properties_.memoryTypes[index].propertyFlags;
+  }
   Allocator* allocator() const { return allocator_; }
 
  private:
@@ -178,6 +194,8 @@ class Context {
   std::function<void(std::string_view)> on_message_;
   std::atomic<std::size_t> message_count_{0};
   Allocator* allocator_ = nullptr;
+  bool map_device_memory_ = true;
+  mutable std::atomic<VkDeviceSize> staged_bytes_{0};
   std::atomic<VkDeviceSize> memory_budget_{0};
   mutable std::atomic<VkDeviceSize> memory_in_use_{0};
   std::mutex messages_mutex_;
