@@ -210,10 +210,9 @@ int main(int argc, char** argv) {
                            {"agree", row.agree}});
     }
     const Times &w = row.methods.at("world"), &m = row.methods.at("moved"), &p = row.methods.at("placed");
-    std::printf(
-        "%-7s moved (move + send) / world send: %.3f; placed gpu / world gpu: %.2f; moved gpu / world gpu: %.2f\n",
-        row.bv.c_str(), (median(m.move) + median(m.send)) / median(w.send), median(p.gpu) / median(w.gpu),
-        median(m.gpu) / median(w.gpu));
+    std::printf("%-7s moved send / world send %.3f, with the move %.3f; gpu over world's: moved %.2f, placed %.2f\n",
+                row.bv.c_str(), median(m.send) / median(w.send), (median(m.move) + median(m.send)) / median(w.send),
+                median(m.gpu) / median(w.gpu), median(p.gpu) / median(w.gpu));
   }
   if (!config.json_path.empty()) std::ofstream(config.json_path) << j.dump(2) << "\n";
   int status = 0;

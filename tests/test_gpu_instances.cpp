@@ -59,6 +59,12 @@ std::vector<Sphere> sphere_meshes(std::mt19937& rng, std::size_t n) {
   return meshes;
 }
 
+Aabb random_box_near(std::mt19937& rng) {
+  const glm::vec3 c(uniform(rng, -15, 15), uniform(rng, -15, 15), uniform(rng, -20, 10));
+  const glm::vec3 h(uniform(rng, 0, 2), uniform(rng, 0, 2), uniform(rng, 0, 2));
+  return {c - h, c + h};
+}
+
 std::string describe(const Transform3x4& t) {
   std::ostringstream s;
   s.precision(9);
@@ -202,11 +208,12 @@ TEST_F(GpuInstances, TwoFramesInFlightShareOneScene) {
   gpu::GpuCuller first(ctx), second(ctx);
   second.share_scene(first);
   first.upload(set);
-  first.reserve_instances(set, 6000);  // room for the adds below: no update grows the buffers
+  second.reserve_instances(set, 6000);  // room for the adds below: no update grows the buffers
   set.clear_changes();
   EXPECT_EQ(second.object_count(), set.size());
-  EXPECT_EQ(second.instance_capacity(), 6000u);
-  gpu::GpuCuller* cullers[2] = {&first, &second};
+  EXPECT_EQ(first.instance_capacity(), 6000u);
+  EXPECT_EQ(first.pending_placements(), set.size());  // queued on the scene, for whichever records first
+  gpu::GpuCuller* cullers[2] = {&second, &first};     // the culler that did not upload records first
   for (gpu::GpuCuller* c : cullers) c->reserve_outputs(4, {}, 6000);  // views_for gives four views
 
   VkDevice dev = ctx.device();
@@ -294,6 +301,32 @@ TEST_F(GpuInstances, TwoFramesInFlightShareOneScene) {
   }
   check(0);
   check(1);
+}
+
+// Placements queued through one culler belong to the scene: another upload through a sharer
+// drops them, so a pass never places objects of a scene that is gone over the new volumes.
+TEST_F(GpuInstances, AnUploadThroughASharerDropsQueuedPlacements) {
+  const vulkan::Context& ctx = *GpuEnvironment::context;
+  std::mt19937 rng(17);
+  InstanceSet<Aabb> set(box_meshes(rng, 3));
+  for (int i = 0; i < 3000; ++i) set.add(static_cast<std::uint32_t>(i % 3), random_placement(rng, 15.0f));
+  gpu::GpuCuller a(ctx), b(ctx);
+  b.share_scene(a);
+  a.upload(set);
+  const std::vector<Frustum> views = views_for<Aabb>(rng, std::vector<Aabb>{set.world_volume(0)});
+  expect_reference(set, b.cull(views), views, "after the upload through the other culler");
+  set.clear_changes();
+  for (int k = 0; k < 300; ++k)
+    set.set_transform(set.ids()[static_cast<std::size_t>(k) * 7], random_placement(rng, 15.0f));
+  b.update(set, set.changed_slots());  // queued, not yet placed
+  std::vector<Aabb> boxes(2000);
+  for (Aabb& box : boxes) box = random_box_near(rng);
+  a.upload(std::span<const Aabb>(boxes));
+  EXPECT_EQ(b.pending_placements(), 0u);
+  const gpu::CullResult r = b.cull(views);
+  std::vector<Classification> cpu(boxes.size());
+  reference::classify_all(std::span<const Aabb>(boxes), views[0], cpu);
+  EXPECT_EQ(r.views.at(0).classes, cpu);
 }
 
 TEST_F(GpuInstances, AnEmptySetCullsNothing) {

@@ -42,9 +42,10 @@ class DynamicTree {
 
   /// The frame's boxes (by object id, as before): a finished rebuild is swapped in, then the
   /// tree is refitted to them; if its quality has fallen past the ratio and no rebuild is under
-  /// way, one starts over a copy of these boxes. A different object count rebuilds now (a
-  /// rebuild under way is waited for and dropped). A rebuild that threw is dropped and tried
-  /// again at the next update that needs one; its error is kept (last_error()).
+  /// way, one starts over a copy of these boxes, on one thread of its own (BuildOptions::pool is
+  /// used only for the builds made here, before returning). A different object count rebuilds
+  /// now (a rebuild under way is waited for and dropped). A rebuild that threw is dropped, and a
+  /// new one starts at once if the tree still needs it; its error is kept (last_error()).
   TreeStep update(std::span<const Aabb> boxes);
 
   const Tree& tree() const { return tree_; }

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "cullpipe/core/thread_pool.hpp"
+#include "cullpipe/geom/plane_bounds.hpp"
 #include "cullpipe/geom/validate.hpp"
 
 namespace cullpipe {
@@ -178,6 +179,8 @@ void InstanceSet<Volume>::world_volumes(std::span<Volume> out, ThreadPool* pool)
   constexpr std::size_t kChunk = 16384;
   const std::size_t chunks = (size() + kChunk - 1) / kChunk;
   auto run = [&](std::size_t c) {
+    // The GPU's rounding: to nearest, subnormals kept (the caller's thread may flush them).
+    const plane_bounds::NearestNoFlush mode;
     const std::size_t end = std::min(size(), (c + 1) * kChunk);
     for (std::size_t s = c * kChunk; s < end; ++s) out[s] = world_volume(s);
   };

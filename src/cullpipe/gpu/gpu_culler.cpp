@@ -103,8 +103,9 @@ const vulkan::ComputePipeline& GpuCuller::pipeline(PipelineKey key) {
 
 GpuCuller::~GpuCuller() = default;
 
-// Every upload writes straight into the mapped buffers, in chunks on the upload pool: no
-// staging copy, and no fresh allocation whose pages fault in on every upload (faulting in a
+// Every upload writes straight into the scene buffers where the host maps them (unified memory),
+// in chunks on the upload pool, else into staging buffers copied into them; buffers are kept
+// and reused, with no fresh allocation whose pages fault in on every upload (faulting in a
 // large buffer costs more than culling it). `fill(first, end)` writes objects [first, end);
 // with `centres` (AABBs) the centre-bound buffer is sized for them too.
 template <class Fill>
@@ -120,8 +121,9 @@ void GpuCuller::upload_volumes(BvKind kind, std::size_t count, std::size_t bytes
   if (centres) detail::check_allocation_size(ctx_, centre_bytes, what + " (centre bounds)");
   scene_->object_count = 0;  // stays 0 if an allocation below fails: no pass on half-written buffers
   scene_->instanced = false;
-  place_count_ = 0;
-  pending_slots_.clear();
+  scene_->instance_capacity = 0;
+  scene_->pending_slots.clear();  // placements queued for an earlier scene do not apply
+  scene_->pending_entries.clear();
   scene_->bytes_per_object = bytes_per_object;
   descriptors_dirty_ = true;  // segment ranges depend on the object size and count
   ++scene_->generation;
@@ -261,8 +263,8 @@ void GpuCuller::upload_instances(const InstanceSet<Volume>& set) {
 
   scene_->object_count = 0;  // stays 0 if an allocation below fails: no pass on half-written buffers
   scene_->instanced = false;
-  place_count_ = 0;
-  pending_slots_.clear();
+  scene_->pending_slots.clear();
+  scene_->pending_entries.clear();
   scene_->bytes_per_object = bytes_per_object;
   descriptors_dirty_ = place_descriptors_dirty_ = true;
   ++scene_->generation;
@@ -271,23 +273,22 @@ void GpuCuller::upload_instances(const InstanceSet<Volume>& set) {
                           kScene);
   detail::ensure_buffer(ctx_, scene_->bounds, bound_bytes, kSceneUsage, "bounds buffer", descriptors_dirty_, kScene);
   bool unused = false;
-  detail::ensure_buffer(ctx_, place_list_, list_bytes, kBoundsUsage, "placing list buffer", unused);
   detail::ensure_buffer(ctx_, scene_->meshes, mesh_bytes, kSceneUsage, "mesh volume buffer", unused, kScene);
   vulkan::write_through_staging(ctx_, scene_->meshes, mesh_bytes,
                                 [&](void* host) { std::memcpy(host, words.data(), mesh_bytes); });
   scene_->mesh_words = words;
-  GpuInstance* list = place_list_.as<GpuInstance>().data();
-  pending_slots_.resize(count);
+  // Every object, placed by whichever sharer records next.
+  scene_->pending_slots.resize(count);
+  scene_->pending_entries.resize(count);
   run_upload_tasks(count, [&](std::size_t first, std::size_t end) {
     for (std::size_t i = first; i < end; ++i) {
-      list[i] = list_entry(set, static_cast<std::uint32_t>(i));
-      pending_slots_[i] = static_cast<std::uint32_t>(i);
+      scene_->pending_slots[i] = static_cast<std::uint32_t>(i);
+      scene_->pending_entries[i] = list_entry(set, static_cast<std::uint32_t>(i));
     }
   });
   scene_->instance_capacity = capacity;
   scene_->kind = kind;
   scene_->object_count = count;
-  place_count_ = count;
   scene_->instanced = true;
 }
 
@@ -319,35 +320,31 @@ void GpuCuller::update_instances(const InstanceSet<Volume>& set, std::span<const
     }
     return;
   }
-  // The list: what earlier updates sent and no pass has placed yet, with these slots, each once
-  // (two entries for one slot would race) and as the set has it now, without slots past its end.
-  // Written in order into the mapped list: sequential stores, where writing each object's entry
-  // at its own slot would miss the cache once per object.
+  // The scene's queue: what earlier updates (through any culler sharing the scene) sent and no
+  // pass has placed yet, with these slots, each once (two entries for one slot would race), as
+  // the set has it now, without slots past its end. Entries are built in order (on the upload
+  // threads); the next pass, whichever sharer records it, copies them into its placing list.
   std::vector<std::uint32_t> pending;
-  if (pending_slots_.empty()) {
+  const std::vector<std::uint32_t>& queued = scene_->pending_slots;
+  if (queued.empty()) {
     pending.assign(slots.begin(), slots.end());
   } else {
-    pending.reserve(pending_slots_.size() + slots.size());
-    std::set_union(pending_slots_.begin(), pending_slots_.end(), slots.begin(), slots.end(),
-                   std::back_inserter(pending));
+    pending.reserve(queued.size() + slots.size());
+    std::set_union(queued.begin(), queued.end(), slots.begin(), slots.end(), std::back_inserter(pending));
     pending.erase(std::lower_bound(pending.begin(), pending.end(), static_cast<std::uint32_t>(set.size())),
                   pending.end());
   }
-  ensure_place_resources(scene_->kind);  // a culler sharing the scene may not have them yet
-  const VkDeviceSize list_bytes = VkDeviceSize(pending.size()) * sizeof(GpuInstance);
-  if (place_list_.size() < list_bytes) {
-    const VkDeviceSize grown = std::max(list_bytes, VkDeviceSize(scene_->instance_capacity) * sizeof(GpuInstance));
-    detail::check_texel_range(ctx_, grown, std::to_string(pending.size()) + " objects to place");
-    detail::ensure_buffer(ctx_, place_list_, grown, kBoundsUsage, "placing list buffer", place_descriptors_dirty_);
-  }
-  GpuInstance* list = place_list_.as<GpuInstance>().data();
+  // Entries rebuilt for the whole queue, into the scene's own storage (kept from frame to frame:
+  // a fresh vector per update would fault its pages in each time). Only the resize can throw,
+  // and it leaves the entries as they were.
+  std::vector<GpuInstance>& entries = scene_->pending_entries;
+  entries.resize(pending.size());
   run_upload_tasks(pending.size(), [&](std::size_t first, std::size_t end) {
-    for (std::size_t k = first; k < end; ++k) list[k] = list_entry(set, pending[k]);
+    for (std::size_t k = first; k < end; ++k) entries[k] = list_entry(set, pending[k]);
   });
   if (set.size() != scene_->object_count) ++scene_->generation;  // segment ranges follow the object count
   scene_->object_count = set.size();
-  place_count_ = pending.size();
-  pending_slots_ = std::move(pending);
+  scene_->pending_slots = std::move(pending);
 }
 
 void GpuCuller::ensure_place_resources(BvKind kind) {
@@ -385,8 +382,6 @@ void GpuCuller::share_scene(const GpuCuller& other) {
     throw std::invalid_argument("GpuCuller::share_scene: the cullers are on different contexts");
   if (other.scene_ == scene_) return;
   scene_ = other.scene_;
-  place_count_ = 0;
-  pending_slots_.clear();
   descriptors_dirty_ = place_descriptors_dirty_ = true;
 }
 
@@ -411,29 +406,53 @@ const vulkan::ComputePipeline& GpuCuller::place_pipeline(BvKind kind) {
   return *slot;
 }
 
-void GpuCuller::record_placement(VkCommandBuffer cmd) {
-  if (place_count_ == 0) return;
-  const vulkan::ComputePipeline& place = place_pipeline(scene_->kind);
+void GpuCuller::prepare_placement() {
+  // The scene's queued placements go into this culler's own list (a sharer's list may still be
+  // read by its pass in flight), before anything is recorded.
+  placing_ = 0;
+  if (!scene_->instanced || scene_->pending_entries.empty()) return;
+  const std::size_t n = scene_->pending_entries.size();
+  ensure_place_resources(scene_->kind);
+  const VkDeviceSize bytes = VkDeviceSize(std::max(n, scene_->instance_capacity)) * sizeof(GpuInstance);
+  detail::check_texel_range(ctx_, bytes, std::to_string(n) + " objects to place");
+  detail::ensure_buffer(ctx_, place_list_, bytes, kBoundsUsage, "placing list buffer", place_descriptors_dirty_);
+  std::memcpy(place_list_.data(), scene_->pending_entries.data(), n * sizeof(GpuInstance));
   if (place_descriptors_dirty_ || written_place_generation_ != scene_->generation) {
-    const vulkan::Buffer* buffers[PLACE_BINDING_COUNT] = {&place_list_, &scene_->meshes, &scene_->bounds,
-                                                          &scene_->centres};
-    place_resources_->write(buffers);
+    // Within one texel buffer view and one storage buffer range (buffers kept from a larger
+    // scene may be bigger).
+    using Range = detail::PassResources::Range;
+    const VkDeviceSize storage = ctx_.properties().limits.maxStorageBufferRange;
+    auto texels = [&](const vulkan::Buffer& b) {
+      return Range{&b, 0, std::min(b.size(), detail::texel_range(ctx_)) / detail::kTexelBytes * detail::kTexelBytes};
+    };
+    auto whole = [&](const vulkan::Buffer& b) { return Range{&b, 0, std::min(b.size(), storage)}; };
+    const Range ranges[PLACE_BINDING_COUNT] = {texels(place_list_), texels(scene_->meshes), whole(scene_->bounds),
+                                               whole(scene_->centres)};
+    place_resources_->write(0, ranges);
     place_descriptors_dirty_ = false;
     written_place_generation_ = scene_->generation;
   }
+  placing_ = n;
+}
+
+void GpuCuller::record_placement(VkCommandBuffer cmd) {
+  if (placing_ == 0) return;
+  const vulkan::ComputePipeline& place = place_pipeline(scene_->kind);
   const VkDescriptorSet set = place_resources_->set();
   vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, place.pipeline());
   vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, place.layout(), 0, 1, &set, 0, nullptr);
   const std::uint64_t per_dispatch = std::uint64_t(max_groups_) * PLACE_GROUP_SIZE;
-  for (std::uint64_t first = 0; first < place_count_; first += per_dispatch) {
-    const PlaceParams params{std::uint32_t(place_count_), std::uint32_t(first)};
+  for (std::uint64_t first = 0; first < placing_; first += per_dispatch) {
+    const PlaceParams params{std::uint32_t(placing_), std::uint32_t(first)};
     vkCmdPushConstants(cmd, place.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
-    vkCmdDispatch(
-        cmd, vulkan::group_count(std::min<std::uint64_t>(per_dispatch, place_count_ - first), PLACE_GROUP_SIZE), 1, 1);
+    vkCmdDispatch(cmd, vulkan::group_count(std::min<std::uint64_t>(per_dispatch, placing_ - first), PLACE_GROUP_SIZE),
+                  1, 1);
   }
   detail::record_compute_to_compute(cmd);  // the culling passes read what it wrote
-  place_count_ = 0;
-  pending_slots_.clear();
+  // Recorded: no later pass of any sharer places them again.
+  placing_ = 0;
+  scene_->pending_slots.clear();
+  scene_->pending_entries.clear();  // its storage is kept for the next frame's
 }
 
 void GpuCuller::upload_draws(std::span<const DrawCommand> templates) {
@@ -653,6 +672,7 @@ void GpuCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   pyramid_ = options.pyramid ? &options.pyramid->texels() : &no_pyramid_;
   pyramid_generation_ = options.pyramid ? options.pyramid->generation() : 0;
   update_descriptors();
+  prepare_placement();
   if (options.pyramid) detail::write_occlusion_views(options, occlusion_views_.as<GpuOcclusionView>());
   auto gpu_views = views_.as<GpuFrustum>();
   for (std::size_t v = 0; v < views.size(); ++v) {

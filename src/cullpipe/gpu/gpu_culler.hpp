@@ -45,6 +45,10 @@ struct SceneBuffers {
   std::vector<std::uint32_t> mesh_words;
   std::size_t instance_capacity = 0;
   bool instanced = false;
+  /// Placements sent (upload, update) and not yet recorded by any sharer: ascending slots and
+  /// their list entries. The next pass of whichever culler records first places them.
+  std::vector<std::uint32_t> pending_slots;
+  std::vector<GpuInstance> pending_entries;
   /// Changes whenever a buffer above is replaced or the object count changes, so every culler
   /// sharing the scene writes its descriptors again.
   std::uint64_t generation = 1;
@@ -188,7 +192,7 @@ class GpuCuller {
   void update(const InstanceSet<Aabb>& instances, std::span<const std::uint32_t> slots);
   void update(const InstanceSet<Sphere>& instances, std::span<const std::uint32_t> slots);
   /// Objects the next pass places before culling (0 after a pass, or for world volumes).
-  std::size_t pending_placements() const { return place_count_; }
+  std::size_t pending_placements() const { return scene_->pending_slots.size(); }
   /// Objects the scene's buffers hold before an update() must grow them (instances).
   std::size_t instance_capacity() const { return scene_->instance_capacity; }
   /// Grows the scene's buffers to hold `objects` instances now (every object is sent and placed
@@ -199,9 +203,10 @@ class GpuCuller {
 
   /// Culls the scene `other` culls, stored once: the volumes, instances and draw templates, and
   /// every upload and update made through either culler (both on one context). Each culler
-  /// keeps its own outputs, so an engine keeps one culler per frame in flight over one scene,
-  /// and sends each frame's changes to that frame's culler: its pass places them in the shared
-  /// buffers, in queue order before the next frame's pass reads them. Uploads, and updates that
+  /// keeps its own outputs, so an engine keeps one culler per frame in flight over one scene.
+  /// Uploads and updates through any of them queue their placements on the scene; the next
+  /// pass recorded by any of them places them in the shared buffers (through its own list), in
+  /// queue order before any later pass reads them. Uploads, and updates that
   /// grow the buffers, replace buffers that passes in flight may still read: make them when no
   /// pass using the scene is in flight (or reserve_instances first). Throws
   /// std::invalid_argument when the cullers are on different contexts.
@@ -286,6 +291,7 @@ class GpuCuller {
   template <class Volume>
   void reserve(const InstanceSet<Volume>& instances, std::size_t objects);
   void ensure_place_resources(BvKind kind);
+  void prepare_placement();
   void record_placement(VkCommandBuffer cmd);
   const vulkan::ComputePipeline& place_pipeline(BvKind kind);
   void ensure_outputs(std::size_t view_count, std::size_t visible_capacity, bool draws, bool ordered, bool may_grow);
@@ -358,8 +364,7 @@ class GpuCuller {
   // Instances (upload(InstanceSet)): the objects the next pass places (GpuInstance each: its
   // transform, mesh and slot), the meshes' local volumes, and the placing pass's pipeline and set.
   vulkan::Buffer place_list_;
-  std::size_t place_count_ = 0;
-  std::vector<std::uint32_t> pending_slots_;                     // ascending: what the next pass places
+  std::size_t placing_ = 0;  // entries of place_list_ the pass being recorded places
   std::unique_ptr<vulkan::ComputePipeline> place_pipelines_[2];  // boxes, spheres
   std::unique_ptr<detail::PassResources> place_resources_;
   bool place_descriptors_dirty_ = true;

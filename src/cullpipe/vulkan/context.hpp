@@ -33,7 +33,9 @@ class Allocator {
   /// `required` flag, preferably also `preferred`: host-visible and coherent required, mapped,
   /// for what the host writes each frame or reads back (preferring device-local); device-local
   /// required for scene buffers (preferring host-visible and coherent, then mapped; otherwise
-  /// `mapped` may be nullptr). `what` names the buffer ("bounds buffer"). Throws on failure (any exception; the
+  /// `mapped` may be nullptr). Return `mapped` only for host-coherent memory: cullpipe writes
+  /// through it without flushing, and writes scene buffers without a mapping through a staging
+  /// copy. `what` names the buffer ("bounds buffer"). Throws on failure (any exception; the
   /// buffer is not created).
   virtual Allocation allocate(const VkMemoryRequirements& requirements, VkMemoryPropertyFlags required,
                               VkMemoryPropertyFlags preferred, const char* what) = 0;
