@@ -317,14 +317,7 @@ void CpuCuller::update_instances(const InstanceSet<Volume>& set, std::span<const
   if (!instanced_ || kind_ != kind_of<Volume>())
     throw std::invalid_argument("CpuCuller::update: no " + std::string(cullpipe::to_string(kind_of<Volume>())) +
                                 " instances were uploaded (call upload(instances) first)");
-  for (std::size_t k = 0; k < slots.size(); ++k) {
-    if (slots[k] >= set.size())
-      throw std::invalid_argument("CpuCuller::update: slot " + std::to_string(slots[k]) + " is out of range (" +
-                                  std::to_string(set.size()) + " objects)");
-    if (k > 0 && slots[k] <= slots[k - 1])
-      throw std::invalid_argument("CpuCuller::update: slots are not ascending (slot " + std::to_string(slots[k]) +
-                                  " after " + std::to_string(slots[k - 1]) + ")");
-  }
+  set.check_slots(slots, "CpuCuller::update");
   if (set.size() != count_) {  // the arrays' stride follows the count: every object again
     upload_instances(set);
     return;

@@ -201,6 +201,18 @@ std::vector<std::uint32_t> InstanceSet<Volume>::changed_slots() const {
 }
 
 template <class Volume>
+void InstanceSet<Volume>::check_slots(std::span<const std::uint32_t> slots, const char* who) const {
+  for (std::size_t k = 0; k < slots.size(); ++k) {
+    if (slots[k] >= size())
+      throw std::invalid_argument(std::string(who) + ": slot " + std::to_string(slots[k]) + " is out of range (" +
+                                  std::to_string(size()) + " objects)");
+    if (k > 0 && slots[k] <= slots[k - 1])
+      throw std::invalid_argument(std::string(who) + ": slots are not ascending (slot " + std::to_string(slots[k]) +
+                                  " after " + std::to_string(slots[k - 1]) + ")");
+  }
+}
+
+template <class Volume>
 void InstanceSet<Volume>::clear_changes() {
   for (const std::uint32_t s : changed_) is_changed_[s] = 0;
   changed_.clear();

@@ -62,6 +62,9 @@ class InstanceSet {
   /// The slots written since the last clear_changes() (added, moved, or filled by a removal),
   /// ascending, each once; slots at or past size() are dropped.
   std::vector<std::uint32_t> changed_slots() const;
+  /// Throws std::invalid_argument, naming `who` (the caller's method), unless `slots` are
+  /// ascending slots of this set: what the cullers' update() takes.
+  void check_slots(std::span<const std::uint32_t> slots, const char* who) const;
   std::size_t changed_count() const { return changed_.size(); }
   void clear_changes();
 

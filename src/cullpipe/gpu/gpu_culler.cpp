@@ -300,14 +300,7 @@ void GpuCuller::update_instances(const InstanceSet<Volume>& set, std::span<const
   if (mesh_words(set) != scene_->mesh_words)
     throw std::invalid_argument("GpuCuller::update: the set's " + std::to_string(set.meshes().size()) +
                                 " meshes are not the ones uploaded (upload the set instead)");
-  for (std::size_t k = 0; k < slots.size(); ++k) {
-    if (slots[k] >= set.size())
-      throw std::invalid_argument("GpuCuller::update: slot " + std::to_string(slots[k]) + " is out of range (" +
-                                  std::to_string(set.size()) + " objects)");
-    if (k > 0 && slots[k] <= slots[k - 1])
-      throw std::invalid_argument("GpuCuller::update: slots are not ascending (slot " + std::to_string(slots[k]) +
-                                  " after " + std::to_string(slots[k - 1]) + ")");
-  }
+  set.check_slots(slots, "GpuCuller::update");
   if (set.size() > scene_->instance_capacity) {
     // Grown past the buffers: larger ones by half again, every object sent and placed.
     const std::size_t old = scene_->instance_capacity;
