@@ -4,7 +4,13 @@
 //            the world volumes (GpuCuller::upload), as an engine without instances does;
 //  - moved:  only the moved objects' transforms are sent (GpuCuller::update) and placed by the GPU;
 //  - placed: every object's transform is sent and placed by the GPU each frame (the cost of
-//            transforming in the shader, against world's cull of ready volumes).
+//            transforming in the shader, against world's cull of ready volumes);
+//  - tree:   (boxes) a BVH built once over the placed boxes; the moved objects' transforms are
+//            sent (BvhCuller::update), placed and the tree refitted by the GPU (BvhCuller::refit),
+//            then culled hierarchically. Its "pass" columns time the placing and refit, and
+//            "cull gpu" the hierarchical cull; then one object is sent again and the tree refitted
+//            once more: the refit alone, whose GPU time over world's flat cull alone is the figure
+//            the refit is measured by.
 // Per frame: CPU time of the move (new transforms into the set, the same for all three), of the
 // send (world: placing and uploading; moved and placed: the update), of the pass's recording,
 // submission and wait, and the GPU time between timestamps (placing and culling). Every frame's
@@ -25,9 +31,11 @@
 #include <vector>
 
 #include "bench_util.hpp"
+#include "cullpipe/bvh/builders.hpp"
 #include "cullpipe/core/thread_pool.hpp"
 #include "cullpipe/cull/instances.hpp"
 #include "cullpipe/cull/reference.hpp"
+#include "cullpipe/gpu/bvh_culler.hpp"
 #include "cullpipe/gpu/gpu_culler.hpp"
 #include "cullpipe/scene/generators.hpp"
 #include "cullpipe/vulkan/context.hpp"
@@ -49,6 +57,7 @@ struct Config {
 // Per method, per frame: milliseconds.
 struct Times {
   std::vector<double> move, send, pass_wall, gpu, cull_gpu;
+  std::vector<double> refit_gpu;  // tree: a refit with one object placed (the refit alone)
 };
 
 struct Row {
@@ -98,6 +107,13 @@ Row run(vulkan::Context& ctx, const Scene& scene, const Config& config) {
   world_culler.upload(std::span<const Volume>(world));
   moved_culler.upload(set);
   placed_culler.upload(set);
+  constexpr bool kTree = std::is_same_v<Volume, Aabb>;
+  gpu::BvhCuller tree_culler(ctx);
+  if constexpr (kTree) {
+    bvh::BuildOptions build;
+    build.pool = &pool;
+    tree_culler.upload(bvh::flatten(bvh::build("binned-sah", world, build)), set);
+  }
   const std::vector<Camera> path = scene_camera_path(scene, config.frames);
   std::vector<std::uint32_t> all(set.size());
   std::iota(all.begin(), all.end(), 0u);
@@ -144,6 +160,26 @@ Row run(vulkan::Context& ctx, const Scene& scene, const Config& config) {
     });
     timed("moved", moved_culler, [&] { moved_culler.update(set, changed); });
     timed("placed", placed_culler, [&] { placed_culler.update(set, all); });
+    if constexpr (kTree) {
+      const auto t_send = Clock::now();
+      tree_culler.update(set, changed);
+      const double send_ms = since(t_send) * 1e-6;
+      const gpu::CullTimings refit = tree_culler.refit();
+      const gpu::CullResult result = tree_culler.cull(std::span<const Frustum>(&view, 1), options);
+      row.agree = row.agree && agrees(set, result, view);
+      if (frame != 0) {
+        Times& t = row.methods["tree"];
+        t.move.push_back(move_ms);
+        t.send.push_back(send_ms);
+        t.pass_wall.push_back(refit.wall_ns * 1e-6);
+        t.gpu.push_back(refit.gpu_ns * 1e-6);
+        t.cull_gpu.push_back(result.timings.gpu_ns * 1e-6);
+        // The refit alone: one object sent again, placed, and the whole tree refitted.
+        const std::uint32_t one[1] = {changed.empty() ? 0u : changed[0]};
+        tree_culler.update(set, one);
+        t.refit_gpu.push_back(tree_culler.refit().gpu_ns * 1e-6);
+      }
+    }
     moves.resize(row.moved_per_frame);
     ids.resize(row.moved_per_frame);
   }
@@ -196,7 +232,8 @@ int main(int argc, char** argv) {
   j["rows"] = nlohmann::json::array();
   for (const Row& row : rows) {
     all_agree &= row.agree;
-    for (const char* method : {"world", "moved", "placed"}) {
+    for (const char* method : {"world", "moved", "placed", "tree"}) {
+      if (!row.methods.contains(method)) continue;
       const Times& t = row.methods.at(method);
       std::printf("%-7s %-7s %10.2f %10.2f %12.2f %10.2f %12.2f\n", row.bv.c_str(), method, median(t.move),
                   median(t.send), median(t.pass_wall), median(t.gpu), median(t.cull_gpu));
@@ -207,12 +244,21 @@ int main(int argc, char** argv) {
                            {"pass_wall_ms", median(t.pass_wall)},
                            {"gpu_ms", median(t.gpu)},
                            {"cull_gpu_ms", median(t.cull_gpu)},
+                           {"refit_gpu_ms", t.refit_gpu.empty() ? 0.0 : median(t.refit_gpu)},
                            {"agree", row.agree}});
     }
     const Times &w = row.methods.at("world"), &m = row.methods.at("moved"), &p = row.methods.at("placed");
     std::printf("%-7s moved send / world send %.3f, with the move %.3f; gpu over world's: moved %.2f, placed %.2f\n",
                 row.bv.c_str(), median(m.send) / median(w.send), (median(m.move) + median(m.send)) / median(w.send),
                 median(m.gpu) / median(w.gpu), median(p.gpu) / median(w.gpu));
+    if (row.methods.contains("tree")) {
+      const Times& r = row.methods.at("tree");
+      std::printf(
+          "%-7s tree over world's flat cull alone, gpu: placing and refit %.2f, refit alone %.2f (%.2f ms), "
+          "hierarchical cull %.2f\n",
+          row.bv.c_str(), median(r.gpu) / median(w.cull_gpu), median(r.refit_gpu) / median(w.cull_gpu),
+          median(r.refit_gpu), median(r.cull_gpu) / median(w.cull_gpu));
+    }
   }
   if (!config.json_path.empty()) std::ofstream(config.json_path) << j.dump(2) << "\n";
   int status = 0;

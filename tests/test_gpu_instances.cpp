@@ -6,16 +6,20 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <glm/ext/matrix_transform.hpp>
 #include <glm/gtc/quaternion.hpp>
 #include <random>
 #include <sstream>
 #include <stdexcept>
 
+#include "cullpipe/bvh/builders.hpp"
+#include "cullpipe/bvh/bvh.hpp"
 #include "cullpipe/cull/compare.hpp"
 #include "cullpipe/cull/instances.hpp"
 #include "cullpipe/cull/reference.hpp"
 #include "cullpipe/geom/obb.hpp"
+#include "cullpipe/gpu/bvh_culler.hpp"
 #include "cullpipe/gpu/gpu_culler.hpp"
 #include "cullpipe/vulkan/context.hpp"
 #include "gpu_test_env.hpp"
@@ -192,6 +196,113 @@ TEST_F(GpuInstances, SpheresAgreeWithTheReferenceOnEveryFrame) {
     run_frames<Sphere>(culler(), sphere_meshes(rng, 5), n, static_cast<std::uint32_t>(n) + 7);
     if (HasFatalFailure()) return;
   }
+}
+
+// The node boxes the device holds against bvh::refit's on the CPU's placed volumes, bit for bit
+// (a -0 where the CPU has +0 is a difference).
+void expect_refit(const gpu::BvhCuller& culler, const bvh::FlatTree& tree, const std::string& when) {
+  const std::vector<Aabb> gpu = culler.node_boxes();
+  ASSERT_EQ(gpu.size(), tree.nodes.size()) << when;
+  for (std::size_t i = 0; i < gpu.size(); ++i)
+    ASSERT_TRUE(std::memcmp(&gpu[i], &tree.nodes[i].box, sizeof(Aabb)) == 0)
+        << when << ": node " << i << " (" << (tree.nodes[i].leaf ? "leaf" : "inner") << ", objects "
+        << tree.nodes[i].first << ".." << tree.nodes[i].first + tree.nodes[i].count << "): cpu refit "
+        << cullpipe::describe(tree.nodes[i].box) << ", gpu refit " << cullpipe::describe(gpu[i]);
+}
+
+// A tree over moving boxes: built once on the host, then each frame a tenth of the objects move
+// (some far out, loosening the tree), the device places them and refits the tree, and the pass's classes and
+// test counts equal bvh::cull_hierarchical's on the CPU-refitted tree, and its node boxes
+// bvh::refit's. Some frames refit without culling first, some send two updates to one pass.
+TEST_F(GpuInstances, TreesOverMovingBoxesAreRefittedOnTheDevice) {
+  gpu::BvhCuller bvh_culler(*GpuEnvironment::context);
+  std::mt19937 rng(11);
+  for (const std::size_t n : {1u, 300u, 20000u}) {
+    SCOPED_TRACE(n);
+    InstanceSet<Aabb> set(box_meshes(rng, 6));
+    std::vector<InstanceId> ids;
+    for (std::size_t i = 0; i < n; ++i)
+      ids.push_back(set.add(static_cast<std::uint32_t>(rng() % 6), random_placement(rng, 15.0f)));
+    std::vector<Aabb> world(n);
+    set.world_volumes(world);
+    bvh::FlatTree tree = bvh::flatten(bvh::build_binned_sah(world));
+    bvh_culler.upload(tree, set);
+    set.clear_changes();
+    EXPECT_EQ(bvh_culler.pending_placements(), 0u);  // uploaded as placed
+    for (int frame = 0; frame < 8; ++frame) {
+      const std::string when = "frame " + std::to_string(frame);
+      for (std::size_t k = 0; k < std::max<std::size_t>(1, n / 10); ++k) {
+        set.set_transform(ids[rng() % n], random_placement(rng, frame % 3 == 2 ? 30.0f : 15.0f));
+      }
+      bvh_culler.update(set, set.changed_slots());
+      set.clear_changes();
+      if (frame % 2 == 1) {  // the same objects again, and more, before any pass
+        for (std::size_t k = 0; k < std::max<std::size_t>(1, n / 20); ++k)
+          set.set_transform(ids[rng() % n], random_placement(rng, 15.0f));
+        bvh_culler.update(set, set.changed_slots());
+        set.clear_changes();
+      }
+      EXPECT_GT(bvh_culler.pending_placements(), 0u);
+      set.world_volumes(world);
+      bvh::refit(tree, world);
+      if (frame % 3 == 0) {
+        bvh_culler.refit();
+        EXPECT_EQ(bvh_culler.pending_placements(), 0u);
+        expect_refit(bvh_culler, tree, when + ", refit()");
+        if (HasFatalFailure()) return;
+      }
+      const std::vector<Frustum> views = views_for<Aabb>(rng, world);
+      gpu::CullOptions options;
+      options.classes = true;
+      const gpu::CullResult result = bvh_culler.cull(views, options);
+      expect_refit(bvh_culler, tree, when);
+      if (HasFatalFailure()) return;
+      for (std::size_t v = 0; v < views.size(); ++v) {
+        const bvh::HierarchicalResult cpu = bvh::cull_hierarchical(tree, std::span<const Aabb>(world), views[v]);
+        const std::size_t s = first_mismatch(cpu.classes, result.views[v].classes);
+        ASSERT_EQ(s, npos) << when << ", view " << v << ": slot " << s << " (transform "
+                           << describe(set.transforms()[s]) << ", placed " << cullpipe::describe(world[s])
+                           << "): cpu says " << to_string(cpu.classes[s]) << ", gpu says "
+                           << to_string(result.views[v].classes[s]);
+        EXPECT_EQ(result.views[v].node_tests, cpu.node_tests) << when << ", view " << v;
+        EXPECT_EQ(result.views[v].object_tests, cpu.object_tests) << when << ", view " << v;
+      }
+      expect_reference(set, result, views, when);  // and flat culling's classes
+      if (HasFatalFailure()) return;
+    }
+  }
+}
+
+TEST_F(GpuInstances, BadTreeUpdatesAreRefusedAndChangeNothing) {
+  gpu::BvhCuller bvh_culler(*GpuEnvironment::context);
+  std::mt19937 rng(12);
+  InstanceSet<Aabb> set(box_meshes(rng, 3));
+  for (int i = 0; i < 50; ++i) set.add(static_cast<std::uint32_t>(i % 3), random_placement(rng, 10.0f));
+  std::vector<std::uint32_t> all(set.size());
+  for (std::uint32_t i = 0; i < all.size(); ++i) all[i] = i;
+  EXPECT_THROW(bvh_culler.update(set, all), std::invalid_argument);  // nothing uploaded
+  std::vector<Aabb> world(set.size());
+  set.world_volumes(world);
+  const bvh::FlatTree tree = bvh::flatten(bvh::build_binned_sah(world));
+  bvh_culler.upload(tree, set);
+  const std::uint32_t backwards[2] = {5, 3};
+  EXPECT_THROW(bvh_culler.update(set, backwards), std::invalid_argument);
+  const std::uint32_t past[1] = {50};
+  EXPECT_THROW(bvh_culler.update(set, past), std::invalid_argument);
+  InstanceSet<Aabb> other_meshes(box_meshes(rng, 3));
+  for (int i = 0; i < 50; ++i) other_meshes.add(0, random_placement(rng, 10.0f));
+  EXPECT_THROW(bvh_culler.update(other_meshes, all), std::invalid_argument);
+  set.add(0, random_placement(rng, 10.0f));  // 51 objects over a tree of 50
+  EXPECT_THROW(bvh_culler.update(set, set.changed_slots()), std::invalid_argument);
+  EXPECT_EQ(bvh_culler.pending_placements(), 0u);
+  // A tree that does not enclose the placed boxes is refused.
+  bvh::FlatTree small = tree;
+  small.nodes[0].box.max.x = small.nodes[0].box.min.x;
+  set.remove(set.ids().back());
+  EXPECT_THROW(bvh_culler.upload(small, set), std::invalid_argument);
+  EXPECT_EQ(bvh_culler.object_count(), 50u);  // the tree uploaded before stays
+  const Frustum everything = Frustum::from_planes(std::vector<glm::vec4>{glm::vec4(1, 0, 0, 1e30f)});
+  EXPECT_EQ(bvh_culler.cull(std::span<const Frustum>(&everything, 1)).views[0].counts.visible, 50u);
 }
 
 // Two frames in flight over one scene: a culler per frame, sharing the placed volumes; each

@@ -4,7 +4,6 @@
 #include <algorithm>
 #include <cmath>
 #include <compare>
-#include <functional>
 #include <glm/geometric.hpp>
 #include <numeric>
 #include <tuple>
@@ -12,6 +11,7 @@
 
 #include "cullpipe/bvh/box_ops.hpp"
 #include "cullpipe/bvh/builders.hpp"
+#include "cullpipe/bvh/sibling_search.inl"
 #include "cullpipe/core/splitmix.hpp"
 
 namespace cullpipe::bvh {
@@ -161,49 +161,8 @@ class DynamicTree {
     return best;
   }
 
-  // Branch and bound (Bittner et al. 2015): the sibling with the least total cost, the new
-  // parent's area plus the area every ancestor gains ("inherited" cost). Nodes are visited by
-  // increasing inherited cost; a subtree is skipped when its lower bound, area(box) + the
-  // inherited cost of its root, cannot beat the best found. Among equal costs the search keeps
-  // the first found (shallower) node, then descends from it while a child costs no more,
-  // into the child with fewer objects, so equal boxes build a balanced tree, not a chain.
-  std::uint32_t find_best(const Aabb& box) {
-    const Measure own = measure(box);
-    std::uint32_t best = root_;
-    Measure best_cost = measure(merged(nodes_[root_].box, box)), best_inherited{};
-    using Item = std::pair<Measure, std::uint32_t>;  // (inherited cost, node)
-    heap_.clear();
-    heap_.push_back({Measure{}, root_});
-    while (!heap_.empty()) {
-      std::pop_heap(heap_.begin(), heap_.end(), std::greater<Item>());
-      const auto [inherited, i] = heap_.back();
-      heap_.pop_back();
-      if (!(inherited + own < best_cost)) break;  // every remaining node inherits at least as much
-      const DynNode& n = nodes_[i];
-      const Measure combined = measure(merged(n.box, box));
-      if (combined + inherited < best_cost) best_cost = combined + inherited, best = i, best_inherited = inherited;
-      if (n.leaf()) continue;
-      const Measure below = inherited + (combined - measure(n.box));
-      if (!(below + own < best_cost)) continue;
-      for (std::uint32_t c : {n.left, n.right}) {
-        heap_.push_back({below, c});
-        std::push_heap(heap_.begin(), heap_.end(), std::greater<Item>());
-      }
-    }
-    while (!nodes_[best].leaf()) {
-      const DynNode& n = nodes_[best];
-      const Measure below = best_inherited + (measure(merged(n.box, box)) - measure(n.box));
-      std::uint32_t next = kNone;
-      for (const std::uint32_t c : {n.left, n.right})
-        if (measure(merged(nodes_[c].box, box)) + below <= best_cost &&
-            (next == kNone || nodes_[c].count < nodes_[next].count))
-          next = c;
-      if (next == kNone) break;
-      best = next;
-      best_inherited = below;
-    }
-    return best;
-  }
+  // Branch and bound (Bittner et al. 2015), shared with DynamicTree::insert (sibling_search.inl).
+  std::uint32_t find_best(const Aabb& box) { return detail::best_sibling(View{nodes_}, root_, box, heap_); }
 
   // The best of the four child/grandchild swaps at node a by the area they save (the swap
   // changes only the box of the child that receives a grandchild), applied when it saves any.
@@ -230,9 +189,19 @@ class DynamicTree {
     n.count = nodes_[n.left].count + nodes_[n.right].count;
   }
 
+  // The nodes as detail::best_sibling reads them.
+  struct View {
+    const std::vector<DynNode>& nodes;
+    const Aabb& box(std::uint32_t i) const { return nodes[i].box; }
+    bool leaf(std::uint32_t i) const { return nodes[i].leaf(); }
+    std::uint32_t left(std::uint32_t i) const { return nodes[i].left; }
+    std::uint32_t right(std::uint32_t i) const { return nodes[i].right; }
+    std::uint32_t count(std::uint32_t i) const { return nodes[i].count; }
+  };
+
   std::vector<DynNode> nodes_;
   std::uint32_t root_ = kNone;
-  std::vector<std::pair<Measure, std::uint32_t>> heap_;
+  detail::SiblingHeap heap_;
 };
 
 Tree build_insertion(std::span<const Aabb> boxes, const BuildOptions& options, DynamicTree::Search search) {

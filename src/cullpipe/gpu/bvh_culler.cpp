@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <bit>
+#include <chrono>
 #include <cstring>
 #include <stdexcept>
 #include <string>
@@ -17,12 +18,16 @@
 
 // SPIR-V compiled from shaders/cull_bvh.comp at build time (glslangValidator --vn).
 #include "cull_bvh.spv.h"
+#include "refit_bvh.spv.h"
 
 namespace cullpipe::gpu {
 namespace {
 
 constexpr VkBufferUsageFlags kStorage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
 constexpr VkBufferUsageFlags kTexel = VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT;
+// The volumes, centre bounds and nodes are storage buffers too: the placing and refitting
+// passes of a tree over instances write them.
+constexpr VkBufferUsageFlags kWritten = kTexel | kStorage;
 // Object volumes, views, nodes, the object order and the centre bounds are read through uniform
 // texel buffers (see cull_bvh.comp).
 constexpr std::uint32_t kTexelBindings = 1u << BINDING_BOUNDS | 1u << BINDING_VIEWS | 1u << BVH_BINDING_NODES |
@@ -33,6 +38,8 @@ constexpr std::uint32_t kTexelBindings = 1u << BINDING_BOUNDS | 1u << BINDING_VI
 // storage-buffer load inserts each lane's words through the stack (a stall per lane and word).
 constexpr std::uint32_t kRecordBindings = 1u << BVH_BINDING_RECORDS;
 constexpr VkBufferUsageFlags kRecordUsage = VK_BUFFER_USAGE_STORAGE_TEXEL_BUFFER_BIT;
+constexpr std::uint32_t kRefitTexelBindings =
+    1u << REFIT_BINDING_NODES | 1u << REFIT_BINDING_BOUNDS | 1u << REFIT_BINDING_ORDER;
 constexpr std::uint32_t kStorageBindings =
     BVH_BINDING_COUNT - std::uint32_t(std::popcount(kTexelBindings | kRecordBindings));
 
@@ -168,12 +175,14 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
   detail::check_texel_range(ctx_, centre_bytes, std::to_string(n) + " centre bounds");
   detail::check_storage_range(ctx_, cut_bytes, std::to_string(cuts.size()) + " BVH subtrees");
   object_count_ = node_count_ = cut_count_ = occlusion_cut_count_ = 0;  // stay 0 if an allocation below fails
+  instanced_ = false;  // a tree over volumes from the host: nothing to place or refit
+  pending_.clear();
   bool& dirty = descriptors_dirty_;
-  detail::ensure_buffer(ctx_, bounds_, box_bytes, kTexel, "object volume buffer", dirty);
-  detail::ensure_buffer(ctx_, nodes_, node_bytes, kTexel, "BVH node buffer", dirty);
+  detail::ensure_buffer(ctx_, bounds_, box_bytes, kWritten, "object volume buffer", dirty);
+  detail::ensure_buffer(ctx_, nodes_, node_bytes, kWritten, "BVH node buffer", dirty);
   detail::ensure_buffer(ctx_, objects_, order_bytes, kTexel, "BVH object order buffer", dirty);
   detail::ensure_buffer(ctx_, cuts_, cut_bytes, kStorage, "BVH cut buffer", dirty);
-  detail::ensure_buffer(ctx_, centres_, centre_bytes, kTexel, "centre bound buffer", dirty);
+  detail::ensure_buffer(ctx_, centres_, centre_bytes, kWritten, "centre bound buffer", dirty);
   // Written straight into the mapped buffers (no staging copies whose pages fault in on every
   // upload of a refitted tree).
   GpuBvhNode* gpu_nodes = nodes_.as<GpuBvhNode>().data();
@@ -207,6 +216,159 @@ void BvhCuller::upload_impl(const bvh::FlatTree& tree, std::span<const Volume> b
   occlusion_cut_count_ = cuts.size() - frustum_cuts;
   levels_ = levels;
   kind_ = kind_of<Volume>();
+}
+
+void BvhCuller::upload(const bvh::FlatTree& tree, const InstanceSet<Aabb>& instances) {
+  const std::size_t n = instances.size(), nodes = tree.nodes.size();
+  std::vector<Aabb> world(n);
+  instances.world_volumes(world);
+  const std::vector<std::uint32_t> words = detail::mesh_words(instances);
+  const VkDeviceSize list_bytes = VkDeviceSize(n) * sizeof(GpuInstance),
+                     mesh_bytes = VkDeviceSize(words.size()) * sizeof(std::uint32_t),
+                     order_bytes = VkDeviceSize(nodes) * sizeof(GpuRefitEntry);
+  const std::string objects = std::to_string(n) + " box instances";
+  detail::check_texel_range(ctx_, list_bytes, objects + " (placing list)");
+  detail::check_texel_range(ctx_, mesh_bytes, std::to_string(instances.meshes().size()) + " meshes");
+  detail::check_storage_range(ctx_, VkDeviceSize(n) * sizeof(GpuAabb), objects + " (world boxes written by placing)");
+  detail::check_storage_range(ctx_, VkDeviceSize(nodes) * sizeof(GpuBvhNode),
+                              std::to_string(nodes) + " BVH nodes (written by refitting)");
+  detail::check_texel_range(ctx_, order_bytes, std::to_string(nodes) + " BVH nodes (refitting order)");
+  if (!place_pipeline_) place_pipeline_ = detail::make_place_pipeline(ctx_, BvKind::Aabb);
+  for (const bool leaves : {true, false}) {  // a pipeline for the leaves, one for inner nodes
+    auto& pipeline = refit_pipelines_[leaves ? 0 : 1];
+    if (pipeline) continue;
+    const std::uint32_t spec[1] = {leaves ? 1u : 0u};
+    pipeline = std::make_unique<vulkan::ComputePipeline>(
+        ctx_, vulkan::ComputePipelineDesc{
+                  std::span<const std::uint32_t>(cullpipe_refit_bvh_spv), REFIT_BINDING_COUNT, sizeof(RefitParams),
+                  spec, leaves ? "BVH refitting (leaves)" : "BVH refitting (inner nodes)", kRefitTexelBindings});
+  }
+  if (!place_resources_)
+    place_resources_ = std::make_unique<detail::PassResources>(ctx_, place_pipeline_->set_layout(), PLACE_BINDING_COUNT,
+                                                               detail::kPlaceTexelBindings);
+  if (!refit_resources_)
+    refit_resources_ = std::make_unique<detail::PassResources>(ctx_, refit_pipelines_[0]->set_layout(),
+                                                               REFIT_BINDING_COUNT, kRefitTexelBindings);
+  upload_impl(tree, std::span<const Aabb>(world));  // checks the tree; clears instanced_
+
+  // The nodes by height (a leaf 0, an inner node one above its higher child), leaves first: a
+  // refitting dispatch per height finds its children done by the ones before.
+  std::vector<std::uint32_t> height(nodes, 0);
+  std::uint32_t top = 0;
+  for (std::size_t i = nodes; i-- > 0;) {
+    if (!tree.nodes[i].leaf) height[i] = 1 + std::max(height[i + 1], height[tree.nodes[i + 1].skip]);
+    top = std::max(top, height[i]);
+  }
+  std::vector<std::uint32_t> starts(nodes ? top + 2 : 1, 0);
+  std::vector<GpuRefitEntry> order(nodes);
+  for (const std::uint32_t h : height) ++starts[h + 1];
+  for (std::size_t h = 1; h < starts.size(); ++h) starts[h] += starts[h - 1];
+  std::vector<std::uint32_t> next(starts.begin(), starts.end() - 1);
+  for (std::size_t i = 0; i < nodes; ++i) {
+    const bvh::FlatNode& node = tree.nodes[i];
+    order[next[height[i]]++] = node.leaf
+                                   ? GpuRefitEntry{std::uint32_t(i), node.first, node.count, 0}
+                                   : GpuRefitEntry{std::uint32_t(i), std::uint32_t(i + 1), tree.nodes[i + 1].skip, 0};
+  }
+  bool unused = false;
+  detail::ensure_buffer(ctx_, meshes_, mesh_bytes, kTexel, "mesh volume buffer", unused);
+  detail::ensure_buffer(ctx_, place_list_, list_bytes, kTexel, "placing list buffer", unused);
+  detail::ensure_buffer(ctx_, refit_order_, order_bytes, kTexel, "BVH refitting order buffer", unused);
+  if (mesh_bytes) std::memcpy(meshes_.data(), words.data(), mesh_bytes);
+  if (nodes) std::memcpy(refit_order_.data(), order.data(), order_bytes);
+  const vulkan::Buffer* const place[PLACE_BINDING_COUNT] = {&place_list_, &meshes_, &bounds_, &centres_};
+  place_resources_->write(place);
+  const vulkan::Buffer* const refit[REFIT_BINDING_COUNT] = {&nodes_, &nodes_, &bounds_, &refit_order_};
+  refit_resources_->write(refit);
+
+  position_.assign(n, 0);
+  for (std::size_t k = 0; k < n; ++k) position_[tree.objects[k]] = std::uint32_t(k);
+  queued_.assign(n, bvh::kNone);
+  pending_.clear();
+  mesh_words_ = words;
+  height_starts_ = std::move(starts);
+  instanced_ = true;
+}
+
+void BvhCuller::update(const InstanceSet<Aabb>& instances, std::span<const std::uint32_t> slots) {
+  if (!instanced_)
+    throw std::invalid_argument("BvhCuller::update: no box instances were uploaded (call upload(tree, instances))");
+  if (instances.size() != object_count_)
+    throw std::invalid_argument("BvhCuller::update: the set holds " + std::to_string(instances.size()) +
+                                " objects, the tree " + std::to_string(object_count_) +
+                                "; a set whose size changed needs a tree over it (upload(tree, instances))");
+  if (detail::mesh_words(instances) != mesh_words_)
+    throw std::invalid_argument("BvhCuller::update: the set's meshes are not those uploaded (upload it again)");
+  instances.check_slots(slots, "BvhCuller::update");
+  for (const std::uint32_t s : slots) {
+    const std::uint32_t at = position_[s];
+    const GpuInstance entry = detail::list_entry(instances, s, at);
+    if (queued_[at] == bvh::kNone) {
+      queued_[at] = std::uint32_t(pending_.size());
+      pending_.push_back(entry);
+    } else {
+      pending_[queued_[at]] = entry;  // placed once, as it is now
+    }
+  }
+}
+
+void BvhCuller::take_placements() {
+  placing_ = pending_.size();
+  if (placing_ == 0) return;
+  std::memcpy(place_list_.data(), pending_.data(), placing_ * sizeof(GpuInstance));
+  for (const GpuInstance& e : pending_) queued_[e.info.z] = bvh::kNone;
+  pending_.clear();
+}
+
+void BvhCuller::record_refit(VkCommandBuffer cmd) {
+  if (placing_ == 0) return;
+  const VkPhysicalDeviceLimits& limits = ctx_.properties().limits;
+  const std::uint32_t max_groups =
+      max_groups_x_ ? std::min(max_groups_x_, limits.maxComputeWorkGroupCount[0]) : limits.maxComputeWorkGroupCount[0];
+  detail::record_placing(cmd, *place_pipeline_, place_resources_->set(), placing_, max_groups);
+  const VkDescriptorSet set = refit_resources_->set();
+  const std::uint64_t per_dispatch = std::uint64_t(max_groups) * REFIT_GROUP_SIZE;
+  for (std::size_t h = 0; h + 1 < height_starts_.size(); ++h) {
+    // Height 0 holds the leaves, every other height inner nodes: the pipeline changes once.
+    const vulkan::ComputePipeline& refit = *refit_pipelines_[h == 0 ? 0 : 1];
+    if (h <= 1) {
+      vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, refit.pipeline());
+      vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, refit.layout(), 0, 1, &set, 0, nullptr);
+    }
+    const std::uint32_t begin = height_starts_[h], end = height_starts_[h + 1];
+    for (std::uint64_t first = begin; first < end; first += per_dispatch) {
+      const std::uint64_t count = std::min<std::uint64_t>(per_dispatch, end - first);
+      const RefitParams params{std::uint32_t(first), std::uint32_t(count)};
+      vkCmdPushConstants(cmd, refit.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
+      vkCmdDispatch(cmd, vulkan::group_count(count, REFIT_GROUP_SIZE), 1, 1);
+    }
+    detail::record_compute_to_compute(cmd);  // the next height, and the culling, read these boxes
+  }
+  placing_ = 0;
+}
+
+CullTimings BvhCuller::refit() {
+  if (pending_.empty()) return {};
+  const auto start = std::chrono::steady_clock::now();
+  take_placements();
+  CullTimings t;
+  t.gpu_ns = resources_->run([&](VkCommandBuffer cmd, VkQueryPool timestamps) {
+    detail::record_entry_barrier(ctx_, cmd);
+    if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, timestamps, 0);
+    record_refit(cmd);
+    if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps, 1);
+    detail::record_exit_barrier(ctx_, cmd);
+  });
+  t.wall_ns =
+      double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());
+  return t;
+}
+
+std::vector<Aabb> BvhCuller::node_boxes() const {
+  std::vector<Aabb> boxes(node_count_);
+  const auto nodes = nodes_.as<const GpuBvhNode>();
+  for (std::size_t i = 0; i < node_count_; ++i) boxes[i] = {nodes[i].box_min, nodes[i].box_max};
+  return boxes;
 }
 
 void BvhCuller::set_subtree_objects(std::uint32_t objects) {
@@ -284,9 +446,9 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
   detail::check_record_range(ctx_, record_bytes,
                              views_x + std::to_string(object_count_) + " objects of traversal records");
   bool& dirty = descriptors_dirty_;
-  detail::ensure_buffer(ctx_, bounds_, 0, kTexel, "object volume buffer", dirty);
-  detail::ensure_buffer(ctx_, nodes_, 0, kTexel, "BVH node buffer", dirty);
-  detail::ensure_buffer(ctx_, centres_, 0, kTexel, "centre bound buffer", dirty);
+  detail::ensure_buffer(ctx_, bounds_, 0, kWritten, "object volume buffer", dirty);
+  detail::ensure_buffer(ctx_, nodes_, 0, kWritten, "BVH node buffer", dirty);
+  detail::ensure_buffer(ctx_, centres_, 0, kWritten, "centre bound buffer", dirty);
   detail::ensure_buffer(ctx_, objects_, 0, kTexel, "BVH object order buffer", dirty);
   detail::ensure_buffer(ctx_, cuts_, 0, kStorage, "BVH cut buffer", dirty);
   detail::ensure_buffer(ctx_, templates_, 0, kStorage, "draw template buffer", dirty);
@@ -320,6 +482,7 @@ void BvhCuller::prepare(std::span<const Frustum> views, const CullOptions& optio
 void BvhCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
   const std::size_t view_count = last_view_count_;
   detail::record_entry_barrier(ctx_, cmd);
+  record_refit(cmd);  // objects that moved, placed and their tree refitted before it is walked
   vkCmdFillBuffer(cmd, counters_.handle(), 0, view_count * sizeof(ViewCounters), 0);
   // Objects no pass reaches are OUTSIDE; without class readback the buffer is left as is.
   if (object_count_ && last_options_.classes)
@@ -351,6 +514,7 @@ void BvhCuller::record_passes(VkCommandBuffer cmd, VkQueryPool timestamps) {
 void BvhCuller::record(VkCommandBuffer cmd, std::span<const Frustum> views, const CullOptions& options) {
   if (views.empty()) throw std::invalid_argument("BvhCuller::record: no views");
   prepare(views, options);
+  take_placements();
   record_passes(cmd, VK_NULL_HANDLE);
 }
 
@@ -362,7 +526,11 @@ CullResult BvhCuller::read_results() const {
 CullResult BvhCuller::cull(std::span<const Frustum> views, const CullOptions& options) {
   if (views.empty()) return {};
   return detail::timed_pass(
-      *resources_, [&] { prepare(views, options); },
+      *resources_,
+      [&] {
+        prepare(views, options);
+        take_placements();
+      },
       [&](VkCommandBuffer cmd, VkQueryPool timestamps) { record_passes(cmd, timestamps); },
       [&] { return read_results(); });
 }

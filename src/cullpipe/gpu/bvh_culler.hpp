@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "cullpipe/bvh/bvh.hpp"
+#include "cullpipe/cull/instances.hpp"
 #include "cullpipe/geom/aabb.hpp"
 #include "cullpipe/geom/frustum.hpp"
 #include "cullpipe/gpu/gpu_culler.hpp"
@@ -54,6 +55,35 @@ class BvhCuller {
   /// The same for OBBs or spheres; the tree's boxes must enclose bvh::enclosing_box of each.
   void upload(const bvh::FlatTree& tree, std::span<const Obb> obbs);
   void upload(const bvh::FlatTree& tree, std::span<const Sphere> spheres);
+  /// A tree over moving boxes: uploads `tree` (flattened over instances.world_volumes(), as
+  /// bvh::flatten lays it out; its object ids are the set's slots) with the set's meshes and
+  /// instances, and culls their world boxes as upload(tree, world boxes) would. From then on
+  /// update() sends only the objects that moved, and the next pass first places them on the
+  /// device (the placing pass GpuCuller runs, bit for bit InstanceSet::world_volumes), then
+  /// refits the tree's boxes there from the leaves up (shaders/refit_bvh.comp, a dispatch per
+  /// height: bvh::refit's boxes bit for bit), then culls: no volume or node box travels from
+  /// the host while the tree's topology stays. Its classes equal bvh::cull_hierarchical's on
+  /// the refitted tree and the set's world volumes, object by object. A tree whose quality has
+  /// worn down (bvh::DynamicTree decides when, on the host) or a set whose size changed is
+  /// uploaded again. Throws as upload(tree, boxes) does, and std::invalid_argument for sets
+  /// InstanceSet::world_volumes refuses.
+  void upload(const bvh::FlatTree& tree, const InstanceSet<Aabb>& instances);
+  /// Sends what moved in the set uploaded last: the transforms and mesh indices of `slots`
+  /// (InstanceSet::changed_slots(), ascending). Updates that no pass has placed yet merge, each
+  /// object placed once. Throws std::invalid_argument, sending nothing, when no set was uploaded,
+  /// its size or meshes changed (upload a tree over it again), or a slot is out of order or
+  /// range.
+  void update(const InstanceSet<Aabb>& instances, std::span<const std::uint32_t> slots);
+  /// Objects the next pass (or refit()) places and refits the tree for.
+  std::size_t pending_placements() const { return pending_.size(); }
+  /// Places and refits what update() sent, submits and waits, without culling (record() does the
+  /// same before it culls). Its times: the GPU's between timestamps around placing and refitting,
+  /// and the wall time of recording, submission and waiting (both 0 when nothing was pending).
+  CullTimings refit();
+  /// The tree's node boxes as the device holds them, depth first: after a pass or refit() has
+  /// completed, the boxes the last refit wrote (a host tree's quality can be measured on them).
+  std::vector<Aabb> node_boxes() const;
+
   /// The cut's size: the traversal's invocations take subtrees of at most this many objects
   /// (and BVH_CUT_MAX_HEIGHT levels below their root), or single leaves. Fewer, larger subtrees
   /// mean fewer redundant tests of the nodes above them and fewer workgroups to share the walks.
@@ -123,6 +153,8 @@ class BvhCuller {
   template <class Volume>
   void upload_impl(const bvh::FlatTree& tree, std::span<const Volume> volumes);
   void update_descriptors();
+  void take_placements();                  // the pending placements into the list, for this pass
+  void record_refit(VkCommandBuffer cmd);  // places and refits what take_placements() took
 
   const vulkan::Context& ctx_;
   std::uint32_t group_size_ = BVH_CULL_GROUP_SIZE;  // the device's subgroup size, at most this
@@ -141,6 +173,16 @@ class BvhCuller {
   const vulkan::Buffer* pyramid_ = nullptr;  // the buffer bound to BVH_BINDING_PYRAMID
   // The pyramid the descriptors hold, by DepthPyramidPass::generation() (0: none).
   std::uint64_t written_pyramid_ = ~std::uint64_t{0}, pyramid_generation_ = 0;
+  // Instances (upload(tree, instances)): the meshes' words (to recognise the set), each slot's
+  // place in the tree order, the placements no pass has taken (and where each position's is,
+  // kNone if nowhere), where each height starts in the refitting order, and the two passes.
+  bool instanced_ = false;
+  std::vector<std::uint32_t> mesh_words_, position_, queued_, height_starts_;
+  std::vector<GpuInstance> pending_;
+  std::size_t placing_ = 0;  // list entries the pass being recorded places
+  vulkan::Buffer meshes_, place_list_, refit_order_;
+  std::unique_ptr<vulkan::ComputePipeline> place_pipeline_, refit_pipelines_[2];  // refitting: leaves, inner nodes
+  std::unique_ptr<detail::PassResources> place_resources_, refit_resources_;
   // After the buffers: destroyed first, it waits for the device (own devices) before they go.
   std::unique_ptr<detail::PassResources> resources_;
   std::size_t object_count_ = 0, node_count_ = 0, template_count_ = 0;

@@ -87,6 +87,32 @@ struct PlaceParams {
   uint first;
 };
 
+// The refitting pass (refit_bvh.comp): the node boxes of a flattened tree recomputed from its
+// objects' placed boxes, one dispatch per height (leaves first), each node's box the union of
+// its objects' or its children's (the float minima and maxima bvh::refit takes, so the boxes
+// are its bit for bit). Uniform texel buffers, except the nodes' words it writes.
+CP_CONST REFIT_BINDING_NODES = 0u;       // GpuBvhNode per node (BVH_BINDING_NODES' buffer), read
+CP_CONST REFIT_BINDING_NODE_WORDS = 1u;  // the same buffer, storage: the boxes written
+CP_CONST REFIT_BINDING_BOUNDS = 2u;      // the objects' boxes in tree order (BINDING_BOUNDS' buffer, GpuAabb)
+CP_CONST REFIT_BINDING_ORDER = 3u;       // GpuRefitEntry per node, by height, leaves first
+CP_CONST REFIT_BINDING_COUNT = 4u;
+CP_CONST REFIT_GROUP_SIZE = 64u;
+
+// A node to refit: its index, then a leaf's first object (in tree order) and count, or an inner
+// node's first and second child.
+struct GpuRefitEntry {
+  uint node;
+  uint a;
+  uint b;
+  uint unused;
+};
+
+// Push constants of one refitting dispatch: the nodes at order[first + i] for i < count.
+struct RefitParams {
+  uint first;
+  uint count;
+};
+
 // One view's frustum, as stored in the views buffer (one entry per view).
 // The culling shaders read the views as integer texels of a uniform texel buffer, FRUSTUM_TEXELS
 // per view: on lavapipe a storage-buffer load at an index it cannot prove uniform (the view

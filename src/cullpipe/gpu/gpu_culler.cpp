@@ -18,7 +18,6 @@
 #include "compact_scan.spv.h"
 #include "compact_scatter.spv.h"
 #include "cull_flat.spv.h"
-#include "place_instances.spv.h"
 
 namespace cullpipe::gpu {
 namespace {
@@ -38,7 +37,7 @@ constexpr VkBufferUsageFlags kBoundsUsage =
 constexpr VkBufferUsageFlags kSceneUsage = kBoundsUsage | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
 constexpr VkBufferUsageFlags kTemplateUsage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
 constexpr vulkan::MemoryUse kScene = vulkan::MemoryUse::Device;
-constexpr std::uint32_t kPlaceTexelBindings = 1u << PLACE_BINDING_LIST | 1u << PLACE_BINDING_MESHES;
+using detail::kPlaceTexelBindings;
 constexpr std::size_t kUploadChunk = 16384;  // objects per upload task
 
 std::uint32_t kind_index(BvKind k) { return static_cast<std::uint32_t>(k); }
@@ -207,33 +206,8 @@ void GpuCuller::upload(std::span<const Sphere> volumes) {
   });
 }
 
-namespace {
-
-template <class Volume>
-constexpr BvKind instance_kind() {
-  return std::is_same_v<Volume, Aabb> ? BvKind::Aabb : BvKind::Sphere;
-}
-
-// Slot s of `set` as an entry of the placing list.
-template <class Volume>
-GpuInstance list_entry(const InstanceSet<Volume>& set, std::uint32_t s) {
-  const Transform3x4& t = set.transforms()[s];
-  return {{t.rows[0], t.rows[1], t.rows[2]},
-          uvec4(set.mesh_indices()[s], std::bit_cast<std::uint32_t>(set.scales()[s]), s, 0u)};
-}
-
-template <class Volume>
-std::vector<std::uint32_t> mesh_words(const InstanceSet<Volume>& set) {
-  std::vector<std::uint32_t> words;
-  for (const Volume& v : set.meshes()) {
-    const auto packed = pack(v);
-    const auto* w = reinterpret_cast<const std::uint32_t*>(&packed);
-    words.insert(words.end(), w, w + sizeof(packed) / sizeof(std::uint32_t));
-  }
-  return words;
-}
-
-}  // namespace
+using detail::instance_kind;
+using detail::mesh_words;
 
 template <class Volume>
 void GpuCuller::upload_instances(const InstanceSet<Volume>& set) {
@@ -283,7 +257,8 @@ void GpuCuller::upload_instances(const InstanceSet<Volume>& set) {
   run_upload_tasks(count, [&](std::size_t first, std::size_t end) {
     for (std::size_t i = first; i < end; ++i) {
       scene_->pending_slots[i] = static_cast<std::uint32_t>(i);
-      scene_->pending_entries[i] = list_entry(set, static_cast<std::uint32_t>(i));
+      scene_->pending_entries[i] =
+          detail::list_entry(set, static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(i));
     }
   });
   scene_->instance_capacity = capacity;
@@ -333,7 +308,7 @@ void GpuCuller::update_instances(const InstanceSet<Volume>& set, std::span<const
   std::vector<GpuInstance>& entries = scene_->pending_entries;
   entries.resize(pending.size());
   run_upload_tasks(pending.size(), [&](std::size_t first, std::size_t end) {
-    for (std::size_t k = first; k < end; ++k) entries[k] = list_entry(set, pending[k]);
+    for (std::size_t k = first; k < end; ++k) entries[k] = detail::list_entry(set, pending[k], pending[k]);
   });
   if (set.size() != scene_->object_count) ++scene_->generation;  // segment ranges follow the object count
   scene_->object_count = set.size();
@@ -389,13 +364,7 @@ void GpuCuller::update(const InstanceSet<Sphere>& instances, std::span<const std
 
 const vulkan::ComputePipeline& GpuCuller::place_pipeline(BvKind kind) {
   auto& slot = place_pipelines_[kind == BvKind::Aabb ? 0 : 1];
-  if (!slot) {
-    const std::uint32_t spec[1] = {kind_index(kind)};
-    const std::string name = "instance placing (" + std::string(to_string(kind)) + ")";
-    slot = std::make_unique<vulkan::ComputePipeline>(
-        ctx_, vulkan::ComputePipelineDesc{cullpipe_place_instances_spv, PLACE_BINDING_COUNT, sizeof(PlaceParams), spec,
-                                          name.c_str(), kPlaceTexelBindings});
-  }
+  if (!slot) slot = detail::make_place_pipeline(ctx_, kind);
   return *slot;
 }
 
@@ -431,17 +400,7 @@ void GpuCuller::prepare_placement() {
 void GpuCuller::record_placement(VkCommandBuffer cmd) {
   if (placing_ == 0) return;
   const vulkan::ComputePipeline& place = place_pipeline(scene_->kind);
-  const VkDescriptorSet set = place_resources_->set();
-  vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, place.pipeline());
-  vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, place.layout(), 0, 1, &set, 0, nullptr);
-  const std::uint64_t per_dispatch = std::uint64_t(max_groups_) * PLACE_GROUP_SIZE;
-  for (std::uint64_t first = 0; first < placing_; first += per_dispatch) {
-    const PlaceParams params{std::uint32_t(placing_), std::uint32_t(first)};
-    vkCmdPushConstants(cmd, place.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
-    vkCmdDispatch(cmd, vulkan::group_count(std::min<std::uint64_t>(per_dispatch, placing_ - first), PLACE_GROUP_SIZE),
-                  1, 1);
-  }
-  detail::record_compute_to_compute(cmd);  // the culling passes read what it wrote
+  detail::record_placing(cmd, place, place_resources_->set(), placing_, max_groups_);
   // Recorded: no later pass of any sharer places them again.
   placing_ = 0;
   scene_->pending_slots.clear();

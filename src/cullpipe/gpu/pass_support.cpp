@@ -7,6 +7,9 @@
 
 #include "cullpipe/vulkan/check.hpp"
 
+// SPIR-V compiled from shaders/place_instances.comp at build time (glslangValidator --vn).
+#include "place_instances.spv.h"
+
 namespace cullpipe::gpu::detail {
 namespace {
 
@@ -134,6 +137,28 @@ void record_compute_to_compute(VkCommandBuffer cmd, bool indirect) {
     dst |= VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT;
   }
   vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, dst, 0, 1, &barrier, 0, nullptr, 0, nullptr);
+}
+
+std::unique_ptr<vulkan::ComputePipeline> make_place_pipeline(const vulkan::Context& ctx, BvKind kind) {
+  const std::uint32_t spec[1] = {static_cast<std::uint32_t>(kind)};
+  const std::string name = "instance placing (" + std::string(to_string(kind)) + ")";
+  return std::make_unique<vulkan::ComputePipeline>(
+      ctx, vulkan::ComputePipelineDesc{cullpipe_place_instances_spv, PLACE_BINDING_COUNT, sizeof(PlaceParams), spec,
+                                       name.c_str(), kPlaceTexelBindings});
+}
+
+void record_placing(VkCommandBuffer cmd, const vulkan::ComputePipeline& pipeline, VkDescriptorSet set,
+                    std::size_t count, std::uint32_t max_groups) {
+  vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline.pipeline());
+  vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline.layout(), 0, 1, &set, 0, nullptr);
+  const std::uint64_t per_dispatch = std::uint64_t(max_groups) * PLACE_GROUP_SIZE;
+  for (std::uint64_t first = 0; first < count; first += per_dispatch) {
+    const PlaceParams params{std::uint32_t(count), std::uint32_t(first)};
+    vkCmdPushConstants(cmd, pipeline.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
+    vkCmdDispatch(cmd, vulkan::group_count(std::min<std::uint64_t>(per_dispatch, count - first), PLACE_GROUP_SIZE), 1,
+                  1);
+  }
+  record_compute_to_compute(cmd);  // the culling passes read what it wrote
 }
 
 CullResult timed_pass(PassResources& resources, const std::function<void()>& prepare,

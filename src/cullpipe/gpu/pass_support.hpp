@@ -4,13 +4,20 @@
 // barriers at the start and end of a recorded pass. Internal to src/cullpipe/gpu.
 #include <vulkan/vulkan.h>
 
+#include <bit>
+#include <cstdint>
 #include <functional>
+#include <memory>
 #include <span>
 #include <string>
+#include <type_traits>
 #include <vector>
 
+#include "cullpipe/cull/instances.hpp"
 #include "cullpipe/gpu/gpu_culler.hpp"
+#include "cullpipe/gpu/layout.hpp"
 #include "cullpipe/vulkan/buffer.hpp"
+#include "cullpipe/vulkan/compute_pipeline.hpp"
 #include "cullpipe/vulkan/context.hpp"
 
 namespace cullpipe::gpu::detail {
@@ -93,6 +100,45 @@ CullResult read_outputs(const OutputBuffers& buffers, std::size_t object_count, 
 /// Throws std::length_error naming `what` and the device limit when `bytes` exceed one memory
 /// allocation (maxMemoryAllocationSize).
 void check_allocation_size(const vulkan::Context& ctx, VkDeviceSize bytes, const std::string& what);
+
+// ---- instances: the placing pass both cullers run (shaders/place_instances.comp) ----
+
+template <class Volume>
+constexpr BvKind instance_kind() {
+  return std::is_same_v<Volume, Aabb> ? BvKind::Aabb : BvKind::Sphere;
+}
+
+/// Slot s of `set` as an entry of the placing list, its world volume written at `destination`
+/// of the bounds (and centre) buffers: the slot itself for the flat pass, the object's place in
+/// the tree order for the hierarchical one.
+template <class Volume>
+GpuInstance list_entry(const InstanceSet<Volume>& set, std::uint32_t s, std::uint32_t destination) {
+  const Transform3x4& t = set.transforms()[s];
+  return {{t.rows[0], t.rows[1], t.rows[2]},
+          uvec4(set.mesh_indices()[s], std::bit_cast<std::uint32_t>(set.scales()[s]), destination, 0u)};
+}
+
+/// The set's meshes' local volumes, packed as the placing pass reads them (and as update()
+/// compares them, to recognise the set uploaded).
+template <class Volume>
+std::vector<std::uint32_t> mesh_words(const InstanceSet<Volume>& set) {
+  std::vector<std::uint32_t> words;
+  for (const Volume& v : set.meshes()) {
+    const auto packed = pack(v);
+    const auto* w = reinterpret_cast<const std::uint32_t*>(&packed);
+    words.insert(words.end(), w, w + sizeof(packed) / sizeof(std::uint32_t));
+  }
+  return words;
+}
+
+/// Bindings of the placing pass read as uniform texel buffers (the list and the meshes).
+inline constexpr std::uint32_t kPlaceTexelBindings = 1u << PLACE_BINDING_LIST | 1u << PLACE_BINDING_MESHES;
+/// The placing pass's pipeline for boxes or spheres.
+std::unique_ptr<vulkan::ComputePipeline> make_place_pipeline(const vulkan::Context& ctx, BvKind kind);
+/// Records the placing of list entries [0, count) in dispatches of at most `max_groups`
+/// workgroups, with `set` bound, then a barrier before the passes that read what it wrote.
+void record_placing(VkCommandBuffer cmd, const vulkan::ComputePipeline& pipeline, VkDescriptorSet set,
+                    std::size_t count, std::uint32_t max_groups);
 
 class PassResources;
 
