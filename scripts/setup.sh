@@ -7,7 +7,7 @@ packages=(
   build-essential cmake ninja-build pkg-config
   mesa-vulkan-drivers libvulkan-dev vulkan-validationlayers vulkan-tools
   glslang-tools libglm-dev libtinygltf-dev nlohmann-json3-dev libcli11-dev libstb-dev
-  libgtest-dev libgmock-dev libbenchmark-dev python3 clang libclang-rt-14-dev clang-format
+  libmeshoptimizer-dev libgtest-dev libgmock-dev libbenchmark-dev python3 clang libclang-rt-14-dev clang-format
 )
 
 missing=()

@@ -1,6 +1,6 @@
 #version 460
 // Places instances in the world: for each entry of the list (an object's transform, mesh and
-// slot), its mesh's local volume under its transform (shared/instance.glsl, bit for bit
+// slot; an OBB's box placed by the host, and its slot), its mesh's local volume under its transform (shared/instance.glsl, bit for bit
 // src/cullpipe/geom/instance.cpp), written into the bounds buffer the culling passes read at its
 // slot, and for boxes their centre and settling bound. Only the objects that changed are listed,
 // each once; the others keep the volumes placed before. The list is read in order and only the
@@ -11,7 +11,7 @@
 #include "shared/instance.glsl"
 
 layout(local_size_x = PLACE_GROUP_SIZE) in;
-layout(constant_id = 0) const uint BV_KIND = BV_KIND_AABB;  // BV_KIND_AABB or BV_KIND_SPHERE
+layout(constant_id = 0) const uint BV_KIND = BV_KIND_AABB;
 
 layout(set = 0, binding = PLACE_BINDING_LIST) uniform usamplerBuffer list;
 layout(set = 0, binding = PLACE_BINDING_MESHES) uniform usamplerBuffer meshes;
@@ -36,6 +36,11 @@ float box_bound(vec3 c, vec3 e) {
 void main() {
   uint k = params.first + gl_GlobalInvocationID.x;
   if (k >= params.count) return;
+  if (BV_KIND == BV_KIND_OBB) {  // placed on the host: copied to its slot, bits as they are
+    uint base = k * OBB_ENTRY_TEXELS, slot = texelFetch(list, int(base + 4u)).z;
+    for (uint j = 0u; j < 4u; ++j) bound_words[4u * slot + j] = word(list, base + j);
+    return;
+  }
   uint base = k * INSTANCE_TEXELS;
   vec4 rows[3] = vec4[3](word(list, base), word(list, base + 1u), word(list, base + 2u));
   uvec4 info = texelFetch(list, int(base + 3u));

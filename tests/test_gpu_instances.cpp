@@ -56,6 +56,17 @@ std::vector<Aabb> box_meshes(std::mt19937& rng, std::size_t n) {
   return meshes;
 }
 
+std::vector<Obb> obb_meshes(std::mt19937& rng, std::size_t n) {
+  std::vector<Obb> meshes;
+  for (std::size_t i = 0; i < n; ++i) {
+    const glm::quat q =
+        glm::normalize(glm::quat(uniform(rng, -1, 1), uniform(rng, -1, 1), uniform(rng, -1, 1), uniform(rng, -1, 1)));
+    meshes.push_back({glm::vec3(uniform(rng, -1, 1), uniform(rng, -1, 1), uniform(rng, -1, 1)), glm::mat3_cast(q),
+                      glm::vec3(uniform(rng, 0, 1.5f), uniform(rng, 0, 1.5f), uniform(rng, 0, 1.5f))});
+  }
+  return meshes;
+}
+
 std::vector<Sphere> sphere_meshes(std::mt19937& rng, std::size_t n) {
   std::vector<Sphere> meshes;
   for (std::size_t i = 0; i < n; ++i)
@@ -96,10 +107,15 @@ std::vector<Frustum> views_for(std::mt19937& rng, std::span<const Volume> world)
       const Plane unit = Frustum::from_planes(std::vector<glm::vec4>{glm::vec4(n, 0.0f)}).planes[0];
       n = unit.normal;
       glm::vec3 touch;
-      if constexpr (std::is_same_v<Volume, Aabb>)
+      if constexpr (std::is_same_v<Volume, Aabb>) {
         touch = {n.x >= 0 ? w.max.x : w.min.x, n.y >= 0 ? w.max.y : w.min.y, n.z >= 0 ? w.max.z : w.min.z};
-      else
+      } else if constexpr (std::is_same_v<Volume, Obb>) {
+        touch = w.center;
+        for (int a = 0; a < 3; ++a)
+          touch += w.basis[a] * (glm::dot(n, w.basis[a]) >= 0 ? w.half_extents[a] : -w.half_extents[a]);
+      } else {
         touch = w.center + n * w.radius;
+      }
       const Plane through{n, 0.0f};
       planes.push_back(glm::vec4(n, -through.distance(touch)));
     }
@@ -185,6 +201,16 @@ TEST_F(GpuInstances, BoxesAgreeWithTheReferenceOnEveryFrame) {
   for (const std::size_t n : {1u, 255u, 1000u, 20000u}) {
     SCOPED_TRACE(n);
     run_frames<Aabb>(culler(), box_meshes(rng, 7), n, static_cast<std::uint32_t>(n));
+    if (HasFatalFailure()) return;
+  }
+}
+
+// OBBs are placed on the host and sent: the same frames, the same contract.
+TEST_F(GpuInstances, ObbsAgreeWithTheReferenceOnEveryFrame) {
+  std::mt19937 rng(3);
+  for (const std::size_t n : {1u, 300u, 20000u}) {
+    SCOPED_TRACE(n);
+    run_frames<Obb>(culler(), obb_meshes(rng, 5), n, static_cast<std::uint32_t>(n) + 11);
     if (HasFatalFailure()) return;
   }
 }

@@ -268,6 +268,53 @@ TEST(InstanceSet, FastCpuPathAgreesWithTheReferenceOnEveryFrame) {
       {Aabb{glm::vec3(-1, -2, -0.5f), glm::vec3(1, 0.5f, 0.5f)}, Aabb{glm::vec3(0), glm::vec3(0.1f, 3, 0)}}, 1);
   if (HasFatalFailure()) return;
   cpu_frames<Sphere>({Sphere{glm::vec3(0.5f, 0, 0), 1.0f}, Sphere{glm::vec3(0), 0.0f}}, 2);
+  if (HasFatalFailure()) return;
+  const glm::mat3 turned = glm::mat3_cast(glm::angleAxis(0.7f, glm::normalize(glm::vec3(1, 2, 3))));
+  cpu_frames<Obb>({Obb{glm::vec3(0.5f, 0, 0), turned, glm::vec3(1, 0.25f, 2)},
+                   Obb{glm::vec3(0), glm::mat3(1.0f), glm::vec3(0.5f, 0, 0.5f)}},
+                  3);
+}
+
+// A placed OBB (on the host, in double) encloses the local box's corners as transformed in
+// double, for rotations, mirrors, non-uniform scale and shear; and with rotation, uniform scale
+// and translation it is the exact box: its extents the local ones scaled, to float rounding.
+TEST(InstanceVolume, ObbEnclosesTheBoxTransformedInDouble) {
+  std::mt19937 rng(9);
+  for (int i = 0; i < 20000; ++i) {
+    const glm::quat q =
+        glm::normalize(glm::quat(uniform(rng, -1, 1), uniform(rng, -1, 1), uniform(rng, -1, 1), uniform(rng, -1, 1)));
+    const Obb local{glm::vec3(uniform(rng, -5, 5), uniform(rng, -5, 5), uniform(rng, -5, 5)), glm::mat3_cast(q),
+                    glm::vec3(uniform(rng, 0, 3), uniform(rng, 0, 3), uniform(rng, 0, 3))};
+    const Transform3x4 t = random_transform(rng, glm::vec3(0.0f));
+    const Obb world = instance_volume(local, t);
+    ASSERT_TRUE(is_valid(world)) << invalid_reason(world);
+    for (int c = 0; c < 8; ++c) {
+      // The local box's corner and its placement, in double (rounding far below a float step).
+      glm::dvec3 corner(local.center);
+      for (int k = 0; k < 3; ++k)
+        corner += glm::dvec3(local.basis[k]) * (double(local.half_extents[k]) * ((c >> k) & 1 ? 1.0 : -1.0));
+      glm::dvec3 p;
+      double magnitude = 0.0;
+      for (int a = 0; a < 3; ++a) {
+        const glm::vec4& row = t.rows[static_cast<std::size_t>(a)];
+        p[a] = double(row.x) * corner.x + double(row.y) * corner.y + double(row.z) * corner.z + double(row.w);
+        magnitude += std::abs(p[a]) + std::abs(double(world.center[a]));
+      }
+      // In the placed box's frame: within its extents (up to double rounding of the magnitudes).
+      const glm::dvec3 d = p - glm::dvec3(world.center);
+      for (int k = 0; k < 3; ++k)
+        ASSERT_LE(std::abs(glm::dot(d, glm::dvec3(world.basis[k]))),
+                  double(world.half_extents[k]) + magnitude * 0x1p-44)
+            << "instance " << i << ", corner " << c << ", axis " << k;
+    }
+  }
+  // Rotation, uniform scale, translation: the local extents times the scale.
+  const Obb local{glm::vec3(1, 2, 3), glm::mat3(1.0f), glm::vec3(1, 2, 0.5f)};
+  const glm::mat4 m = glm::translate(glm::mat4(1.0f), glm::vec3(10, -4, 2)) *
+                      glm::mat4_cast(glm::angleAxis(1.1f, glm::normalize(glm::vec3(0, 1, 1)))) *
+                      glm::scale(glm::mat4(1.0f), glm::vec3(2.0f));
+  const Obb world = instance_volume(local, Transform3x4::from_mat4(m));
+  for (int k = 0; k < 3; ++k) EXPECT_NEAR(world.half_extents[k], 2.0f * local.half_extents[k], 1e-5f) << k;
 }
 
 TEST(InstanceSet, FastCpuPathRefusesBadUpdates) {

@@ -229,7 +229,7 @@ namespace {
 
 // How upload() stores object i of each kind: its centre and packed plane bound in the arrays,
 // the rest in its record (as the kernels read them).
-constexpr std::size_t kAabbColumns = 4, kSphereColumns = 5;
+constexpr std::size_t kAabbColumns = 4, kObbColumns = 4, kSphereColumns = 5;
 void store_aabb(const Aabb& b, float* const* c, std::size_t i) {
   glm::vec3 centre;
   c[3][i] = plane_bounds::pack_lower(plane_bounds::aabb_plane_bound(b, centre), plane_bounds::aabb_lower(b));
@@ -240,6 +240,19 @@ void store_aabb(const Aabb& b, float* const* c, std::size_t i) {
     record[3 + a] = b.max[a];
   }
   record[6] = record[7] = 0.0f;
+}
+void store_obb(const Obb& b, float* const* c, std::size_t i) {
+  c[0][i] = b.center.x, c[1][i] = b.center.y, c[2][i] = b.center.z;
+  c[3][i] = plane_bounds::pack_lower(plane_bounds::obb_plane_bound(b), plane_bounds::obb_lower(b));
+  float* record = c[4] + i * detail::kObbRecordFloats;  // as classify_obb_records reads it
+  for (int a = 0; a < 3; ++a) {
+    record[a] = b.center[a];
+    record[3 + a] = b.basis[0][a];
+    record[6 + a] = b.basis[1][a];
+    record[9 + a] = b.basis[2][a];
+    record[12 + a] = b.half_extents[a];
+  }
+  record[15] = 0.0f;
 }
 void store_sphere(const Sphere& s, float* const* c, std::size_t i) {
   c[0][i] = s.center.x, c[1][i] = s.center.y, c[2][i] = s.center.z;
@@ -258,19 +271,7 @@ void CpuCuller::upload(std::span<const Aabb> volumes) {
 void CpuCuller::upload(std::span<const Obb> volumes) {
   static_assert(detail::kObbRecordFloats == 16);
   instanced_ = false;
-  upload_columns<4, detail::kObbRecordFloats>(volumes, [](const Obb& b, float* const* c, std::size_t i) {
-    c[0][i] = b.center.x, c[1][i] = b.center.y, c[2][i] = b.center.z;
-    c[3][i] = plane_bounds::pack_lower(plane_bounds::obb_plane_bound(b), plane_bounds::obb_lower(b));
-    float* record = c[4] + i * detail::kObbRecordFloats;  // as classify_obb_records reads it
-    for (int a = 0; a < 3; ++a) {
-      record[a] = b.center[a];
-      record[3 + a] = b.basis[0][a];
-      record[6 + a] = b.basis[1][a];
-      record[9 + a] = b.basis[2][a];
-      record[12 + a] = b.half_extents[a];
-    }
-    record[15] = 0.0f;
-  });
+  upload_columns<kObbColumns, detail::kObbRecordFloats>(volumes, store_obb);
 }
 
 void CpuCuller::upload(std::span<const Sphere> volumes) {
@@ -280,8 +281,9 @@ void CpuCuller::upload(std::span<const Sphere> volumes) {
 
 template <class Volume>
 void CpuCuller::place(const InstanceSet<Volume>& set, std::span<const std::uint32_t> slots) {
-  constexpr bool boxes = std::is_same_v<Volume, Aabb>;
-  constexpr std::size_t columns = boxes ? kAabbColumns : kSphereColumns;
+  constexpr std::size_t columns = std::is_same_v<Volume, Aabb>  ? kAabbColumns
+                                  : std::is_same_v<Volume, Obb> ? kObbColumns
+                                                                : kSphereColumns;
   float* c[columns + 1];
   for (std::size_t k = 0; k < columns; ++k) c[k] = impl_->column(k);
   c[columns] = impl_->records;
@@ -291,8 +293,10 @@ void CpuCuller::place(const InstanceSet<Volume>& set, std::span<const std::uint3
     const std::size_t end = std::min(n, (t + 1) * per_task);
     for (std::size_t k = t * per_task; k < end; ++k) {
       const std::size_t i = slots.empty() ? k : slots[k];
-      if constexpr (boxes)
+      if constexpr (std::is_same_v<Volume, Aabb>)
         store_aabb(set.world_volume(i), c, i);
+      else if constexpr (std::is_same_v<Volume, Obb>)
+        store_obb(set.world_volume(i), c, i);
       else
         store_sphere(set.world_volume(i), c, i);
     }
@@ -301,11 +305,15 @@ void CpuCuller::place(const InstanceSet<Volume>& set, std::span<const std::uint3
 
 template <class Volume>
 void CpuCuller::upload_instances(const InstanceSet<Volume>& set) {
-  constexpr bool boxes = std::is_same_v<Volume, Aabb>;
   check_count(set.size());
   count_ = 0;  // stays 0 if the allocation fails
   instanced_ = false;
-  impl_->reserve(boxes ? kAabbColumns : kSphereColumns, set.size(), boxes ? detail::kAabbRecordFloats : 0);
+  if constexpr (std::is_same_v<Volume, Aabb>)
+    impl_->reserve(kAabbColumns, set.size(), detail::kAabbRecordFloats);
+  else if constexpr (std::is_same_v<Volume, Obb>)
+    impl_->reserve(kObbColumns, set.size(), detail::kObbRecordFloats);
+  else
+    impl_->reserve(kSphereColumns, set.size(), 0);
   place(set, {});
   kind_ = kind_of<Volume>();
   count_ = set.size();
@@ -326,8 +334,12 @@ void CpuCuller::update_instances(const InstanceSet<Volume>& set, std::span<const
 }
 
 void CpuCuller::upload(const InstanceSet<Aabb>& instances) { upload_instances(instances); }
+void CpuCuller::upload(const InstanceSet<Obb>& instances) { upload_instances(instances); }
 void CpuCuller::upload(const InstanceSet<Sphere>& instances) { upload_instances(instances); }
 void CpuCuller::update(const InstanceSet<Aabb>& instances, std::span<const std::uint32_t> slots) {
+  update_instances(instances, slots);
+}
+void CpuCuller::update(const InstanceSet<Obb>& instances, std::span<const std::uint32_t> slots) {
   update_instances(instances, slots);
 }
 void CpuCuller::update(const InstanceSet<Sphere>& instances, std::span<const std::uint32_t> slots) {

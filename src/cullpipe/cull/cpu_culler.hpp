@@ -81,12 +81,14 @@ class CpuCuller {
   /// threads and stored as upload(volumes) stores it, so the answers are the reference's on
   /// instances.world_volumes(); objects are reported by slot.
   void upload(const InstanceSet<Aabb>& instances);
+  void upload(const InstanceSet<Obb>& instances);
   void upload(const InstanceSet<Sphere>& instances);
   /// Places again only `slots` (InstanceSet::changed_slots(), ascending) of the set uploaded
   /// last; when its size has changed, every object (the arrays' layout follows the count).
   /// Throws std::invalid_argument, changing nothing, when no instances of the kind were
   /// uploaded, a slot is out of range or the slots are not ascending.
   void update(const InstanceSet<Aabb>& instances, std::span<const std::uint32_t> slots);
+  void update(const InstanceSet<Obb>& instances, std::span<const std::uint32_t> slots);
   void update(const InstanceSet<Sphere>& instances, std::span<const std::uint32_t> slots);
 
   /// One result per view, each as a pass of its own would give. Several views (a camera and

@@ -22,6 +22,14 @@ double reach(const Aabb& b) {
   for (int i = 0; i < 3; ++i) r = std::max({r, std::abs(double(b.min[i])), std::abs(double(b.max[i]))});
   return r;
 }
+double reach(const Obb& b) {  // the centre's largest coordinate plus the box's diagonal
+  double r = 0.0, diagonal = 0.0;
+  for (int i = 0; i < 3; ++i) {
+    r = std::max(r, std::abs(double(b.center[i])));
+    diagonal += std::abs(double(b.half_extents[i])) * glm::length(glm::dvec3(b.basis[i]));
+  }
+  return r + diagonal;
+}
 double reach(const Sphere& s) {
   double r = 0.0;
   for (int i = 0; i < 3; ++i) r = std::max(r, std::abs(double(s.center[i])));
@@ -219,6 +227,7 @@ void InstanceSet<Volume>::clear_changes() {
 }
 
 template class InstanceSet<Aabb>;
+template class InstanceSet<Obb>;
 template class InstanceSet<Sphere>;
 
 }  // namespace cullpipe

@@ -10,6 +10,7 @@
 
 #include "cullpipe/geom/aabb.hpp"
 #include "cullpipe/geom/instance.hpp"
+#include "cullpipe/geom/obb.hpp"
 #include "cullpipe/geom/sphere.hpp"
 
 namespace cullpipe {
@@ -20,7 +21,7 @@ class ThreadPool;
 /// given again by a later add().
 using InstanceId = std::uint32_t;
 
-/// Instances of one volume kind (Aabb or Sphere). Objects are kept densely in slots 0..size()-1,
+/// Instances of one volume kind (Aabb, Obb or Sphere). Objects are kept densely in slots 0..size()-1,
 /// the order culling reports them in; removing one moves the last object into its slot, so a
 /// slot's object can change while its id does not (ids() maps slots to ids, slot() back).
 /// Every method that takes outside input checks all of it first and throws
@@ -86,6 +87,7 @@ class InstanceSet {
 };
 
 extern template class InstanceSet<Aabb>;
+extern template class InstanceSet<Obb>;
 extern template class InstanceSet<Sphere>;
 
 }  // namespace cullpipe

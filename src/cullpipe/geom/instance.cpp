@@ -119,4 +119,14 @@ Sphere instance_volume(const Sphere& local, const Transform3x4& t, float scale) 
   return world;
 }
 
+Obb instance_volume(const Obb& local, const Transform3x4& t) {
+  // The box is the cube [-h, h] in its own frame: frame and transform composed in double.
+  glm::dmat4 frame(1.0), m(1.0);
+  for (int k = 0; k < 3; ++k) frame[k] = glm::dvec4(glm::dvec3(local.basis[k]), 0.0);
+  frame[3] = glm::dvec4(glm::dvec3(local.center), 1.0);
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 4; ++j) m[j][i] = double(t.rows[static_cast<std::size_t>(i)][j]);
+  return Obb::from_transformed_aabb(Aabb{-local.half_extents, local.half_extents}, m * frame);
+}
+
 }  // namespace cullpipe

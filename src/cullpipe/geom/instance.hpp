@@ -9,6 +9,7 @@
 #include <string>
 
 #include "cullpipe/geom/aabb.hpp"
+#include "cullpipe/geom/obb.hpp"
 #include "cullpipe/geom/sphere.hpp"
 
 namespace cullpipe {
@@ -44,5 +45,13 @@ Aabb instance_volume(const Aabb& local, const Transform3x4& t);
 /// centre's magnitudes, plus 2^-120. A sphere whose values overflow becomes the one centred
 /// at the origin with an infinite radius. The GPU's transform pass computes the same floats.
 Sphere instance_volume(const Sphere& local, const Transform3x4& t, float scale);
+/// A local OBB placed by `t`, on the host only: the box's frame composed with the transform in
+/// double, then Obb::from_transformed_aabb (axes orthonormalised in double, extents from the
+/// eight corners projected on the float axes, rounded up), so the box encloses the local box
+/// transformed exactly: tight for rotation, uniform scale and translation, still enclosing with
+/// non-uniform scale or shear. The orthonormalisation takes square roots and divisions, which
+/// GPUs do not round as the CPU does: placed OBBs are computed here and sent, not placed by the
+/// GPU.
+Obb instance_volume(const Obb& local, const Transform3x4& t);
 
 }  // namespace cullpipe

@@ -71,10 +71,14 @@ struct GpuInstance {
   uvec4 info;
 };
 CP_CONST INSTANCE_TEXELS = 4u;
+// OBBs are placed on the host (their axes are orthonormalised, with square roots and divisions
+// GPUs do not round as the CPU does) and their list entries carry the placed box: a GpuObb
+// (four texels), then a texel whose z is the slot.
+CP_CONST OBB_ENTRY_TEXELS = 5u;
 
 // The placing pass (place_instances.comp): world volumes of the listed instances, written where
 // the culling passes read them. Uniform texel buffers, except the two outputs.
-CP_CONST PLACE_BINDING_LIST = 0u;     // GpuInstance per object to place, INSTANCE_TEXELS texels each
+CP_CONST PLACE_BINDING_LIST = 0u;     // per object to place: a GpuInstance, or an OBB's OBB_ENTRY_TEXELS
 CP_CONST PLACE_BINDING_MESHES = 1u;   // the meshes' local volumes (GpuAabb or GpuSphere)
 CP_CONST PLACE_BINDING_BOUNDS = 2u;   // out: vec4 words of the world volumes (BINDING_BOUNDS' buffer)
 CP_CONST PLACE_BINDING_CENTRES = 3u;  // out: AABBs' centre and bound (BINDING_CENTRES' buffer)

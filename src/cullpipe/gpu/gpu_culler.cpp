@@ -220,11 +220,14 @@ void GpuCuller::upload_instances(const InstanceSet<Volume>& set) {
   const std::string what = std::to_string(capacity) + " " + std::string(to_string(kind)) + " instances";
   if (capacity > std::numeric_limits<std::uint32_t>::max())
     throw std::length_error(what + ": object ids are 32-bit (at most 4294967295 objects)");
-  const std::size_t bytes_per_object = kind == BvKind::Aabb ? sizeof(GpuAabb) : sizeof(GpuSphere);
+  const std::size_t bytes_per_object = kind == BvKind::Aabb  ? sizeof(GpuAabb)
+                                       : kind == BvKind::Obb ? sizeof(GpuObb)
+                                                             : sizeof(GpuSphere);
+  constexpr std::size_t texels = detail::entry_texels<Volume>();
   const std::vector<std::uint32_t> words = mesh_words(set);
   const VkDeviceSize bound_bytes = VkDeviceSize(capacity) * bytes_per_object,
                      centre_bytes = kind == BvKind::Aabb ? VkDeviceSize(capacity) * sizeof(glm::vec4) : 0,
-                     list_bytes = VkDeviceSize(capacity) * sizeof(GpuInstance),
+                     list_bytes = VkDeviceSize(capacity) * texels * detail::kTexelBytes,
                      mesh_bytes = VkDeviceSize(words.size()) * sizeof(std::uint32_t);
   // Every check before anything changes. The placing pass binds whole buffers: the outputs as one
   // storage buffer range each, the inputs as one texel buffer view each.
@@ -253,12 +256,14 @@ void GpuCuller::upload_instances(const InstanceSet<Volume>& set) {
   scene_->mesh_words = words;
   // Every object, placed by whichever sharer records next.
   scene_->pending_slots.resize(count);
-  scene_->pending_entries.resize(count);
+  scene_->pending_entries.resize(count * texels);
+  scene_->entry_texels = texels;
   run_upload_tasks(count, [&](std::size_t first, std::size_t end) {
+    const plane_bounds::NearestNoFlush mode;  // (OBBs are placed here)
     for (std::size_t i = first; i < end; ++i) {
-      scene_->pending_slots[i] = static_cast<std::uint32_t>(i);
-      scene_->pending_entries[i] =
-          detail::list_entry(set, static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(i));
+      const auto s = static_cast<std::uint32_t>(i);
+      scene_->pending_slots[i] = s;
+      detail::write_entry(set, s, s, &scene_->pending_entries[i * texels]);
     }
   });
   scene_->instance_capacity = capacity;
@@ -305,10 +310,12 @@ void GpuCuller::update_instances(const InstanceSet<Volume>& set, std::span<const
   // Entries rebuilt for the whole queue, into the scene's own storage (kept from frame to frame:
   // a fresh vector per update would fault its pages in each time). Only the resize can throw,
   // and it leaves the entries as they were.
-  std::vector<GpuInstance>& entries = scene_->pending_entries;
-  entries.resize(pending.size());
+  constexpr std::size_t texels = detail::entry_texels<Volume>();
+  std::vector<uvec4>& entries = scene_->pending_entries;
+  entries.resize(pending.size() * texels);
   run_upload_tasks(pending.size(), [&](std::size_t first, std::size_t end) {
-    for (std::size_t k = first; k < end; ++k) entries[k] = detail::list_entry(set, pending[k], pending[k]);
+    const plane_bounds::NearestNoFlush mode;  // (OBBs are placed here)
+    for (std::size_t k = first; k < end; ++k) detail::write_entry(set, pending[k], pending[k], &entries[k * texels]);
   });
   if (set.size() != scene_->object_count) ++scene_->generation;  // segment ranges follow the object count
   scene_->object_count = set.size();
@@ -341,6 +348,9 @@ void GpuCuller::reserve(const InstanceSet<Volume>& set, std::size_t objects) {
 void GpuCuller::reserve_instances(const InstanceSet<Aabb>& instances, std::size_t objects) {
   reserve(instances, objects);
 }
+void GpuCuller::reserve_instances(const InstanceSet<Obb>& instances, std::size_t objects) {
+  reserve(instances, objects);
+}
 void GpuCuller::reserve_instances(const InstanceSet<Sphere>& instances, std::size_t objects) {
   reserve(instances, objects);
 }
@@ -354,8 +364,12 @@ void GpuCuller::share_scene(const GpuCuller& other) {
 }
 
 void GpuCuller::upload(const InstanceSet<Aabb>& instances) { upload_instances(instances); }
+void GpuCuller::upload(const InstanceSet<Obb>& instances) { upload_instances(instances); }
 void GpuCuller::upload(const InstanceSet<Sphere>& instances) { upload_instances(instances); }
 void GpuCuller::update(const InstanceSet<Aabb>& instances, std::span<const std::uint32_t> slots) {
+  update_instances(instances, slots);
+}
+void GpuCuller::update(const InstanceSet<Obb>& instances, std::span<const std::uint32_t> slots) {
   update_instances(instances, slots);
 }
 void GpuCuller::update(const InstanceSet<Sphere>& instances, std::span<const std::uint32_t> slots) {
@@ -363,7 +377,7 @@ void GpuCuller::update(const InstanceSet<Sphere>& instances, std::span<const std
 }
 
 const vulkan::ComputePipeline& GpuCuller::place_pipeline(BvKind kind) {
-  auto& slot = place_pipelines_[kind == BvKind::Aabb ? 0 : 1];
+  auto& slot = place_pipelines_[kind_index(kind)];
   if (!slot) slot = detail::make_place_pipeline(ctx_, kind);
   return *slot;
 }
@@ -372,13 +386,13 @@ void GpuCuller::prepare_placement() {
   // The scene's queued placements go into this culler's own list (a sharer's list may still be
   // read by its pass in flight), before anything is recorded.
   placing_ = 0;
-  if (!scene_->instanced || scene_->pending_entries.empty()) return;
-  const std::size_t n = scene_->pending_entries.size();
+  if (!scene_->instanced || scene_->pending_slots.empty()) return;
+  const std::size_t n = scene_->pending_slots.size(), entry_bytes = scene_->entry_texels * detail::kTexelBytes;
   ensure_place_resources(scene_->kind);
-  const VkDeviceSize bytes = VkDeviceSize(std::max(n, scene_->instance_capacity)) * sizeof(GpuInstance);
+  const VkDeviceSize bytes = VkDeviceSize(std::max(n, scene_->instance_capacity)) * entry_bytes;
   detail::check_texel_range(ctx_, bytes, std::to_string(n) + " objects to place");
   detail::ensure_buffer(ctx_, place_list_, bytes, kBoundsUsage, "placing list buffer", place_descriptors_dirty_);
-  std::memcpy(place_list_.data(), scene_->pending_entries.data(), n * sizeof(GpuInstance));
+  std::memcpy(place_list_.data(), scene_->pending_entries.data(), n * entry_bytes);
   if (place_descriptors_dirty_ || written_place_generation_ != scene_->generation) {
     // Within one texel buffer view and one storage buffer range (buffers kept from a larger
     // scene may be bigger).

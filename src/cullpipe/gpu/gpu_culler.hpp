@@ -46,9 +46,11 @@ struct SceneBuffers {
   std::size_t instance_capacity = 0;
   bool instanced = false;
   /// Placements sent (upload, update) and not yet recorded by any sharer: ascending slots and
-  /// their list entries. The next pass of whichever culler records first places them.
+  /// their list entries, entry_texels texels each (instances; OBBs placed on the host). The next
+  /// pass of whichever culler records first places them.
   std::vector<std::uint32_t> pending_slots;
-  std::vector<GpuInstance> pending_entries;
+  std::vector<uvec4> pending_entries;
+  std::size_t entry_texels = INSTANCE_TEXELS;
   /// Changes whenever a buffer above is replaced or the object count changes, so every culler
   /// sharing the scene writes its descriptors again.
   std::uint64_t generation = 1;
@@ -180,7 +182,11 @@ class GpuCuller {
   /// the CPU, bit for bit), then culls the placed volumes as upload(world volumes) would, so its
   /// answers are the reference's on instances.world_volumes(), object by object; objects are
   /// reported by slot. Throws as upload(volumes) does when the buffers cannot hold them.
+  /// OBBs are placed on the host (instance_volume: their axes orthonormalised in double, which
+  /// GPUs do not round alike) on the upload threads, and the placed boxes sent: still only the
+  /// objects that changed, 80 bytes each.
   void upload(const InstanceSet<Aabb>& instances);
+  void upload(const InstanceSet<Obb>& instances);
   void upload(const InstanceSet<Sphere>& instances);
   /// Sends what changed in the set uploaded last: the transforms and mesh indices of `slots`
   /// (InstanceSet::changed_slots(), ascending), and its new size after adds and removes. Only
@@ -190,6 +196,7 @@ class GpuCuller {
   /// the ones uploaded, a slot is out of range or the slots are not ascending, and nothing
   /// changes.
   void update(const InstanceSet<Aabb>& instances, std::span<const std::uint32_t> slots);
+  void update(const InstanceSet<Obb>& instances, std::span<const std::uint32_t> slots);
   void update(const InstanceSet<Sphere>& instances, std::span<const std::uint32_t> slots);
   /// Objects the next pass places before culling (0 after a pass, or for world volumes).
   std::size_t pending_placements() const { return scene_->pending_slots.size(); }
@@ -199,6 +206,7 @@ class GpuCuller {
   /// again), so that no later update() grows them: an engine calls it when no pass using the
   /// scene is in flight. Throws std::invalid_argument without instances uploaded.
   void reserve_instances(const InstanceSet<Aabb>& instances, std::size_t objects);
+  void reserve_instances(const InstanceSet<Obb>& instances, std::size_t objects);
   void reserve_instances(const InstanceSet<Sphere>& instances, std::size_t objects);
 
   /// Culls the scene `other` culls, stored once: the volumes, instances and draw templates, and
@@ -365,7 +373,7 @@ class GpuCuller {
   // transform, mesh and slot), the meshes' local volumes, and the placing pass's pipeline and set.
   vulkan::Buffer place_list_;
   std::size_t placing_ = 0;  // entries of place_list_ the pass being recorded places
-  std::unique_ptr<vulkan::ComputePipeline> place_pipelines_[2];  // boxes, spheres
+  std::unique_ptr<vulkan::ComputePipeline> place_pipelines_[3];  // by BvKind
   std::unique_ptr<detail::PassResources> place_resources_;
   bool place_descriptors_dirty_ = true;
 };

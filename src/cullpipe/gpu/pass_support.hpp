@@ -6,6 +6,7 @@
 
 #include <bit>
 #include <cstdint>
+#include <cstring>
 #include <functional>
 #include <memory>
 #include <span>
@@ -14,6 +15,7 @@
 #include <vector>
 
 #include "cullpipe/cull/instances.hpp"
+#include "cullpipe/geom/plane_bounds.hpp"
 #include "cullpipe/gpu/gpu_culler.hpp"
 #include "cullpipe/gpu/layout.hpp"
 #include "cullpipe/vulkan/buffer.hpp"
@@ -105,7 +107,14 @@ void check_allocation_size(const vulkan::Context& ctx, VkDeviceSize bytes, const
 
 template <class Volume>
 constexpr BvKind instance_kind() {
-  return std::is_same_v<Volume, Aabb> ? BvKind::Aabb : BvKind::Sphere;
+  return kind_of<Volume>();
+}
+
+/// Texels of one entry of the placing list: an instance the GPU places (boxes, spheres), or an
+/// OBB placed on the host with its slot.
+template <class Volume>
+constexpr std::size_t entry_texels() {
+  return std::is_same_v<Volume, Obb> ? OBB_ENTRY_TEXELS : INSTANCE_TEXELS;
 }
 
 /// Slot s of `set` as an entry of the placing list, its world volume written at `destination`
@@ -116,6 +125,24 @@ GpuInstance list_entry(const InstanceSet<Volume>& set, std::uint32_t s, std::uin
   const Transform3x4& t = set.transforms()[s];
   return {{t.rows[0], t.rows[1], t.rows[2]},
           uvec4(set.mesh_indices()[s], std::bit_cast<std::uint32_t>(set.scales()[s]), destination, 0u)};
+}
+
+/// Slot s of `set` as the entry_texels<Volume>() texels of a placing list entry at `out`, its
+/// world volume written at `destination`: boxes and spheres as list_entry; an OBB placed here
+/// (InstanceSet::world_volume, in the GPU's rounding mode) with its settling bound, as
+/// GpuCuller::upload(OBBs) sends it. Call under plane_bounds::NearestNoFlush.
+template <class Volume>
+void write_entry(const InstanceSet<Volume>& set, std::uint32_t s, std::uint32_t destination, uvec4* out) {
+  if constexpr (std::is_same_v<Volume, Obb>) {
+    const Obb world = set.world_volume(s);
+    GpuObb packed = pack(world);
+    packed.center.w = plane_bounds::obb_plane_bound(world);
+    std::memcpy(out, &packed, sizeof(GpuObb));
+    out[OBB_ENTRY_TEXELS - 1] = uvec4(0u, 0u, destination, 0u);
+  } else {
+    const GpuInstance entry = list_entry(set, s, destination);
+    std::memcpy(out, &entry, sizeof(GpuInstance));
+  }
 }
 
 /// The set's meshes' local volumes, packed as the placing pass reads them (and as update()
