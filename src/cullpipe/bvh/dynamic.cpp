@@ -170,8 +170,12 @@ TreeStep DynamicTree::update(std::span<const Aabb> boxes) {
   quality_ = boxes.empty() ? 1.0 : sah_cost(tree_) / (built_cost_ * scale);
   if (step == TreeStep::Refitted && !pending_.valid() && quality_ > options_.rebuild_ratio) {
     try {
-      pending_ =
-          std::async(std::launch::async, &DynamicTree::make, std::vector<Aabb>(boxes.begin(), boxes.end()), options_);
+      // Not on the caller's pool: its parallel_for takes one caller at a time, and the engine
+      // may use it during the frame while this build runs.
+      DynamicTreeOptions background = options_;
+      background.build.pool = nullptr;
+      pending_ = std::async(std::launch::async, &DynamicTree::make, std::vector<Aabb>(boxes.begin(), boxes.end()),
+                            std::move(background));
       step = TreeStep::RebuildStarted;
     } catch (const std::system_error& e) {  // no thread to be had: refitting goes on
       last_error_ = e.what();

@@ -10,6 +10,7 @@
 #include <type_traits>
 
 #include "cullpipe/bvh/box_ops.hpp"
+#include "cullpipe/bvh/builders.hpp"
 #include "cullpipe/core/prefetch.hpp"
 #include "cullpipe/geom/plane_bounds.hpp"
 #include "cullpipe/geom/validate.hpp"
@@ -249,7 +250,19 @@ void BvhCuller::upload(const bvh::FlatTree& tree, const InstanceSet<Aabb>& insta
   if (!refit_resources_)
     refit_resources_ = std::make_unique<detail::PassResources>(ctx_, refit_pipelines_[0]->set_layout(),
                                                                REFIT_BINDING_COUNT, kRefitTexelBindings);
-  upload_impl(tree, std::span<const Aabb>(world));  // checks the tree; clears instanced_
+  // The tree as bvh::refit leaves it over the placed boxes: refits mark only the nodes above
+  // moved objects, so every node's box must already be its children's union, as a refit on
+  // the host computes it (a tree built or refitted earlier may hold looser boxes).
+  if (const std::string why = bvh::check_flat_structure(tree, n); !why.empty())
+    throw std::invalid_argument("BvhCuller::upload: " + why);
+  // The instances' own buffers first: a failure here leaves the earlier upload as it was.
+  bool unused = false;
+  detail::ensure_buffer(ctx_, meshes_, mesh_bytes, kTexel, "mesh volume buffer", unused);
+  detail::ensure_buffer(ctx_, place_list_, list_bytes, kTexel, "placing list buffer", unused);
+  detail::ensure_buffer(ctx_, refit_order_, order_bytes, kTexel, "BVH refitting order buffer", unused);
+  bvh::FlatTree tight = tree;
+  bvh::refit(tight, world);
+  upload_impl(tight, std::span<const Aabb>(world));  // checks the tree; clears instanced_
 
   // The nodes by height (a leaf 0, an inner node one above its higher child), leaves first: a
   // refitting dispatch per height finds its children done by the ones before.
@@ -259,34 +272,54 @@ void BvhCuller::upload(const bvh::FlatTree& tree, const InstanceSet<Aabb>& insta
     if (!tree.nodes[i].leaf) height[i] = 1 + std::max(height[i + 1], height[tree.nodes[i + 1].skip]);
     top = std::max(top, height[i]);
   }
-  std::vector<std::uint32_t> starts(nodes ? top + 2 : 1, 0);
-  std::vector<GpuRefitEntry> order(nodes);
+  // Every node's entry, by height and within a height by index (the depth-first order keeps
+  // a dispatch's reads near each other); each node's parent, and each object's leaf (by its
+  // place in the tree order): update() climbs from the leaves of the moved objects.
+  std::vector<std::uint32_t> starts(nodes ? top + 2 : 1, 0), next;
   for (const std::uint32_t h : height) ++starts[h + 1];
   for (std::size_t h = 1; h < starts.size(); ++h) starts[h] += starts[h - 1];
-  std::vector<std::uint32_t> next(starts.begin(), starts.end() - 1);
+  next.assign(starts.begin(), starts.end() - 1);
+  std::vector<GpuRefitEntry> order(nodes);
+  std::vector<std::uint32_t> parents(nodes, bvh::kNone), leaf_at(n, 0);
   for (std::size_t i = 0; i < nodes; ++i) {
     const bvh::FlatNode& node = tree.nodes[i];
-    order[next[height[i]]++] = node.leaf
-                                   ? GpuRefitEntry{std::uint32_t(i), node.first, node.count, 0}
-                                   : GpuRefitEntry{std::uint32_t(i), std::uint32_t(i + 1), tree.nodes[i + 1].skip, 0};
+    if (node.leaf) {
+      order[next[height[i]]++] = GpuRefitEntry{std::uint32_t(i), node.first, node.count, 0};
+      for (std::uint32_t k = node.first; k < node.first + node.count; ++k) leaf_at[k] = std::uint32_t(i);
+    } else {
+      const std::uint32_t second = tree.nodes[i + 1].skip;
+      order[next[height[i]]++] = GpuRefitEntry{std::uint32_t(i), std::uint32_t(i + 1), second, 0};
+      parents[i + 1] = parents[second] = std::uint32_t(i);
+    }
   }
-  bool unused = false;
-  detail::ensure_buffer(ctx_, meshes_, mesh_bytes, kTexel, "mesh volume buffer", unused);
-  detail::ensure_buffer(ctx_, place_list_, list_bytes, kTexel, "placing list buffer", unused);
-  detail::ensure_buffer(ctx_, refit_order_, order_bytes, kTexel, "BVH refitting order buffer", unused);
   if (mesh_bytes) std::memcpy(meshes_.data(), words.data(), mesh_bytes);
-  if (nodes) std::memcpy(refit_order_.data(), order.data(), order_bytes);
-  const vulkan::Buffer* const place[PLACE_BINDING_COUNT] = {&place_list_, &meshes_, &bounds_, &centres_};
-  place_resources_->write(place);
-  const vulkan::Buffer* const refit[REFIT_BINDING_COUNT] = {&nodes_, &nodes_, &bounds_, &refit_order_};
-  refit_resources_->write(refit);
+  // This upload's bytes of each buffer (one kept from a larger scene may pass a binding's limit
+  // whole).
+  using Range = detail::PassResources::Range;
+  const VkDeviceSize bound_bytes = VkDeviceSize(n) * sizeof(GpuAabb), centre_bytes = VkDeviceSize(n) * 16,
+                     node_bytes = VkDeviceSize(nodes) * sizeof(GpuBvhNode);
+  auto part = [](const vulkan::Buffer& b, VkDeviceSize bytes) {
+    return Range{&b, 0, std::max<VkDeviceSize>(detail::kTexelBytes, std::min(b.size(), bytes))};
+  };
+  const Range place[PLACE_BINDING_COUNT] = {part(place_list_, list_bytes), part(meshes_, mesh_bytes),
+                                            part(bounds_, bound_bytes), part(centres_, centre_bytes)};
+  place_resources_->write(0, place);
+  const Range refit[REFIT_BINDING_COUNT] = {part(nodes_, node_bytes), part(nodes_, node_bytes),
+                                            part(bounds_, bound_bytes), part(refit_order_, order_bytes)};
+  refit_resources_->write(0, refit);
 
   position_.assign(n, 0);
   for (std::size_t k = 0; k < n; ++k) position_[tree.objects[k]] = std::uint32_t(k);
   queued_.assign(n, bvh::kNone);
   pending_.clear();
   mesh_words_ = words;
-  height_starts_ = std::move(starts);
+  refit_order_host_ = std::move(order);
+  refit_starts_ = std::move(starts);
+  refit_parents_ = std::move(parents);
+  leaf_at_ = std::move(leaf_at);
+  stale_.assign(nodes, 0);
+  stale_count_ = 0;
+  order_is_full_ = false;
   instanced_ = true;
 }
 
@@ -309,42 +342,75 @@ void BvhCuller::update(const InstanceSet<Aabb>& instances, std::span<const std::
     } else {
       pending_[queued_[at]] = entry;  // placed once, as it is now
     }
+    // Its leaf and the leaf's ancestors are refitted, each once: the climb stops at a node
+    // already marked, whose ancestors are.
+    for (std::uint32_t node = leaf_at_[at]; node != bvh::kNone && !stale_[node]; node = refit_parents_[node]) {
+      stale_[node] = 1;
+      ++stale_count_;
+    }
   }
 }
 
 void BvhCuller::take_placements() {
   placing_ = pending_.size();
   if (placing_ == 0) return;
+  // Copied for the pass; the queue and the marks stay until it is recorded (record_refit), so a
+  // pass that fails before that leaves them for the next.
   std::memcpy(place_list_.data(), pending_.data(), placing_ * sizeof(GpuInstance));
-  for (const GpuInstance& e : pending_) queued_[e.info.z] = bvh::kNone;
-  pending_.clear();
+  // The marked nodes' entries, by height, leaves first, in the order's own order. Past three
+  // quarters of the nodes the whole order is refitted instead, written once and kept: picking
+  // the marked ones out saved less than the scan cost (bench/NOTES.md, Moving instances).
+  GpuRefitEntry* out = refit_order_.as<GpuRefitEntry>().data();
+  refit_ranges_.clear();
+  const std::size_t heights = refit_starts_.size() - 1;
+  if (4 * stale_count_ > 3 * refit_order_host_.size()) {
+    if (!order_is_full_) std::memcpy(out, refit_order_host_.data(), refit_order_host_.size() * sizeof(GpuRefitEntry));
+    order_is_full_ = true;
+    for (std::size_t h = 0; h < heights; ++h) refit_ranges_.push_back({refit_starts_[h], refit_starts_[h + 1], h == 0});
+    return;
+  }
+  order_is_full_ = false;
+  std::uint32_t written = 0;
+  for (std::size_t h = 0; h < heights; ++h) {
+    const std::uint32_t begin = written;
+    for (std::uint32_t k = refit_starts_[h]; k < refit_starts_[h + 1]; ++k)
+      if (stale_[refit_order_host_[k].node]) out[written++] = refit_order_host_[k];
+    if (written > begin) refit_ranges_.push_back({begin, written, h == 0});
+  }
 }
 
-void BvhCuller::record_refit(VkCommandBuffer cmd) {
+void BvhCuller::record_refit(VkCommandBuffer cmd, VkQueryPool timestamps) {
   if (placing_ == 0) return;
   const VkPhysicalDeviceLimits& limits = ctx_.properties().limits;
   const std::uint32_t max_groups =
       max_groups_x_ ? std::min(max_groups_x_, limits.maxComputeWorkGroupCount[0]) : limits.maxComputeWorkGroupCount[0];
   detail::record_placing(cmd, *place_pipeline_, place_resources_->set(), placing_, max_groups);
+  if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, timestamps, 0);
   const VkDescriptorSet set = refit_resources_->set();
   const std::uint64_t per_dispatch = std::uint64_t(max_groups) * REFIT_GROUP_SIZE;
-  for (std::size_t h = 0; h + 1 < height_starts_.size(); ++h) {
-    // Height 0 holds the leaves, every other height inner nodes: the pipeline changes once.
-    const vulkan::ComputePipeline& refit = *refit_pipelines_[h == 0 ? 0 : 1];
-    if (h <= 1) {
+  const vulkan::ComputePipeline* bound = nullptr;
+  for (const RefitRange& range : refit_ranges_) {
+    const vulkan::ComputePipeline& refit = *refit_pipelines_[range.leaves ? 0 : 1];
+    if (bound != &refit) {
       vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, refit.pipeline());
       vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, refit.layout(), 0, 1, &set, 0, nullptr);
+      bound = &refit;
     }
-    const std::uint32_t begin = height_starts_[h], end = height_starts_[h + 1];
-    for (std::uint64_t first = begin; first < end; first += per_dispatch) {
-      const std::uint64_t count = std::min<std::uint64_t>(per_dispatch, end - first);
+    for (std::uint64_t first = range.begin; first < range.end; first += per_dispatch) {
+      const std::uint64_t count = std::min<std::uint64_t>(per_dispatch, range.end - first);
       const RefitParams params{std::uint32_t(first), std::uint32_t(count)};
       vkCmdPushConstants(cmd, refit.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
       vkCmdDispatch(cmd, vulkan::group_count(count, REFIT_GROUP_SIZE), 1, 1);
     }
     detail::record_compute_to_compute(cmd);  // the next height, and the culling, read these boxes
   }
+  if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps, 1);
+  // Recorded: the next pass places and refits only what is sent from now on.
   placing_ = 0;
+  for (const GpuInstance& e : pending_) queued_[e.info.z] = bvh::kNone;
+  pending_.clear();
+  std::fill(stale_.begin(), stale_.end(), std::uint8_t{0});
+  stale_count_ = 0;
 }
 
 CullTimings BvhCuller::refit() {
@@ -354,9 +420,7 @@ CullTimings BvhCuller::refit() {
   CullTimings t;
   t.gpu_ns = resources_->run([&](VkCommandBuffer cmd, VkQueryPool timestamps) {
     detail::record_entry_barrier(ctx_, cmd);
-    if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, timestamps, 0);
-    record_refit(cmd);
-    if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps, 1);
+    record_refit(cmd, timestamps);
     detail::record_exit_barrier(ctx_, cmd);
   });
   t.wall_ns =

@@ -55,9 +55,10 @@ class BvhCuller {
   /// The same for OBBs or spheres; the tree's boxes must enclose bvh::enclosing_box of each.
   void upload(const bvh::FlatTree& tree, std::span<const Obb> obbs);
   void upload(const bvh::FlatTree& tree, std::span<const Sphere> spheres);
-  /// A tree over moving boxes: uploads `tree` (flattened over instances.world_volumes(), as
-  /// bvh::flatten lays it out; its object ids are the set's slots) with the set's meshes and
-  /// instances, and culls their world boxes as upload(tree, world boxes) would. From then on
+  /// A tree over moving boxes: uploads `tree` (as bvh::flatten lays it out; its object ids are
+  /// the set's slots) with the set's meshes and instances, its node boxes refitted on the host
+  /// to instances.world_volumes() (whatever boxes it came with), and culls their world boxes as
+  /// upload(refitted tree, world boxes) would. From then on
   /// update() sends only the objects that moved, and the next pass first places them on the
   /// device (the placing pass GpuCuller runs, bit for bit InstanceSet::world_volumes), then
   /// refits the tree's boxes there from the leaves up (shaders/refit_bvh.comp, a dispatch per
@@ -65,20 +66,22 @@ class BvhCuller {
   /// the host while the tree's topology stays. Its classes equal bvh::cull_hierarchical's on
   /// the refitted tree and the set's world volumes, object by object. A tree whose quality has
   /// worn down (bvh::DynamicTree decides when, on the host) or a set whose size changed is
-  /// uploaded again. Throws as upload(tree, boxes) does, and std::invalid_argument for sets
-  /// InstanceSet::world_volumes refuses.
+  /// uploaded again. Throws as upload(tree, boxes) does for a tree whose links, ranges or ids
+  /// are not flatten's (before anything changes).
   void upload(const bvh::FlatTree& tree, const InstanceSet<Aabb>& instances);
   /// Sends what moved in the set uploaded last: the transforms and mesh indices of `slots`
   /// (InstanceSet::changed_slots(), ascending). Updates that no pass has placed yet merge, each
-  /// object placed once. Throws std::invalid_argument, sending nothing, when no set was uploaded,
-  /// its size or meshes changed (upload a tree over it again), or a slot is out of order or
-  /// range.
+  /// object placed once. Only their leaves and the leaves' ancestors are refitted (marked here,
+  /// climbing until a node already marked): a refit costs what moved, not the whole tree. Throws std::invalid_argument,
+  /// sending nothing, when no set was uploaded, its size or meshes changed (upload a tree over it again), or a slot is
+  /// out of order or range.
   void update(const InstanceSet<Aabb>& instances, std::span<const std::uint32_t> slots);
   /// Objects the next pass (or refit()) places and refits the tree for.
   std::size_t pending_placements() const { return pending_.size(); }
   /// Places and refits what update() sent, submits and waits, without culling (record() does the
-  /// same before it culls). Its times: the GPU's between timestamps around placing and refitting,
-  /// and the wall time of recording, submission and waiting (both 0 when nothing was pending).
+  /// same before it culls). Its times: the GPU's between timestamps around the refit alone (after
+  /// the placing), and the wall time of recording, submission and waiting (both 0 when nothing
+  /// was pending).
   CullTimings refit();
   /// The tree's node boxes as the device holds them, depth first: after a pass or refit() has
   /// completed, the boxes the last refit wrote (a host tree's quality can be measured on them).
@@ -153,8 +156,9 @@ class BvhCuller {
   template <class Volume>
   void upload_impl(const bvh::FlatTree& tree, std::span<const Volume> volumes);
   void update_descriptors();
-  void take_placements();                  // the pending placements into the list, for this pass
-  void record_refit(VkCommandBuffer cmd);  // places and refits what take_placements() took
+  void take_placements();  // the pending placements into the list, for this pass
+  // Places and refits what take_placements() took; timestamps 0 and 1 around the refit alone.
+  void record_refit(VkCommandBuffer cmd, VkQueryPool timestamps = VK_NULL_HANDLE);
 
   const vulkan::Context& ctx_;
   std::uint32_t group_size_ = BVH_CULL_GROUP_SIZE;  // the device's subgroup size, at most this
@@ -175,10 +179,22 @@ class BvhCuller {
   std::uint64_t written_pyramid_ = ~std::uint64_t{0}, pyramid_generation_ = 0;
   // Instances (upload(tree, instances)): the meshes' words (to recognise the set), each slot's
   // place in the tree order, the placements no pass has taken (and where each position's is,
-  // kNone if nowhere), where each height starts in the refitting order, and the two passes.
+  // kNone if nowhere). For the refit: every node's entry by height, each node's parent, each
+  // position's leaf, the nodes marked for the next refit, and the runs of the device's order
+  // the pass being recorded refits (one height each); and the two passes.
   bool instanced_ = false;
-  std::vector<std::uint32_t> mesh_words_, position_, queued_, height_starts_;
+  std::vector<std::uint32_t> mesh_words_, position_, queued_;
   std::vector<GpuInstance> pending_;
+  std::vector<GpuRefitEntry> refit_order_host_;                        // every node, by height
+  std::vector<std::uint32_t> refit_starts_, refit_parents_, leaf_at_;  // each height's start in it
+  std::vector<std::uint8_t> stale_;
+  std::size_t stale_count_ = 0;
+  bool order_is_full_ = false;  // refit_order_ holds the whole order (not a marked part)
+  struct RefitRange {
+    std::uint32_t begin, end;
+    bool leaves;
+  };
+  std::vector<RefitRange> refit_ranges_;
   std::size_t placing_ = 0;  // list entries the pass being recorded places
   vulkan::Buffer meshes_, place_list_, refit_order_;
   std::unique_ptr<vulkan::ComputePipeline> place_pipeline_, refit_pipelines_[2];  // refitting: leaves, inner nodes

@@ -98,7 +98,7 @@ struct PlaceParams {
 CP_CONST REFIT_BINDING_NODES = 0u;       // GpuBvhNode per node (BVH_BINDING_NODES' buffer), read
 CP_CONST REFIT_BINDING_NODE_WORDS = 1u;  // the same buffer, storage: the boxes written
 CP_CONST REFIT_BINDING_BOUNDS = 2u;      // the objects' boxes in tree order (BINDING_BOUNDS' buffer, GpuAabb)
-CP_CONST REFIT_BINDING_ORDER = 3u;       // GpuRefitEntry per node, by height, leaves first
+CP_CONST REFIT_BINDING_ORDER = 3u;       // GpuRefitEntry per node to refit, by height, leaves first
 CP_CONST REFIT_BINDING_COUNT = 4u;
 CP_CONST REFIT_GROUP_SIZE = 64u;
 
