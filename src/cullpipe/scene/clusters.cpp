@@ -1,0 +1,158 @@
+#include "cullpipe/scene/clusters.hpp"
+
+#include <meshoptimizer.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+#include "cullpipe/geom/rounding.hpp"
+
+namespace cullpipe {
+
+namespace {
+
+std::string where(std::string_view name) { return "build_clusters: " + std::string(name) + ": "; }
+
+// The smallest float radius, from meshoptimizer's, that encloses every vertex about the float
+// centre as measured in double (the sum of three squares of float differences is exact to
+// 2^-50, and the square root then rounds once in double): meshoptimizer computes its sphere in
+// float and does not promise enclosure to the last bit.
+float enclosing_radius(const glm::vec3& centre, float radius, std::span<const glm::vec3> points) {
+  double needed = 0.0;
+  for (const glm::vec3& p : points) {
+    const double dx = double(p.x) - centre.x, dy = double(p.y) - centre.y, dz = double(p.z) - centre.z;
+    needed = std::max(needed, std::sqrt(dx * dx + dy * dy + dz * dz));
+  }
+  return std::max(radius, float_above(round_up(needed * (1.0 + 0x1p-50))));
+}
+
+}  // namespace
+
+MeshClusters build_clusters(const TriangleMesh& mesh, const ClusterOptions& options, std::string_view name) {
+  const std::size_t index_count = mesh.indices.size(), vertex_count = mesh.positions.size();
+  if (options.max_vertices < 3 || options.max_vertices > 255)
+    throw std::invalid_argument(where(name) + "max_vertices " + std::to_string(options.max_vertices) +
+                                " is outside 3..255");
+  if (options.max_triangles < 1 || options.max_triangles > 512 || options.max_triangles % 4 != 0)
+    throw std::invalid_argument(where(name) + "max_triangles " + std::to_string(options.max_triangles) +
+                                " is not a multiple of 4 in 4..512");
+  if (!(options.cone_weight >= 0.0f && options.cone_weight <= 1.0f))
+    throw std::invalid_argument(where(name) + "cone_weight " + std::to_string(options.cone_weight) +
+                                " is outside 0..1");
+  if (index_count == 0) throw std::invalid_argument(where(name) + "has no triangles");
+  if (index_count % 3 != 0)
+    throw std::invalid_argument(where(name) + std::to_string(index_count) + " indices, not a multiple of 3");
+  if (index_count > std::numeric_limits<std::uint32_t>::max())
+    throw std::invalid_argument(where(name) + std::to_string(index_count) + " indices, more than 2^32 - 1");
+  for (std::size_t k = 0; k < index_count; ++k)
+    if (mesh.indices[k] >= vertex_count)
+      throw std::invalid_argument(where(name) + "index " + std::to_string(k) + " is " +
+                                  std::to_string(mesh.indices[k]) + ", past its " + std::to_string(vertex_count) +
+                                  " vertices");
+  for (std::size_t v = 0; v < vertex_count; ++v)
+    for (int a = 0; a < 3; ++a)
+      if (!std::isfinite(mesh.positions[v][a]))
+        throw std::invalid_argument(where(name) + "vertex " + std::to_string(v) + " is not finite");
+
+  const float* positions = &mesh.positions[0].x;
+  const std::size_t stride = sizeof(glm::vec3);
+  const std::size_t bound = meshopt_buildMeshletsBound(index_count, options.max_vertices, options.max_triangles);
+  std::vector<meshopt_Meshlet> meshlets(bound);
+  std::vector<unsigned int> meshlet_vertices(bound * options.max_vertices);
+  std::vector<unsigned char> meshlet_triangles(bound * options.max_triangles * 3);
+  const std::size_t count = meshopt_buildMeshlets(meshlets.data(), meshlet_vertices.data(), meshlet_triangles.data(),
+                                                  mesh.indices.data(), index_count, positions, vertex_count, stride,
+                                                  options.max_vertices, options.max_triangles, options.cone_weight);
+
+  MeshClusters out;
+  out.options = options;
+  out.clusters.reserve(count);
+  out.indices.reserve(index_count);
+  std::vector<glm::vec3> points;
+  for (std::size_t m = 0; m < count; ++m) {
+    const meshopt_Meshlet& ml = meshlets[m];
+    const unsigned int* local = &meshlet_vertices[ml.vertex_offset];
+    const unsigned char* tris = &meshlet_triangles[ml.triangle_offset];
+    Cluster c;
+    c.first_index = static_cast<std::uint32_t>(out.indices.size());
+    c.index_count = ml.triangle_count * 3;
+    c.vertex_count = ml.vertex_count;
+    for (std::size_t k = 0; k < std::size_t(ml.triangle_count) * 3; ++k) out.indices.push_back(local[tris[k]]);
+    points.clear();
+    c.box = {glm::vec3(std::numeric_limits<float>::infinity()), glm::vec3(-std::numeric_limits<float>::infinity())};
+    for (std::size_t v = 0; v < ml.vertex_count; ++v) {
+      const glm::vec3& p = mesh.positions[local[v]];
+      points.push_back(p);
+      c.box.min = glm::min(c.box.min, p);
+      c.box.max = glm::max(c.box.max, p);
+    }
+    const meshopt_Bounds b =
+        meshopt_computeMeshletBounds(local, tris, ml.triangle_count, positions, vertex_count, stride);
+    c.sphere.center = glm::vec3(b.center[0], b.center[1], b.center[2]);
+    c.sphere.radius = enclosing_radius(c.sphere.center, b.radius, points);
+    c.cone_apex = glm::vec3(b.cone_apex[0], b.cone_apex[1], b.cone_apex[2]);
+    c.cone_axis = glm::vec3(b.cone_axis[0], b.cone_axis[1], b.cone_axis[2]);
+    c.cone_cutoff = b.cone_cutoff;
+    out.clusters.push_back(c);
+  }
+  return out;
+}
+
+std::string check_clusters(const MeshClusters& clusters, const TriangleMesh& mesh) {
+  const std::size_t triangles = mesh.indices.size() / 3;
+  if (clusters.indices.size() != mesh.indices.size())
+    return std::to_string(clusters.indices.size()) + " cluster indices for " + std::to_string(mesh.indices.size()) +
+           " mesh indices";
+  // Each triangle as its corners rotated to start at the smallest index (winding kept), sorted:
+  // the clusters' triangles must be the mesh's, each once.
+  auto canonical = [](std::span<const std::uint32_t> idx) {
+    std::vector<std::array<std::uint32_t, 3>> t(idx.size() / 3);
+    for (std::size_t k = 0; k < t.size(); ++k) {
+      std::array<std::uint32_t, 3> a{idx[3 * k], idx[3 * k + 1], idx[3 * k + 2]};
+      const std::size_t low = std::size_t(std::min_element(a.begin(), a.end()) - a.begin());
+      std::rotate(a.begin(), a.begin() + std::ptrdiff_t(low), a.end());
+      t[k] = a;
+    }
+    std::sort(t.begin(), t.end());
+    return t;
+  };
+  if (canonical(clusters.indices) != canonical(mesh.indices))
+    return "the clusters' triangles are not the mesh's " + std::to_string(triangles) + " triangles with their winding";
+  std::uint32_t next = 0;
+  for (std::size_t c = 0; c < clusters.clusters.size(); ++c) {
+    const Cluster& cl = clusters.clusters[c];
+    const std::string at = "cluster " + std::to_string(c) + ": ";
+    if (cl.first_index != next || cl.index_count == 0 || cl.index_count % 3 != 0)
+      return at + "index range " + std::to_string(cl.first_index) + "+" + std::to_string(cl.index_count) +
+             " does not follow the one before";
+    next += cl.index_count;
+    if (next > clusters.indices.size()) return at + "index range past the indices";
+    if (cl.index_count / 3 > clusters.options.max_triangles || cl.vertex_count > clusters.options.max_vertices)
+      return at + std::to_string(cl.index_count / 3) + " triangles and " + std::to_string(cl.vertex_count) +
+             " vertices, past the options";
+    std::vector<std::uint32_t> used(clusters.indices.begin() + cl.first_index,
+                                    clusters.indices.begin() + cl.first_index + cl.index_count);
+    std::sort(used.begin(), used.end());
+    used.erase(std::unique(used.begin(), used.end()), used.end());
+    if (used.size() != cl.vertex_count)
+      return at + std::to_string(used.size()) + " distinct vertices, " + std::to_string(cl.vertex_count) + " counted";
+    for (const std::uint32_t v : used) {
+      const glm::vec3& p = mesh.positions[v];
+      for (int a = 0; a < 3; ++a)
+        if (!(cl.box.min[a] <= p[a] && p[a] <= cl.box.max[a]))
+          return at + "box does not enclose vertex " + std::to_string(v);
+      const double dx = double(p.x) - cl.sphere.center.x, dy = double(p.y) - cl.sphere.center.y,
+                   dz = double(p.z) - cl.sphere.center.z;
+      if (!(std::sqrt(dx * dx + dy * dy + dz * dz) <= double(cl.sphere.radius)))
+        return at + "sphere does not enclose vertex " + std::to_string(v);
+    }
+  }
+  if (next != clusters.indices.size()) return "the clusters cover " + std::to_string(next) + " of the indices";
+  return "";
+}
+
+}  // namespace cullpipe
