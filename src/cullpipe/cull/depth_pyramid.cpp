@@ -1,5 +1,6 @@
 #include "cullpipe/cull/depth_pyramid.hpp"
 
+#include <bit>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -66,6 +67,35 @@ DepthPyramid build_depth_pyramid(std::span<const float> depth, std::uint32_t wid
     }
   }
   return p;
+}
+
+namespace {
+
+// The float k steps away from zero (a positive x: up; a negative one: down), on the bits.
+float away_from_zero(float x, std::uint32_t k) { return std::bit_cast<float>(std::bit_cast<std::uint32_t>(x) + k); }
+// The float k steps towards zero from a positive x.
+float towards_zero(float x, std::uint32_t k) { return std::bit_cast<float>(std::bit_cast<std::uint32_t>(x) - k); }
+
+}  // namespace
+
+float unorm_depth_float(std::uint32_t q, unsigned bits, bool reversed_z) {
+  if (bits != 16 && bits != 24)
+    throw std::invalid_argument("unorm depth of " + std::to_string(bits) + " bits (16 or 24 are supported)");
+  const std::uint32_t n = (1u << bits) - 1u;
+  q &= n;
+  const float step = static_cast<float>(1.0 / double(n));                        // fl(1/N); the shader gets these bits
+  if (!reversed_z) return away_from_zero(static_cast<float>(q + 1u) * step, 3);  // >= (q + 1) / N
+  if (q == 0) return -away_from_zero(step, 3);                                   // <= -1 / N
+  if (q == 1) return 0.0f;                                                       // (q - 1) / N, exactly
+  return towards_zero(static_cast<float>(q - 1u) * step, 3);                     // <= (q - 1) / N
+}
+
+DepthPyramid build_unorm_depth_pyramid(std::span<const std::uint32_t> depth, unsigned bits, std::uint32_t width,
+                                       std::uint32_t height, bool reversed_z) {
+  unorm_depth_float(0, bits, reversed_z);  // (checks bits)
+  std::vector<float> floats(depth.size());
+  for (std::size_t i = 0; i < depth.size(); ++i) floats[i] = unorm_depth_float(depth[i], bits, reversed_z);
+  return build_depth_pyramid(floats, width, height, reversed_z);
 }
 
 }  // namespace cullpipe::occlusion

@@ -55,4 +55,18 @@ struct DepthPyramid {
 DepthPyramid build_depth_pyramid(std::span<const float> depth, std::uint32_t width, std::uint32_t height,
                                  bool reversed_z);
 
+/// Depth stored as unsigned normalised integers of `bits` bits (16: D16_UNORM; 24: the depth of
+/// X8_D24_UNORM_PACK32 and D24_UNORM_S8_UINT), value q meaning q / (2^bits - 1). A fragment's
+/// depth is converted to that format before its depth test, so a stored q lets through every
+/// fragment whose depth converts to q or nearer: up to (q + 1) / N with N = 2^bits - 1 (q - 1
+/// under reversed-Z), the conversion rounding by at most one step. unorm_depth_float gives the
+/// float a pyramid keeps for q: that bound, rounded outward (the product (q +- 1) fl(1/N), then
+/// three float steps farther; docs/numerics.md, Depth pyramids), in float operations the GPU
+/// repeats bit for bit. Throws std::invalid_argument for bits other than 16 or 24.
+float unorm_depth_float(std::uint32_t q, unsigned bits, bool reversed_z);
+/// build_depth_pyramid of unorm depth: every value through unorm_depth_float first (values past
+/// `bits` bits are masked off, as the high byte of a 24-bit depth copy is undefined).
+DepthPyramid build_unorm_depth_pyramid(std::span<const std::uint32_t> depth, unsigned bits, std::uint32_t width,
+                                       std::uint32_t height, bool reversed_z);
+
 }  // namespace cullpipe::occlusion

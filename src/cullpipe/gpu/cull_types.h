@@ -283,6 +283,14 @@ CP_CONST OCCLUSION_VIEW_TEXELS = 21u;
 
 // Push constants of depth_pyramid.comp: one level from the level below it, both in one float
 // array (occlusion::pyramid_levels gives the offsets, in floats).
+// Push constants of the pass that fills level 0 from unorm depth (depth_unorm.comp).
+struct PyramidUnormParams {
+  uint count;       // texels
+  uint bits;        // 16 or 24
+  uint reversed_z;  // 1: the farthest depth is the smallest
+  uint step_bits;   // the bits of fl(1 / (2^bits - 1))
+};
+
 struct PyramidReduceParams {
   uint source_offset;
   uint source_width;

@@ -1,6 +1,7 @@
 #include "cullpipe/gpu/depth_pyramid_pass.hpp"
 
 #include <atomic>
+#include <bit>
 #include <cstring>
 #include <stdexcept>
 
@@ -11,6 +12,7 @@
 
 // SPIR-V of shaders/depth_pyramid.comp, compiled at build time.
 #include "depth_pyramid.spv.h"
+#include "depth_unorm.spv.h"
 
 namespace cullpipe::gpu {
 
@@ -39,7 +41,16 @@ std::string format_name(VkFormat f) {
   }
 }
 
-bool has_stencil(VkFormat f) { return f == VK_FORMAT_D32_SFLOAT_S8_UINT; }
+bool has_stencil(VkFormat f) {
+  return f == VK_FORMAT_D32_SFLOAT_S8_UINT || f == VK_FORMAT_D24_UNORM_S8_UINT || f == VK_FORMAT_D16_UNORM_S8_UINT;
+}
+
+// Bits of a unorm depth format's depth, 0 for float depth.
+unsigned unorm_bits(VkFormat f) {
+  if (f == VK_FORMAT_D16_UNORM || f == VK_FORMAT_D16_UNORM_S8_UINT) return 16;
+  if (f == VK_FORMAT_X8_D24_UNORM_PACK32 || f == VK_FORMAT_D24_UNORM_S8_UINT) return 24;
+  return 0;
+}
 
 /// The stages and accesses of depth writes before the pass (and depth tests after it), on a
 /// queue with graphics; on a compute-only queue, all commands and memory writes.
@@ -60,10 +71,11 @@ void depth_stages(const vulkan::Context& ctx, VkPipelineStageFlags& stages, VkAc
 
 std::string depth_source_problem(const DepthSource& s) {
   if (s.image == VK_NULL_HANDLE) return "no image";
-  if (s.format != VK_FORMAT_D32_SFLOAT && s.format != VK_FORMAT_D32_SFLOAT_S8_UINT)
+  if (s.format != VK_FORMAT_D32_SFLOAT && s.format != VK_FORMAT_D32_SFLOAT_S8_UINT && unorm_bits(s.format) == 0)
     return "depth format " + format_name(s.format) +
-           " is not supported (VK_FORMAT_D32_SFLOAT or VK_FORMAT_D32_SFLOAT_S8_UINT: the pyramid keeps the stored "
-           "floats)";
+           " is not supported (a depth format: VK_FORMAT_D32_SFLOAT, VK_FORMAT_D32_SFLOAT_S8_UINT, "
+           "VK_FORMAT_D16_UNORM, "
+           "VK_FORMAT_D16_UNORM_S8_UINT, VK_FORMAT_X8_D24_UNORM_PACK32 or VK_FORMAT_D24_UNORM_S8_UINT)";
   if (s.layout == VK_IMAGE_LAYOUT_UNDEFINED || s.layout == VK_IMAGE_LAYOUT_PREINITIALIZED)
     return "the depth image's layout is undefined: it holds no depth to reduce";
   if (s.width == 0 || s.height == 0 || s.width > occlusion::kMaxViewportSide || s.height > occlusion::kMaxViewportSide)
@@ -110,11 +122,33 @@ void DepthPyramidPass::resize(std::uint32_t width, std::uint32_t height) {
   height_ = height;
 }
 
+void DepthPyramidPass::prepare_unorm(unsigned bits) {
+  const VkDeviceSize pixels = VkDeviceSize(width_) * height_,
+                     bytes = (bits == 16 ? (pixels + 1) / 2 : pixels) * sizeof(std::uint32_t);
+  const std::string what = "unorm depth of a " + std::to_string(width_) + "x" + std::to_string(height_) + " image";
+  detail::check_storage_range(ctx_, bytes, what);
+  if (!unorm_pipeline_) {
+    auto pipeline = std::make_unique<vulkan::ComputePipeline>(
+        ctx_, vulkan::ComputePipelineDesc{
+                  cullpipe_depth_unorm_spv, 2, sizeof(PyramidUnormParams), {}, "depth pyramid (unorm depth)"});
+    unorm_resources_ = std::make_unique<detail::PassResources>(ctx_, pipeline->set_layout(), 2);
+    unorm_pipeline_ = std::move(pipeline);
+  }
+  detail::ensure_buffer(ctx_, raw_, bytes, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                        "unorm depth buffer", unorm_descriptors_dirty_);
+  if (unorm_descriptors_dirty_ || unorm_generation_ != generation_) {
+    const vulkan::Buffer* bound[2] = {&texels_, &raw_};
+    unorm_resources_->write(bound);
+    unorm_descriptors_dirty_ = false;
+    unorm_generation_ = generation_;
+  }
+}
+
 void DepthPyramidPass::record(VkCommandBuffer cmd, const DepthSource& source, bool reversed_z) {
   if (const std::string why = depth_source_problem(source); !why.empty())
     throw std::invalid_argument("depth pyramid: " + why);
   resize(source.width, source.height);
-
+  if (unorm_bits(source.format)) prepare_unorm(unorm_bits(source.format));
   VkPipelineStageFlags depth_stage;
   VkAccessFlags depth_writes, depth_reads;
   depth_stages(ctx_, depth_stage, depth_writes, depth_reads);
@@ -138,7 +172,10 @@ void DepthPyramidPass::record(VkCommandBuffer cmd, const DepthSource& source, bo
   VkBufferImageCopy copy{};
   copy.imageSubresource = {VK_IMAGE_ASPECT_DEPTH_BIT, 0, 0, 1};
   copy.imageExtent = {source.width, source.height, 1};
-  vkCmdCopyImageToBuffer(cmd, source.image, copy_layout, texels_.handle(), 1, &copy);
+  const unsigned bits = unorm_bits(source.format);
+  // Float depth is level 0 as it is; unorm depth (16 bits packed two to a word, 24 in a word
+  // each) goes to the raw buffer first.
+  vkCmdCopyImageToBuffer(cmd, source.image, copy_layout, bits ? raw_.handle() : texels_.handle(), 1, &copy);
   if (move) {
     image.srcAccessMask = VK_ACCESS_TRANSFER_READ_BIT;
     image.dstAccessMask = depth_reads;
@@ -147,7 +184,18 @@ void DepthPyramidPass::record(VkCommandBuffer cmd, const DepthSource& source, bo
     vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, depth_stage, 0, 0, nullptr, 0, nullptr, 1, &image);
   }
   detail::record_transfer_to_compute(cmd);
-
+  if (bits) {
+    const std::uint32_t count = source.width * source.height;
+    const PyramidUnormParams params{count, bits, reversed_z ? 1u : 0u,
+                                    std::bit_cast<std::uint32_t>(static_cast<float>(1.0 / double((1u << bits) - 1u)))};
+    vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, unorm_pipeline_->pipeline());
+    const VkDescriptorSet unorm_set = unorm_resources_->set();
+    vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, unorm_pipeline_->layout(), 0, 1, &unorm_set, 0,
+                            nullptr);
+    vkCmdPushConstants(cmd, unorm_pipeline_->layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
+    vkCmdDispatch(cmd, vulkan::group_count(count, 64), 1, 1);
+    detail::record_compute_to_compute(cmd);
+  }
   vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_->pipeline());
   const VkDescriptorSet set = resources_->set();
   vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_->layout(), 0, 1, &set, 0, nullptr);

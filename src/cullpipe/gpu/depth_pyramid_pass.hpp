@@ -1,7 +1,8 @@
 #pragma once
-// The depth pyramid on the GPU: copies a depth image into level 0 of one float buffer and
-// reduces it level by level (shaders/depth_pyramid.comp), giving the bits
-// occlusion::build_depth_pyramid gives on the CPU.
+// The depth pyramid on the GPU: copies a depth image into level 0 of one float buffer (unorm
+// depth through a conversion pass, shaders/depth_unorm.comp) and reduces it level by level
+// (shaders/depth_pyramid.comp), giving the bits occlusion::build_depth_pyramid (or
+// build_unorm_depth_pyramid) gives on the CPU.
 #include <vulkan/vulkan.h>
 
 #include <cstdint>
@@ -29,7 +30,11 @@ class PassResources;
 struct DepthSource {
   VkImage image = VK_NULL_HANDLE;
   VkImageLayout layout = VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL;
-  VkFormat format = VK_FORMAT_D32_SFLOAT;  ///< D32_SFLOAT or D32_SFLOAT_S8_UINT; others are refused
+  /// D32_SFLOAT or D32_SFLOAT_S8_UINT (the stored floats kept), or D16_UNORM, D16_UNORM_S8_UINT,
+  /// X8_D24_UNORM_PACK32 or D24_UNORM_S8_UINT (each value q kept as
+  /// occlusion::unorm_depth_float(q): the farthest depth a fragment it lets through can have,
+  /// rounded outward); others are refused by name.
+  VkFormat format = VK_FORMAT_D32_SFLOAT;
   std::uint32_t width = 0, height = 0;
 };
 
@@ -82,6 +87,13 @@ class DepthPyramidPass {
   std::unique_ptr<vulkan::ComputePipeline> pipeline_;
   std::unique_ptr<detail::PassResources> resources_;
   vulkan::Buffer texels_;
+  // Unorm depth: the copied integers, and the pass that turns them into level 0 (made on first use).
+  vulkan::Buffer raw_;
+  std::unique_ptr<vulkan::ComputePipeline> unorm_pipeline_;
+  std::unique_ptr<detail::PassResources> unorm_resources_;
+  bool unorm_descriptors_dirty_ = true;
+  std::uint64_t unorm_generation_ = 0;  // the texels' generation its descriptor set holds
+  void prepare_unorm(unsigned bits);    // the raw buffer, pipeline and set for unorm depth
   std::vector<occlusion::PyramidLevel> levels_;
   std::uint32_t width_ = 0, height_ = 0;
   double last_gpu_ns_ = 0.0;
