@@ -109,7 +109,7 @@ Row run(vulkan::Context& ctx, const Scene& scene, const Config& config) {
   set.world_volumes(world, &pool);
   world_culler.upload(std::span<const Volume>(world));
   moved_culler.upload(set);
-  placed_culler.upload(set);
+  if constexpr (!std::is_same_v<Volume, Obb>) placed_culler.upload(set);  // (not run for OBBs, see below)
   constexpr bool kTree = std::is_same_v<Volume, Aabb>;
   gpu::BvhCuller tree_culler(ctx);
   if constexpr (kTree) {

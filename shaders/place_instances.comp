@@ -1,8 +1,9 @@
 #version 460
 // Places instances in the world: for each entry of the list (an object's transform, mesh and
-// slot; an OBB's box placed by the host, and its slot), its mesh's local volume under its transform (shared/instance.glsl, bit for bit
+// slot), its mesh's local volume under its transform (shared/instance.glsl, bit for bit
 // src/cullpipe/geom/instance.cpp), written into the bounds buffer the culling passes read at its
-// slot, and for boxes their centre and settling bound. Only the objects that changed are listed,
+// slot, and for boxes their centre and settling bound. An OBB's entry carries its box, placed
+// by the host, which is copied to its slot. Only the objects that changed are listed,
 // each once; the others keep the volumes placed before. The list is read in order and only the
 // outputs are scattered.
 #extension GL_GOOGLE_include_directive : require

@@ -209,21 +209,6 @@ void scan_outside(std::span<const glm::vec3> points, const Ball& b, const Tolera
   }
 }
 
-// The float sphere about `center` that encloses every point: radius = the largest distance,
-// evaluated in double and rounded up to a float.
-Sphere enclosing_sphere(const dvec3& center, std::span<const glm::vec3> points) {
-  Sphere s;
-  s.center = glm::vec3(center);
-  const dvec3 c(s.center);
-  double r2 = 0.0;
-  for (const glm::vec3& p : points) {
-    const dvec3 d = dvec3(p) - c;
-    r2 = std::max(r2, glm::dot(d, d));
-  }
-  s.radius = round_up(std::sqrt(r2));
-  return s;
-}
-
 // Ritter's grow step: the smallest sphere containing the sphere and p.
 void grow(dvec3& c, double& r, const dvec3& p) {
   const dvec3 d = p - c;
@@ -236,6 +221,19 @@ void grow(dvec3& c, double& r, const dvec3& p) {
 }
 
 }  // namespace
+
+Sphere enclosing_sphere(const dvec3& center, std::span<const glm::vec3> points) {
+  Sphere s;
+  s.center = glm::vec3(center);
+  const dvec3 c(s.center);
+  double r2 = 0.0;
+  for (const glm::vec3& p : points) {
+    const dvec3 d = dvec3(p) - c;
+    r2 = std::max(r2, glm::dot(d, d));
+  }
+  s.radius = round_up(std::sqrt(r2));
+  return s;
+}
 
 Aabb aabb_of_points(std::span<const glm::vec3> points) {
   check_points(points);

@@ -1,5 +1,6 @@
 #pragma once
 #include <cstdint>
+#include <glm/ext/vector_double3.hpp>
 #include <glm/vec3.hpp>
 #include <span>
 
@@ -15,6 +16,11 @@ namespace cullpipe::bounds {
 
 /// The AABB of the points, in one pass.
 Aabb aabb_of_points(std::span<const glm::vec3> points);
+
+/// The sphere about `center` (rounded to float) that encloses every point: the radius is the
+/// largest distance from the float centre, evaluated in double and rounded up to a float. What
+/// every builder here ends with; for a centre found elsewhere.
+Sphere enclosing_sphere(const glm::dvec3& center, std::span<const glm::vec3> points);
 
 /// Ritter (1990) as usually given (Ericson, Real-Time Collision Detection 4.3.2): seed with the
 /// most separated pair among the six axis-extreme points, then one pass growing the sphere

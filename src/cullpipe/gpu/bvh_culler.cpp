@@ -250,9 +250,7 @@ void BvhCuller::upload(const bvh::FlatTree& tree, const InstanceSet<Aabb>& insta
   if (!refit_resources_)
     refit_resources_ = std::make_unique<detail::PassResources>(ctx_, refit_pipelines_[0]->set_layout(),
                                                                REFIT_BINDING_COUNT, kRefitTexelBindings);
-  // The tree as bvh::refit leaves it over the placed boxes: refits mark only the nodes above
-  // moved objects, so every node's box must already be its children's union, as a refit on
-  // the host computes it (a tree built or refitted earlier may hold looser boxes).
+  // bvh::refit below indexes by the tree's links: they are checked first.
   if (const std::string why = bvh::check_flat_structure(tree, n); !why.empty())
     throw std::invalid_argument("BvhCuller::upload: " + why);
   // The instances' own buffers first: a failure here leaves the earlier upload as it was.
@@ -260,6 +258,9 @@ void BvhCuller::upload(const bvh::FlatTree& tree, const InstanceSet<Aabb>& insta
   detail::ensure_buffer(ctx_, meshes_, mesh_bytes, kTexel, "mesh volume buffer", unused);
   detail::ensure_buffer(ctx_, place_list_, list_bytes, kTexel, "placing list buffer", unused);
   detail::ensure_buffer(ctx_, refit_order_, order_bytes, kTexel, "BVH refitting order buffer", unused);
+  // The tree as bvh::refit leaves it over the placed boxes: refits mark only the nodes above
+  // moved objects, so every node's box must already be its children's union, as a refit on
+  // the host computes it (a tree built or refitted earlier may hold looser boxes).
   bvh::FlatTree tight = tree;
   bvh::refit(tight, world);
   upload_impl(tight, std::span<const Aabb>(world));  // checks the tree; clears instanced_

@@ -58,23 +58,21 @@ class BvhCuller {
   /// A tree over moving boxes: uploads `tree` (as bvh::flatten lays it out; its object ids are
   /// the set's slots) with the set's meshes and instances, its node boxes refitted on the host
   /// to instances.world_volumes() (whatever boxes it came with), and culls their world boxes as
-  /// upload(refitted tree, world boxes) would. From then on
-  /// update() sends only the objects that moved, and the next pass first places them on the
-  /// device (the placing pass GpuCuller runs, bit for bit InstanceSet::world_volumes), then
-  /// refits the tree's boxes there from the leaves up (shaders/refit_bvh.comp, a dispatch per
-  /// height: bvh::refit's boxes bit for bit), then culls: no volume or node box travels from
-  /// the host while the tree's topology stays. Its classes equal bvh::cull_hierarchical's on
-  /// the refitted tree and the set's world volumes, object by object. A tree whose quality has
-  /// worn down (bvh::DynamicTree decides when, on the host) or a set whose size changed is
-  /// uploaded again. Throws as upload(tree, boxes) does for a tree whose links, ranges or ids
-  /// are not flatten's (before anything changes).
+  /// upload(refitted tree, world boxes) would. From then on update() sends only the objects that
+  /// moved, and the next pass first places them on the device (the placing pass GpuCuller runs,
+  /// bit for bit InstanceSet::world_volumes), then refits the nodes above them there from the
+  /// leaves up (shaders/refit_bvh.comp, a dispatch per height: bvh::refit's boxes bit for bit),
+  /// then culls: no volume or node box travels from the host while the tree's topology stays. Its classes equal
+  /// bvh::cull_hierarchical's on the refitted tree and the set's world volumes, object by object. A tree whose quality
+  /// has worn down (bvh::DynamicTree decides when, on the host) or a set whose size changed is uploaded again. Throws
+  /// as upload(tree, boxes) does for a tree whose links, ranges or ids are not flatten's (before anything changes).
   void upload(const bvh::FlatTree& tree, const InstanceSet<Aabb>& instances);
   /// Sends what moved in the set uploaded last: the transforms and mesh indices of `slots`
   /// (InstanceSet::changed_slots(), ascending). Updates that no pass has placed yet merge, each
   /// object placed once. Only their leaves and the leaves' ancestors are refitted (marked here,
-  /// climbing until a node already marked): a refit costs what moved, not the whole tree. Throws std::invalid_argument,
-  /// sending nothing, when no set was uploaded, its size or meshes changed (upload a tree over it again), or a slot is
-  /// out of order or range.
+  /// climbing until a node already marked): a refit costs what moved, not the whole tree.
+  /// Throws std::invalid_argument, sending nothing, when no set was uploaded, its size or meshes
+  /// changed (upload a tree over it again), or a slot is out of order or range.
   void update(const InstanceSet<Aabb>& instances, std::span<const std::uint32_t> slots);
   /// Objects the next pass (or refit()) places and refits the tree for.
   std::size_t pending_placements() const { return pending_.size(); }

@@ -79,7 +79,7 @@ CP_CONST OBB_ENTRY_TEXELS = 5u;
 // The placing pass (place_instances.comp): world volumes of the listed instances, written where
 // the culling passes read them. Uniform texel buffers, except the two outputs.
 CP_CONST PLACE_BINDING_LIST = 0u;     // per object to place: a GpuInstance, or an OBB's OBB_ENTRY_TEXELS
-CP_CONST PLACE_BINDING_MESHES = 1u;   // the meshes' local volumes (GpuAabb or GpuSphere)
+CP_CONST PLACE_BINDING_MESHES = 1u;   // the meshes' local volumes (GpuAabb or GpuSphere; OBB entries need none)
 CP_CONST PLACE_BINDING_BOUNDS = 2u;   // out: vec4 words of the world volumes (BINDING_BOUNDS' buffer)
 CP_CONST PLACE_BINDING_CENTRES = 3u;  // out: AABBs' centre and bound (BINDING_CENTRES' buffer)
 CP_CONST PLACE_BINDING_COUNT = 4u;
@@ -281,8 +281,6 @@ struct GpuOcclusionView {
 };
 CP_CONST OCCLUSION_VIEW_TEXELS = 21u;
 
-// Push constants of depth_pyramid.comp: one level from the level below it, both in one float
-// array (occlusion::pyramid_levels gives the offsets, in floats).
 // Push constants of the pass that fills level 0 from unorm depth (depth_unorm.comp).
 struct PyramidUnormParams {
   uint count;       // texels
@@ -291,6 +289,8 @@ struct PyramidUnormParams {
   uint step_bits;   // the bits of fl(1 / (2^bits - 1))
 };
 
+// Push constants of depth_pyramid.comp: one level from the level below it, both in one float
+// array (occlusion::pyramid_levels gives the offsets, in floats).
 struct PyramidReduceParams {
   uint source_offset;
   uint source_width;

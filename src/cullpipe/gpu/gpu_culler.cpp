@@ -206,12 +206,11 @@ void GpuCuller::upload(std::span<const Sphere> volumes) {
   });
 }
 
-using detail::instance_kind;
 using detail::mesh_words;
 
 template <class Volume>
 void GpuCuller::upload_instances(const InstanceSet<Volume>& set) {
-  constexpr BvKind kind = instance_kind<Volume>();
+  constexpr BvKind kind = kind_of<Volume>();
   const std::size_t count = set.size();
   // Room for growth by later updates: half again, so a scene that grows a little at a time
   // reallocates (and sends every object again) a logarithmic number of times.
@@ -274,8 +273,8 @@ void GpuCuller::upload_instances(const InstanceSet<Volume>& set) {
 
 template <class Volume>
 void GpuCuller::update_instances(const InstanceSet<Volume>& set, std::span<const std::uint32_t> slots) {
-  if (!scene_->instanced || scene_->kind != instance_kind<Volume>())
-    throw std::invalid_argument("GpuCuller::update: no " + std::string(to_string(instance_kind<Volume>())) +
+  if (!scene_->instanced || scene_->kind != kind_of<Volume>())
+    throw std::invalid_argument("GpuCuller::update: no " + std::string(to_string(kind_of<Volume>())) +
                                 " instances were uploaded (call upload(instances) first)");
   if (mesh_words(set) != scene_->mesh_words)
     throw std::invalid_argument("GpuCuller::update: the set's " + std::to_string(set.meshes().size()) +
@@ -331,8 +330,8 @@ void GpuCuller::ensure_place_resources(BvKind kind) {
 
 template <class Volume>
 void GpuCuller::reserve(const InstanceSet<Volume>& set, std::size_t objects) {
-  if (!scene_->instanced || scene_->kind != instance_kind<Volume>())
-    throw std::invalid_argument("GpuCuller::reserve_instances: no " + std::string(to_string(instance_kind<Volume>())) +
+  if (!scene_->instanced || scene_->kind != kind_of<Volume>())
+    throw std::invalid_argument("GpuCuller::reserve_instances: no " + std::string(to_string(kind_of<Volume>())) +
                                 " instances were uploaded (call upload(instances) first)");
   if (objects <= scene_->instance_capacity) return;
   const std::size_t old = scene_->instance_capacity;

@@ -105,11 +105,6 @@ void check_allocation_size(const vulkan::Context& ctx, VkDeviceSize bytes, const
 
 // ---- instances: the placing pass both cullers run (shaders/place_instances.comp) ----
 
-template <class Volume>
-constexpr BvKind instance_kind() {
-  return kind_of<Volume>();
-}
-
 /// Texels of one entry of the placing list: an instance the GPU places (boxes, spheres), or an
 /// OBB placed on the host with its slot.
 template <class Volume>
@@ -160,7 +155,7 @@ std::vector<std::uint32_t> mesh_words(const InstanceSet<Volume>& set) {
 
 /// Bindings of the placing pass read as uniform texel buffers (the list and the meshes).
 inline constexpr std::uint32_t kPlaceTexelBindings = 1u << PLACE_BINDING_LIST | 1u << PLACE_BINDING_MESHES;
-/// The placing pass's pipeline for boxes or spheres.
+/// The placing pass's pipeline for a volume kind (OBB entries are copied into place).
 std::unique_ptr<vulkan::ComputePipeline> make_place_pipeline(const vulkan::Context& ctx, BvKind kind);
 /// Records the placing of list entries [0, count) in dispatches of at most `max_groups`
 /// workgroups, with `set` bound, then a barrier before the passes that read what it wrote.

@@ -9,26 +9,13 @@
 #include <stdexcept>
 #include <string>
 
-#include "cullpipe/geom/rounding.hpp"
+#include "cullpipe/bounds/sphere_fit.hpp"
 
 namespace cullpipe {
 
 namespace {
 
 std::string where(std::string_view name) { return "build_clusters: " + std::string(name) + ": "; }
-
-// The smallest float radius, from meshoptimizer's, that encloses every vertex about the float
-// centre as measured in double (the sum of three squares of float differences is exact to
-// 2^-50, and the square root then rounds once in double): meshoptimizer computes its sphere in
-// float and does not promise enclosure to the last bit.
-float enclosing_radius(const glm::vec3& centre, float radius, std::span<const glm::vec3> points) {
-  double needed = 0.0;
-  for (const glm::vec3& p : points) {
-    const double dx = double(p.x) - centre.x, dy = double(p.y) - centre.y, dz = double(p.z) - centre.z;
-    needed = std::max(needed, std::sqrt(dx * dx + dy * dy + dz * dz));
-  }
-  return std::max(radius, float_above(round_up(needed * (1.0 + 0x1p-50))));
-}
 
 }  // namespace
 
@@ -83,17 +70,13 @@ MeshClusters build_clusters(const TriangleMesh& mesh, const ClusterOptions& opti
     c.vertex_count = ml.vertex_count;
     for (std::size_t k = 0; k < std::size_t(ml.triangle_count) * 3; ++k) out.indices.push_back(local[tris[k]]);
     points.clear();
-    c.box = {glm::vec3(std::numeric_limits<float>::infinity()), glm::vec3(-std::numeric_limits<float>::infinity())};
-    for (std::size_t v = 0; v < ml.vertex_count; ++v) {
-      const glm::vec3& p = mesh.positions[local[v]];
-      points.push_back(p);
-      c.box.min = glm::min(c.box.min, p);
-      c.box.max = glm::max(c.box.max, p);
-    }
+    for (std::size_t v = 0; v < ml.vertex_count; ++v) points.push_back(mesh.positions[local[v]]);
+    c.box = bounds::aabb_of_points(points);
     const meshopt_Bounds b =
         meshopt_computeMeshletBounds(local, tris, ml.triangle_count, positions, vertex_count, stride);
-    c.sphere.center = glm::vec3(b.center[0], b.center[1], b.center[2]);
-    c.sphere.radius = enclosing_radius(c.sphere.center, b.radius, points);
+    // meshoptimizer's centre, with the radius that encloses every vertex as measured in double
+    // (meshoptimizer computes its sphere in float and does not promise that to the last bit).
+    c.sphere = bounds::enclosing_sphere(glm::dvec3(b.center[0], b.center[1], b.center[2]), points);
     c.cone_apex = glm::vec3(b.cone_apex[0], b.cone_apex[1], b.cone_apex[2]);
     c.cone_axis = glm::vec3(b.cone_axis[0], b.cone_axis[1], b.cone_axis[2]);
     c.cone_cutoff = b.cone_cutoff;

@@ -35,8 +35,8 @@ struct Cluster {
   std::uint32_t vertex_count = 0;  ///< distinct vertices its triangles use
   /// The AABB of its vertices, exactly (a float box's bounds are the vertices' own floats).
   Aabb box;
-  /// meshoptimizer's bounding sphere of its vertices (meshopt_computeMeshletBounds), its
-  /// radius rounded up until it encloses every vertex as computed in double.
+  /// About the centre of meshoptimizer's bounding sphere (meshopt_computeMeshletBounds), the
+  /// radius that encloses every vertex as measured in double (bounds::enclosing_sphere).
   Sphere sphere;
   /// meshoptimizer's normal cone, as it computes it: the cluster faces away from every viewer
   /// at p with dot(normalize(cone_apex - p), cone_axis) >= cone_cutoff; cone_cutoff = 1 when
