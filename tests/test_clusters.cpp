@@ -10,6 +10,13 @@
 #include <map>
 #include <stdexcept>
 
+#include <glm/ext/matrix_double3x3.hpp>
+#include <glm/ext/vector_double3.hpp>
+#include <glm/geometric.hpp>
+#include <glm/matrix.hpp>
+#include <random>
+
+#include "cullpipe/geom/cone.hpp"
 #include "cullpipe/scene/clusters.hpp"
 #include "cullpipe/scene/gltf_scene.hpp"
 
@@ -51,7 +58,7 @@ TEST(Clusters, ASphereSplitsIntoValidClusters) {
     EXPECT_GE(c.clusters.size(), fewest);
     EXPECT_LE(c.clusters.size(), 2 * fewest + 2);
     for (const Cluster& cl : c.clusters) {
-      EXPECT_LE(cl.cone_cutoff, 1.0f);
+      EXPECT_TRUE(cl.cone.cutoff <= 1.0f) << cl.cone.cutoff;
       for (int a = 0; a < 3; ++a) EXPECT_LE(cl.box.max[a] - cl.box.min[a], 2.0f * cl.sphere.radius * 1.0001f);
     }
   }
@@ -97,10 +104,110 @@ TEST(Clusters, BadMeshesAreRefusedByName) {
   EXPECT_NE(message(m, {.cone_weight = 2.0f}).find("cone_weight"), std::string::npos);
 }
 
+// A random affine transform: rotation, scale per axis in [0.2, 5] (non-uniform), a mirror with
+// probability 1/2, and a translation up to 100.
+Transform3x4 random_transform(std::mt19937& rng) {
+  std::uniform_real_distribution<double> u(-1.0, 1.0), scale(0.2, 5.0);
+  glm::dvec3 a = glm::normalize(glm::dvec3(u(rng), u(rng), u(rng)) + glm::dvec3(0, 0, 1e-3));
+  const double angle = 3.14159265 * u(rng), c = std::cos(angle), s = std::sin(angle);
+  glm::dmat3 r(c + a.x * a.x * (1 - c), a.y * a.x * (1 - c) + a.z * s, a.z * a.x * (1 - c) - a.y * s,
+               a.x * a.y * (1 - c) - a.z * s, c + a.y * a.y * (1 - c), a.z * a.y * (1 - c) + a.x * s,
+               a.x * a.z * (1 - c) + a.y * s, a.y * a.z * (1 - c) - a.x * s, c + a.z * a.z * (1 - c));
+  glm::dvec3 k(scale(rng), scale(rng), scale(rng));
+  if (u(rng) < 0.0) k.x = -k.x;
+  Transform3x4 t;
+  for (int row = 0; row < 3; ++row)
+    t.rows[std::size_t(row)] = glm::vec4(float(r[0][row] * k.x), float(r[1][row] * k.y), float(r[2][row] * k.z),
+                                         float(100.0 * u(rng)));
+  return t;
+}
+
+// Whether every triangle of cluster `cl` with an area faces away from `eye` (world), in double:
+// the eye brought into the mesh's space by the transform's inverse, then the side of each
+// triangle's plane (counter-clockwise front faces in the mesh's space; a mirrored instance's
+// winding is flipped when drawn, which keeps that side).
+bool all_face_away(const TriangleMesh& mesh, const MeshClusters& c, const Cluster& cl, const Transform3x4& t,
+                   const glm::dvec3& eye) {
+  glm::dmat3 m;
+  for (int row = 0; row < 3; ++row)
+    for (int col = 0; col < 3; ++col) m[col][row] = t.rows[std::size_t(row)][col];
+  const glm::dvec3 translation(t.rows[0].w, t.rows[1].w, t.rows[2].w);
+  const glm::dvec3 local = glm::inverse(m) * (eye - translation);
+  for (std::uint32_t k = cl.first_index; k < cl.first_index + cl.index_count; k += 3) {
+    const glm::dvec3 a(mesh.positions[c.indices[k]]), b(mesh.positions[c.indices[k + 1]]),
+        d(mesh.positions[c.indices[k + 2]]);
+    const glm::dvec3 n = glm::cross(b - a, d - a);
+    if (glm::length(n) == 0.0) continue;
+    if (!(glm::dot(n, local - a) < 0.0)) return false;
+  }
+  return true;
+}
+
+TEST(ClusterCones, InverseFramesBringTheEyeHome) {
+  std::mt19937 rng(5);
+  for (int i = 0; i < 200; ++i) {
+    const Transform3x4 t = random_transform(rng);
+    const InverseFrame f = inverse_frame(t);
+    ASSERT_TRUE(f.usable);
+    const glm::vec3 p(1.5f, -2.0f, 0.25f);
+    glm::vec3 world, back;
+    for (int r = 0; r < 3; ++r) world[r] = glm::dot(glm::vec3(t.rows[std::size_t(r)]), p) + t.rows[std::size_t(r)].w;
+    for (int r = 0; r < 3; ++r)
+      back[r] = glm::dot(glm::vec3(f.inverse.rows[std::size_t(r)]), world) + f.inverse.rows[std::size_t(r)].w;
+    EXPECT_LT(glm::length(back - p), 1e-3f);
+  }
+  Transform3x4 flat;
+  flat.rows[2] = glm::vec4(0.0f, 0.0f, 0.0f, 1.0f);  // z squashed to a plane
+  EXPECT_FALSE(inverse_frame(flat).usable);
+  Transform3x4 nan;
+  nan.rows[1].w = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_FALSE(inverse_frame(nan).usable);
+  Transform3x4 thin;  // two rows 10^-6 apart: the determinant's terms cancel to 2^-20 of themselves
+  thin.rows[0] = glm::vec4(1.0f, 1.0f, 0.0f, 0.0f);
+  thin.rows[1] = glm::vec4(1.0f, 1.000001f, 0.0f, 0.0f);
+  EXPECT_FALSE(inverse_frame(thin).usable);
+  Transform3x4 scaled;  // a scale of 10^-7 on one axis: an exact inverse, so usable
+  scaled.rows[2] = glm::vec4(0.0f, 0.0f, 1e-7f, 0.0f);
+  EXPECT_TRUE(inverse_frame(scaled).usable);
+}
+
+// The cone test culls a cluster only when every one of its triangles faces away, under
+// rotated, non-uniformly scaled and mirrored instances and from eyes all around; and it culls
+// a good share of a closed mesh seen from outside (about half of it faces away).
+TEST(ClusterCones, BackFacingClustersHaveNoFrontFace) {
+  const TriangleMesh mesh = uv_sphere(40, 64, 2.0f);
+  const MeshClusters c = build_clusters(mesh, {}, "sphere");
+  std::size_t usable = 0;
+  for (const Cluster& cl : c.clusters) usable += cl.cone.usable() ? 1 : 0;
+  EXPECT_GT(usable, c.clusters.size() * 9 / 10);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::size_t tests = 0, culled = 0;
+  for (int i = 0; i < 60; ++i) {
+    const Transform3x4 t = random_transform(rng);
+    const InverseFrame f = inverse_frame(t);
+    const glm::dvec3 centre(t.rows[0].w, t.rows[1].w, t.rows[2].w);
+    for (int e = 0; e < 8; ++e) {
+      // Eyes from just outside the sphere to far away.
+      const glm::dvec3 dir = glm::normalize(glm::dvec3(u(rng), u(rng), u(rng)));
+      const glm::dvec3 eye = centre + dir * (12.0 * std::pow(10.0, 2.0 * (u(rng) + 1.0)));
+      for (const Cluster& cl : c.clusters) {
+        ++tests;
+        if (!facing_away(cl.cone, f, glm::vec3(eye))) continue;
+        ++culled;
+        ASSERT_TRUE(all_face_away(mesh, c, cl, t, glm::dvec3(glm::vec3(eye))))
+            << "transform " << i << " eye " << e << " cluster at " << cl.first_index;
+      }
+    }
+  }
+  std::printf("%zu of %zu cluster tests found the cluster facing away\n", culled, tests);
+  EXPECT_GT(culled, tests / 5);
+}
+
 // Every mesh primitive of the shared scenes, split with the default options.
 TEST(Clusters, SharedScenesSplitIntoValidClusters) {
   if (!fs::exists(kScenes)) GTEST_SKIP() << kScenes << " not present";
-  std::size_t meshes = 0, triangles = 0, clusters = 0;
+  std::size_t meshes = 0, triangles = 0, clusters = 0, cones = 0;
   for (const auto& dir : fs::directory_iterator(kScenes)) {
     if (!dir.is_directory()) continue;
     for (const auto& file : fs::directory_iterator(dir.path())) {
@@ -118,10 +225,12 @@ TEST(Clusters, SharedScenesSplitIntoValidClusters) {
         ++meshes;
         triangles += o.triangles->indices.size() / 3;
         clusters += c.clusters.size();
+        for (const Cluster& cl : c.clusters) cones += cl.cone.usable() ? 1 : 0;
       }
     }
   }
-  std::printf("%zu meshes, %zu triangles in %zu clusters\n", meshes, triangles, clusters);
+  std::printf("%zu meshes, %zu triangles in %zu clusters, %zu with a back-face cone\n", meshes, triangles, clusters,
+              cones);
   EXPECT_GT(meshes, 0u);
 }
 

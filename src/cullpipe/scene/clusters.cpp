@@ -5,10 +5,13 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <glm/ext/vector_double3.hpp>
+#include <glm/geometric.hpp>
 #include <limits>
 #include <stdexcept>
 #include <string>
 
+#include "cullpipe/bounds/cone_fit.hpp"
 #include "cullpipe/bounds/sphere_fit.hpp"
 
 namespace cullpipe {
@@ -77,9 +80,9 @@ MeshClusters build_clusters(const TriangleMesh& mesh, const ClusterOptions& opti
     // meshoptimizer's centre, with the radius that encloses every vertex as measured in double
     // (meshoptimizer computes its sphere in float and does not promise that to the last bit).
     c.sphere = bounds::enclosing_sphere(glm::dvec3(b.center[0], b.center[1], b.center[2]), points);
-    c.cone_apex = glm::vec3(b.cone_apex[0], b.cone_apex[1], b.cone_apex[2]);
-    c.cone_axis = glm::vec3(b.cone_axis[0], b.cone_axis[1], b.cone_axis[2]);
-    c.cone_cutoff = b.cone_cutoff;
+    // meshoptimizer's axis, with an apex and a cutoff that are proven (its float ones are not).
+    c.cone = bounds::backface_cone(mesh.positions, std::span(out.indices).subspan(c.first_index, c.index_count),
+                                   glm::vec3(b.cone_axis[0], b.cone_axis[1], b.cone_axis[2]));
     out.clusters.push_back(c);
   }
   return out;
@@ -132,6 +135,20 @@ std::string check_clusters(const MeshClusters& clusters, const TriangleMesh& mes
                    dz = double(p.z) - cl.sphere.center.z;
       if (!(std::sqrt(dx * dx + dy * dy + dz * dz) <= double(cl.sphere.radius)))
         return at + "sphere does not enclose vertex " + std::to_string(v);
+    }
+    if (cl.cone.usable()) {
+      // Every triangle with an area within the cone's angle, and behind the apex (in double).
+      const glm::dvec3 axis = glm::normalize(glm::dvec3(cl.cone.axis)), apex(cl.cone.apex);
+      const double cutoff = cl.cone.cutoff, min_cos = std::sqrt(std::max(0.0, 1.0 - cutoff * cutoff));
+      for (std::uint32_t k = cl.first_index; k < cl.first_index + cl.index_count; k += 3) {
+        const glm::dvec3 a(mesh.positions[clusters.indices[k]]), b(mesh.positions[clusters.indices[k + 1]]),
+            c3(mesh.positions[clusters.indices[k + 2]]);
+        const glm::dvec3 n = glm::cross(b - a, c3 - a);
+        if (!(glm::length(n) > 0.0)) continue;
+        const glm::dvec3 u = n / glm::length(n);
+        if (!(glm::dot(u, axis) >= min_cos) || !(glm::dot(u, apex - a) < 0.0))
+          return at + "the cone does not hold triangle " + std::to_string((k - cl.first_index) / 3);
+      }
     }
   }
   if (next != clusters.indices.size()) return "the clusters cover " + std::to_string(next) + " of the indices";

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "cullpipe/geom/aabb.hpp"
+#include "cullpipe/geom/cone.hpp"
 #include "cullpipe/geom/sphere.hpp"
 #include "cullpipe/scene/scene.hpp"
 
@@ -38,12 +39,10 @@ struct Cluster {
   /// About the centre of meshoptimizer's bounding sphere (meshopt_computeMeshletBounds), the
   /// radius that encloses every vertex as measured in double (bounds::enclosing_sphere).
   Sphere sphere;
-  /// meshoptimizer's normal cone, as it computes it: the cluster faces away from every viewer
-  /// at p with dot(normalize(cone_apex - p), cone_axis) >= cone_cutoff; cone_cutoff = 1 when
-  /// the normals spread too far for any cone. Kept as meshoptimizer gives it; a conservative
-  /// test of it is the culling pass's to make.
-  glm::vec3 cone_apex{0.0f}, cone_axis{0.0f};
-  float cone_cutoff = 1.0f;
+  /// The back-face cone about meshoptimizer's cone axis, with the apex and cutoff measured in
+  /// double (bounds::backface_cone): the cluster faces away from every viewer the cone test
+  /// (facing_away) passes. Unusable (cutoff 1) when the normals spread too far.
+  BackfaceCone cone;
 };
 
 /// A mesh's clusters. `indices` hold every triangle of the mesh once (a permutation of its
@@ -65,8 +64,8 @@ MeshClusters build_clusters(const TriangleMesh& mesh, const ClusterOptions& opti
 
 /// "" when `clusters` are a valid split of `mesh`: every triangle of the mesh in exactly one
 /// cluster with its winding, ranges contiguous and in bounds, at most the options' vertices and
-/// triangles per cluster, and every cluster's box and sphere enclosing its vertices; else what
-/// is wrong and where.
+/// triangles per cluster, every cluster's box and sphere enclosing its vertices, and its cone
+/// (when usable) holding every triangle with an area, in double; else what is wrong and where.
 std::string check_clusters(const MeshClusters& clusters, const TriangleMesh& mesh);
 
 }  // namespace cullpipe
