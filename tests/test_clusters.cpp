@@ -6,43 +6,26 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <limits>
-#include <map>
-#include <stdexcept>
-
 #include <glm/ext/matrix_double3x3.hpp>
 #include <glm/ext/vector_double3.hpp>
 #include <glm/geometric.hpp>
 #include <glm/matrix.hpp>
-#include <random>
+#include <limits>
+#include <map>
+#include <stdexcept>
 
 #include "cullpipe/geom/cone.hpp"
 #include "cullpipe/scene/clusters.hpp"
 #include "cullpipe/scene/gltf_scene.hpp"
+#include "mesh_test_util.hpp"
 
 namespace cullpipe {
 namespace {
 
 namespace fs = std::filesystem;
+using test::random_transform;
+using test::uv_sphere;
 const fs::path kScenes = fs::path(CULLPIPE_SHARED_DIR) / "scenes";
-
-// A latitude-longitude sphere of radius r: 2 x rings x segments triangles, wound outwards.
-TriangleMesh uv_sphere(int rings, int segments, float r) {
-  TriangleMesh m;
-  for (int i = 0; i <= rings; ++i)
-    for (int j = 0; j < segments; ++j) {
-      const float theta = float(i) / float(rings) * 3.14159265f, phi = float(j) / float(segments) * 6.2831853f;
-      m.positions.push_back(
-          r * glm::vec3(std::sin(theta) * std::cos(phi), std::cos(theta), std::sin(theta) * std::sin(phi)));
-    }
-  auto at = [&](int i, int j) { return std::uint32_t(i * segments + (j % segments)); };
-  for (int i = 0; i < rings; ++i)
-    for (int j = 0; j < segments; ++j) {
-      m.indices.insert(m.indices.end(), {at(i, j), at(i, j + 1), at(i + 1, j)});
-      m.indices.insert(m.indices.end(), {at(i, j + 1), at(i + 1, j + 1), at(i + 1, j)});
-    }
-  return m;
-}
 
 TEST(Clusters, ASphereSplitsIntoValidClusters) {
   const TriangleMesh mesh = uv_sphere(60, 80, 3.0f);  // 9,600 triangles, the poles degenerate
@@ -104,24 +87,6 @@ TEST(Clusters, BadMeshesAreRefusedByName) {
   EXPECT_NE(message(m, {.cone_weight = 2.0f}).find("cone_weight"), std::string::npos);
 }
 
-// A random affine transform: rotation, scale per axis in [0.2, 5] (non-uniform), a mirror with
-// probability 1/2, and a translation up to 100.
-Transform3x4 random_transform(std::mt19937& rng) {
-  std::uniform_real_distribution<double> u(-1.0, 1.0), scale(0.2, 5.0);
-  glm::dvec3 a = glm::normalize(glm::dvec3(u(rng), u(rng), u(rng)) + glm::dvec3(0, 0, 1e-3));
-  const double angle = 3.14159265 * u(rng), c = std::cos(angle), s = std::sin(angle);
-  glm::dmat3 r(c + a.x * a.x * (1 - c), a.y * a.x * (1 - c) + a.z * s, a.z * a.x * (1 - c) - a.y * s,
-               a.x * a.y * (1 - c) - a.z * s, c + a.y * a.y * (1 - c), a.z * a.y * (1 - c) + a.x * s,
-               a.x * a.z * (1 - c) + a.y * s, a.y * a.z * (1 - c) - a.x * s, c + a.z * a.z * (1 - c));
-  glm::dvec3 k(scale(rng), scale(rng), scale(rng));
-  if (u(rng) < 0.0) k.x = -k.x;
-  Transform3x4 t;
-  for (int row = 0; row < 3; ++row)
-    t.rows[std::size_t(row)] = glm::vec4(float(r[0][row] * k.x), float(r[1][row] * k.y), float(r[2][row] * k.z),
-                                         float(100.0 * u(rng)));
-  return t;
-}
-
 // Whether every triangle of cluster `cl` with an area faces away from `eye` (world), in double:
 // the eye brought into the mesh's space by the transform's inverse, then the side of each
 // triangle's plane (counter-clockwise front faces in the mesh's space; a mirrored instance's
@@ -144,7 +109,7 @@ bool all_face_away(const TriangleMesh& mesh, const MeshClusters& c, const Cluste
 }
 
 TEST(ClusterCones, InverseFramesBringTheEyeHome) {
-  std::mt19937 rng(5);
+  test::Rng rng(5);
   for (int i = 0; i < 200; ++i) {
     const Transform3x4 t = random_transform(rng);
     const InverseFrame f = inverse_frame(t);
@@ -180,8 +145,7 @@ TEST(ClusterCones, BackFacingClustersHaveNoFrontFace) {
   std::size_t usable = 0;
   for (const Cluster& cl : c.clusters) usable += cl.cone.usable() ? 1 : 0;
   EXPECT_GT(usable, c.clusters.size() * 9 / 10);
-  std::mt19937 rng(11);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  test::Rng rng(11);
   std::size_t tests = 0, culled = 0;
   for (int i = 0; i < 60; ++i) {
     const Transform3x4 t = random_transform(rng);
@@ -189,8 +153,8 @@ TEST(ClusterCones, BackFacingClustersHaveNoFrontFace) {
     const glm::dvec3 centre(t.rows[0].w, t.rows[1].w, t.rows[2].w);
     for (int e = 0; e < 8; ++e) {
       // Eyes from just outside the sphere to far away.
-      const glm::dvec3 dir = glm::normalize(glm::dvec3(u(rng), u(rng), u(rng)));
-      const glm::dvec3 eye = centre + dir * (12.0 * std::pow(10.0, 2.0 * (u(rng) + 1.0)));
+      const glm::dvec3 dir = glm::normalize(glm::dvec3(rng.vec3(-1.0f, 1.0f)) + glm::dvec3(1e-3, 0.0, 0.0));
+      const glm::dvec3 eye = centre + dir * (12.0 * std::pow(10.0, 2.0 * double(rng.uniform(0.0f, 2.0f))));
       for (const Cluster& cl : c.clusters) {
         ++tests;
         if (!facing_away(cl.cone, f, glm::vec3(eye))) continue;

@@ -13,11 +13,14 @@
 #include "cullpipe/cull/depth_pyramid.hpp"
 #include "cullpipe/cull/occlusion.hpp"
 #include "cullpipe/gpu/bvh_culler.hpp"
+#include "cullpipe/gpu/cluster_culler.hpp"
 #include "cullpipe/gpu/depth_pyramid_pass.hpp"
 #include "cullpipe/gpu/gpu_culler.hpp"
+#include "cullpipe/scene/clusters.hpp"
 #include "cullpipe/vulkan/buffer.hpp"
 #include "cullpipe/vulkan/check.hpp"
 #include "gpu_test_env.hpp"
+#include "mesh_test_util.hpp"
 #include "occlusion_test_util.hpp"
 #include "test_util.hpp"
 
@@ -418,6 +421,103 @@ TEST_F(GpuPyramid, HierarchicalOcclusionOfLargeSubtreesEqualsTheReference) {
       }
     }
   }
+}
+
+// The cluster pass against clusters::classify, pair by pair: instances of two meshes under
+// rotated, non-uniformly scaled and mirrored transforms, with and without the object pass's
+// classes, the back-face test and the pyramid, from every kind of camera; and its draws, the
+// drawn pairs' in pair order.
+TEST_F(GpuPyramid, ClusterPassEqualsTheReferencePairByPair) {
+  gpu::ClusterCuller pass(context());
+  const TriangleMesh meshes[2] = {test::uv_sphere(24, 32, 2.0f), test::uv_sphere(6, 10, 1.0f)};
+  std::vector<Aabb> boxes;
+  std::vector<BackfaceCone> cones;
+  std::uint32_t first[2], count[2];
+  for (int m = 0; m < 2; ++m) {
+    const MeshClusters c = build_clusters(meshes[m]);
+    first[m] = std::uint32_t(boxes.size());
+    count[m] = std::uint32_t(c.clusters.size());
+    for (const Cluster& cl : c.clusters) {
+      boxes.push_back(cl.box);
+      cones.push_back(cl.cone);
+    }
+  }
+  test::Rng rng(31);
+  std::vector<gpu::ClusterInstance> instances(300);
+  std::vector<std::uint32_t> instance_of, cluster_of;  // per pair
+  for (std::size_t i = 0; i < instances.size(); ++i) {
+    const int m = int(i % 2);
+    instances[i] = {test::random_transform(rng, 30.0f), first[m], count[m], i % 7 != 0};
+    for (std::uint32_t c = 0; c < count[m]; ++c) {
+      instance_of.push_back(std::uint32_t(i));
+      cluster_of.push_back(first[m] + c);
+    }
+  }
+  pass.upload(boxes, cones, instances);
+  ASSERT_EQ(pass.pair_count(), instance_of.size());
+  std::vector<gpu::DrawCommand> templates(pass.pair_count());
+  for (std::size_t p = 0; p < templates.size(); ++p)
+    templates[p] = {std::uint32_t(3 * (p % 40 + 1)), 1, std::uint32_t(p), 0, instance_of[p], 0};
+  pass.upload_draws(templates);
+  vulkan::Buffer object_classes(context(), instances.size() * 4, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "object classes");
+
+  std::array<std::size_t, 6> seen{};
+  for (int s = 0; s < 16; ++s) {
+    const Camera cam = test::random_camera(rng, s % 8);
+    const std::uint32_t w = 32 + std::uint32_t(rng.next() % 200), h = 32 + std::uint32_t(rng.next() % 120);
+    const glm::mat4 vp = cam.view_proj();
+    const test::Caster k(vp, w, h, cam.reversed_z);
+    std::vector<Aabb> occluders;
+    for (int i = 0; i < 8; ++i) occluders.push_back(test::random_volume<Aabb>(rng, 12.0f, 8.0f));
+    const DepthImage image(context(), w, h, test::render_depth(k, occluders));
+    const occlusion::DepthPyramid pyramid = culler().build(image.source(), cam.reversed_z);
+    auto* classes = static_cast<std::uint32_t*>(object_classes.data());
+    for (std::size_t i = 0; i < instances.size(); ++i) classes[i] = std::uint32_t(rng.next() % 4);
+
+    gpu::ClusterFrame frame;
+    frame.frustum = Frustum::from_view_proj(vp);
+    frame.eye = cam.eye;
+    frame.backface = !cam.orthographic && s % 4 != 3;
+    frame.object_classes = s % 2 ? &object_classes : nullptr;
+    const bool occlusion = s % 3 != 2;
+    if (occlusion) {
+      frame.pyramid = &culler();
+      frame.occlusion_view = {vp, w, h, cam.reversed_z};
+      frame.occlusion_options.texels_per_axis = 2u << (s % 4);
+    }
+    const gpu::ClusterResult r = pass.cull(frame);
+    clusters::ClusterView view{frame.frustum,
+                               frame.eye,
+                               frame.backface,
+                               occlusion ? &frame.occlusion_view : nullptr,
+                               occlusion ? &pyramid : nullptr,
+                               frame.occlusion_options};
+    std::size_t mismatches = 0;
+    std::vector<gpu::DrawCommand> expected;
+    for (std::size_t p = 0; p < pass.pair_count(); ++p) {
+      const std::uint32_t i = instance_of[p], c = cluster_of[p];
+      const gpu::ClusterInstance& in = instances[i];
+      const bool kept =
+          !frame.object_classes || classes[i] == gpu::CLASS_INSIDE || classes[i] == gpu::CLASS_INTERSECTING;
+      clusters::ClusterView v = view;
+      v.backface = view.backface && in.backface;
+      const clusters::ClusterClass want =
+          clusters::classify(boxes[c], cones[c], in.transform, inverse_frame(in.transform), kept, v);
+      ++seen[std::size_t(want)];
+      if (want == clusters::ClusterClass::Drawn) expected.push_back(templates[p]);
+      if (r.classes[p] != want && ++mismatches <= 3)
+        ADD_FAILURE() << "frame " << s << " (camera variant " << s % 8 << ", " << w << "x" << h << "): pair " << p
+                      << " (instance " << i << ", cluster " << c << ", box " << describe(boxes[c]) << ", cone apex "
+                      << cones[c].apex.x << " " << cones[c].apex.y << " " << cones[c].apex.z << " cutoff "
+                      << cones[c].cutoff << "): GPU " << to_string(r.classes[p]) << ", reference " << to_string(want);
+    }
+    ASSERT_EQ(mismatches, 0u);
+    ASSERT_EQ(r.drawn, expected.size());
+    const auto draws = pass.draw_buffer().as<const gpu::DrawCommand>();
+    for (std::size_t d = 0; d < expected.size(); ++d)
+      ASSERT_EQ(std::memcmp(&draws[d], &expected[d], 20), 0) << "frame " << s << ": draw " << d;
+  }
+  for (std::size_t c : {0, 1, 3, 4, 5}) EXPECT_GT(seen[c], 100u) << "too few pairs of class " << c;
 }
 
 }  // namespace

@@ -12,8 +12,8 @@ namespace cullpipe::bounds {
 /// mean when the hint is zero or not finite). The widest angle between the float axis and a
 /// triangle's normal is measured in double and its sine raised by 2^-20 before rounding up; the
 /// apex is put behind every triangle's plane by 2^-12 of the cluster's radius, and found
-/// behind each by 2^-21 of its distance (in double, from the float apex). Triangles with two equal corners are skipped (they have no area
-/// wherever they are drawn). No cone (cutoff 1) when a triangle is so thin that its normal is
+/// behind each by 2^-21 of its distance (in double, from the float apex). Triangles with two equal corners are skipped
+/// (they have no area wherever they are drawn). No cone (cutoff 1) when a triangle is so thin that its normal is
 /// uncertain (|(b - a) x (c - a)| below 2^-30 of |b - a| |c - a|), when a normal is 84 degrees
 /// or more from the axis (meshoptimizer's limit), or when nothing is finite. Indices must be in
 /// range (not checked: build_clusters checks them). O(triangles).

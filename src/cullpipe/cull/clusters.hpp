@@ -16,9 +16,10 @@
 
 namespace cullpipe::clusters {
 
-/// What became of a cluster of an instance. Numbered as the GPU writes them (cull_types.h).
-enum class ClusterClass : std::uint8_t { Drawn = 0, ObjectCulled = 1, Outside = 2, BackFacing = 3, Occluded = 4 };
-inline constexpr std::size_t kClusterClassCount = 5;
+/// What became of a cluster of an instance. Numbered as the GPU writes them (cull_types.h,
+/// CLUSTER_*): Outside and Drawn as the object classes OUTSIDE and INTERSECTING, so the object
+/// passes' compaction lists the drawn ones.
+enum class ClusterClass : std::uint8_t { Outside = 0, Drawn = 1, Occluded = 3, BackFacing = 4, ObjectCulled = 5 };
 
 constexpr std::string_view to_string(ClusterClass c) {
   switch (c) {

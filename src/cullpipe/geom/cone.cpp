@@ -42,8 +42,7 @@ InverseFrame inverse_frame(const Transform3x4& t) {
       cof[r][c] = m[r1][c1] * m[r2][c2] - m[r1][c2] * m[r2][c1];
     }
   const double det = m[0][0] * cof[0][0] + m[0][1] * cof[0][1] + m[0][2] * cof[0][2];
-  const double terms =
-      std::abs(m[0][0] * cof[0][0]) + std::abs(m[0][1] * cof[0][1]) + std::abs(m[0][2] * cof[0][2]);
+  const double terms = std::abs(m[0][0] * cof[0][0]) + std::abs(m[0][1] * cof[0][1]) + std::abs(m[0][2] * cof[0][2]);
   if (!(det != 0.0) || !std::isfinite(det) || !(terms <= kMaxConditioning * std::abs(det))) return f;
   for (int r = 0; r < 3; ++r) {
     double a[3], b = 0.0, magnitude = 0.0;

@@ -257,6 +257,45 @@ CP_CONST BVH_BINDING_PYRAMID = 12u;          // occlusion: the depth pyramid's f
 CP_CONST BVH_BINDING_OCCLUSION_VIEWS = 13u;  // occlusion: GpuOcclusionView per view (as BINDING_OCCLUSION_VIEWS)
 CP_CONST BVH_BINDING_COUNT = 14u;
 
+// ---- clusters (shaders/cull_clusters.comp) ----
+// One invocation per (instance, cluster) pair, in pair order (an instance's clusters together,
+// instances in order). It writes each pair's class and its workgroup's drawn count in the layout
+// the ordered flat pass writes them, and compact_scan.comp and compact_scatter.comp then list
+// the drawn pairs' draws in pair order. Bindings 0..10 mean what they mean for the flat pass,
+// with these inputs: BINDING_BOUNDS holds CLUSTER_TEXELS per cluster, BINDING_CENTRES
+// CLUSTER_INSTANCE_TEXELS per instance.
+CP_CONST CLUSTER_BINDING_PAIRS = 11u;           // uniform texel buffer: per pair x = instance, y = cluster
+CP_CONST CLUSTER_BINDING_OBJECT_CLASSES = 12u;  // uint per instance: the object pass's class (CLASS_*)
+CP_CONST CLUSTER_BINDING_COUNT = 13u;
+
+// Per cluster: (box min, cone cutoff), (box max, 0), (cone apex, 0), (cone axis, 0).
+CP_CONST CLUSTER_TEXELS = 4u;
+// Per instance: the rows of its transform, the rows of its inverse (InverseFrame::inverse), then
+// (translation magnitudes, flags: bit 0 = the inverse frame is usable).
+CP_CONST CLUSTER_INSTANCE_TEXELS = 7u;
+
+// A pair's class. Drawn and culled-by-the-frustum take the object classes' values that mean
+// the same, so the compaction passes list exactly the drawn pairs (CLASS_INTERSECTING).
+CP_CONST CLUSTER_OUTSIDE = 0u;        // its placed box is outside the frustum
+CP_CONST CLUSTER_DRAWN = 1u;          // = CLASS_INTERSECTING
+CP_CONST CLUSTER_OCCLUDED = 3u;       // its placed box is hidden behind the depth pyramid
+CP_CONST CLUSTER_BACK_FACING = 4u;    // every one of its triangles faces away from the eye
+CP_CONST CLUSTER_OBJECT_CULLED = 5u;  // the object pass culled its instance
+
+// Push constants of the cluster pass; the compaction passes read the first five words as their
+// FlatCullParams (object_count = pairs, one view).
+struct ClusterCullParams {
+  uint pair_count;
+  uint first_pair;  // the first pair of this dispatch
+  uint view_count;  // 1
+  uint visible_capacity;
+  uint id_base;   // 0
+  uint backface;  // 1: the back-face test
+  uint reserved1;
+  uint reserved2;
+  vec4 eye;  // xyz: the eye, world space
+};
+
 // ---- occlusion: the depth pyramid (src/cullpipe/gpu/depth_pyramid_pass.hpp) ----
 
 // Invocations per workgroup side of depth_pyramid.comp (8 x 8 texels a workgroup).

@@ -1,0 +1,99 @@
+#version 460
+// Cluster culling: one invocation per (instance, cluster) pair. A pair is culled when the
+// object pass culled its instance (OBJECT_CLASSES), when the cluster's box placed by the
+// instance's transform is outside the frustum, when every triangle of the cluster faces away
+// from the eye (its back-face cone, shared/cone.glsl), or when the placed box is hidden behind
+// the depth pyramid (OCCLUSION): the first test that culls names its class (CLUSTER_*), as
+// clusters::classify in src/cullpipe/cull/clusters.cpp decides it, bit for bit. Each pair's
+// class and its workgroup's drawn count are written as the ordered flat pass writes them;
+// compact_scan.comp and compact_scatter.comp then list the drawn pairs' draws in pair order.
+#extension GL_GOOGLE_include_directive : require
+#extension GL_KHR_shader_subgroup_basic : require
+#extension GL_KHR_shader_subgroup_arithmetic : require
+#extension GL_EXT_control_flow_attributes : require
+
+#include "cullpipe/gpu/cull_types.h"
+
+layout(local_size_x_id = 1) in;  // = FLAT_CULL_GROUP_SIZE
+layout(constant_id = 4) const uint OBJECTS_PER_INVOCATION = 1;  // one pair per invocation (ordered_runs.glsl)
+layout(constant_id = 6) const uint OCCLUSION = 0;       // 1: test the kept pairs against the pyramid
+layout(constant_id = 8) const uint OBJECT_CLASSES = 0;  // 1: skip the pairs whose object the object pass culled
+const uint BV_KIND = BV_KIND_AABB;
+
+layout(set = 0, binding = BINDING_BOUNDS) uniform usamplerBuffer clusters;  // CLUSTER_TEXELS each
+layout(std430, set = 0, binding = BINDING_CLASSES) writeonly buffer Classes { uint classes[]; };
+layout(std430, set = 0, binding = BINDING_COUNTERS) buffer Counters { ViewCounters counters[]; };
+layout(set = 0, binding = BINDING_VIEWS) uniform usamplerBuffer views;          // GpuFrustum
+layout(set = 0, binding = BINDING_CENTRES) uniform usamplerBuffer instances;    // CLUSTER_INSTANCE_TEXELS each
+layout(std430, set = 0, binding = BINDING_GROUP_COUNTS) buffer GroupCounts { uint group_counts[]; };
+layout(std430, set = 0, binding = BINDING_PYRAMID) readonly buffer Pyramid { float pyramid[]; };
+layout(set = 0, binding = BINDING_OCCLUSION_VIEWS) uniform usamplerBuffer occlusion_views;
+layout(set = 0, binding = CLUSTER_BINDING_PAIRS) uniform usamplerBuffer pairs;
+layout(std430, set = 0, binding = CLUSTER_BINDING_OBJECT_CLASSES) readonly buffer ObjectClasses { uint object_classes[]; };
+
+layout(push_constant, std430) uniform Push { ClusterCullParams params; };
+
+uint view_plane_count;
+vec4 view_planes[MAX_FRUSTUM_PLANES];
+vec4 occ_volume_word(uint word) { return vec4(0.0); }  // (boxes are tested from their corners directly)
+
+#include "shared/classify.glsl"
+#include "shared/cone.glsl"
+#include "shared/instance.glsl"
+#include "shared/occlusion.glsl"
+#include "shared/ordered_runs.glsl"
+
+vec4 word(usamplerBuffer b, int i) { return uintBitsToFloat(texelFetch(b, i)); }
+
+void load_view() {
+  uvec4 tail = texelFetch(views, int(MAX_FRUSTUM_PLANES));
+  view_plane_count = min(tail.x, MAX_FRUSTUM_PLANES);
+  [[unroll]] for (uint k = 0; k < MAX_FRUSTUM_PLANES; ++k) view_planes[k] = word(views, int(k));
+  if (OCCLUSION != 0u) occ_load_view(0u);
+}
+
+uint classify_pair(uint instance, uint cluster) {
+  if (OBJECT_CLASSES != 0u) {
+    uint c = object_classes[instance];
+    if (c != CLASS_INSIDE && c != CLASS_INTERSECTING) return CLUSTER_OBJECT_CULLED;
+  }
+  int ib = int(CLUSTER_INSTANCE_TEXELS * instance), cb = int(CLUSTER_TEXELS * cluster);
+  vec4 rows[3] = vec4[3](word(instances, ib), word(instances, ib + 1), word(instances, ib + 2));
+  vec4 box_min = word(clusters, cb), box_max = word(clusters, cb + 1);
+  vec3 lo, hi;
+  instance_aabb(rows, box_min.xyz, box_max.xyz, lo, hi);
+  uint straddled;
+  if (classify_aabb(lo, hi, ALL_PLANES, straddled) == CLASS_OUTSIDE) return CLUSTER_OUTSIDE;
+  if (params.backface != 0u) {
+    vec4 frame = word(instances, ib + 6);
+    if ((floatBitsToUint(frame.w) & 1u) != 0u) {
+      vec4 inverse[3] = vec4[3](word(instances, ib + 3), word(instances, ib + 4), word(instances, ib + 5));
+      if (cone_facing_away(word(clusters, cb + 2).xyz, box_min.w, word(clusters, cb + 3).xyz, inverse, frame.xyz,
+                           params.eye.xyz))
+        return CLUSTER_BACK_FACING;
+    }
+  }
+  if (OCCLUSION != 0u) {
+    vec3 p[8];
+    vec3 magnitude;
+    occ_box_corners(lo, hi, p, magnitude);
+    if (occ_occluded(p, magnitude, 1.0, OCC_TEXELS)) return CLUSTER_OCCLUDED;
+  }
+  return CLUSTER_DRAWN;
+}
+
+void main() {
+  load_view();
+  uint p = this_run_first_object(params.first_pair) + gl_LocalInvocationIndex;
+  bool drawn = false;
+  if (p < params.pair_count) {
+    uvec4 pair = texelFetch(pairs, int(p));
+    uint c = classify_pair(pair.x, pair.y);
+    classes[p] = c;
+    drawn = c == CLUSTER_DRAWN;
+  }
+  // The workgroup's drawn count (its INSIDE count stays 0), one atomic per subgroup on the
+  // workgroup's own count, zeroed before the pass.
+  uint total = subgroupAdd(drawn ? 1u : 0u);
+  if (subgroupElect() && total > 0u) atomicAdd(group_counts[this_run(params.first_pair)], total);
+}

@@ -1,0 +1,293 @@
+#include "cullpipe/gpu/cluster_culler.hpp"
+
+#include <algorithm>
+#include <bit>
+#include <cstring>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+#include "cullpipe/gpu/layout.hpp"
+#include "cullpipe/gpu/pass_support.hpp"
+#include "cullpipe/vulkan/check.hpp"
+
+// SPIR-V compiled from shaders/ at build time.
+#include "compact_scan.spv.h"
+#include "compact_scatter.spv.h"
+#include "cull_clusters.spv.h"
+
+namespace cullpipe::gpu {
+
+namespace {
+
+constexpr std::uint32_t kBindingCount = CLUSTER_BINDING_COUNT;
+constexpr std::uint32_t kTexelBindings = 1u << BINDING_BOUNDS | 1u << BINDING_VIEWS | 1u << BINDING_CENTRES |
+                                         1u << BINDING_OCCLUSION_VIEWS | 1u << CLUSTER_BINDING_PAIRS;
+constexpr VkBufferUsageFlags kTexel = VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT;
+constexpr VkBufferUsageFlags kStorage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
+enum Shader { Cull = 0, Scan = 1, Scatter = 2 };
+
+}  // namespace
+
+ClusterCuller::ClusterCuller(const vulkan::Context& ctx) : ctx_(ctx) {
+  detail::check_subgroup_operations(ctx_, VK_SUBGROUP_FEATURE_BASIC_BIT | VK_SUBGROUP_FEATURE_ARITHMETIC_BIT,
+                                    "the cluster pass");
+  detail::check_texel_format(ctx_, "the cluster pass");
+  const auto& limits = ctx_.properties().limits;
+  group_size_ =
+      std::min({FLAT_CULL_GROUP_SIZE, limits.maxComputeWorkGroupSize[0], limits.maxComputeWorkGroupInvocations});
+  max_groups_ = limits.maxComputeWorkGroupCount[0];
+  const vulkan::ComputePipeline& first = pipeline(Cull);
+  resources_ = std::make_unique<detail::PassResources>(ctx_, first.set_layout(), kBindingCount, kTexelBindings);
+  bool dirty = false;
+  detail::ensure_buffer(ctx_, counters_, sizeof(ViewCounters),
+                        kStorage | VK_BUFFER_USAGE_TRANSFER_DST_BIT | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT,
+                        "cluster counter buffer", dirty);
+  detail::ensure_buffer(ctx_, views_, sizeof(GpuFrustum), kTexel, "cluster view buffer", dirty);
+  detail::ensure_buffer(ctx_, occlusion_views_, sizeof(GpuOcclusionView), kTexel, "cluster occlusion view buffer",
+                        dirty);
+  detail::ensure_buffer(ctx_, no_pyramid_, 16, kStorage, "empty pyramid buffer", dirty);
+  detail::ensure_buffer(ctx_, no_classes_, 16, kStorage, "empty object class buffer", dirty);
+  upload({}, {}, {});
+}
+
+ClusterCuller::~ClusterCuller() {
+  if (ctx_.owns_device()) vkDeviceWaitIdle(ctx_.device());
+}
+
+const vulkan::ComputePipeline& ClusterCuller::pipeline(int which, bool occlusion, bool object_classes,
+                                                       std::uint32_t texels) {
+  if (which != Cull) occlusion = false, object_classes = false, texels = 4;
+  const std::size_t key = std::size_t(which) * 64 + (occlusion ? 32 : 0) + (object_classes ? 16 : 0) + texels;
+  if (pipelines_.size() <= key) pipelines_.resize(key + 1);
+  if (!pipelines_[key]) {
+    // Specialization constants: 1 group size, 3 draws (scatter), 4 pairs per invocation (1),
+    // 6 occlusion, 7 its texels per axis, 8 the object pass's classes.
+    const std::uint32_t spec[9] = {
+        0u, group_size_, 1u, 1u, 1u, 1u, occlusion ? 1u : 0u, texels, object_classes ? 1u : 0u};
+    std::span<const std::uint32_t> spirv = which == Cull ? std::span<const std::uint32_t>(cullpipe_cull_clusters_spv)
+                                           : which == Scan
+                                               ? std::span<const std::uint32_t>(cullpipe_compact_scan_spv)
+                                               : std::span<const std::uint32_t>(cullpipe_compact_scatter_spv);
+    const std::string name = which == Cull   ? "cluster cull"
+                             : which == Scan ? "cluster compaction scan"
+                                             : "cluster compaction scatter";
+    pipelines_[key] = std::make_unique<vulkan::ComputePipeline>(
+        ctx_, vulkan::ComputePipelineDesc{spirv, kBindingCount, sizeof(ClusterCullParams), spec, name.c_str(),
+                                          kTexelBindings});
+  }
+  return *pipelines_[key];
+}
+
+void ClusterCuller::upload(std::span<const Aabb> boxes, std::span<const BackfaceCone> cones,
+                           std::span<const ClusterInstance> instances) {
+  if (boxes.size() != cones.size())
+    throw std::invalid_argument("ClusterCuller::upload: " + std::to_string(boxes.size()) + " boxes and " +
+                                std::to_string(cones.size()) + " cones");
+  std::uint64_t pairs = 0;
+  for (std::size_t i = 0; i < instances.size(); ++i) {
+    const ClusterInstance& in = instances[i];
+    const std::string at = "ClusterCuller::upload: instance " + std::to_string(i) + ": ";
+    if (std::uint64_t(in.first_cluster) + in.cluster_count > boxes.size())
+      throw std::invalid_argument(at + "clusters " + std::to_string(in.first_cluster) + "+" +
+                                  std::to_string(in.cluster_count) + " past the " + std::to_string(boxes.size()) +
+                                  " clusters");
+    if (const std::string why = invalid_reason(in.transform); !why.empty())
+      throw std::invalid_argument(at + "transform " + why);
+    pairs += in.cluster_count;
+  }
+  if (pairs > std::numeric_limits<std::uint32_t>::max() || instances.size() > std::numeric_limits<std::uint32_t>::max())
+    throw std::length_error("ClusterCuller::upload: " + std::to_string(pairs) + " pairs, more than 2^32 - 1");
+  const std::uint64_t groups = (pairs + group_size_ - 1) / group_size_;
+  const VkDeviceSize pair_bytes = std::max<VkDeviceSize>(pairs * 16, 16);
+  detail::check_texel_range(ctx_, pair_bytes, "the cluster pairs");
+  detail::check_texel_range(ctx_, std::max<VkDeviceSize>(boxes.size() * CLUSTER_TEXELS * 16, 16), "the clusters");
+  detail::check_texel_range(ctx_, std::max<VkDeviceSize>(instances.size() * CLUSTER_INSTANCE_TEXELS * 16, 16),
+                            "the cluster instances");
+  detail::check_storage_range(ctx_, std::max<VkDeviceSize>(pairs * sizeof(DrawCommand), 16), "the cluster draws");
+
+  // New buffers first: a failed allocation leaves the culler as it was.
+  vulkan::Buffer clusters(ctx_, std::max<VkDeviceSize>(boxes.size() * CLUSTER_TEXELS * 16, 16), kTexel,
+                          "cluster buffer");
+  vulkan::Buffer inst(ctx_, std::max<VkDeviceSize>(instances.size() * CLUSTER_INSTANCE_TEXELS * 16, 16), kTexel,
+                      "cluster instance buffer");
+  vulkan::Buffer pair_buffer(ctx_, pair_bytes, kTexel, "cluster pair buffer");
+  vulkan::Buffer templates(ctx_, std::max<VkDeviceSize>(pairs * sizeof(DrawCommand), 16), kStorage,
+                           "cluster draw template buffer");
+  vulkan::Buffer classes(ctx_, std::max<VkDeviceSize>(pairs * 4, 16), kStorage, "cluster class buffer");
+  vulkan::Buffer visible(ctx_, std::max<VkDeviceSize>(pairs * 4, 16), kStorage, "cluster visible buffer");
+  vulkan::Buffer draws(ctx_, std::max<VkDeviceSize>(pairs * sizeof(DrawCommand), 16),
+                       kStorage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "cluster draw buffer");
+  vulkan::Buffer group_counts(ctx_, std::max<VkDeviceSize>(groups * 8, 16), kStorage | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                              "cluster group count buffer");
+  for (vulkan::Buffer* b : {&clusters, &inst, &pair_buffer, &templates})
+    if (!b->mapped()) throw vulkan::Error("the cluster pass needs host-visible memory for its inputs");
+
+  auto* cw = static_cast<vec4*>(clusters.data());
+  for (std::size_t c = 0; c < boxes.size(); ++c) {
+    cw[CLUSTER_TEXELS * c + 0] = vec4(boxes[c].min, cones[c].cutoff);
+    cw[CLUSTER_TEXELS * c + 1] = vec4(boxes[c].max, 0.0f);
+    cw[CLUSTER_TEXELS * c + 2] = vec4(cones[c].apex, 0.0f);
+    cw[CLUSTER_TEXELS * c + 3] = vec4(cones[c].axis, 0.0f);
+  }
+  auto* iw = static_cast<vec4*>(inst.data());
+  auto* pw = static_cast<uvec4*>(pair_buffer.data());
+  std::size_t p = 0;
+  for (std::size_t i = 0; i < instances.size(); ++i) {
+    const ClusterInstance& in = instances[i];
+    const InverseFrame frame = inverse_frame(in.transform);
+    vec4* w = iw + CLUSTER_INSTANCE_TEXELS * i;
+    for (int r = 0; r < 3; ++r) {
+      w[r] = in.transform.rows[std::size_t(r)];
+      w[3 + r] = frame.inverse.rows[std::size_t(r)];
+    }
+    w[6] = vec4(frame.translation_magnitude, std::bit_cast<float>(frame.usable && in.backface ? 1u : 0u));
+    for (std::uint32_t c = 0; c < in.cluster_count; ++c)
+      pw[p++] = uvec4(std::uint32_t(i), in.first_cluster + c, 0u, 0u);
+  }
+  clusters_ = std::move(clusters);
+  instances_ = std::move(inst);
+  pairs_ = std::move(pair_buffer);
+  templates_ = std::move(templates);
+  classes_ = std::move(classes);
+  visible_ = std::move(visible);
+  draws_ = std::move(draws);
+  group_counts_ = std::move(group_counts);
+  pair_count_ = std::size_t(pairs);
+  instance_count_ = instances.size();
+  std::memset(templates_.data(), 0, templates_.size());
+  bound_classes_ = nullptr;  // descriptors rewritten by the next pass
+}
+
+void ClusterCuller::upload_draws(std::span<const DrawCommand> draws) {
+  if (draws.size() != pair_count_)
+    throw std::invalid_argument("ClusterCuller::upload_draws: " + std::to_string(draws.size()) + " draws for " +
+                                std::to_string(pair_count_) + " pairs");
+  if (!draws.empty()) std::memcpy(templates_.data(), draws.data(), draws.size_bytes());
+}
+
+void ClusterCuller::prepare(const ClusterFrame& frame) {
+  for (std::size_t k = 0; k < frame.frustum.plane_count; ++k)
+    if (!std::isfinite(frame.frustum.planes[k].normal.x) || !std::isfinite(frame.frustum.planes[k].normal.y) ||
+        !std::isfinite(frame.frustum.planes[k].normal.z) || !std::isfinite(frame.frustum.planes[k].d))
+      throw std::invalid_argument("ClusterCuller: frustum plane " + std::to_string(k) + " is not finite");
+  if (frame.backface && !(std::isfinite(frame.eye.x) && std::isfinite(frame.eye.y) && std::isfinite(frame.eye.z)))
+    throw std::invalid_argument("ClusterCuller: the eye is not finite");
+  CullOptions occlusion;
+  if (frame.pyramid) {
+    occlusion.pyramid = frame.pyramid;
+    occlusion.occlusion_views = {frame.occlusion_view};
+    occlusion.occlusion_options = frame.occlusion_options;
+    detail::check_occlusion(ctx_, occlusion, 1);
+  }
+  if (frame.object_classes && frame.object_classes->size() < frame.object_classes_offset + 4 * instance_count())
+    throw std::invalid_argument("ClusterCuller: the object class buffer holds fewer than the " +
+                                std::to_string(instance_count()) + " instances' classes");
+  occlusion_ = frame.pyramid != nullptr;
+  object_classes_ = frame.object_classes != nullptr;
+  texels_ = occlusion_ ? frame.occlusion_options.texels_per_axis : 4u;
+  // Every pipeline now, not while recording.
+  pipeline(Cull, occlusion_, object_classes_, texels_);
+  pipeline(Scan);
+  pipeline(Scatter);
+
+  views_.as<GpuFrustum>()[0] = pack(frame.frustum);
+  if (occlusion_) detail::write_occlusion_views(occlusion, occlusion_views_.as<GpuOcclusionView>());
+  params_ = {};
+  params_.pair_count = std::uint32_t(pair_count_);
+  params_.view_count = 1;
+  params_.visible_capacity = std::uint32_t(pair_count_);
+  params_.backface = frame.backface ? 1u : 0u;
+  params_.eye = vec4(frame.eye, 0.0f);
+
+  // The descriptors, when what they name changed (the previous pass has completed: the
+  // renderer and cull() wait for every frame).
+  const vulkan::Buffer* classes = frame.object_classes ? frame.object_classes : &no_classes_;
+  const vulkan::Buffer* pyramid = frame.pyramid ? &frame.pyramid->texels() : &no_pyramid_;
+  const VkDeviceSize classes_offset = frame.object_classes ? frame.object_classes_offset : 0;
+  if (bound_classes_ != classes || bound_classes_offset_ != classes_offset || bound_pyramid_ != pyramid ||
+      bound_pyramid_generation_ != (frame.pyramid ? frame.pyramid->generation() : 0)) {
+    using Range = detail::PassResources::Range;
+    const Range ranges[kBindingCount] = {Range{&clusters_},
+                                         Range{&classes_},
+                                         Range{&visible_},
+                                         Range{&counters_},
+                                         Range{&views_},
+                                         Range{&templates_},
+                                         Range{&draws_},
+                                         Range{&group_counts_},
+                                         Range{&instances_},
+                                         Range{pyramid},
+                                         Range{&occlusion_views_},
+                                         Range{&pairs_},
+                                         Range{classes, classes_offset}};
+    resources_->write(0, ranges);
+    bound_classes_ = classes;
+    bound_classes_offset_ = classes_offset;
+    bound_pyramid_ = pyramid;
+    bound_pyramid_generation_ = frame.pyramid ? frame.pyramid->generation() : 0;
+  }
+}
+
+void ClusterCuller::record_passes(VkCommandBuffer cmd) {
+  detail::record_entry_barrier(ctx_, cmd);
+  vkCmdFillBuffer(cmd, counters_.handle(), 0, sizeof(ViewCounters), 0);
+  vkCmdFillBuffer(cmd, group_counts_.handle(), 0, VK_WHOLE_SIZE, 0);
+  detail::record_transfer_to_compute(cmd);
+  if (pair_count_ > 0) {
+    const VkDescriptorSet set = resources_->set();
+    const std::uint64_t per_dispatch = std::uint64_t(max_groups_) * group_size_;
+    auto pass = [&](const vulkan::ComputePipeline& pipe) {
+      vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.pipeline());
+      vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.layout(), 0, 1, &set, 0, nullptr);
+      for (std::uint64_t first = 0; first < pair_count_; first += per_dispatch) {
+        if (first > 0) detail::record_compute_to_compute(cmd);
+        ClusterCullParams params = params_;
+        params.first_pair = std::uint32_t(first);
+        vkCmdPushConstants(cmd, pipe.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
+        vkCmdDispatch(cmd, vulkan::group_count(std::min<std::uint64_t>(per_dispatch, pair_count_ - first), group_size_),
+                      1, 1);
+      }
+    };
+    pass(pipeline(Cull, occlusion_, object_classes_, texels_));
+    detail::record_compute_to_compute(cmd);
+    const vulkan::ComputePipeline& scan = pipeline(Scan);
+    vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, scan.pipeline());
+    vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, scan.layout(), 0, 1, &set, 0, nullptr);
+    vkCmdPushConstants(cmd, scan.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params_), &params_);
+    vkCmdDispatch(cmd, 1, 1, 1);
+    detail::record_compute_to_compute(cmd);
+    pass(pipeline(Scatter));
+  }
+  detail::record_exit_barrier(ctx_, cmd);
+}
+
+void ClusterCuller::record(VkCommandBuffer cmd, const ClusterFrame& frame) {
+  prepare(frame);
+  record_passes(cmd);
+}
+
+ClusterResult ClusterCuller::read_results() const {
+  ClusterResult r;
+  r.classes.resize(pair_count_);
+  const auto* c = static_cast<const std::uint32_t*>(classes_.data());
+  for (std::size_t p = 0; p < pair_count_; ++p) {
+    const std::uint32_t v = c[p];
+    r.classes[p] = static_cast<clusters::ClusterClass>(v);
+    if (v < r.counts.size()) ++r.counts[v];
+  }
+  r.drawn = counters_.as<const ViewCounters>()[0].visible_count;
+  return r;
+}
+
+ClusterResult ClusterCuller::cull(const ClusterFrame& frame) {
+  prepare(frame);
+  resources_->run([&](VkCommandBuffer cmd, VkQueryPool timestamps) {
+    if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, timestamps, 0);
+    record_passes(cmd);
+    if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps, 1);
+  });
+  return read_results();
+}
+
+}  // namespace cullpipe::gpu
