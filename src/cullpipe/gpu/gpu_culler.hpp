@@ -235,6 +235,11 @@ class GpuCuller {
   const vulkan::Buffer& draw_buffer() const { return draws_; }
   const vulkan::Buffer& counter_buffer() const { return counters_; }
   std::size_t last_visible_capacity() const { return last_capacity_; }
+  /// The classes the last pass wrote (ordered passes always write them; arrival order with
+  /// CullOptions::classes): object i of view v at uint [v * object count + i] when it culled
+  /// one segment (last_segment_count() == 1, as every ordered pass does). What the cluster pass
+  /// reads (ClusterFrame::object_classes).
+  const vulkan::Buffer& class_buffer() const { return classes_; }
 
   /// Writes the draws, counters and visible ids of every later pass into the engine's buffers
   /// (the engine keeps its indirect arguments where it wants them); draw_buffer() and

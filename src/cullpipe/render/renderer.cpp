@@ -4,12 +4,18 @@
 #include <cmath>
 #include <cstring>
 #include <functional>
+#include <glm/ext/matrix_double3x3.hpp>
 #include <glm/ext/matrix_transform.hpp>
+#include <glm/matrix.hpp>
 #include <limits>
+#include <map>
 #include <stdexcept>
 #include <string>
 #include <unordered_map>
+#include <utility>
 
+#include "cullpipe/bounds/sphere_fit.hpp"
+#include "cullpipe/geom/instance.hpp"
 #include "cullpipe/vulkan/check.hpp"
 
 // SPIR-V compiled from shaders/render_mesh.{vert,frag} at build time.
@@ -68,41 +74,115 @@ Renderer::Renderer(const vulkan::Context& ctx, const Scene& scene, const Rendere
     throw std::invalid_argument("image size " + std::to_string(config_.width) + "x" + std::to_string(config_.height) +
                                 " is empty or larger than the device's framebuffer limit");
   try {
-    // ---- geometry: each distinct triangle mesh once, box objects share one unit cube ----
-    std::vector<glm::vec3> vertices(std::begin(kCubeVertices), std::end(kCubeVertices));
-    std::vector<std::uint32_t> indices(std::begin(kCubeIndices), std::end(kCubeIndices));
-    struct Placed {
-      std::uint32_t first_index, index_count;
-      std::int32_t vertex_offset;
+    // ---- geometry: each distinct triangle mesh's vertices once (box objects share the unit
+    //      cube), its triangles once per winding it is drawn with, cluster by cluster ----
+    TriangleMesh cube;
+    cube.positions.assign(std::begin(kCubeVertices), std::end(kCubeVertices));
+    cube.indices.assign(std::begin(kCubeIndices), std::end(kCubeIndices));
+    std::vector<glm::vec3> vertices;
+    std::vector<std::uint32_t> indices;
+    std::vector<Aabb> cluster_boxes;
+    std::vector<BackfaceCone> cluster_cones;
+    // A mesh's vertices in the vertex buffer, and its triangles' order: ranges of its own index
+    // list (its clusters' with RendererConfig::clusters, else one range of every triangle).
+    struct Source {
+      std::int32_t vertex_offset = 0;
+      std::vector<std::uint32_t> order;  // the mesh's indices, cluster by cluster
+      std::vector<std::pair<std::uint32_t, std::uint32_t>> ranges;
+      std::uint32_t first_cluster = 0;  // into cluster_boxes / cluster_cones
     };
-    std::unordered_map<const TriangleMesh*, Placed> placed;
+    std::unordered_map<const TriangleMesh*, Source> sources;
+    auto source_of = [&](const TriangleMesh& mesh, std::size_t object) -> const Source& {
+      auto found = sources.find(&mesh);
+      if (found != sources.end()) return found->second;
+      if (vertices.size() + mesh.positions.size() > std::size_t(std::numeric_limits<std::int32_t>::max()))
+        throw std::length_error("the scene's distinct meshes have more vertices than one draw can address");
+      Source src;
+      src.vertex_offset = std::int32_t(vertices.size());
+      vertices.insert(vertices.end(), mesh.positions.begin(), mesh.positions.end());
+      src.first_cluster = std::uint32_t(cluster_boxes.size());
+      bool split = false;
+      if (config_.clusters) {
+        const std::string name = "object " + std::to_string(object) + "'s mesh";
+        try {
+          const MeshClusters c = build_clusters(mesh, config_.cluster_options, name);
+          src.order = c.indices;
+          for (const Cluster& cl : c.clusters) {
+            src.ranges.emplace_back(cl.first_index, cl.index_count);
+            cluster_boxes.push_back(cl.box);
+            cluster_cones.push_back(config_.cull_back_faces && !mesh.double_sided ? cl.cone : BackfaceCone{});
+          }
+          split = true;
+        } catch (const std::invalid_argument& e) {
+          cluster_fallbacks_.push_back(e.what());  // drawn whole: one cluster, no cone
+        }
+      }
+      if (!split) {
+        src.order = mesh.indices;
+        src.ranges.emplace_back(0u, std::uint32_t(mesh.indices.size()));
+        if (config_.clusters) {
+          cluster_boxes.push_back(mesh.positions.empty() ? Aabb{} : bounds::aabb_of_points(mesh.positions));
+          cluster_cones.push_back(BackfaceCone{});
+        }
+      }
+      return sources.emplace(&mesh, std::move(src)).first->second;
+    };
+    // Where a mesh's triangles are in the index buffer for one winding: each range (cluster)
+    // in order, its triangles flipped for a mirroring instance, and for a double-sided mesh
+    // followed by the same triangles reversed, so that back-face culling keeps one side of each.
+    struct Layout {
+      std::uint32_t first = 0, count = 0;
+      std::vector<std::pair<std::uint32_t, std::uint32_t>> ranges;  // per cluster, in the index buffer
+    };
+    std::map<std::pair<const TriangleMesh*, bool>, Layout> layouts;
+    auto layout_of = [&](const TriangleMesh& mesh, const Source& src, bool flipped) -> const Layout& {
+      auto found = layouts.find({&mesh, flipped});
+      if (found != layouts.end()) return found->second;
+      const bool both = config_.cull_back_faces && mesh.double_sided;
+      if (indices.size() + src.order.size() * (both ? 2 : 1) > std::numeric_limits<std::uint32_t>::max())
+        throw std::length_error("the scene's distinct meshes have more indices than one draw can address");
+      Layout l;
+      l.first = std::uint32_t(indices.size());
+      for (const auto& [first, count] : src.ranges) {
+        const std::uint32_t start = std::uint32_t(indices.size());
+        for (int side = 0; side < (both ? 2 : 1); ++side)
+          for (std::uint32_t k = first; k < first + count; k += 3) {
+            const bool reverse = flipped != (side == 1);
+            indices.insert(indices.end(),
+                           {src.order[k], src.order[k + (reverse ? 2 : 1)], src.order[k + (reverse ? 1 : 2)]});
+          }
+        l.ranges.emplace_back(start, std::uint32_t(indices.size()) - start);
+      }
+      l.count = std::uint32_t(indices.size()) - l.first;
+      return layouts.emplace(std::pair{&mesh, flipped}, std::move(l)).first->second;
+    };
     const std::size_t n = scene.objects.size();
     templates_.resize(n);
     std::vector<RenderObject> objects(n);
+    std::vector<gpu::ClusterInstance> cluster_instances;
+    std::vector<DrawCommand> cluster_draws;
     for (std::size_t i = 0; i < n; ++i) {
       const SceneObject& o = scene.objects[i];
-      Placed p{0, 36, 0};  // the cube
+      const TriangleMesh& mesh = o.triangles ? *o.triangles : cube;
       if (o.triangles) {
-        auto it = placed.find(o.triangles.get());
-        if (it == placed.end()) {
-          if (vertices.size() + o.triangles->positions.size() > std::size_t(std::numeric_limits<std::int32_t>::max()) ||
-              indices.size() + o.triangles->indices.size() > std::numeric_limits<std::uint32_t>::max())
-            throw std::length_error(
-                "the scene's distinct meshes have more vertices or indices than one draw can address");
-          p = {std::uint32_t(indices.size()), std::uint32_t(o.triangles->indices.size()),
-               std::int32_t(vertices.size())};
-          vertices.insert(vertices.end(), o.triangles->positions.begin(), o.triangles->positions.end());
-          indices.insert(indices.end(), o.triangles->indices.begin(), o.triangles->indices.end());
-          it = placed.emplace(o.triangles.get(), p).first;
-        }
-        p = it->second;
         objects[i].model = o.world;
       } else {
         const glm::vec3 size = o.local_bounds.max - o.local_bounds.min;
         objects[i].model = glm::scale(glm::translate(o.world, o.local_bounds.min), size);
       }
       objects[i].color = object_color(i);
-      templates_[i] = {p.index_count, 1, p.first_index, p.vertex_offset, std::uint32_t(i), 0};
+      // glTF: a transform with a negative determinant mirrors, and turns the winding around.
+      const glm::dmat3 linear(objects[i].model);
+      const bool flipped = config_.cull_back_faces && !mesh.double_sided && glm::determinant(linear) < 0.0;
+      const Source& src = source_of(mesh, i);
+      const Layout& l = layout_of(mesh, src, flipped);
+      templates_[i] = {l.count, 1, l.first, src.vertex_offset, std::uint32_t(i), 0};
+      if (config_.clusters) {
+        cluster_instances.push_back({Transform3x4::from_mat4(objects[i].model), src.first_cluster,
+                                     std::uint32_t(l.ranges.size()), config_.cull_back_faces && !mesh.double_sided});
+        for (const auto& [first, count] : l.ranges)
+          cluster_draws.push_back({count, 1, first, src.vertex_offset, std::uint32_t(i), 0});
+      }
     }
     const auto upload = [&](vulkan::Buffer& b, const void* data, std::size_t bytes, VkBufferUsageFlags usage,
                             const char* what) {
@@ -159,6 +239,15 @@ Renderer::Renderer(const vulkan::Context& ctx, const Scene& scene, const Rendere
     frame_options.ordered = true;
     frame_options.draws = true;
     culler_->reserve_outputs(1, frame_options);
+    if (config_.clusters) {
+      if (cluster_draws.size() > ctx_.properties().limits.maxDrawIndirectCount)
+        throw std::length_error(std::to_string(cluster_draws.size()) +
+                                " clusters are more draws than one indirect draw call may issue on " +
+                                ctx_.info().name);
+      cluster_culler_ = std::make_unique<gpu::ClusterCuller>(ctx_);
+      cluster_culler_->upload(cluster_boxes, cluster_cones, cluster_instances);
+      cluster_culler_->upload_draws(cluster_draws);
+    }
 
     create_targets();
     create_pipelines();
@@ -355,7 +444,9 @@ void Renderer::create_pipelines() {
     viewport_state.pScissors = &scissor;
     VkPipelineRasterizationStateCreateInfo raster{VK_STRUCTURE_TYPE_PIPELINE_RASTERIZATION_STATE_CREATE_INFO};
     raster.polygonMode = VK_POLYGON_MODE_FILL;
-    raster.cullMode = VK_CULL_MODE_NONE;  // mirrored instances flip winding; draw both sides
+    // glTF's front faces are counter-clockwise; the index buffer holds mirroring instances'
+    // triangles flipped and double-sided meshes' twice, so one state serves every draw.
+    raster.cullMode = config_.cull_back_faces ? VK_CULL_MODE_BACK_BIT : VK_CULL_MODE_NONE;
     raster.frontFace = VK_FRONT_FACE_COUNTER_CLOCKWISE;
     raster.lineWidth = 1.0f;
     VkPipelineMultisampleStateCreateInfo multisample{VK_STRUCTURE_TYPE_PIPELINE_MULTISAMPLE_STATE_CREATE_INFO};
@@ -410,6 +501,7 @@ void Renderer::create_pipelines() {
 void Renderer::release() {
   VkDevice dev = ctx_.device();
   if (ctx_.owns_device()) vkDeviceWaitIdle(dev);
+  cluster_culler_.reset();
   culler_.reset();
   if (stats_pool_) vkDestroyQueryPool(dev, stats_pool_, nullptr);
   if (cmd_) vkFreeCommandBuffers(dev, ctx_.command_pool(), 1, &cmd_);
@@ -536,11 +628,18 @@ Image Renderer::render(const Camera& camera, CullMode mode, FrameStats* stats) {
 
   const auto scene_pass = [&](const std::function<void()>& draw) { record_scene_pass(camera, ScenePass::Image, draw); };
   // n <= maxDrawIndirectCount (checked at construction): one call either way. The culled count
-  // (view 0's visible_count) cannot exceed the capacity n: maxDrawCount = n.
+  // (view 0's visible_count) cannot exceed the capacity n: maxDrawCount = n. Cluster frames draw
+  // the cluster pass's draws, as many as there are pairs at most.
   const auto culled_draws = [&] {
-    if (n > 0)
+    if (cluster_culler_) {
+      if (cluster_culler_->pair_count() > 0)
+        vkCmdDrawIndexedIndirectCount(cmd_, cluster_culler_->draw_buffer().handle(), 0,
+                                      cluster_culler_->counter_buffer().handle(), 0,
+                                      std::uint32_t(cluster_culler_->pair_count()), sizeof(DrawCommand));
+    } else if (n > 0) {
       vkCmdDrawIndexedIndirectCount(cmd_, culler_->draw_buffer().handle(), 0, culler_->counter_buffer().handle(), 0,
                                     std::uint32_t(n), sizeof(DrawCommand));
+    }
   };
 
   std::size_t first_phase_draws = 0;
@@ -549,7 +648,10 @@ Image Renderer::render(const Camera& camera, CullMode mode, FrameStats* stats) {
     // for depth; then that depth as a pyramid.
     if (first_phase) {
       first_phase_draws =
-          std::min<std::size_t>(culler_->counter_buffer().as<const gpu::ViewCounters>()[0].visible_count, n);
+          cluster_culler_
+              ? std::min<std::size_t>(cluster_culler_->counter_buffer().as<const gpu::ViewCounters>()[0].visible_count,
+                                      cluster_culler_->pair_count())
+              : std::min<std::size_t>(culler_->counter_buffer().as<const gpu::ViewCounters>()[0].visible_count, n);
       record_scene_pass(camera, ScenePass::Depth, culled_draws);  // (its colour is cleared below)
     } else {
       record_scene_pass(camera, ScenePass::Depth, [] {});  // nothing drawn: a cleared depth occludes nothing
@@ -557,6 +659,21 @@ Image Renderer::render(const Camera& camera, CullMode mode, FrameStats* stats) {
     pyramid_->record(cmd_, depth_source(), camera.reversed_z);
   }
   if (cull) culler_->record(cmd_, std::span(&frustum, 1), options);
+  if (cull && cluster_culler_) {
+    // Each kept object's clusters: by the frustum, their cones (perspective views: the eye is
+    // the projection's centre) and the same pyramid.
+    gpu::ClusterFrame frame;
+    frame.frustum = frustum;
+    frame.backface = config_.cull_back_faces && !camera.orthographic;
+    frame.eye = camera.eye;
+    frame.object_classes = &culler_->class_buffer();
+    if (occlusion) {
+      frame.pyramid = pyramid_.get();
+      frame.occlusion_view = options.occlusion_views[0];
+      frame.occlusion_options = options.occlusion_options;
+    }
+    cluster_culler_->record(cmd_, frame);
+  }
   // The image: every object, or what the culling pass kept, in object order.
   scene_pass([&] {
     if (stats_pool_) vkCmdBeginQuery(cmd_, stats_pool_, 0, 0);
@@ -576,11 +693,19 @@ Image Renderer::render(const Camera& camera, CullMode mode, FrameStats* stats) {
     stats->objects = n;
     stats->first_phase_draws = first_phase_draws;
     stats->occluded = 0;
+    stats->clusters = cluster_culler_ ? cluster_culler_->pair_count() : 0;
+    stats->cluster_classes = {};
+    stats->cluster_draws = 0;
     if (cull) {
       const gpu::CullResult r = culler_->read_results();
       stats->draws = std::min<std::size_t>(r.views[0].counts.visible, n);
       stats->occluded = r.views[0].counts.occluded;
       stats->classes = r.views[0].classes;
+      if (cluster_culler_) {
+        const gpu::ClusterResult c = cluster_culler_->read_results();
+        stats->cluster_classes = c.counts;
+        stats->cluster_draws = stats->draws = std::min(c.drawn, cluster_culler_->pair_count());
+      }
     } else {
       stats->draws = n;
       stats->classes.clear();

@@ -1,7 +1,9 @@
 #pragma once
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "cullpipe/bounds/aabb_update.hpp"
@@ -9,10 +11,12 @@
 #include "cullpipe/cull/software_depth.hpp"
 #include "cullpipe/geom/bv_kind.hpp"
 #include "cullpipe/geom/classification.hpp"
+#include "cullpipe/gpu/cluster_culler.hpp"
 #include "cullpipe/gpu/depth_pyramid_pass.hpp"
 #include "cullpipe/gpu/gpu_culler.hpp"
 #include "cullpipe/render/image.hpp"
 #include "cullpipe/scene/camera.hpp"
+#include "cullpipe/scene/clusters.hpp"
 #include "cullpipe/scene/scene.hpp"
 #include "cullpipe/vulkan/buffer.hpp"
 #include "cullpipe/vulkan/context.hpp"
@@ -26,6 +30,16 @@ struct RendererConfig {
   occlusion::OcclusionOptions occlusion;
   BvKind bv = BvKind::Aabb;                                            ///< volume the culling pass tests
   bounds::AabbUpdate aabb_update = bounds::AabbUpdate::HullRecompute;  ///< world AABBs of mesh objects
+  /// Back faces culled as glTF draws them: triangles wound clockwise on screen are not drawn,
+  /// except those of double-sided meshes (TriangleMesh::double_sided); a mirroring instance
+  /// (negative determinant) has its winding flipped. False: every face drawn.
+  bool cull_back_faces = true;
+  /// Cluster culling: every mesh (and the box objects' cube) split into clusters
+  /// (build_clusters with `cluster_options`); culled frames run the cluster pass
+  /// (gpu::ClusterCuller) after the object pass and draw the image from the kept clusters. The
+  /// meshes' triangles are stored cluster by cluster, for every frame, culled or not.
+  bool clusters = false;
+  ClusterOptions cluster_options;
 };
 
 /// How a frame culls: not at all, by the frustum, or by the frustum and then occlusion in two
@@ -46,6 +60,12 @@ struct FrameStats {
   std::uint64_t primitives = 0;
   bool primitives_counted = false;
   std::vector<Classification> classes;  ///< per object, from the culling pass (culled frames)
+  /// Cluster frames (RendererConfig::clusters, culled): the cluster pairs (every object's
+  /// clusters), the pairs per class (indexed by clusters::ClusterClass's value) and the clusters
+  /// drawn (draws is then this); the first phase's draws count clusters too.
+  std::size_t clusters = 0;
+  std::array<std::size_t, 6> cluster_classes{};
+  std::size_t cluster_draws = 0;
 };
 
 /// A headless Vulkan rasteriser (offscreen colour + depth, no window) that draws a scene from
@@ -95,9 +115,13 @@ class Renderer {
   /// with care.)
   std::vector<bool> pixel_owners(const Camera& camera);
 
-  /// Triangles of object i (what a draw of it feeds the input assembler).
+  /// Triangles of object i (what a draw of it feeds the input assembler; a double-sided mesh's
+  /// count twice when back faces are culled: it is drawn with both windings).
   std::uint64_t triangles(std::size_t object) const { return templates_[object].index_count / 3; }
   std::size_t object_count() const { return templates_.size(); }
+  /// Cluster rendering: the meshes build_clusters refused, drawn as one cluster each with no
+  /// back-face cone (named in the messages, as "mesh <i>: why").
+  const std::vector<std::string>& cluster_fallbacks() const { return cluster_fallbacks_; }
 
  private:
   void begin_frame();
@@ -115,6 +139,8 @@ class Renderer {
   RendererConfig config_;
   std::vector<gpu::DrawCommand> templates_;
   std::unique_ptr<gpu::GpuCuller> culler_;
+  std::unique_ptr<gpu::ClusterCuller> cluster_culler_;  // RendererConfig::clusters
+  std::vector<std::string> cluster_fallbacks_;
   std::unique_ptr<gpu::DepthPyramidPass> pyramid_;
   bool has_visibility_ = false;  // the culler's draw buffer holds the last culled frame's draws
   vulkan::Buffer vertices_, indices_, objects_, id_objects_, all_draws_, readback_;

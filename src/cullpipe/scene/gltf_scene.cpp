@@ -200,11 +200,15 @@ GltfScene load_gltf_scene(const std::string& path, const GltfSceneOptions& optio
   };
   // Keyed by what defines the geometry (POSITION accessor, index accessor, mode), so meshes
   // that share accessors share the work and the memory.
-  std::map<std::array<int, 3>, Primitive> cache;
+  // (And by whether its material is double-sided: drawn with both faces, as glTF asks.)
+  std::map<std::array<int, 4>, Primitive> cache;
   auto primitive = [&](std::size_t m, std::size_t p) -> const Primitive& {
     const tinygltf::Primitive& source = model.meshes[m].primitives[p];
     const auto pos_it = source.attributes.find("POSITION");
-    Primitive& slot = cache[{pos_it == source.attributes.end() ? -1 : pos_it->second, source.indices, source.mode}];
+    const bool double_sided = source.material >= 0 && std::size_t(source.material) < model.materials.size() &&
+                              model.materials[std::size_t(source.material)].doubleSided;
+    Primitive& slot = cache[{pos_it == source.attributes.end() ? -1 : pos_it->second, source.indices, source.mode,
+                             double_sided ? 1 : 0}];
     if (!slot.bounds) {
       const std::string where = file + idx("meshes", m) + ".primitives[" + std::to_string(p) + "]: ";
       gltf::Positions pos = gltf::read_positions(model, m, p, where);
@@ -219,6 +223,7 @@ GltfScene load_gltf_scene(const std::string& path, const GltfSceneOptions& optio
         auto tri = std::make_shared<TriangleMesh>();
         tri->indices = gltf::triangle_list(prim.mode, indices);
         tri->positions = std::move(pos.points);
+        tri->double_sided = double_sided;
         slot.triangles = std::move(tri);
       }
     }

@@ -41,6 +41,9 @@ struct ObjectOrigin {
 struct TriangleMesh {
   std::vector<glm::vec3> positions;
   std::vector<std::uint32_t> indices;  ///< three per triangle, each < positions.size()
+  /// Both faces are drawn (a glTF material's doubleSided); otherwise the triangles wound
+  /// clockwise as seen are back faces, culled (counter-clockwise under a mirroring transform).
+  bool double_sided = false;
 };
 
 /// One cullable object: its bounds in its own space and where the world puts it.
