@@ -489,6 +489,31 @@ TEST(Cli, RenderWithOcclusionPrintsEachFrameAndKeepsTheImage) {
   EXPECT_EQ(cullpipe("render --occlusion --texels 3 --out '" + png.string() + "'").code, 2);
 }
 
+// render --clusters on a shipped scene: every frame's image checked against the unculled one,
+// the clusters and triangles reported; back-facing clusters culled on the duck of the shared
+// scenes when present.
+TEST(Cli, RenderWithClustersChecksTheImage) {
+  const fs::path png = temp_dir() / "clusters.png";
+  const Result r =
+      cullpipe("render --clusters --occlusion --frames 2 --check --validate --width 240 --height 135 --out '" +
+               png.string() + "'");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("clusters: "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(" of culled objects, "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("triangles: "), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("DIFFERS"), std::string::npos) << r.out;
+  const fs::path duck = fs::path(CULLPIPE_TEST_DATA) / "../../../shared/scenes/Duck/Duck.gltf";
+  if (fs::exists(duck)) {
+    const Result d = cullpipe("render --clusters --check --validate --width 240 --height 135 --scene '" +
+                              duck.string() + "' --out '" + png.string() + "'");
+    ASSERT_EQ(d.code, 0) << d.err;
+    EXPECT_EQ(d.out.find(" 0 back-facing"), std::string::npos) << d.out;
+    EXPECT_EQ(d.out.find("DIFFERS"), std::string::npos) << d.out;
+  }
+  EXPECT_EQ(cullpipe("render --clusters --no-cull --out '" + png.string() + "'").code, 2);
+  EXPECT_EQ(cullpipe("render --clusters --cone-weight 2 --out '" + png.string() + "'").code, 2);
+}
+
 // run --occlusion walks the streets' path with both passes checked against the reference on
 // every frame's pyramid; the JSON and the dump carry each frame, OCCLUDED included.
 TEST(Cli, RunWithOcclusionChecksEveryFrameAgainstTheReference) {

@@ -71,11 +71,14 @@ struct RenderOptions : SceneOptions {
   std::string bv = "aabb";
   std::size_t view = 0;  ///< which view of a `views`-camera path around the scene (0: the scene's camera)
   std::size_t views = 1;
-  bool no_cull = false;      ///< draw every object instead of the culling pass's draws
-  bool check = false;        ///< render both ways and require identical images
-  bool occlusion = false;    ///< two-phase occlusion frames (render::CullMode::Occlusion)
-  std::size_t frames = 1;    ///< frames along the camera path from `view`, visibility carried
-  std::uint32_t texels = 4;  ///< occlusion: texels per axis the test reads (2, 4, 8, 16)
+  bool no_cull = false;       ///< draw every object instead of the culling pass's draws
+  bool check = false;         ///< render both ways and require identical images
+  bool occlusion = false;     ///< two-phase occlusion frames (render::CullMode::Occlusion)
+  std::size_t frames = 1;     ///< frames along the camera path from `view`, visibility carried
+  std::uint32_t texels = 4;   ///< occlusion: texels per axis the test reads (2, 4, 8, 16)
+  bool clusters = false;      ///< cluster culling after the object pass (RendererConfig::clusters)
+  float cone_weight = 0.25f;  ///< --clusters: meshoptimizer's cone weight (ClusterOptions)
+  bool all_faces = false;     ///< draw back faces too (RendererConfig::cull_back_faces = false)
   std::uint32_t width = 960, height = 540;
   std::string out_path;       ///< PNG
   std::string top_down_path;  ///< optional top-down debug PNG

@@ -130,6 +130,15 @@ int main(int argc, char** argv) {
   render_cmd->add_option("--texels", render.texels, "--occlusion: texels per axis the test reads: 2 | 4 | 8 | 16")
       ->capture_default_str()
       ->check(CLI::IsMember({2u, 4u, 8u, 16u}));
+  render_cmd->add_flag("--clusters", render.clusters,
+                       "Also cull clusters of the kept objects' meshes (frustum, back-face cone, occlusion with "
+                       "--occlusion) and draw the kept clusters");
+  render_cmd
+      ->add_option("--cone-weight", render.cone_weight,
+                   "--clusters: 0 splits meshes for compact clusters, towards 1 for narrow normal cones")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0f, 1.0f));
+  render_cmd->add_flag("--all-faces", render.all_faces, "Draw back faces too (no back-face culling, no cone test)");
   render_cmd->add_flag("--check", render.check,
                        "Also draw without culling and require the same image, pixel for pixel (exit 1 if not)");
   render_cmd->add_option("--views", render.views, "Camera path of this many views around the scene")

@@ -19,6 +19,7 @@ int render_command(const RenderOptions& o, std::ostream& out, std::ostream& err)
     if (o.views == 0 || o.view >= o.views) throw InputError("--view must be below --views");
     if (o.no_cull && o.check) throw InputError("give --no-cull or --check, not both");
     if (o.no_cull && o.occlusion) throw InputError("give --no-cull or --occlusion, not both");
+    if (o.no_cull && o.clusters) throw InputError("give --no-cull or --clusters, not both");
     const LoadedScene loaded = load_scene_source(o);
     const Scene& scene = loaded.scene;
     const std::vector<Camera> path = scene_camera_path(scene, o.views);
@@ -31,7 +32,12 @@ int render_command(const RenderOptions& o, std::ostream& out, std::ostream& err)
     config.bv = *bv;
     config.aabb_update = loaded.aabb_update;
     config.occlusion.texels_per_axis = o.texels;
+    config.clusters = o.clusters;
+    config.cluster_options.cone_weight = o.cone_weight;
+    config.cull_back_faces = !o.all_faces;
     render::Renderer renderer(ctx, scene, config);
+    for (const std::string& why : renderer.cluster_fallbacks())
+      out << "  drawn whole, not in clusters: " << why << "\n";
     const render::CullMode mode = o.no_cull     ? render::CullMode::None
                                   : o.occlusion ? render::CullMode::Occlusion
                                                 : render::CullMode::Frustum;
@@ -48,19 +54,36 @@ int render_command(const RenderOptions& o, std::ostream& out, std::ostream& err)
     for (std::size_t f = 0; f < o.frames; ++f) {
       camera = path[(o.view + f) % path.size()];
       image = renderer.render(camera, mode, &stats);
+      std::size_t kept = 0;
+      std::uint64_t kept_triangles = 0;  // what object-level culling submits
+      for (std::size_t i = 0; i < stats.classes.size(); ++i)
+        if (is_visible(stats.classes[i])) ++kept, kept_triangles += renderer.triangles(i);
       if (o.frames > 1) out << "  frame " << f << ":";
       if (o.no_cull) {
         out << "  no culling: " << stats.draws << " draws";
       } else {
         std::size_t inside = 0;
         for (Classification c : stats.classes) inside += c == Classification::Inside;
-        out << "  culled with " << o.bv << ": " << stats.draws << " of " << scene.objects.size() << " objects drawn ("
-            << inside << " inside, " << stats.draws - inside << " intersecting)";
+        out << "  culled with " << o.bv << ": " << kept << " of " << scene.objects.size() << " objects drawn ("
+            << inside << " inside, " << kept - inside << " intersecting)";
         if (o.occlusion)
-          out << "; " << stats.draws + stats.occluded << " kept by the frustum, " << stats.occluded << " occluded, "
-              << stats.first_phase_draws << " drawn first";
+          out << "; " << kept + stats.occluded << " kept by the frustum, " << stats.occluded << " occluded, "
+              << stats.first_phase_draws << (o.clusters ? " clusters" : "") << " drawn first";
+        if (o.clusters) {
+          using clusters::ClusterClass;
+          const auto count = [&](ClusterClass c) { return stats.cluster_classes[std::size_t(c)]; };
+          out << "\n    clusters: " << stats.cluster_draws << " of " << stats.clusters << " drawn; "
+              << count(ClusterClass::ObjectCulled) << " of culled objects, " << count(ClusterClass::Outside)
+              << " outside, " << count(ClusterClass::BackFacing) << " back-facing, " << count(ClusterClass::Occluded)
+              << " occluded";
+          if (stats.primitives_counted)
+            out << "\n    triangles: " << stats.primitives << " submitted, " << kept_triangles
+                << " by the kept objects whole ("
+                << (kept_triangles ? double(stats.primitives) / double(kept_triangles) : 0.0) << "x)";
+        }
       }
-      if (stats.primitives_counted) out << ", " << stats.primitives << " of " << all_triangles << " triangles";
+      if (stats.primitives_counted && !o.clusters)
+        out << ", " << stats.primitives << " of " << all_triangles << " triangles";
       out << "\n";
       if (o.check) {
         render::FrameStats all_stats;
@@ -78,7 +101,7 @@ int render_command(const RenderOptions& o, std::ostream& out, std::ostream& err)
           for (std::size_t i = 0; i < owners.size(); ++i)
             if (owners[i]) ++owning, dropped += !is_visible(stats.classes[i]);
           out << "  check: " << owning << " objects own a pixel, " << (dropped ? std::to_string(dropped) : "none")
-              << " of them culled; drawn / owning " << (owning ? double(stats.draws) / double(owning) : 0.0) << "\n";
+              << " of them culled; drawn / owning " << (owning ? double(kept) / double(owning) : 0.0) << "\n";
           if (dropped) {
             err << "error: " << dropped << " objects owning a pixel were culled\n";
             code = kExitMismatch;
