@@ -4,28 +4,14 @@
 #include <cstdint>
 
 #include "cullpipe/geom/instance.hpp"
+#include "cullpipe/scene/generators.hpp"
 #include "cullpipe/scene/scene.hpp"
 #include "test_util.hpp"
 
 namespace cullpipe::test {
 
 // A latitude-longitude sphere of radius r: 2 x rings x segments triangles, wound outwards.
-inline TriangleMesh uv_sphere(int rings, int segments, float r) {
-  TriangleMesh m;
-  for (int i = 0; i <= rings; ++i)
-    for (int j = 0; j < segments; ++j) {
-      const float theta = float(i) / float(rings) * 3.14159265f, phi = float(j) / float(segments) * 6.2831853f;
-      m.positions.push_back(
-          r * glm::vec3(std::sin(theta) * std::cos(phi), std::cos(theta), std::sin(theta) * std::sin(phi)));
-    }
-  auto at = [&](int i, int j) { return std::uint32_t(i * segments + (j % segments)); };
-  for (int i = 0; i < rings; ++i)
-    for (int j = 0; j < segments; ++j) {
-      m.indices.insert(m.indices.end(), {at(i, j), at(i, j + 1), at(i + 1, j)});
-      m.indices.insert(m.indices.end(), {at(i, j + 1), at(i + 1, j + 1), at(i + 1, j)});
-    }
-  return m;
-}
+inline TriangleMesh uv_sphere(int rings, int segments, float r) { return uv_sphere_mesh(rings, segments, r); }
 
 // A random affine transform: rotation, scale per axis in [0.2, 5] (non-uniform), a mirror with
 // probability 1/2, and a translation up to `reach` on each axis.

@@ -25,7 +25,8 @@ void add_device_options(CLI::App* cmd, DeviceOptions& d) {
 void add_scene_options(CLI::App* cmd, SceneOptions& s) {
   auto* scene_opt = cmd->add_option(
       "--scene", s.scene_path, "Scene file: cullpipe-scene JSON, or glTF (.gltf, .glb); default: scenes/default.json");
-  cmd->add_option("--generate", s.generate, "Procedural scene KIND:N, KIND = uniform | clustered | city | streets")
+  cmd->add_option("--generate", s.generate,
+                  "Procedural scene KIND:N, KIND = uniform | clustered | city | streets | meshes")
       ->excludes(scene_opt);
   cmd->add_option("--seed", s.seed, "Seed for --generate and --layout random")->capture_default_str();
   cmd->add_option("--gltf-scene", s.gltf_scene, "glTF: index of the scene to load (default: the file's default scene)");
@@ -184,7 +185,8 @@ int main(int argc, char** argv) {
 
   GenerateOptions generate;
   CLI::App* generate_cmd = app.add_subcommand("generate", "Write a procedural scene to a file");
-  generate_cmd->add_option("spec", generate.spec, "KIND:N, KIND = uniform | clustered | city | streets")->required();
+  generate_cmd->add_option("spec", generate.spec, "KIND:N, KIND = uniform | clustered | city | streets | meshes")
+      ->required();
   generate_cmd->add_option("--seed", generate.seed, "Seed")->capture_default_str();
   generate_cmd->add_option("--out", generate.out_path, "Output scene file")->required();
 

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <chrono>
 #include <cstring>
 #include <limits>
 #include <stdexcept>
@@ -281,13 +282,18 @@ ClusterResult ClusterCuller::read_results() const {
 }
 
 ClusterResult ClusterCuller::cull(const ClusterFrame& frame) {
+  const auto start = std::chrono::steady_clock::now();
   prepare(frame);
-  resources_->run([&](VkCommandBuffer cmd, VkQueryPool timestamps) {
+  const double gpu_ns = resources_->run([&](VkCommandBuffer cmd, VkQueryPool timestamps) {
     if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, timestamps, 0);
     record_passes(cmd);
     if (timestamps) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, timestamps, 1);
   });
-  return read_results();
+  ClusterResult r = read_results();
+  r.gpu_ns = gpu_ns;
+  r.wall_ns =
+      double(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - start).count());
+  return r;
 }
 
 }  // namespace cullpipe::gpu

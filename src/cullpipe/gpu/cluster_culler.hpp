@@ -58,6 +58,8 @@ struct ClusterResult {
   std::vector<clusters::ClusterClass> classes;  ///< per pair, in pair order
   std::array<std::size_t, 6> counts{};          ///< pairs per class, indexed by the class's value
   std::size_t drawn = 0;                        ///< the draw count
+  /// cull(): GPU time of the passes (timestamps; 0 without) and wall time of all of it.
+  double gpu_ns = 0.0, wall_ns = 0.0;
 };
 
 class ClusterCuller {

@@ -4,7 +4,10 @@
 #include <array>
 #include <cmath>
 #include <glm/ext/matrix_transform.hpp>
+#include <memory>
 
+#include "cullpipe/bounds/mesh_bounds.hpp"
+#include "cullpipe/bounds/sphere_fit.hpp"
 #include "cullpipe/core/splitmix.hpp"
 
 namespace cullpipe {
@@ -152,6 +155,7 @@ std::optional<SceneKind> parse_scene_kind(std::string_view name) {
   if (name == "clustered") return SceneKind::Clustered;
   if (name == "city") return SceneKind::City;
   if (name == "streets") return SceneKind::Streets;
+  if (name == "meshes") return SceneKind::Meshes;
   return std::nullopt;
 }
 
@@ -165,6 +169,8 @@ std::string_view to_string(SceneKind kind) {
       return "city";
     case SceneKind::Streets:
       return "streets";
+    case SceneKind::Meshes:
+      return "meshes";
   }
   return "?";
 }
@@ -196,6 +202,26 @@ Scene generate_scene(SceneKind kind, std::size_t count, std::uint64_t seed) {
       }
       break;
     }
+    case SceneKind::Meshes: {
+      auto mesh = std::make_shared<TriangleMesh>(rock_mesh(seed));
+      auto bounds = std::make_shared<const bounds::MeshBounds>(mesh->positions);
+      const Aabb local = bounds::aabb_of_points(mesh->positions);
+      const std::size_t per_row = std::max<std::size_t>(1, std::size_t(std::ceil(std::sqrt(double(count)))));
+      const float spacing = 10.0f, origin = -0.5f * spacing * float(per_row - 1);
+      for (std::size_t i = 0; i < count; ++i) {
+        const float x = origin + spacing * float(i % per_row), z = origin + spacing * float(i / per_row);
+        const float w = rng.uniform(2.0f, 4.0f), d = rng.uniform(2.0f, 4.0f), h = rng.uniform(2.0f, 14.0f);
+        SceneObject o;
+        o.local_bounds = local;
+        o.world = glm::rotate(glm::translate(glm::mat4(1.0f), glm::vec3(x, h, z)), rng.uniform(0.0f, 6.2831853f),
+                              glm::vec3(0, 1, 0));
+        o.world = glm::scale(o.world, glm::vec3(rng.uniform() < 0.25f ? -w : w, h, d));
+        o.mesh = bounds;
+        o.triangles = mesh;
+        scene.objects.push_back(o);
+      }
+      break;
+    }
     case SceneKind::City: {
       const std::size_t per_row = std::max<std::size_t>(1, std::size_t(std::ceil(std::sqrt(double(count)))));
       const float spacing = 10.0f;
@@ -222,7 +248,7 @@ Scene generate_scene(SceneKind kind, std::size_t count, std::uint64_t seed) {
     }
   }
   aim_camera(scene);
-  if (kind == SceneKind::City) {  // street level rather than from above
+  if (kind == SceneKind::City || kind == SceneKind::Meshes) {  // street level rather than from above
     const Aabb b = scene.bounds();
     const float r = std::max(glm::length(b.extent()) * 0.5f, 1.0f);
     scene.camera.eye = glm::vec3(0.45f * r, 12.0f, 0.45f * r);
@@ -239,13 +265,43 @@ Scene generate_scene(SceneKind kind, std::size_t count, std::uint64_t seed) {
   return scene;
 }
 
+TriangleMesh uv_sphere_mesh(int rings, int segments, float radius) {
+  TriangleMesh m;
+  for (int i = 0; i <= rings; ++i)
+    for (int j = 0; j < segments; ++j) {
+      const float theta = float(i) / float(rings) * 3.14159265f, phi = float(j) / float(segments) * 6.2831853f;
+      m.positions.push_back(
+          radius * glm::vec3(std::sin(theta) * std::cos(phi), std::cos(theta), std::sin(theta) * std::sin(phi)));
+    }
+  const auto at = [&](int i, int j) { return std::uint32_t(i * segments + (j % segments)); };
+  for (int i = 0; i < rings; ++i)
+    for (int j = 0; j < segments; ++j) {
+      m.indices.insert(m.indices.end(), {at(i, j), at(i, j + 1), at(i + 1, j)});
+      m.indices.insert(m.indices.end(), {at(i, j + 1), at(i + 1, j + 1), at(i + 1, j)});
+    }
+  return m;
+}
+
+TriangleMesh rock_mesh(std::uint64_t seed) {
+  constexpr int kRings = 24, kSegments = 48;
+  TriangleMesh m = uv_sphere_mesh(kRings, kSegments, 1.0f);
+  Rng rng{{seed * 0x9E3779B97F4A7C15ull + 17}};
+  for (int i = 0; i <= kRings; ++i) {
+    // A pole's copies move together, so the mesh stays closed.
+    const float pole = rng.uniform(0.85f, 1.15f);
+    for (int j = 0; j < kSegments; ++j)
+      m.positions[std::size_t(i * kSegments + j)] *= i == 0 || i == kRings ? pole : rng.uniform(0.85f, 1.15f);
+  }
+  return m;
+}
+
 std::pair<SceneKind, std::size_t> parse_generate_spec(std::string_view spec) {
   const auto colon = spec.find(':');
   const std::string kind_name(spec.substr(0, colon));
   const auto kind = parse_scene_kind(kind_name);
   if (!kind)
     throw InputError("--generate " + std::string(spec) + ": unknown kind '" + kind_name +
-                     "' (uniform, clustered, city, streets)");
+                     "' (uniform, clustered, city, streets, meshes)");
   if (colon == std::string_view::npos)
     throw InputError("--generate " + std::string(spec) + ": expected KIND:N, e.g. city:2000");
   const std::string n_text(spec.substr(colon + 1));
