@@ -520,5 +520,62 @@ TEST_F(GpuPyramid, ClusterPassEqualsTheReferencePairByPair) {
   for (std::size_t c : {0, 1, 3, 4, 5}) EXPECT_GT(seen[c], 100u) << "too few pairs of class " << c;
 }
 
+
+// Bad uploads and frames are refused by name before anything changes: the pass after them is
+// the pass before.
+TEST_F(GpuPyramid, ClusterPassRefusesBadInputAndKeepsItsState) {
+  gpu::ClusterCuller pass(context());
+  const MeshClusters c = build_clusters(test::uv_sphere(8, 12, 1.0f));
+  std::vector<Aabb> boxes;
+  std::vector<BackfaceCone> cones;
+  for (const Cluster& cl : c.clusters) boxes.push_back(cl.box), cones.push_back(cl.cone);
+  const std::uint32_t n = std::uint32_t(boxes.size());
+  std::vector<gpu::ClusterInstance> instances = {{Transform3x4{}, 0, n, true}};
+  pass.upload(boxes, cones, instances);
+  pass.upload_draws(std::vector<gpu::DrawCommand>(n, gpu::DrawCommand{3, 1, 0, 0, 0, 0}));
+  gpu::ClusterFrame frame;
+  frame.frustum = Frustum::from_view_proj(test::test_view_proj());
+  frame.eye = glm::vec3(0.0f, 0.0f, 10.0f);
+  const gpu::ClusterResult before = pass.cull(frame);
+  ASSERT_GT(before.drawn, 0u);
+
+  auto message = [&](auto&& call) {
+    try {
+      call();
+    } catch (const std::exception& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  std::vector<gpu::ClusterInstance> past = instances;
+  past[0].cluster_count = n + 1;
+  EXPECT_NE(message([&] { pass.upload(boxes, cones, past); }).find("instance 0: clusters 0+" + std::to_string(n + 1)),
+            std::string::npos);
+  std::vector<gpu::ClusterInstance> nan = instances;
+  nan[0].transform.rows[1].y = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_NE(message([&] { pass.upload(boxes, cones, nan); }).find("instance 0: transform row 1 column 1 is NaN"),
+            std::string::npos);
+  EXPECT_NE(message([&] { pass.upload(boxes, std::span(cones).first(1), instances); }).find("boxes and 1 cones"),
+            std::string::npos);
+  EXPECT_NE(message([&] { pass.upload_draws(std::vector<gpu::DrawCommand>(1)); }).find("1 draws for"),
+            std::string::npos);
+  gpu::ClusterFrame bad = frame;
+  bad.eye.x = std::numeric_limits<float>::infinity();
+  EXPECT_NE(message([&] { pass.cull(bad); }).find("the eye is not finite"), std::string::npos);
+  bad = frame;
+  bad.pyramid = &culler();
+  bad.occlusion_view = {test::test_view_proj(), 7, 5, false};  // not the pyramid's size
+  EXPECT_NE(message([&] { pass.cull(bad); }), "no error");
+  vulkan::Buffer small(context(), 4, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "small");
+  bad = frame;
+  bad.object_classes = &small;
+  bad.object_classes_offset = 4;
+  EXPECT_NE(message([&] { pass.cull(bad); }).find("object class buffer"), std::string::npos);
+
+  const gpu::ClusterResult after = pass.cull(frame);
+  EXPECT_EQ(after.classes, before.classes);
+  EXPECT_EQ(after.drawn, before.drawn);
+}
+
 }  // namespace
 }  // namespace cullpipe

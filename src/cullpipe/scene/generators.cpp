@@ -285,13 +285,18 @@ TriangleMesh uv_sphere_mesh(int rings, int segments, float radius) {
 TriangleMesh rock_mesh(std::uint64_t seed) {
   constexpr int kRings = 24, kSegments = 48;
   TriangleMesh m = uv_sphere_mesh(kRings, kSegments, 1.0f);
+  // Smooth lumps: a few low-frequency waves over the sphere (a pole's copies move together, so
+  // the mesh stays closed), so that neighbouring triangles face much the same way.
   Rng rng{{seed * 0x9E3779B97F4A7C15ull + 17}};
-  for (int i = 0; i <= kRings; ++i) {
-    // A pole's copies move together, so the mesh stays closed.
-    const float pole = rng.uniform(0.85f, 1.15f);
-    for (int j = 0; j < kSegments; ++j)
-      m.positions[std::size_t(i * kSegments + j)] *= i == 0 || i == kRings ? pole : rng.uniform(0.85f, 1.15f);
-  }
+  const float a = rng.uniform(0.0f, 6.2831853f), b = rng.uniform(0.0f, 6.2831853f), c = rng.uniform(0.0f, 6.2831853f);
+  for (int i = 0; i <= kRings; ++i)
+    for (int j = 0; j < kSegments; ++j) {
+      const float theta = float(i) / float(kRings) * 3.14159265f;
+      const float phi = i == 0 || i == kRings ? 0.0f : float(j) / float(kSegments) * 6.2831853f;
+      const float lump = 1.0f + 0.1f * std::sin(2.0f * theta + a) * std::cos(3.0f * phi + b) +
+                         0.05f * std::cos(3.0f * theta + c) * std::sin(2.0f * phi + a);
+      m.positions[std::size_t(i * kSegments + j)] *= lump;
+    }
   return m;
 }
 

@@ -29,8 +29,8 @@ std::optional<SceneKind> parse_scene_kind(std::string_view name);
 /// vertices (each pole `segments` times), 2 x rings x segments triangles wound counter-clockwise
 /// seen from outside (those at the poles have two corners at one place: no area).
 TriangleMesh uv_sphere_mesh(int rings, int segments, float radius);
-/// The `meshes` scene's mesh for `seed`: uv_sphere_mesh(24, 48, 1) with each vertex moved
-/// along its direction by up to 15% (the poles' copies alike), so its clusters' normals vary.
+/// The `meshes` scene's mesh for `seed`: uv_sphere_mesh(24, 48, 1) with smooth lumps, each
+/// vertex moved along its direction by up to 15% by a few low-frequency waves.
 TriangleMesh rock_mesh(std::uint64_t seed);
 std::string_view to_string(SceneKind kind);
 
