@@ -5,7 +5,7 @@
 //           submit, wait, read the image back), medians over the frames after the first; the
 //           first and last frames' images checked against the unculled one. Scenes: the shared
 //           scenes' FlightHelmet, 2CylinderEngine and ReciprocatingSaw on an orbit path, and the
-//           generated `meshes` scene (instances of one mesh) along a street-level orbit.
+//           generated `meshes` scene (instances of one mesh), walking and turning at street level.
 //   pass    the cluster pass over P (instance, cluster) pairs against the flat ordered pass
 //           with draws over P objects (the placed cluster boxes), GPU time, medians of repeats.
 // Ratios are within one run: clusters over objects.
@@ -182,14 +182,17 @@ int main(int argc, char** argv) {
   }
   if (cfg.meshes > 0) {
     const Scene scene = generate_scene(SceneKind::Meshes, cfg.meshes, 1);
-    // A slow turn about the scene's centre at street level: frame to frame the view moves a little.
+    // Walking and turning at street level: half a unit forward (the grid's cells are 10 apart)
+    // and 1.4 degrees to the left a frame.
     std::vector<Camera> path;
-    const glm::vec3 c = scene.bounds().center();
     for (std::size_t f = 0; f < cfg.frames; ++f) {
       Camera cam = scene.camera;
-      const float a = 0.6f * float(f) / float(cfg.frames);
-      const glm::vec3 d = cam.eye - c;
-      cam.eye = c + glm::vec3(d.x * std::cos(a) - d.z * std::sin(a), d.y, d.x * std::sin(a) + d.z * std::cos(a));
+      const glm::vec3 ahead = cam.target - cam.eye;
+      const float a = 0.025f * float(f);
+      const glm::vec3 turned(ahead.x * std::cos(a) - ahead.z * std::sin(a), ahead.y,
+                             ahead.x * std::sin(a) + ahead.z * std::cos(a));
+      cam.eye += glm::normalize(glm::vec3(ahead.x, 0.0f, ahead.z)) * (0.5f * float(f));
+      cam.target = cam.eye + turned;
       path.push_back(cam);
     }
     rows.push_back(run_frames(ctx, "meshes:" + std::to_string(cfg.meshes), scene, path, cfg));

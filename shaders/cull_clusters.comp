@@ -5,8 +5,10 @@
 // from the eye (its back-face cone, shared/cone.glsl), or when the placed box is hidden behind
 // the depth pyramid (OCCLUSION): the first test that culls names its class (CLUSTER_*), as
 // clusters::classify in src/cullpipe/cull/clusters.cpp decides it, bit for bit. Each pair's
-// class and its workgroup's drawn count are written as the ordered flat pass writes them;
-// compact_scan.comp and compact_scatter.comp then list the drawn pairs' draws in pair order.
+// class and its workgroup's count of draws are written as the ordered flat pass writes its
+// classes and counts; compact_scan.comp turns the counts into offsets and cluster_scatter.comp
+// writes the draws in pair order, a run of drawn clusters whose index ranges follow on from
+// each other in one draw.
 #extension GL_GOOGLE_include_directive : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_arithmetic : require
@@ -82,18 +84,29 @@ uint classify_pair(uint instance, uint cluster) {
   return CLUSTER_DRAWN;
 }
 
+// The run's drawn pairs (for the draws' starts).
+shared uint drawn_bits[MAX_CULL_GROUP_SIZE / 32];
+
 void main() {
+  uint t = gl_LocalInvocationIndex;
+  if (t < (gl_WorkGroupSize.x + 31u) / 32u) drawn_bits[t] = 0u;
   load_view();
-  uint p = this_run_first_object(params.first_pair) + gl_LocalInvocationIndex;
-  bool drawn = false;
+  uint p = this_run_first_object(params.first_pair) + t;
+  bool drawn = false, continues = false;
   if (p < params.pair_count) {
     uvec4 pair = texelFetch(pairs, int(p));
     uint c = classify_pair(pair.x, pair.y);
     classes[p] = c;
     drawn = c == CLUSTER_DRAWN;
+    continues = pair.w != 0u;
   }
-  // The workgroup's drawn count (its INSIDE count stays 0), one atomic per subgroup on the
-  // workgroup's own count, zeroed before the pass.
-  uint total = subgroupAdd(drawn ? 1u : 0u);
+  barrier();
+  if (drawn) atomicOr(drawn_bits[t / 32u], 1u << (t % 32u));
+  barrier();
+  // The workgroup's draws: its drawn pairs that do not join the draw of the pair before
+  // (cluster_scatter.comp), counted with one atomic per subgroup on the workgroup's own count,
+  // zeroed before the pass (its INSIDE count stays 0).
+  bool joins = continues && t > 0u && (drawn_bits[(t - 1u) / 32u] & (1u << ((t - 1u) % 32u))) != 0u;
+  uint total = subgroupAdd(drawn && !joins ? 1u : 0u);
   if (subgroupElect() && total > 0u) atomicAdd(group_counts[this_run(params.first_pair)], total);
 }

@@ -347,9 +347,9 @@ ClusterTotals expect_clusters_invisible(const Scene& scene, const std::vector<Ca
       const render::Image culled = renderer.render(cameras[v], mode, &stats);
       const render::Image all = renderer.render(cameras[v], render::CullMode::None);
       EXPECT_EQ(render::count_different_pixels(culled, all), 0u)
-          << stats.cluster_draws << " of " << stats.clusters << " clusters drawn";
+          << stats.clusters_drawn << " of " << stats.clusters << " clusters drawn";
       objects.render(cameras[v], mode, &object_stats);
-      EXPECT_EQ(stats.cluster_draws, stats.cluster_classes[std::size_t(clusters::ClusterClass::Drawn)]);
+      EXPECT_EQ(stats.clusters_drawn, stats.cluster_classes[std::size_t(clusters::ClusterClass::Drawn)]);
       std::size_t sum = 0;
       for (std::size_t c = 0; c < stats.cluster_classes.size(); ++c) {
         totals.classes[c] += stats.cluster_classes[c];

@@ -72,10 +72,10 @@ int render_command(const RenderOptions& o, std::ostream& out, std::ostream& err)
         if (o.clusters) {
           using clusters::ClusterClass;
           const auto count = [&](ClusterClass c) { return stats.cluster_classes[std::size_t(c)]; };
-          out << "\n    clusters: " << stats.cluster_draws << " of " << stats.clusters << " drawn; "
-              << count(ClusterClass::ObjectCulled) << " of culled objects, " << count(ClusterClass::Outside)
-              << " outside, " << count(ClusterClass::BackFacing) << " back-facing, " << count(ClusterClass::Occluded)
-              << " occluded";
+          out << "\n    clusters: " << stats.clusters_drawn << " of " << stats.clusters << " drawn in " << stats.draws
+              << " draws; " << count(ClusterClass::ObjectCulled) << " of culled objects, "
+              << count(ClusterClass::Outside) << " outside, " << count(ClusterClass::BackFacing) << " back-facing, "
+              << count(ClusterClass::Occluded) << " occluded";
           if (stats.primitives_counted)
             out << "\n    triangles: " << stats.primitives << " submitted, " << kept_triangles
                 << " by the kept objects whole ("

@@ -13,8 +13,8 @@
 #include "cullpipe/vulkan/check.hpp"
 
 // SPIR-V compiled from shaders/ at build time.
+#include "cluster_scatter.spv.h"
 #include "compact_scan.spv.h"
-#include "compact_scatter.spv.h"
 #include "cull_clusters.spv.h"
 
 namespace cullpipe::gpu {
@@ -69,10 +69,10 @@ const vulkan::ComputePipeline& ClusterCuller::pipeline(int which, bool occlusion
     std::span<const std::uint32_t> spirv = which == Cull ? std::span<const std::uint32_t>(cullpipe_cull_clusters_spv)
                                            : which == Scan
                                                ? std::span<const std::uint32_t>(cullpipe_compact_scan_spv)
-                                               : std::span<const std::uint32_t>(cullpipe_compact_scatter_spv);
+                                               : std::span<const std::uint32_t>(cullpipe_cluster_scatter_spv);
     const std::string name = which == Cull   ? "cluster cull"
                              : which == Scan ? "cluster compaction scan"
-                                             : "cluster compaction scatter";
+                                             : "cluster draws";
     pipelines_[key] = std::make_unique<vulkan::ComputePipeline>(
         ctx_, vulkan::ComputePipelineDesc{spirv, kBindingCount, sizeof(ClusterCullParams), spec, name.c_str(),
                                           kTexelBindings});
@@ -165,6 +165,17 @@ void ClusterCuller::upload_draws(std::span<const DrawCommand> draws) {
     throw std::invalid_argument("ClusterCuller::upload_draws: " + std::to_string(draws.size()) + " draws for " +
                                 std::to_string(pair_count_) + " pairs");
   if (!draws.empty()) std::memcpy(templates_.data(), draws.data(), draws.size_bytes());
+  // Which pairs continue the draw of the pair before (cull_types.h, CLUSTER_BINDING_PAIRS).
+  auto* pairs = static_cast<uvec4*>(pairs_.data());
+  for (std::size_t p = 0; p < draws.size(); ++p) {
+    const DrawCommand* a = p > 0 ? &draws[p - 1] : nullptr;
+    const DrawCommand& b = draws[p];
+    pairs[p].w = a && pairs[p - 1].x == pairs[p].x && a->instance_count == b.instance_count &&
+                         a->vertex_offset == b.vertex_offset && a->first_instance == b.first_instance &&
+                         std::uint64_t(a->first_index) + a->index_count == b.first_index
+                     ? 1u
+                     : 0u;
+  }
 }
 
 void ClusterCuller::prepare(const ClusterFrame& frame) {
@@ -277,7 +288,8 @@ ClusterResult ClusterCuller::read_results() const {
     r.classes[p] = static_cast<clusters::ClusterClass>(v);
     if (v < r.counts.size()) ++r.counts[v];
   }
-  r.drawn = counters_.as<const ViewCounters>()[0].visible_count;
+  r.drawn = r.counts[std::size_t(clusters::ClusterClass::Drawn)];
+  r.draws = counters_.as<const ViewCounters>()[0].visible_count;
   return r;
 }
 

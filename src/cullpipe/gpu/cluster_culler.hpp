@@ -2,7 +2,8 @@
 // The GPU cluster pass (shaders/cull_clusters.comp): every cluster of every instance tested in
 // parallel, by its object's class from the object pass, the frustum, its back-face cone and
 // the depth pyramid, and the drawn ones listed as indexed indirect draws of their index
-// ranges, in pair order, with a count. Its classes equal clusters::classify's, pair by pair.
+// ranges, in pair order, with a count; drawn clusters whose ranges follow on from each other
+// share a draw. Its classes equal clusters::classify's, pair by pair.
 #include <vulkan/vulkan.h>
 
 #include <array>
@@ -57,7 +58,10 @@ struct ClusterFrame {
 struct ClusterResult {
   std::vector<clusters::ClusterClass> classes;  ///< per pair, in pair order
   std::array<std::size_t, 6> counts{};          ///< pairs per class, indexed by the class's value
-  std::size_t drawn = 0;                        ///< the draw count
+  std::size_t drawn = 0;                        ///< clusters drawn
+  /// Draws written (the draw count): a run of drawn clusters whose index ranges follow on from
+  /// each other is one draw.
+  std::size_t draws = 0;
   /// cull(): GPU time of the passes (timestamps; 0 without) and wall time of all of it.
   double gpu_ns = 0.0, wall_ns = 0.0;
 };
@@ -76,8 +80,10 @@ class ClusterCuller {
   /// past 2^32 pairs or the device's limits. On a throw the culler keeps what it had.
   void upload(std::span<const Aabb> boxes, std::span<const BackfaceCone> cones,
               std::span<const ClusterInstance> instances);
-  /// A draw per pair, in pair order (first_instance says which object a draw is of). Throws
-  /// std::invalid_argument for a count other than pair_count().
+  /// A draw per pair, in pair order (first_instance says which object a draw is of). Where a
+  /// pair's draw continues the one before (same instance, instance count, vertex offset and
+  /// first instance, its index range starting where that one's ends), a run of them that is
+  /// drawn becomes one draw. Throws std::invalid_argument for a count other than pair_count().
   void upload_draws(std::span<const DrawCommand> draws);
   std::size_t pair_count() const { return pair_count_; }
   std::size_t instance_count() const { return instance_count_; }

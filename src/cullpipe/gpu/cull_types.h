@@ -259,9 +259,10 @@ CP_CONST BVH_BINDING_COUNT = 14u;
 
 // ---- clusters (shaders/cull_clusters.comp) ----
 // One invocation per (instance, cluster) pair, in pair order (an instance's clusters together,
-// instances in order). It writes each pair's class and its workgroup's drawn count in the layout
-// the ordered flat pass writes them, and compact_scan.comp and compact_scatter.comp then list
-// the drawn pairs' draws in pair order. Bindings 0..10 mean what they mean for the flat pass,
+// instances in order). It writes each pair's class and its workgroup's count of draws in the
+// layout the ordered flat pass writes them; compact_scan.comp turns the counts into offsets and
+// cluster_scatter.comp writes the draws in pair order, one per run of drawn pairs whose index
+// ranges follow on from each other. Bindings 0..10 mean what they mean for the flat pass,
 // with these inputs: BINDING_BOUNDS holds CLUSTER_TEXELS per cluster, BINDING_CENTRES
 // CLUSTER_INSTANCE_TEXELS per instance.
 CP_CONST CLUSTER_BINDING_PAIRS = 11u;           // uniform texel buffer: per pair x = instance, y = cluster

@@ -695,7 +695,7 @@ Image Renderer::render(const Camera& camera, CullMode mode, FrameStats* stats) {
     stats->occluded = 0;
     stats->clusters = cluster_culler_ ? cluster_culler_->pair_count() : 0;
     stats->cluster_classes = {};
-    stats->cluster_draws = 0;
+    stats->clusters_drawn = 0;
     if (cull) {
       const gpu::CullResult r = culler_->read_results();
       stats->draws = std::min<std::size_t>(r.views[0].counts.visible, n);
@@ -704,7 +704,8 @@ Image Renderer::render(const Camera& camera, CullMode mode, FrameStats* stats) {
       if (cluster_culler_) {
         const gpu::ClusterResult c = cluster_culler_->read_results();
         stats->cluster_classes = c.counts;
-        stats->cluster_draws = stats->draws = std::min(c.drawn, cluster_culler_->pair_count());
+        stats->clusters_drawn = c.drawn;
+        stats->draws = std::min(c.draws, cluster_culler_->pair_count());
       }
     } else {
       stats->draws = n;

@@ -62,10 +62,11 @@ struct FrameStats {
   std::vector<Classification> classes;  ///< per object, from the culling pass (culled frames)
   /// Cluster frames (RendererConfig::clusters, culled): the cluster pairs (every object's
   /// clusters), the pairs per class (indexed by clusters::ClusterClass's value) and the clusters
-  /// drawn (draws is then this); the first phase's draws count clusters too.
+  /// drawn; `draws` then counts the cluster pass's draws (a run of an object's drawn clusters
+  /// is one), and so do the first phase's.
   std::size_t clusters = 0;
   std::array<std::size_t, 6> cluster_classes{};
-  std::size_t cluster_draws = 0;
+  std::size_t clusters_drawn = 0;
 };
 
 /// A headless Vulkan rasteriser (offscreen colour + depth, no window) that draws a scene from
