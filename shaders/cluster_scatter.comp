@@ -1,6 +1,6 @@
 #version 460
-// Cluster draws, the last of the cluster pass's three passes (after cull_clusters.comp and
-// compact_scan.comp): the drawn pairs of each workgroup's run, in pair order, as draws, where a
+// Cluster draws, the last of the cluster pass's passes (after cull_clusters.comp and
+// compact_scan.comp): the drawn pairs of each workgroup's run of listed pairs, in pair order, as draws, where a
 // drawn pair that continues the one before it (its index range follows on from it, same
 // instance and vertex offset: the pair texel's w) joins that pair's draw. A draw starts at a
 // drawn pair whose predecessor in the run is not drawn or not continued; it ends before the
@@ -22,6 +22,7 @@ layout(std430, set = 0, binding = BINDING_DRAW_TEMPLATES) readonly buffer DrawTe
 layout(std430, set = 0, binding = BINDING_DRAWS) writeonly buffer Draws { DrawCommand draws[]; };
 layout(std430, set = 0, binding = BINDING_GROUP_COUNTS) readonly buffer GroupCounts { uint group_offsets[]; };
 layout(set = 0, binding = CLUSTER_BINDING_PAIRS) uniform usamplerBuffer pairs;
+layout(std430, set = 0, binding = CLUSTER_BINDING_ACTIVE) readonly buffer Listed { uint listed_pairs[]; };
 layout(push_constant, std430) uniform Push { ClusterCullParams params; };
 
 // Per pair of the run: drawn; joining the draw of the pair before (drawn, continuing it, and
@@ -43,12 +44,15 @@ uint draw_end(uint t, uint limit) {
   return limit;
 }
 
+// Invocation k takes the k-th listed pair (cluster_expand.comp), as the culling pass did.
 void main() {
   uint t = gl_LocalInvocationIndex;
   uint group_size = gl_WorkGroupSize.x;
+  uint listed = listed_pairs[0];
   uint first = this_run_first_object(params.first_pair);
-  uint p = first + t;
-  uint limit = min(group_size, params.pair_count > first ? params.pair_count - first : 0u);
+  if (first >= listed) return;  // the whole workgroup
+  uint k = first + t;
+  uint limit = min(group_size, listed - first);
   uint words = (group_size + 31u) / 32u;
   if (t < words) {
     drawn_bits[t] = 0u;
@@ -56,7 +60,8 @@ void main() {
     start_bits[t] = 0u;
   }
   barrier();
-  bool drawn = p < params.pair_count && classes[p] == CLUSTER_DRAWN;
+  uint p = k < listed ? listed_pairs[CLUSTER_ACTIVE_HEADER + k] : 0u;
+  bool drawn = k < listed && classes[p] == CLUSTER_DRAWN;
   if (drawn) atomicOr(drawn_bits[t / 32u], 1u << (t % 32u));
   barrier();
   bool continues = drawn && texelFetch(pairs, int(p)).w != 0u;
@@ -67,7 +72,7 @@ void main() {
   barrier();
   if (t < words) {
     uint before = 0u;
-    for (uint k = 0u; k < t; ++k) before += bitCount(start_bits[k]);
+    for (uint w = 0u; w < t; ++w) before += bitCount(start_bits[w]);
     word_base[t] = before;
   }
   barrier();
@@ -75,7 +80,7 @@ void main() {
   uint slot = group_offsets[this_run(params.first_pair)] + word_base[t / 32u] +
               bitCount(start_bits[t / 32u] & ((1u << (t % 32u)) - 1u));
   if (slot >= params.visible_capacity) return;
-  uint last = first + draw_end(t, limit) - 1u;
+  uint last = listed_pairs[CLUSTER_ACTIVE_HEADER + first + draw_end(t, limit) - 1u];
   DrawCommand d = templates[p];
   DrawCommand e = templates[last];
   d.index_count = e.first_index + e.index_count - d.first_index;

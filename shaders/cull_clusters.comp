@@ -1,6 +1,7 @@
 #version 460
-// Cluster culling: one invocation per (instance, cluster) pair. A pair is culled when the
-// object pass culled its instance (OBJECT_CLASSES), when the cluster's box placed by the
+// Cluster culling: one invocation per listed (instance, cluster) pair, the pairs of the
+// instances the object pass kept (cluster_expand.comp; the others' classes are filled with
+// CLUSTER_OBJECT_CULLED before). A listed pair is culled when the cluster's box placed by the
 // instance's transform is outside the frustum, when every triangle of the cluster faces away
 // from the eye (its back-face cone, shared/cone.glsl), or when the placed box is hidden behind
 // the depth pyramid (OCCLUSION): the first test that culls names its class (CLUSTER_*), as
@@ -19,7 +20,6 @@
 layout(local_size_x_id = 1) in;  // = FLAT_CULL_GROUP_SIZE
 layout(constant_id = 4) const uint OBJECTS_PER_INVOCATION = 1;  // one pair per invocation (ordered_runs.glsl)
 layout(constant_id = 6) const uint OCCLUSION = 0;       // 1: test the kept pairs against the pyramid
-layout(constant_id = 8) const uint OBJECT_CLASSES = 0;  // 1: skip the pairs whose object the object pass culled
 const uint BV_KIND = BV_KIND_AABB;
 
 layout(set = 0, binding = BINDING_BOUNDS) uniform usamplerBuffer clusters;  // CLUSTER_TEXELS each
@@ -31,7 +31,7 @@ layout(std430, set = 0, binding = BINDING_GROUP_COUNTS) buffer GroupCounts { uin
 layout(std430, set = 0, binding = BINDING_PYRAMID) readonly buffer Pyramid { float pyramid[]; };
 layout(set = 0, binding = BINDING_OCCLUSION_VIEWS) uniform usamplerBuffer occlusion_views;
 layout(set = 0, binding = CLUSTER_BINDING_PAIRS) uniform usamplerBuffer pairs;
-layout(std430, set = 0, binding = CLUSTER_BINDING_OBJECT_CLASSES) readonly buffer ObjectClasses { uint object_classes[]; };
+layout(std430, set = 0, binding = CLUSTER_BINDING_ACTIVE) readonly buffer Listed { uint listed_pairs[]; };
 
 layout(push_constant, std430) uniform Push { ClusterCullParams params; };
 
@@ -54,11 +54,8 @@ void load_view() {
   if (OCCLUSION != 0u) occ_load_view(0u);
 }
 
+// A listed pair's class (its instance was kept: the list holds no other).
 uint classify_pair(uint instance, uint cluster) {
-  if (OBJECT_CLASSES != 0u) {
-    uint c = object_classes[instance];
-    if (c != CLASS_INSIDE && c != CLASS_INTERSECTING) return CLUSTER_OBJECT_CULLED;
-  }
   int ib = int(CLUSTER_INSTANCE_TEXELS * instance), cb = int(CLUSTER_TEXELS * cluster);
   vec4 rows[3] = vec4[3](word(instances, ib), word(instances, ib + 1), word(instances, ib + 2));
   vec4 box_min = word(clusters, cb), box_max = word(clusters, cb + 1);
@@ -87,13 +84,19 @@ uint classify_pair(uint instance, uint cluster) {
 // The run's drawn pairs (for the draws' starts).
 shared uint drawn_bits[MAX_CULL_GROUP_SIZE / 32];
 
+// Invocation k takes the k-th listed pair (cluster_expand.comp); workgroups past the list end
+// at once.
 void main() {
   uint t = gl_LocalInvocationIndex;
+  uint listed = listed_pairs[0];  // the header's visible_count
+  uint k0 = this_run_first_object(params.first_pair);
+  if (k0 >= listed) return;  // the whole workgroup
   if (t < (gl_WorkGroupSize.x + 31u) / 32u) drawn_bits[t] = 0u;
   load_view();
-  uint p = this_run_first_object(params.first_pair) + t;
+  uint k = k0 + t;
   bool drawn = false, continues = false;
-  if (p < params.pair_count) {
+  if (k < listed) {
+    uint p = listed_pairs[CLUSTER_ACTIVE_HEADER + k];
     uvec4 pair = texelFetch(pairs, int(p));
     uint c = classify_pair(pair.x, pair.y);
     classes[p] = c;
@@ -104,7 +107,8 @@ void main() {
   if (drawn) atomicOr(drawn_bits[t / 32u], 1u << (t % 32u));
   barrier();
   // The workgroup's draws: its drawn pairs that do not join the draw of the pair before
-  // (cluster_scatter.comp), counted with one atomic per subgroup on the workgroup's own count,
+  // (cluster_scatter.comp; a pair continuing another is of the same instance, so that pair is
+  // listed just before it), counted with one atomic per subgroup on the workgroup's own count,
   // zeroed before the pass (its INSIDE count stays 0).
   bool joins = continues && t > 0u && (drawn_bits[(t - 1u) / 32u] & (1u << ((t - 1u) % 32u))) != 0u;
   uint total = subgroupAdd(drawn && !joins ? 1u : 0u);

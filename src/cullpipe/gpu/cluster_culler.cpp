@@ -13,6 +13,7 @@
 #include "cullpipe/vulkan/check.hpp"
 
 // SPIR-V compiled from shaders/ at build time.
+#include "cluster_expand.spv.h"
 #include "cluster_scatter.spv.h"
 #include "compact_scan.spv.h"
 #include "cull_clusters.spv.h"
@@ -26,7 +27,7 @@ constexpr std::uint32_t kTexelBindings = 1u << BINDING_BOUNDS | 1u << BINDING_VI
                                          1u << BINDING_OCCLUSION_VIEWS | 1u << CLUSTER_BINDING_PAIRS;
 constexpr VkBufferUsageFlags kTexel = VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT;
 constexpr VkBufferUsageFlags kStorage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
-enum Shader { Cull = 0, Scan = 1, Scatter = 2 };
+enum Shader { Cull = 0, Scan = 1, Scatter = 2, Expand = 3, ExpandWrite = 4 };
 
 }  // namespace
 
@@ -40,6 +41,7 @@ ClusterCuller::ClusterCuller(const vulkan::Context& ctx) : ctx_(ctx) {
   max_groups_ = limits.maxComputeWorkGroupCount[0];
   const vulkan::ComputePipeline& first = pipeline(Cull);
   resources_ = std::make_unique<detail::PassResources>(ctx_, first.set_layout(), kBindingCount, kTexelBindings);
+  resources_->ensure_sets(2);  // the cluster passes', and the listing's
   bool dirty = false;
   detail::ensure_buffer(ctx_, counters_, sizeof(ViewCounters),
                         kStorage | VK_BUFFER_USAGE_TRANSFER_DST_BIT | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT,
@@ -58,21 +60,38 @@ ClusterCuller::~ClusterCuller() {
 
 const vulkan::ComputePipeline& ClusterCuller::pipeline(int which, bool occlusion, bool object_classes,
                                                        std::uint32_t texels) {
-  if (which != Cull) occlusion = false, object_classes = false, texels = 4;
+  if (which != Cull) occlusion = false, texels = 4;
+  if (which != Expand && which != ExpandWrite) object_classes = false;
   const std::size_t key = std::size_t(which) * 64 + (occlusion ? 32 : 0) + (object_classes ? 16 : 0) + texels;
   if (pipelines_.size() <= key) pipelines_.resize(key + 1);
   if (!pipelines_[key]) {
     // Specialization constants: 1 group size, 3 draws (scatter), 4 pairs per invocation (1),
-    // 6 occlusion, 7 its texels per axis, 8 the object pass's classes.
-    const std::uint32_t spec[9] = {
-        0u, group_size_, 1u, 1u, 1u, 1u, occlusion ? 1u : 0u, texels, object_classes ? 1u : 0u};
-    std::span<const std::uint32_t> spirv = which == Cull ? std::span<const std::uint32_t>(cullpipe_cull_clusters_spv)
-                                           : which == Scan
-                                               ? std::span<const std::uint32_t>(cullpipe_compact_scan_spv)
-                                               : std::span<const std::uint32_t>(cullpipe_cluster_scatter_spv);
-    const std::string name = which == Cull   ? "cluster cull"
-                             : which == Scan ? "cluster compaction scan"
-                                             : "cluster draws";
+    // 6 occlusion, 7 its texels per axis, 8 the object pass's classes, 9 the listing's stage.
+    const std::uint32_t spec[10] = {0u,
+                                    group_size_,
+                                    1u,
+                                    1u,
+                                    1u,
+                                    1u,
+                                    occlusion ? 1u : 0u,
+                                    texels,
+                                    object_classes ? 1u : 0u,
+                                    which == ExpandWrite ? 1u : 0u};
+    std::span<const std::uint32_t> spirv;
+    std::string name;
+    switch (which) {
+      case Cull:
+        spirv = cullpipe_cull_clusters_spv, name = "cluster cull";
+        break;
+      case Scan:
+        spirv = cullpipe_compact_scan_spv, name = "cluster compaction scan";
+        break;
+      case Scatter:
+        spirv = cullpipe_cluster_scatter_spv, name = "cluster draws";
+        break;
+      default:
+        spirv = cullpipe_cluster_expand_spv, name = "cluster listing";
+    }
     pipelines_[key] = std::make_unique<vulkan::ComputePipeline>(
         ctx_, vulkan::ComputePipelineDesc{spirv, kBindingCount, sizeof(ClusterCullParams), spec, name.c_str(),
                                           kTexelBindings});
@@ -100,6 +119,10 @@ void ClusterCuller::upload(std::span<const Aabb> boxes, std::span<const Backface
   if (pairs > std::numeric_limits<std::uint32_t>::max() || instances.size() > std::numeric_limits<std::uint32_t>::max())
     throw std::length_error("ClusterCuller::upload: " + std::to_string(pairs) + " pairs, more than 2^32 - 1");
   const std::uint64_t groups = (pairs + group_size_ - 1) / group_size_;
+  if (groups > max_groups_)
+    throw std::length_error("ClusterCuller::upload: " + std::to_string(pairs) + " pairs need " +
+                            std::to_string(groups) + " workgroups, more than one dispatch may have on " +
+                            ctx_.info().name + " (maxComputeWorkGroupCount[0] " + std::to_string(max_groups_) + ")");
   const VkDeviceSize pair_bytes = std::max<VkDeviceSize>(pairs * 16, 16);
   detail::check_texel_range(ctx_, pair_bytes, "the cluster pairs");
   detail::check_texel_range(ctx_, std::max<VkDeviceSize>(boxes.size() * CLUSTER_TEXELS * 16, 16), "the clusters");
@@ -115,12 +138,18 @@ void ClusterCuller::upload(std::span<const Aabb> boxes, std::span<const Backface
   vulkan::Buffer pair_buffer(ctx_, pair_bytes, kTexel, "cluster pair buffer");
   vulkan::Buffer templates(ctx_, std::max<VkDeviceSize>(pairs * sizeof(DrawCommand), 16), kStorage,
                            "cluster draw template buffer");
-  vulkan::Buffer classes(ctx_, std::max<VkDeviceSize>(pairs * 4, 16), kStorage, "cluster class buffer");
+  vulkan::Buffer classes(ctx_, std::max<VkDeviceSize>(pairs * 4, 16), kStorage | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
+                         "cluster class buffer");
   vulkan::Buffer visible(ctx_, std::max<VkDeviceSize>(pairs * 4, 16), kStorage, "cluster visible buffer");
   vulkan::Buffer draws(ctx_, std::max<VkDeviceSize>(pairs * sizeof(DrawCommand), 16),
                        kStorage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "cluster draw buffer");
   vulkan::Buffer group_counts(ctx_, std::max<VkDeviceSize>(groups * 8, 16), kStorage | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
                               "cluster group count buffer");
+  const std::uint64_t instance_groups = (instances.size() + group_size_ - 1) / group_size_;
+  vulkan::Buffer expand_counts(ctx_, std::max<VkDeviceSize>(instance_groups * 8, 16),
+                               kStorage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, "cluster listing count buffer");
+  vulkan::Buffer active(ctx_, (CLUSTER_ACTIVE_HEADER + pairs) * 4, kStorage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT,
+                        "listed cluster buffer");
   for (vulkan::Buffer* b : {&clusters, &inst, &pair_buffer, &templates})
     if (!b->mapped()) throw vulkan::Error("the cluster pass needs host-visible memory for its inputs");
 
@@ -143,6 +172,7 @@ void ClusterCuller::upload(std::span<const Aabb> boxes, std::span<const Backface
       w[3 + r] = frame.inverse.rows[std::size_t(r)];
     }
     w[6] = vec4(frame.translation_magnitude, std::bit_cast<float>(frame.usable && in.backface ? 1u : 0u));
+    reinterpret_cast<uvec4*>(w)[7] = uvec4(std::uint32_t(p), in.cluster_count, 0u, 0u);
     for (std::uint32_t c = 0; c < in.cluster_count; ++c)
       pw[p++] = uvec4(std::uint32_t(i), in.first_cluster + c, 0u, 0u);
   }
@@ -154,6 +184,8 @@ void ClusterCuller::upload(std::span<const Aabb> boxes, std::span<const Backface
   visible_ = std::move(visible);
   draws_ = std::move(draws);
   group_counts_ = std::move(group_counts);
+  expand_counts_ = std::move(expand_counts);
+  active_ = std::move(active);
   pair_count_ = std::size_t(pairs);
   instance_count_ = instances.size();
   std::memset(templates_.data(), 0, templates_.size());
@@ -199,7 +231,9 @@ void ClusterCuller::prepare(const ClusterFrame& frame) {
   object_classes_ = frame.object_classes != nullptr;
   texels_ = occlusion_ ? frame.occlusion_options.texels_per_axis : 4u;
   // Every pipeline now, not while recording.
-  pipeline(Cull, occlusion_, object_classes_, texels_);
+  pipeline(Expand, false, object_classes_);
+  pipeline(ExpandWrite, false, object_classes_);
+  pipeline(Cull, occlusion_, false, texels_);
   pipeline(Scan);
   pipeline(Scatter);
 
@@ -232,8 +266,15 @@ void ClusterCuller::prepare(const ClusterFrame& frame) {
                                          Range{pyramid},
                                          Range{&occlusion_views_},
                                          Range{&pairs_},
-                                         Range{classes, classes_offset}};
+                                         Range{classes, classes_offset},
+                                         Range{&active_}};
     resources_->write(0, ranges);
+    // The listing's set: its group counts, and the list's header as its counters.
+    Range listing[kBindingCount];
+    std::copy(std::begin(ranges), std::end(ranges), listing);
+    listing[BINDING_COUNTERS] = Range{&active_, 0, sizeof(ViewCounters)};
+    listing[BINDING_GROUP_COUNTS] = Range{&expand_counts_};
+    resources_->write(1, listing);
     bound_classes_ = classes;
     bound_classes_offset_ = classes_offset;
     bound_pyramid_ = pyramid;
@@ -245,31 +286,61 @@ void ClusterCuller::record_passes(VkCommandBuffer cmd) {
   detail::record_entry_barrier(ctx_, cmd);
   vkCmdFillBuffer(cmd, counters_.handle(), 0, sizeof(ViewCounters), 0);
   vkCmdFillBuffer(cmd, group_counts_.handle(), 0, VK_WHOLE_SIZE, 0);
+  vkCmdFillBuffer(cmd, expand_counts_.handle(), 0, VK_WHOLE_SIZE, 0);
+  // Pairs of the instances the object pass culled are never visited: their class is this.
+  vkCmdFillBuffer(cmd, classes_.handle(), 0, VK_WHOLE_SIZE, CLUSTER_OBJECT_CULLED);
   detail::record_transfer_to_compute(cmd);
   if (pair_count_ > 0) {
-    const VkDescriptorSet set = resources_->set();
     const std::uint64_t per_dispatch = std::uint64_t(max_groups_) * group_size_;
-    auto pass = [&](const vulkan::ComputePipeline& pipe) {
+    // One pass over `items` (instances or pairs) with descriptor set `set_index`.
+    auto pass = [&](const vulkan::ComputePipeline& pipe, std::size_t set_index, std::uint64_t items) {
+      const VkDescriptorSet set = resources_->set(set_index);
       vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.pipeline());
       vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.layout(), 0, 1, &set, 0, nullptr);
-      for (std::uint64_t first = 0; first < pair_count_; first += per_dispatch) {
+      for (std::uint64_t first = 0; first < items; first += per_dispatch) {
         if (first > 0) detail::record_compute_to_compute(cmd);
         ClusterCullParams params = params_;
+        params.pair_count = std::uint32_t(items);
         params.first_pair = std::uint32_t(first);
         vkCmdPushConstants(cmd, pipe.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
-        vkCmdDispatch(cmd, vulkan::group_count(std::min<std::uint64_t>(per_dispatch, pair_count_ - first), group_size_),
-                      1, 1);
+        vkCmdDispatch(cmd, vulkan::group_count(std::min<std::uint64_t>(per_dispatch, items - first), group_size_), 1,
+                      1);
       }
     };
-    pass(pipeline(Cull, occlusion_, object_classes_, texels_));
+    auto scan = [&](std::size_t set_index, std::uint64_t items) {
+      const vulkan::ComputePipeline& pipe = pipeline(Scan);
+      const VkDescriptorSet set = resources_->set(set_index);
+      ClusterCullParams params = params_;
+      params.pair_count = std::uint32_t(items);
+      vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.pipeline());
+      vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.layout(), 0, 1, &set, 0, nullptr);
+      vkCmdPushConstants(cmd, pipe.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
+      vkCmdDispatch(cmd, 1, 1, 1);
+    };
+    // List the kept instances' pairs (set 1: the list's header is its counter)...
+    pass(pipeline(Expand, false, object_classes_), 1, instance_count_);
     detail::record_compute_to_compute(cmd);
-    const vulkan::ComputePipeline& scan = pipeline(Scan);
-    vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, scan.pipeline());
-    vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, scan.layout(), 0, 1, &set, 0, nullptr);
-    vkCmdPushConstants(cmd, scan.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params_), &params_);
-    vkCmdDispatch(cmd, 1, 1, 1);
+    scan(1, instance_count_);
     detail::record_compute_to_compute(cmd);
-    pass(pipeline(Scatter));
+    pass(pipeline(ExpandWrite, false, object_classes_), 1, instance_count_);
+    detail::record_compute_to_compute(cmd);
+    // ...then cull them, count the draws per workgroup, and write the draws, in as many
+    // workgroups as the list needs (the listing wrote the count).
+    detail::record_compute_to_compute(cmd, true);
+    auto listed_pass = [&](const vulkan::ComputePipeline& pipe) {
+      const VkDescriptorSet set = resources_->set(0);
+      ClusterCullParams params = params_;
+      params.first_pair = 0;
+      vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.pipeline());
+      vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipe.layout(), 0, 1, &set, 0, nullptr);
+      vkCmdPushConstants(cmd, pipe.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
+      vkCmdDispatchIndirect(cmd, active_.handle(), CLUSTER_ACTIVE_DISPATCH * sizeof(std::uint32_t));
+    };
+    listed_pass(pipeline(Cull, occlusion_, false, texels_));
+    detail::record_compute_to_compute(cmd);
+    scan(0, pair_count_);
+    detail::record_compute_to_compute(cmd);
+    listed_pass(pipeline(Scatter));
   }
   detail::record_exit_barrier(ctx_, cmd);
 }

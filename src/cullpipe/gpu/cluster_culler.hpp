@@ -118,6 +118,7 @@ class ClusterCuller {
   vulkan::Buffer clusters_, instances_, pairs_, templates_;
   vulkan::Buffer classes_, visible_, counters_, views_, draws_, group_counts_, occlusion_views_, no_pyramid_,
       no_classes_;
+  vulkan::Buffer expand_counts_, active_;  // the listing of the kept instances' pairs
   std::size_t instance_count_ = 0;
   ClusterCullParams params_{};
   // What the descriptor set names now (rewritten when a frame names other buffers).

@@ -258,22 +258,33 @@ CP_CONST BVH_BINDING_OCCLUSION_VIEWS = 13u;  // occlusion: GpuOcclusionView per 
 CP_CONST BVH_BINDING_COUNT = 14u;
 
 // ---- clusters (shaders/cull_clusters.comp) ----
-// One invocation per (instance, cluster) pair, in pair order (an instance's clusters together,
-// instances in order). It writes each pair's class and its workgroup's count of draws in the
-// layout the ordered flat pass writes them; compact_scan.comp turns the counts into offsets and
-// cluster_scatter.comp writes the draws in pair order, one per run of drawn pairs whose index
-// ranges follow on from each other. Bindings 0..10 mean what they mean for the flat pass,
+// First the pairs of the instances the object pass kept are listed (cluster_expand.comp, with
+// compact_scan.comp between its two stages); then one invocation per listed pair, in pair order
+// (an instance's clusters together, instances in order), writes the pair's class and its
+// workgroup's count of draws in the layout the ordered flat pass writes them; compact_scan.comp
+// turns the counts into offsets and cluster_scatter.comp writes the draws in pair order, one per
+// run of drawn pairs whose index ranges follow on from each other. The pairs of culled instances
+// cost nothing but a fill of their classes. Bindings 0..10 mean what they mean for the flat pass,
 // with these inputs: BINDING_BOUNDS holds CLUSTER_TEXELS per cluster, BINDING_CENTRES
 // CLUSTER_INSTANCE_TEXELS per instance.
 CP_CONST CLUSTER_BINDING_PAIRS = 11u;           // uniform texel buffer: per pair x = instance, y = cluster
 CP_CONST CLUSTER_BINDING_OBJECT_CLASSES = 12u;  // uint per instance: the object pass's class (CLASS_*)
-CP_CONST CLUSTER_BINDING_COUNT = 13u;
+// The pairs of the instances the object pass kept, in pair order (cluster_expand.comp): a
+// ViewCounters first (its visible_count the number of them; the workgroups of the passes over
+// them from CLUSTER_ACTIVE_DISPATCH), then their pair indices from uint CLUSTER_ACTIVE_HEADER on.
+// The cluster pass and its draws run over this list only, dispatched indirectly.
+CP_CONST CLUSTER_BINDING_ACTIVE = 13u;
+CP_CONST CLUSTER_BINDING_COUNT = 14u;
+CP_CONST CLUSTER_ACTIVE_HEADER = 8u;
+// In the header, from this uint: the VkDispatchIndirectCommand of the passes over the list.
+CP_CONST CLUSTER_ACTIVE_DISPATCH = 4u;
 
 // Per cluster: (box min, cone cutoff), (box max, 0), (cone apex, 0), (cone axis, 0).
 CP_CONST CLUSTER_TEXELS = 4u;
-// Per instance: the rows of its transform, the rows of its inverse (InverseFrame::inverse), then
-// (translation magnitudes, flags: bit 0 = the inverse frame is usable).
-CP_CONST CLUSTER_INSTANCE_TEXELS = 7u;
+// Per instance: the rows of its transform, the rows of its inverse (InverseFrame::inverse),
+// (translation magnitudes, flags: bit 0 = the inverse frame is usable), then (its first pair,
+// its cluster count, 0, 0).
+CP_CONST CLUSTER_INSTANCE_TEXELS = 8u;
 
 // A pair's class. Drawn and culled-by-the-frustum take the object classes' values that mean
 // the same, so the compaction passes list exactly the drawn pairs (CLASS_INTERSECTING).

@@ -283,7 +283,7 @@ TriangleMesh uv_sphere_mesh(int rings, int segments, float radius) {
 }
 
 TriangleMesh rock_mesh(std::uint64_t seed) {
-  constexpr int kRings = 24, kSegments = 48;
+  constexpr int kRings = 40, kSegments = 80;
   TriangleMesh m = uv_sphere_mesh(kRings, kSegments, 1.0f);
   // Smooth lumps: a few low-frequency waves over the sphere (a pole's copies move together, so
   // the mesh stays closed), so that neighbouring triangles face much the same way.

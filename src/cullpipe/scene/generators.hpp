@@ -17,7 +17,7 @@ enum class SceneKind {
   /// Buildings packed into city blocks (street_lots) seen from street level, with a camera
   /// path (Scene::path) walking a loop of streets near the centre.
   Streets,
-  /// Instances of one triangle mesh (a lumpy sphere of 2,304 triangles, rock_mesh) on the
+  /// Instances of one triangle mesh (a lumpy sphere of 6,400 triangles, rock_mesh) on the
   /// city's grid, each turned, scaled unevenly (2-4 wide, 2-14 high) and one in four mirrored,
   /// seen from street level: many instanced meshes with real depth complexity.
   Meshes,
@@ -29,7 +29,7 @@ std::optional<SceneKind> parse_scene_kind(std::string_view name);
 /// vertices (each pole `segments` times), 2 x rings x segments triangles wound counter-clockwise
 /// seen from outside (those at the poles have two corners at one place: no area).
 TriangleMesh uv_sphere_mesh(int rings, int segments, float radius);
-/// The `meshes` scene's mesh for `seed`: uv_sphere_mesh(24, 48, 1) with smooth lumps, each
+/// The `meshes` scene's mesh for `seed`: uv_sphere_mesh(40, 80, 1) with smooth lumps, each
 /// vertex moved along its direction by up to 15% by a few low-frequency waves.
 TriangleMesh rock_mesh(std::uint64_t seed);
 std::string_view to_string(SceneKind kind);
