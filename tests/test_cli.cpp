@@ -514,6 +514,27 @@ TEST(Cli, RenderWithClustersChecksTheImage) {
   EXPECT_EQ(cullpipe("render --clusters --cone-weight 2 --out '" + png.string() + "'").code, 2);
 }
 
+// run --occlusion --clusters checks every (object, cluster) pair against the reference on each
+// frame; --clusters alone is refused.
+TEST(Cli, RunWithClustersChecksEveryPairAgainstTheReference) {
+  const fs::path json = temp_dir() / "clusters.json";
+  const Result r = cullpipe(
+      "run --occlusion --clusters --generate meshes:300 --views 40 --frames 3 --validate "
+      "--width 240 --height 135 --json '" +
+      json.string() + "'");
+  ASSERT_EQ(r.code, 0) << r.out << r.err;
+  EXPECT_NE(r.out.find("cluster-frame classes equal the reference's"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(" back-facing, "), std::string::npos) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(slurp(json));
+  EXPECT_EQ(j["cluster_mismatches"], 0);
+  ASSERT_EQ(j["per_frame"].size(), 3u);
+  EXPECT_GT(j["per_frame"][1]["clusters_back_facing"].get<std::size_t>(), 0u);
+  EXPECT_GT(j["per_frame"][1]["clusters_drawn"].get<std::size_t>(), 0u);
+  const Result alone = cullpipe("run --clusters --generate meshes:10");
+  EXPECT_EQ(alone.code, 2);
+  EXPECT_NE(alone.err.find("--clusters runs with --occlusion"), std::string::npos) << alone.err;
+}
+
 // run --occlusion walks the streets' path with both passes checked against the reference on
 // every frame's pyramid; the JSON and the dump carry each frame, OCCLUDED included.
 TEST(Cli, RunWithOcclusionChecksEveryFrameAgainstTheReference) {

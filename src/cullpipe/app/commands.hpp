@@ -61,6 +61,9 @@ struct RunOptions : SceneOptions {
   /// Two-phase occlusion frames through the renderer (run_occlusion), `frames` of them along the
   /// path of `views` cameras, at width x height, the test reading `texels` texels per axis.
   bool occlusion = false;
+  /// With occlusion: the renderer culls clusters too, and every (object, cluster) pair's class
+  /// is checked against clusters::classify on each frame's pyramid.
+  bool clusters = false;
   std::size_t frames = 1;
   std::uint32_t texels = 4;
   std::uint32_t width = 960, height = 540;

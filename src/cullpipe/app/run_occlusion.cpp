@@ -3,6 +3,7 @@
 // hierarchical pass on the same pyramid) are checked object by object against the scalar
 // reference on that frame's pyramid, and the objects owning a pixel of the unculled image (an id
 // buffer) against what was drawn.
+#include <array>
 #include <cstdio>
 #include <nlohmann/json.hpp>
 #include <ostream>
@@ -11,9 +12,11 @@
 #include "cullpipe/app/commands.hpp"
 #include "cullpipe/app/scene_source.hpp"
 #include "cullpipe/core/thread_pool.hpp"
+#include "cullpipe/cull/clusters.hpp"
 #include "cullpipe/cull/compare.hpp"
 #include "cullpipe/cull/occlusion.hpp"
 #include "cullpipe/cull/software_depth.hpp"
+#include "cullpipe/geom/cone.hpp"
 #include "cullpipe/gpu/bvh_culler.hpp"
 #include "cullpipe/render/renderer.hpp"
 #include "cullpipe/scene/cull_case_io.hpp"
@@ -44,7 +47,51 @@ struct FrameReport {
   std::size_t mismatches = 0;       // classes differing from the reference's
   std::size_t cpu_occluded = 0;     // the CPU path's occluded (software depth of the box objects)
   std::size_t cpu_missed = 0;       // own a pixel, but the CPU path hid them: must be 0
+  // --clusters: the pairs per class (clusters::ClusterClass's values), the cluster pass's draws,
+  // the triangles submitted, and pairs differing from the reference's.
+  std::array<std::size_t, 6> clusters{};
+  std::size_t cluster_draws = 0, cluster_mismatches = 0;
+  std::uint64_t triangles = 0;
 };
+
+std::size_t stats_pairs(const render::Renderer& renderer) {
+  std::size_t pairs = 0;
+  for (const gpu::ClusterInstance& in : renderer.cluster_instances()) pairs += in.cluster_count;
+  return pairs;
+}
+
+/// The cluster pass's classes of one frame against clusters::classify's on the frame's pyramid,
+/// given the object pass's classes; a report per mismatch (the first few).
+std::size_t check_clusters_frame(const render::Renderer& renderer, const render::FrameStats& stats,
+                                 const std::vector<InverseFrame>& frames, const Camera& camera, const Frustum& frustum,
+                                 const occlusion::OcclusionView& view, const occlusion::DepthPyramid& pyramid,
+                                 const occlusion::OcclusionOptions& options, std::size_t frame,
+                                 std::vector<std::string>& reports) {
+  const auto& boxes = renderer.cluster_boxes();
+  const auto& cones = renderer.cluster_cones();
+  const auto& instances = renderer.cluster_instances();
+  clusters::ClusterView cv{frustum, camera.eye, !camera.orthographic, &view, &pyramid, options};
+  std::size_t p = 0, mismatches = 0;
+  for (std::size_t i = 0; i < instances.size(); ++i) {
+    const gpu::ClusterInstance& in = instances[i];
+    clusters::ClusterView v = cv;
+    v.backface = cv.backface && in.backface;
+    for (std::uint32_t k = 0; k < in.cluster_count; ++k, ++p) {
+      const std::uint32_t c = in.first_cluster + k;
+      const clusters::ClusterClass want =
+          clusters::classify(boxes[c], cones[c], in.transform, frames[i], is_visible(stats.classes[i]), v);
+      const clusters::ClusterClass got =
+          p < stats.cluster_pair_classes.size() ? stats.cluster_pair_classes[p] : clusters::ClusterClass::Drawn;
+      if (got == want) continue;
+      if (++mismatches + reports.size() <= 10)
+        reports.push_back("frame " + std::to_string(frame) + ": object " + std::to_string(i) + " cluster " +
+                          std::to_string(k) + " (box " + describe(boxes[c]) + ", cone cutoff " +
+                          std::to_string(cones[c].cutoff) + "): GPU " + std::string(to_string(got)) + ", reference " +
+                          std::string(to_string(want)));
+    }
+  }
+  return mismatches;
+}
 
 /// The checks of one frame for one kind of volume: the renderer's classes against the
 /// reference's on the frame's pyramid, and with a tree the hierarchical pass's against both.
@@ -97,8 +144,12 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
   config.bv = bv;
   config.aabb_update = loaded.aabb_update;
   config.occlusion.texels_per_axis = o.texels;
+  config.clusters = o.clusters;
   occlusion::check_view({glm::mat4(1.0f), o.width, o.height, false}, o.width, o.height, false, config.occlusion);
   render::Renderer renderer(ctx, scene, config);
+  std::vector<InverseFrame> inverse_frames;  // --clusters: each object's, for the reference
+  for (const gpu::ClusterInstance& in : renderer.cluster_instances())
+    inverse_frames.push_back(inverse_frame(in.transform));
 
   // The volumes the renderer culls, and with --cull bvh a tree over them.
   const std::vector<Aabb> aabbs = world_aabbs(scene, loaded.aabb_update);
@@ -142,7 +193,7 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
   std::vector<Frustum> frusta;
   std::vector<std::vector<Classification>> dumped;
   std::vector<std::string> reports;
-  std::size_t mismatches = 0, missed = 0;
+  std::size_t mismatches = 0, missed = 0, cluster_mismatches = 0;
   for (std::size_t f = 0; f < o.frames; ++f) {
     const Camera& camera = path[f % path.size()];
     const Frustum frustum = Frustum::from_view_proj(camera.view_proj());
@@ -150,9 +201,9 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
     renderer.render(camera, render::CullMode::Occlusion, &stats);
     const occlusion::OcclusionView view{camera.view_proj(), o.width, o.height, camera.reversed_z};
     FrameReport r;
-    r.drawn = stats.draws;
+    for (const Classification c : stats.classes) r.drawn += is_visible(c);  // (stats.draws counts clusters' draws)
     r.occluded = stats.occluded;
-    r.frustum = stats.draws + stats.occluded;
+    r.frustum = r.drawn + stats.occluded;
     r.first_phase = stats.first_phase_draws;
     const gpu::DepthPyramidPass& pass = *renderer.pyramid();
     const bvh::FlatTree* tree = hierarchical ? &built.flat : nullptr;
@@ -169,6 +220,14 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
         r.mismatches =
             check_frame(spheres, frustum, view, pass, config.occlusion, stats.classes, tree, bvh_culler.get(), reports);
         break;
+    }
+    if (o.clusters) {
+      r.clusters = stats.cluster_classes;
+      r.cluster_draws = stats.draws;
+      r.triangles = stats.primitives;
+      r.cluster_mismatches = check_clusters_frame(renderer, stats, inverse_frames, camera, frustum, view, pass.read(),
+                                                  config.occlusion, f, reports);
+      cluster_mismatches += r.cluster_mismatches;
     }
     const std::vector<bool> owners = renderer.pixel_owners(camera);
     for (std::size_t i = 0; i < n; ++i) {
@@ -197,6 +256,14 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
         << pad(std::to_string(r.false_positives), 17)
         << pad(r.owning ? format_ratio(double(r.drawn) / double(r.owning)) : "-", 14)
         << pad(std::to_string(r.cpu_occluded), 14) << "\n";
+    if (o.clusters) {
+      using clusters::ClusterClass;
+      const auto count = [&](ClusterClass c) { return std::to_string(r.clusters[std::size_t(c)]); };
+      out << "         clusters: " << count(ClusterClass::Drawn) << " drawn in " << r.cluster_draws << " draws, "
+          << count(ClusterClass::ObjectCulled) << " of culled objects, " << count(ClusterClass::Outside) << " outside, "
+          << count(ClusterClass::BackFacing) << " back-facing, " << count(ClusterClass::Occluded) << " occluded; "
+          << r.triangles << " triangles\n";
+    }
     frames.push_back(r);
     if (!o.dump_path.empty()) {
       frusta.push_back(frustum);
@@ -209,6 +276,13 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
         << (hierarchical ? "flat pass == hierarchical pass == reference" : "flat pass == reference") << ")\n";
   else
     out << "  agreement:     " << mismatches << " MISMATCHES with the reference\n";
+  if (o.clusters) {
+    const std::size_t pairs = renderer.cluster_instances().empty() ? 0 : stats_pairs(renderer) * o.frames;
+    if (cluster_mismatches == 0)
+      out << "  clusters:      all " << pairs << " cluster-frame classes equal the reference's (clusters::classify)\n";
+    else
+      out << "  clusters:      " << cluster_mismatches << " cluster classes DIFFER from the reference's\n";
+  }
   out << "  pixels:        "
       << (missed ? std::to_string(missed) + " objects owning a pixel were CULLED (GPU and CPU paths)"
                  : std::string("every object owning a pixel was drawn, and kept by the CPU path"))
@@ -228,6 +302,8 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
     j["device"] = ctx.info().name;
     j["driver"] = ctx.info().driver;
     j["mismatches"] = mismatches;
+    j["clusters"] = o.clusters;
+    j["cluster_mismatches"] = cluster_mismatches;
     j["missed"] = missed;
     j["agree"] = mismatches == 0;
     nlohmann::json per_frame = nlohmann::json::array();
@@ -241,7 +317,15 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
                            {"missed", r.missed},
                            {"mismatches", r.mismatches},
                            {"cpu_occluded", r.cpu_occluded},
-                           {"cpu_missed", r.cpu_missed}});
+                           {"cpu_missed", r.cpu_missed},
+                           {"clusters_drawn", r.clusters[std::size_t(clusters::ClusterClass::Drawn)]},
+                           {"clusters_object_culled", r.clusters[std::size_t(clusters::ClusterClass::ObjectCulled)]},
+                           {"clusters_outside", r.clusters[std::size_t(clusters::ClusterClass::Outside)]},
+                           {"clusters_back_facing", r.clusters[std::size_t(clusters::ClusterClass::BackFacing)]},
+                           {"clusters_occluded", r.clusters[std::size_t(clusters::ClusterClass::Occluded)]},
+                           {"cluster_draws", r.cluster_draws},
+                           {"triangles", r.triangles},
+                           {"cluster_mismatches", r.cluster_mismatches}});
     j["per_frame"] = per_frame;
     json_util::write_file_atomic(o.json_path, j.dump(2) + "\n");
   }
@@ -254,6 +338,7 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
     json_util::write_file_atomic(o.dump_path, cull_case_to_json(c, &dumped));
   }
   gpu.check_validation();
+  mismatches += cluster_mismatches;
   if (mismatches || missed) {
     err << "error: ";
     if (mismatches) err << mismatches << " classes differ from the reference's" << (missed ? "; " : "");

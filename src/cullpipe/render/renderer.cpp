@@ -247,6 +247,9 @@ Renderer::Renderer(const vulkan::Context& ctx, const Scene& scene, const Rendere
       cluster_culler_ = std::make_unique<gpu::ClusterCuller>(ctx_);
       cluster_culler_->upload(cluster_boxes, cluster_cones, cluster_instances);
       cluster_culler_->upload_draws(cluster_draws);
+      cluster_boxes_ = std::move(cluster_boxes);
+      cluster_cones_ = std::move(cluster_cones);
+      cluster_instances_ = std::move(cluster_instances);
     }
 
     create_targets();
@@ -695,6 +698,7 @@ Image Renderer::render(const Camera& camera, CullMode mode, FrameStats* stats) {
     stats->occluded = 0;
     stats->clusters = cluster_culler_ ? cluster_culler_->pair_count() : 0;
     stats->cluster_classes = {};
+    stats->cluster_pair_classes.clear();
     stats->clusters_drawn = 0;
     if (cull) {
       const gpu::CullResult r = culler_->read_results();
@@ -704,6 +708,7 @@ Image Renderer::render(const Camera& camera, CullMode mode, FrameStats* stats) {
       if (cluster_culler_) {
         const gpu::ClusterResult c = cluster_culler_->read_results();
         stats->cluster_classes = c.counts;
+        stats->cluster_pair_classes = c.classes;
         stats->clusters_drawn = c.drawn;
         stats->draws = std::min(c.draws, cluster_culler_->pair_count());
       }

@@ -67,6 +67,9 @@ struct FrameStats {
   std::size_t clusters = 0;
   std::array<std::size_t, 6> cluster_classes{};
   std::size_t clusters_drawn = 0;
+  /// Every pair's class, in pair order (object by object, each object's clusters in order; see
+  /// Renderer::cluster_instances()).
+  std::vector<clusters::ClusterClass> cluster_pair_classes;
 };
 
 /// A headless Vulkan rasteriser (offscreen colour + depth, no window) that draws a scene from
@@ -123,6 +126,12 @@ class Renderer {
   /// Cluster rendering: the meshes build_clusters refused, drawn as one cluster each with no
   /// back-face cone (named in the messages, as "mesh <i>: why").
   const std::vector<std::string>& cluster_fallbacks() const { return cluster_fallbacks_; }
+  /// What the cluster pass culls, for checking it against clusters::classify: the clusters'
+  /// local boxes and cones (every distinct mesh's, the cube's for box objects), and per object
+  /// its transform (its draw's model matrix) and range of them; empty without clusters.
+  const std::vector<Aabb>& cluster_boxes() const { return cluster_boxes_; }
+  const std::vector<BackfaceCone>& cluster_cones() const { return cluster_cones_; }
+  const std::vector<gpu::ClusterInstance>& cluster_instances() const { return cluster_instances_; }
 
  private:
   void begin_frame();
@@ -142,6 +151,9 @@ class Renderer {
   std::unique_ptr<gpu::GpuCuller> culler_;
   std::unique_ptr<gpu::ClusterCuller> cluster_culler_;  // RendererConfig::clusters
   std::vector<std::string> cluster_fallbacks_;
+  std::vector<Aabb> cluster_boxes_;
+  std::vector<BackfaceCone> cluster_cones_;
+  std::vector<gpu::ClusterInstance> cluster_instances_;
   std::unique_ptr<gpu::DepthPyramidPass> pyramid_;
   bool has_visibility_ = false;  // the culler's draw buffer holds the last culled frame's draws
   vulkan::Buffer vertices_, indices_, objects_, id_objects_, all_draws_, readback_;
