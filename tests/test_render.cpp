@@ -370,7 +370,9 @@ TEST(Render, ClusterFramesEqualUnculled) {
   std::size_t files = 0;
   for (const char* name : {"FlightHelmet/FlightHelmet.gltf", "2CylinderEngine/2CylinderEngine.gltf",
                            "ReciprocatingSaw/ReciprocatingSaw.gltf", "VC/VC.gltf",
-                           "NegativeScaleTest/NegativeScaleTest.gltf", "Lantern/Lantern.gltf", "Duck/Duck.gltf"}) {
+                           "NegativeScaleTest/NegativeScaleTest.gltf", "Lantern/Lantern.gltf", "Duck/Duck.gltf",
+                           "CesiumMilkTruck/CesiumMilkTruck.gltf", "OrientationTest/OrientationTest.gltf",
+                           "Box/Box.gltf"}) {
     const std::filesystem::path path = kScenes / name;
     if (!std::filesystem::exists(path)) continue;
     SCOPED_TRACE(path.string());
@@ -389,7 +391,7 @@ TEST(Render, ClusterFramesEqualUnculled) {
     EXPECT_LE(t.cluster_triangles, t.object_triangles);
     for (std::size_t c = 0; c < all.classes.size(); ++c) all.classes[c] += t.classes[c];
   }
-  EXPECT_EQ(files, 7u);
+  EXPECT_EQ(files, 10u);
   for (const clusters::ClusterClass c : {clusters::ClusterClass::Outside, clusters::ClusterClass::BackFacing,
                                          clusters::ClusterClass::Occluded, clusters::ClusterClass::Drawn})
     EXPECT_GT(all.classes[std::size_t(c)], 100u) << "too few clusters " << to_string(c) << " to test the images";
