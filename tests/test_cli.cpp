@@ -493,11 +493,14 @@ TEST(Cli, RenderWithOcclusionPrintsEachFrameAndKeepsTheImage) {
 // the clusters and triangles reported; back-facing clusters culled on the duck of the shared
 // scenes when present.
 TEST(Cli, RenderWithClustersChecksTheImage) {
-  const fs::path png = temp_dir() / "clusters.png";
+  const fs::path png = temp_dir() / "clusters.png", top = temp_dir() / "clusters_top.png";
+  fs::remove(top);
   const Result r =
       cullpipe("render --clusters --occlusion --frames 2 --check --validate --width 240 --height 135 --out '" +
-               png.string() + "'");
+               png.string() + "' --top-down '" + top.string() + "'");
   ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(top));
+  EXPECT_NE(r.out.find("top-down clusters"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("clusters: "), std::string::npos) << r.out;
   EXPECT_NE(r.out.find(" of culled objects, "), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("triangles: "), std::string::npos) << r.out;

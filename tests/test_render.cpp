@@ -368,11 +368,11 @@ TEST(Render, ClusterFramesEqualUnculled) {
   if (!std::filesystem::exists(kScenes)) GTEST_SKIP() << kScenes << " not present";
   ClusterTotals all;
   std::size_t files = 0;
-  for (const char* name : {"FlightHelmet/FlightHelmet.gltf", "2CylinderEngine/2CylinderEngine.gltf",
-                           "ReciprocatingSaw/ReciprocatingSaw.gltf", "VC/VC.gltf",
-                           "NegativeScaleTest/NegativeScaleTest.gltf", "Lantern/Lantern.gltf", "Duck/Duck.gltf",
-                           "CesiumMilkTruck/CesiumMilkTruck.gltf", "OrientationTest/OrientationTest.gltf",
-                           "Box/Box.gltf"}) {
+  for (const char* name :
+       {"FlightHelmet/FlightHelmet.gltf", "2CylinderEngine/2CylinderEngine.gltf",
+        "ReciprocatingSaw/ReciprocatingSaw.gltf", "VC/VC.gltf", "NegativeScaleTest/NegativeScaleTest.gltf",
+        "Lantern/Lantern.gltf", "Duck/Duck.gltf", "CesiumMilkTruck/CesiumMilkTruck.gltf",
+        "OrientationTest/OrientationTest.gltf", "Box/Box.gltf"}) {
     const std::filesystem::path path = kScenes / name;
     if (!std::filesystem::exists(path)) continue;
     SCOPED_TRACE(path.string());

@@ -112,7 +112,12 @@ int render_command(const RenderOptions& o, std::ostream& out, std::ostream& err)
     render::write_png(o.out_path, image);
     out << "  wrote " << o.out_path << "\n";
 
-    if (!o.top_down_path.empty()) {
+    if (!o.top_down_path.empty() && o.clusters) {
+      render::write_png(o.top_down_path, render::cluster_top_down_image(renderer, stats, camera, 900));
+      out << "  wrote " << o.top_down_path
+          << " (top-down clusters: green drawn, violet occluded, blue back-facing, grey outside, dark grey of culled "
+             "objects, white frustum)\n";
+    } else if (!o.top_down_path.empty()) {
       std::vector<Classification> classes = stats.classes;
       if (classes.empty()) {  // --no-cull: classify for the picture anyway
         render::FrameStats culled;

@@ -82,6 +82,20 @@ std::size_t count_different_pixels(const Image& a, const Image& b) {
 
 Image top_down_image(const std::vector<Aabb>& world_boxes, const std::vector<Classification>& classes,
                      const Camera& camera, std::uint32_t size) {
+  // Outside, then occluded, intersecting and inside on top.
+  const Classification order[4] = {Classification::Outside, Classification::Occluded, Classification::Intersecting,
+                                   Classification::Inside};
+  const std::uint32_t colors[4] = {kColorOutside, kColorOccluded, kColorIntersecting, kColorInside};
+  std::vector<Aabb> boxes;
+  std::vector<std::uint32_t> box_colors;
+  for (int pass = 0; pass < 4; ++pass)
+    for (std::size_t i = 0; i < world_boxes.size() && i < classes.size(); ++i)
+      if (classes[i] == order[pass]) boxes.push_back(world_boxes[i]), box_colors.push_back(colors[pass]);
+  return top_down_image(boxes, box_colors, camera, size);
+}
+
+Image top_down_image(const std::vector<Aabb>& world_boxes, const std::vector<std::uint32_t>& colors,
+                     const Camera& camera, std::uint32_t size) {
   // The frustum's corners: unproject the clip-space corners; an infinite or very far far
   // plane is cut at `far_limit` from the eye so the drawing stays readable.
   float lo_x = camera.eye.x, hi_x = camera.eye.x, lo_z = camera.eye.z, hi_z = camera.eye.z;
@@ -119,22 +133,14 @@ Image top_down_image(const std::vector<Aabb>& world_boxes, const std::vector<Cla
   const auto px = [&](float x) { return int(std::floor((x - cx) * scale + 0.5f * float(img.width))); };
   const auto pz = [&](float z) { return int(std::floor((z - cz) * scale + 0.5f * float(img.height))); };
 
-  // Outside, then occluded, intersecting and inside on top.
-  const Classification order[4] = {Classification::Outside, Classification::Occluded, Classification::Intersecting,
-                                   Classification::Inside};
-  const std::uint32_t colors[4] = {kColorOutside, kColorOccluded, kColorIntersecting, kColorInside};
-  for (int pass = 0; pass < 4; ++pass) {
-    const Classification want = order[pass];
-    const std::uint32_t color = colors[pass];
-    for (std::size_t i = 0; i < world_boxes.size() && i < classes.size(); ++i) {
-      if (classes[i] != want) continue;
-      const Aabb& b = world_boxes[i];
-      const int x0 = px(b.min.x), x1 = px(b.max.x), z0 = pz(b.min.z), z1 = pz(b.max.z);
-      c.fill(x0, z0, x1, z1, color);
-      if (x1 - x0 > 3 && z1 - z0 > 3) {
-        c.line(x0, z0, x1, z0, darker(color)), c.line(x1, z0, x1, z1, darker(color));
-        c.line(x1, z1, x0, z1, darker(color)), c.line(x0, z1, x0, z0, darker(color));
-      }
+  for (std::size_t i = 0; i < world_boxes.size() && i < colors.size(); ++i) {
+    const Aabb& b = world_boxes[i];
+    const std::uint32_t color = colors[i];
+    const int x0 = px(b.min.x), x1 = px(b.max.x), z0 = pz(b.min.z), z1 = pz(b.max.z);
+    c.fill(x0, z0, x1, z1, color);
+    if (x1 - x0 > 3 && z1 - z0 > 3) {
+      c.line(x0, z0, x1, z0, darker(color)), c.line(x1, z0, x1, z1, darker(color));
+      c.line(x1, z1, x0, z1, darker(color)), c.line(x0, z1, x0, z0, darker(color));
     }
   }
   // Frustum edges: near quad, far quad, and the four side edges.

@@ -29,6 +29,8 @@ inline constexpr std::uint32_t kColorInside = 0x3cb44bff;        ///< green
 inline constexpr std::uint32_t kColorIntersecting = 0xf0b400ff;  ///< amber
 inline constexpr std::uint32_t kColorOutside = 0x5a5f69ff;       ///< grey
 inline constexpr std::uint32_t kColorOccluded = 0x8c5ac8ff;      ///< violet
+inline constexpr std::uint32_t kColorBackFacing = 0x3c82dcff;    ///< blue (clusters facing away)
+inline constexpr std::uint32_t kColorObjectCulled = 0x3a3d44ff;  ///< dark grey (clusters of culled objects)
 
 /// A top-down (looking down -y) debug view drawn on the CPU: every object's world AABB
 /// footprint in the x-z plane, filled by its class (outside first, so visible objects stay on
@@ -36,6 +38,10 @@ inline constexpr std::uint32_t kColorOccluded = 0x8c5ac8ff;      ///< violet
 /// eye when the far plane is infinite or farther) and the eye. `size` pixels on the longer
 /// side of the area shown (the objects' and the frustum's extent).
 Image top_down_image(const std::vector<Aabb>& world_boxes, const std::vector<Classification>& classes,
+                     const Camera& camera, std::uint32_t size);
+/// The same view with each box filled by its own colour (RGBA, 0xRRGGBBAA), in the order given
+/// (later boxes on top).
+Image top_down_image(const std::vector<Aabb>& world_boxes, const std::vector<std::uint32_t>& colors,
                      const Camera& camera, std::uint32_t size);
 
 }  // namespace cullpipe::render

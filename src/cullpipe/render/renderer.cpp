@@ -729,6 +729,26 @@ Image Renderer::render(const Camera& camera, CullMode mode, FrameStats* stats) {
   return image;
 }
 
+Image cluster_top_down_image(const Renderer& renderer, const FrameStats& stats, const Camera& camera,
+                             std::uint32_t size) {
+  using clusters::ClusterClass;
+  const ClusterClass order[5] = {ClusterClass::ObjectCulled, ClusterClass::Outside, ClusterClass::BackFacing,
+                                 ClusterClass::Occluded, ClusterClass::Drawn};
+  const std::uint32_t colors[5] = {kColorObjectCulled, kColorOutside, kColorBackFacing, kColorOccluded, kColorInside};
+  std::vector<Aabb> boxes;
+  std::vector<std::uint32_t> box_colors;
+  for (int layer = 0; layer < 5; ++layer) {
+    std::size_t p = 0;
+    for (const gpu::ClusterInstance& in : renderer.cluster_instances())
+      for (std::uint32_t k = 0; k < in.cluster_count; ++k, ++p)
+        if (p < stats.cluster_pair_classes.size() && stats.cluster_pair_classes[p] == order[layer]) {
+          boxes.push_back(instance_volume(renderer.cluster_boxes()[in.first_cluster + k], in.transform));
+          box_colors.push_back(colors[layer]);
+        }
+  }
+  return top_down_image(boxes, box_colors, camera, size);
+}
+
 std::vector<occlusion::OccluderBox> box_occluders(const Scene& scene) {
   std::vector<occlusion::OccluderBox> occluders;
   for (const SceneObject& object : scene.objects)

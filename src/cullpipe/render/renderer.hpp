@@ -174,6 +174,13 @@ class Renderer {
   VkQueryPool stats_pool_ = VK_NULL_HANDLE;
 };
 
+/// A top-down debug view of a cluster frame (RendererConfig::clusters): every (object, cluster)
+/// pair's box placed by its object's transform, filled by the class the frame gave it (dark grey
+/// of a culled object, grey outside, blue back-facing, violet occluded, green drawn on top), the
+/// frustum and the eye as top_down_image draws them.
+Image cluster_top_down_image(const Renderer& renderer, const FrameStats& stats, const Camera& camera,
+                             std::uint32_t size);
+
 /// The CPU occlusion path's occluders for `scene`: its objects the renderer draws as boxes (those
 /// without triangles), as it draws them (occlusion::occluder_box of the local box and the world
 /// transform). Mesh objects are left out: their boxes are not inside them.
