@@ -40,6 +40,14 @@ const auto* const kEnv = ::testing::AddGlobalTestEnvironment(new RenderEnvironme
 
 const std::filesystem::path kScenes = std::filesystem::path(CULLPIPE_SHARED_DIR) / "scenes";
 
+// `camera` moved towards its target to `factor` of its distance (an orbit closer than the
+// framing camera leaves part of the model outside the view), its near plane brought in.
+Camera closer(Camera camera, float factor) {
+  camera.eye = camera.target + (camera.eye - camera.target) * factor;
+  camera.near_plane *= 0.2f;
+  return camera;
+}
+
 // The scene's world volumes of the kind the renderer's culling pass tests.
 struct WorldVolumes {
   std::vector<Aabb> aabbs;
@@ -156,11 +164,7 @@ TEST(Render, GltfScenesCulledEqualsUnculled) {
     SCOPED_TRACE(path.string());
     ++files;
     const GltfScene g = load_gltf_scene(path.string());
-    // Orbit closer than the framing camera so that part of the model is outside the view.
-    Camera base = g.scene.camera;
-    base.eye = base.target + (base.eye - base.target) * 0.45f;
-    base.near_plane *= 0.2f;
-    std::vector<Camera> cameras = camera_path(base, g.scene.bounds(), 4);
+    std::vector<Camera> cameras = camera_path(closer(g.scene.camera, 0.45f), g.scene.bounds(), 4);
     for (std::size_t c = 0; c < g.cameras.size() && c < 3; ++c) {
       if (g.cameras[c].node < 0) continue;
       GltfSceneOptions o;
@@ -378,11 +382,8 @@ TEST(Render, ClusterFramesEqualUnculled) {
     SCOPED_TRACE(path.string());
     ++files;
     const GltfScene g = load_gltf_scene(path.string());
-    // Orbit closer than the framing camera so that part of the model is outside the view.
-    Camera base = g.scene.camera;
-    base.eye = base.target + (base.eye - base.target) * 0.6f;
-    base.near_plane *= 0.2f;
-    const ClusterTotals t = expect_clusters_invisible(g.scene, camera_path(base, g.scene.bounds(), 4));
+    const ClusterTotals t =
+        expect_clusters_invisible(g.scene, camera_path(closer(g.scene.camera, 0.6f), g.scene.bounds(), 4));
     std::printf(
         "%s: %llu triangles submitted with clusters, %llu by objects; clusters outside %zu, back-facing %zu, "
         "occluded %zu, of culled objects %zu, drawn %zu\n",
