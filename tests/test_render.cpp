@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <glm/ext/matrix_transform.hpp>
 #include <memory>
+#include <optional>
 
 #include "cullpipe/core/thread_pool.hpp"
 #include "cullpipe/cull/occlusion.hpp"
@@ -326,7 +327,7 @@ TEST(Render, BackFaceCullingKeepsClosedMeshesWhole) {
 struct ClusterTotals {
   std::size_t frames = 0;
   std::array<std::size_t, 6> classes{};
-  std::uint64_t cluster_triangles = 0, object_triangles = 0;
+  std::uint64_t cluster_triangles = 0, object_triangles = 0, visible_triangles = 0;
 };
 
 // Cluster frames along `cameras`, by the frustum and then with occlusion in two phases: each
@@ -362,6 +363,13 @@ ClusterTotals expect_clusters_invisible(const Scene& scene, const std::vector<Ca
       EXPECT_EQ(sum, stats.clusters);
       totals.cluster_triangles += stats.primitives;
       totals.object_triangles += object_stats.primitives;
+      if (const std::optional<std::uint64_t> visible = renderer.visible_triangles(cameras[v])) {
+        // Every triangle owning a pixel is among those submitted (the images are equal).
+        if (stats.primitives_counted) {
+          EXPECT_LE(*visible, stats.primitives);
+        }
+        totals.visible_triangles += *visible;
+      }
       ++totals.frames;
     }
   }
@@ -385,10 +393,11 @@ TEST(Render, ClusterFramesEqualUnculled) {
     const ClusterTotals t =
         expect_clusters_invisible(g.scene, camera_path(closer(g.scene.camera, 0.6f), g.scene.bounds(), 4));
     std::printf(
-        "%s: %llu triangles submitted with clusters, %llu by objects; clusters outside %zu, back-facing %zu, "
-        "occluded %zu, of culled objects %zu, drawn %zu\n",
+        "%s: %llu triangles submitted with clusters, %llu by objects, %llu own a pixel; clusters outside %zu, "
+        "back-facing %zu, occluded %zu, of culled objects %zu, drawn %zu\n",
         name, static_cast<unsigned long long>(t.cluster_triangles), static_cast<unsigned long long>(t.object_triangles),
-        t.classes[0], t.classes[4], t.classes[3], t.classes[5], t.classes[1]);
+        static_cast<unsigned long long>(t.visible_triangles), t.classes[0], t.classes[4], t.classes[3], t.classes[5],
+        t.classes[1]);
     EXPECT_LE(t.cluster_triangles, t.object_triangles);
     for (std::size_t c = 0; c < all.classes.size(); ++c) all.classes[c] += t.classes[c];
   }

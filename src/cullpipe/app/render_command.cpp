@@ -1,4 +1,5 @@
 #include <cstdio>
+#include <optional>
 #include <ostream>
 
 #include "cullpipe/app/backends.hpp"
@@ -102,6 +103,10 @@ int render_command(const RenderOptions& o, std::ostream& out, std::ostream& err)
             if (owners[i]) ++owning, dropped += !is_visible(stats.classes[i]);
           out << "  check: " << owning << " objects own a pixel, " << (dropped ? std::to_string(dropped) : "none")
               << " of them culled; drawn / owning " << (owning ? double(kept) / double(owning) : 0.0) << "\n";
+          if (o.clusters && stats.primitives_counted)
+            if (const std::optional<std::uint64_t> visible = renderer.visible_triangles(camera))
+              out << "  check: " << *visible << " triangles own a pixel; submitted / owning "
+                  << (*visible ? double(stats.primitives) / double(*visible) : 0.0) << "\n";
           if (dropped) {
             err << "error: " << dropped << " objects owning a pixel were culled\n";
             code = kExitMismatch;

@@ -22,6 +22,7 @@
 #include "render_id.frag.spv.h"
 #include "render_mesh.frag.spv.h"
 #include "render_mesh.vert.spv.h"
+#include "render_primitive.frag.spv.h"
 
 namespace cullpipe::render {
 namespace {
@@ -410,10 +411,13 @@ void Renderer::create_pipelines() {
   vkUpdateDescriptorSets(dev, 1, &write, 0, nullptr);
 
   VkShaderModule vert = shader_module(dev, cullpipe_render_mesh_vert_spv, sizeof(cullpipe_render_mesh_vert_spv));
-  VkShaderModule frag = VK_NULL_HANDLE, id_frag = VK_NULL_HANDLE;
+  VkShaderModule frag = VK_NULL_HANDLE, id_frag = VK_NULL_HANDLE, primitive_frag = VK_NULL_HANDLE;
   try {
     frag = shader_module(dev, cullpipe_render_mesh_frag_spv, sizeof(cullpipe_render_mesh_frag_spv));
     id_frag = shader_module(dev, cullpipe_render_id_frag_spv, sizeof(cullpipe_render_id_frag_spv));
+    if (ctx_.primitive_ids())
+      primitive_frag =
+          shader_module(dev, cullpipe_render_primitive_frag_spv, sizeof(cullpipe_render_primitive_frag_spv));
     VkPipelineShaderStageCreateInfo stages[2]{};
     stages[0] = {VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO,
                  nullptr,
@@ -482,6 +486,11 @@ void Renderer::create_pipelines() {
       CULLPIPE_VK_CHECK(vkCreateGraphicsPipelines(dev, VK_NULL_HANDLE, 1, &info, nullptr, &pipeline_[reversed]));
       stages[1].module = id_frag;
       CULLPIPE_VK_CHECK(vkCreateGraphicsPipelines(dev, VK_NULL_HANDLE, 1, &info, nullptr, &id_pipeline_[reversed]));
+      if (primitive_frag) {
+        stages[1].module = primitive_frag;
+        CULLPIPE_VK_CHECK(
+            vkCreateGraphicsPipelines(dev, VK_NULL_HANDLE, 1, &info, nullptr, &primitive_pipeline_[reversed]));
+      }
       // Depth only (the first phase of an occlusion frame): no fragment shader, no colour.
       info.stageCount = 1;
       blend_attachment.colorWriteMask = 0;
@@ -494,11 +503,13 @@ void Renderer::create_pipelines() {
     vkDestroyShaderModule(dev, vert, nullptr);
     if (frag) vkDestroyShaderModule(dev, frag, nullptr);
     if (id_frag) vkDestroyShaderModule(dev, id_frag, nullptr);
+    if (primitive_frag) vkDestroyShaderModule(dev, primitive_frag, nullptr);
     throw;
   }
   vkDestroyShaderModule(dev, vert, nullptr);
   vkDestroyShaderModule(dev, frag, nullptr);
   vkDestroyShaderModule(dev, id_frag, nullptr);
+  if (primitive_frag) vkDestroyShaderModule(dev, primitive_frag, nullptr);
 }
 
 void Renderer::release() {
@@ -513,6 +524,8 @@ void Renderer::release() {
   for (VkPipeline& p : depth_pipeline_)
     if (p) vkDestroyPipeline(dev, p, nullptr), p = VK_NULL_HANDLE;
   for (VkPipeline& p : id_pipeline_)
+    if (p) vkDestroyPipeline(dev, p, nullptr), p = VK_NULL_HANDLE;
+  for (VkPipeline& p : primitive_pipeline_)
     if (p) vkDestroyPipeline(dev, p, nullptr), p = VK_NULL_HANDLE;
   if (descriptor_pool_) vkDestroyDescriptorPool(dev, descriptor_pool_, nullptr);
   if (pipeline_layout_) vkDestroyPipelineLayout(dev, pipeline_layout_, nullptr);
@@ -545,9 +558,10 @@ void Renderer::begin_frame() {
 }
 
 void Renderer::record_scene_pass(const Camera& camera, ScenePass pass, const std::function<void()>& draw) {
-  const bool ids = pass == ScenePass::Ids;
+  const bool ids = pass == ScenePass::Ids, primitives = pass == ScenePass::Primitives;
   VkClearValue clears[2];
-  clears[0].color = ids ? VkClearColorValue{{0.0f, 0.0f, 0.0f, 0.0f}} : VkClearColorValue{{0.085f, 0.09f, 0.11f, 1.0f}};
+  clears[0].color =
+      ids || primitives ? VkClearColorValue{{0.0f, 0.0f, 0.0f, 0.0f}} : VkClearColorValue{{0.085f, 0.09f, 0.11f, 1.0f}};
   clears[1].depthStencil = {camera.reversed_z ? 0.0f : 1.0f, 0};
   VkRenderPassBeginInfo rp{VK_STRUCTURE_TYPE_RENDER_PASS_BEGIN_INFO};
   rp.renderPass = render_pass_;
@@ -558,6 +572,7 @@ void Renderer::record_scene_pass(const Camera& camera, ScenePass pass, const std
   vkCmdBeginRenderPass(cmd_, &rp, VK_SUBPASS_CONTENTS_INLINE);
   const int reversed = camera.reversed_z ? 1 : 0;
   const VkPipeline pipeline = ids                        ? id_pipeline_[reversed]
+                              : primitives               ? primitive_pipeline_[reversed]
                               : pass == ScenePass::Depth ? depth_pipeline_[reversed]
                                                          : pipeline_[reversed];
   vkCmdBindPipeline(cmd_, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline);
@@ -592,13 +607,35 @@ Image Renderer::submit_and_read() {
   return image;
 }
 
-std::vector<bool> Renderer::pixel_owners(const Camera& camera) {
+Image Renderer::draw_everything(const Camera& camera, ScenePass pass) {
   const std::size_t n = templates_.size();
   begin_frame();
-  record_scene_pass(camera, ScenePass::Ids, [&] {
+  record_scene_pass(camera, pass, [&] {
     if (n > 0) vkCmdDrawIndexedIndirect(cmd_, all_draws_.handle(), 0, std::uint32_t(n), sizeof(DrawCommand));
   });
-  const Image image = submit_and_read();
+  return submit_and_read();
+}
+
+std::optional<std::uint64_t> Renderer::visible_triangles(const Camera& camera) {
+  if (!primitive_pipeline_[0]) return std::nullopt;
+  const Image objects = draw_everything(camera, ScenePass::Ids);
+  const Image primitives = draw_everything(camera, ScenePass::Primitives);
+  std::vector<std::uint64_t> owners;
+  for (std::size_t p = 0; p < objects.rgba.size(); p += 4) {
+    const std::uint64_t object = std::uint64_t(objects.rgba[p]) | std::uint64_t(objects.rgba[p + 1]) << 8 |
+                                 std::uint64_t(objects.rgba[p + 2]) << 16;
+    const std::uint64_t primitive = std::uint64_t(primitives.rgba[p]) | std::uint64_t(primitives.rgba[p + 1]) << 8 |
+                                    std::uint64_t(primitives.rgba[p + 2]) << 16 |
+                                    std::uint64_t(primitives.rgba[p + 3]) << 24;
+    if (object != 0 && primitive != 0) owners.push_back(object << 32 | primitive);
+  }
+  std::sort(owners.begin(), owners.end());
+  return std::uint64_t(std::unique(owners.begin(), owners.end()) - owners.begin());
+}
+
+std::vector<bool> Renderer::pixel_owners(const Camera& camera) {
+  const std::size_t n = templates_.size();
+  const Image image = draw_everything(camera, ScenePass::Ids);
   std::vector<bool> owners(n, false);
   for (std::size_t p = 0; p < image.rgba.size(); p += 4) {
     const std::uint32_t id =

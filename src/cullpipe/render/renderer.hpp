@@ -3,6 +3,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -118,6 +119,11 @@ class Renderer {
   /// decoration of gl_PerVertex, so on other drivers treat a disagreement with the image check
   /// with care.)
   std::vector<bool> pixel_owners(const Camera& camera);
+  /// How many triangles own at least one pixel of the unculled image seen by `camera` (drawn as
+  /// pixel_owners draws, then again writing each triangle's index within its object's draw):
+  /// what cluster culling could at best submit. Empty when the device cannot read
+  /// gl_PrimitiveID in a fragment shader (vulkan::Context::primitive_ids()).
+  std::optional<std::uint64_t> visible_triangles(const Camera& camera);
 
   /// Triangles of object i (what a draw of it feeds the input assembler; a double-sided mesh's
   /// count twice when back faces are culled: it is drawn with both windings).
@@ -137,7 +143,9 @@ class Renderer {
   void begin_frame();
   /// One pass of the scene into the colour and depth targets, cleared: the image, the objects'
   /// ids (the id pass's pipeline and objects), or depth alone; `draw` records the draws.
-  enum class ScenePass { Image, Ids, Depth };
+  enum class ScenePass { Image, Ids, Primitives, Depth };
+  /// Every object drawn, as the unculled frame draws them, in one pass; the image read back.
+  Image draw_everything(const Camera& camera, ScenePass pass);
   void record_scene_pass(const Camera& camera, ScenePass pass, const std::function<void()>& draw);
   /// Copies the colour image out, ends, submits and waits, and returns the image.
   Image submit_and_read();
@@ -164,10 +172,11 @@ class Renderer {
   VkFramebuffer framebuffer_ = VK_NULL_HANDLE;
   VkDescriptorSetLayout set_layout_ = VK_NULL_HANDLE;
   VkPipelineLayout pipeline_layout_ = VK_NULL_HANDLE;
-  VkPipeline pipeline_[2] = {VK_NULL_HANDLE, VK_NULL_HANDLE};        // [reversed_z]: depth LESS or GREATER
-  VkPipeline id_pipeline_[2] = {VK_NULL_HANDLE, VK_NULL_HANDLE};     // the id pass's, likewise
-  VkPipeline depth_pipeline_[2] = {VK_NULL_HANDLE, VK_NULL_HANDLE};  // depth only, likewise
-  VkDescriptorSet id_descriptor_set_ = VK_NULL_HANDLE;               // its objects: id_objects_
+  VkPipeline pipeline_[2] = {VK_NULL_HANDLE, VK_NULL_HANDLE};            // [reversed_z]: depth LESS or GREATER
+  VkPipeline id_pipeline_[2] = {VK_NULL_HANDLE, VK_NULL_HANDLE};         // the id pass's, likewise
+  VkPipeline primitive_pipeline_[2] = {VK_NULL_HANDLE, VK_NULL_HANDLE};  // triangle ids (primitive_ids())
+  VkPipeline depth_pipeline_[2] = {VK_NULL_HANDLE, VK_NULL_HANDLE};      // depth only, likewise
+  VkDescriptorSet id_descriptor_set_ = VK_NULL_HANDLE;                   // its objects: id_objects_
   VkDescriptorPool descriptor_pool_ = VK_NULL_HANDLE;
   VkDescriptorSet descriptor_set_ = VK_NULL_HANDLE;
   VkCommandBuffer cmd_ = VK_NULL_HANDLE;

@@ -269,9 +269,11 @@ Context::Context(const ContextOptions& options)
     enable.features.multiDrawIndirect = f2.features.multiDrawIndirect;
     enable.features.drawIndirectFirstInstance = f2.features.drawIndirectFirstInstance;
     enable.features.pipelineStatisticsQuery = f2.features.pipelineStatisticsQuery;
+    enable.features.geometryShader = f2.features.geometryShader;  // (gl_PrimitiveID in fragment shaders)
     draw_indirect_count_ =
         f12.drawIndirectCount && f2.features.multiDrawIndirect && f2.features.drawIndirectFirstInstance;
     pipeline_statistics_ = f2.features.pipelineStatisticsQuery;
+    primitive_ids_ = f2.features.geometryShader;
 
     const float priority = 1.0f;
     VkDeviceQueueCreateInfo queue_info{VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO};
@@ -312,6 +314,7 @@ Context::Context(const ExternalDevice& external) : owns_device_(false) {
     read_device_properties();
     draw_indirect_count_ = external.draw_indirect_count;  // the caller chose the device's features
     pipeline_statistics_ = external.pipeline_statistics;
+    primitive_ids_ = external.primitive_ids;
     create_pool_and_fence();
   } catch (...) {
     destroy();

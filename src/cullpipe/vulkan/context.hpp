@@ -80,6 +80,9 @@ struct ExternalDevice {
   bool draw_indirect_count = false;
   /// The caller enabled pipelineStatisticsQuery (the renderer then counts triangles drawn).
   bool pipeline_statistics = false;
+  /// The caller enabled geometryShader (fragment shaders may read gl_PrimitiveID: the renderer
+  /// then counts the triangles owning a pixel).
+  bool primitive_ids = false;
 };
 
 /// A physical device as listed by list_devices().
@@ -126,6 +129,9 @@ class Context {
   bool draw_indirect_count() const { return draw_indirect_count_; }
   /// pipelineStatisticsQuery is enabled (own devices that support it).
   bool pipeline_statistics() const { return pipeline_statistics_; }
+  /// geometryShader is enabled, so fragment shaders may read gl_PrimitiveID (own devices that
+  /// support it).
+  bool primitive_ids() const { return primitive_ids_; }
   /// Whether this context created (and will destroy) the device.
   bool owns_device() const { return owns_device_; }
   /// Validation messages reported so far (0 when validation is off).
@@ -191,6 +197,7 @@ class Context {
   VkQueueFlags queue_flags_ = 0;
   bool draw_indirect_count_ = false;
   bool pipeline_statistics_ = false;
+  bool primitive_ids_ = false;
   bool owns_device_ = true;
 
   std::function<void(std::string_view)> on_message_;
