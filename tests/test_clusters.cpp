@@ -168,6 +168,79 @@ TEST(ClusterCones, BackFacingClustersHaveNoFrontFace) {
   EXPECT_GT(culled, tests / 5);
 }
 
+// Eyes on the edge of each cone: at angles from the axis within 2^-4 to 2^-30 of the cutoff's
+// (inside and outside), from 2^-20 to 2^20 times the cluster's size away, under transforms that
+// scale by 2^-10 to 2^10 per axis, mirror, and translate by up to 2^15. Every cluster the float
+// test culls has every triangle facing away in double.
+TEST(ClusterCones, EyesOnTheConesEdgeNeverCullAFrontFace) {
+  const TriangleMesh mesh = uv_sphere(24, 32, 1.0f);
+  const MeshClusters c = build_clusters(mesh, {}, "sphere");
+  test::Rng rng(23);
+  std::size_t tests = 0, culled = 0;
+  for (int t = 0; t < 40; ++t) {
+    const glm::mat3 r = rng.rotation();
+    glm::vec3 k(std::exp2(rng.uniform(-10.0f, 10.0f)), std::exp2(rng.uniform(-10.0f, 10.0f)),
+                std::exp2(rng.uniform(-10.0f, 10.0f)));
+    if (t % 2) k.y = -k.y;
+    Transform3x4 tr;
+    for (int row = 0; row < 3; ++row)
+      tr.rows[std::size_t(row)] =
+          glm::vec4(r[0][row] * k.x, r[1][row] * k.y, r[2][row] * k.z, rng.uniform(-32768.0f, 32768.0f));
+    const InverseFrame f = inverse_frame(tr);
+    if (!f.usable) continue;
+    glm::dmat3 m;
+    for (int row = 0; row < 3; ++row)
+      for (int col = 0; col < 3; ++col) m[col][row] = tr.rows[std::size_t(row)][col];
+    const glm::dvec3 translation(tr.rows[0].w, tr.rows[1].w, tr.rows[2].w);
+    for (const Cluster& cl : c.clusters) {
+      if (!cl.cone.usable()) continue;
+      const glm::dvec3 axis = glm::normalize(glm::dvec3(cl.cone.axis)), apex(cl.cone.apex);
+      const glm::dvec3 side =
+          glm::normalize(glm::cross(axis, std::abs(axis.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0)));
+      const glm::dvec3 up = glm::cross(axis, side);
+      const double size = glm::length(glm::dvec3(cl.box.max - cl.box.min));
+      const double edge = std::acos(double(cl.cone.cutoff));
+      for (int e = 0; e < 24; ++e) {
+        const double angle = edge * (1.0 + (e % 2 ? 1.0 : -1.0) * std::exp2(-double(rng.uniform(4.0f, 30.0f))));
+        const double turn = double(rng.uniform(0.0f, 6.2831853f));
+        const glm::dvec3 u = std::cos(angle) * axis + std::sin(angle) * (std::cos(turn) * side + std::sin(turn) * up);
+        const glm::dvec3 local = apex - u * (size * std::exp2(double(rng.uniform(-20.0f, 20.0f))));
+        const glm::vec3 eye(m * local + translation);
+        ++tests;
+        if (!facing_away(cl.cone, f, eye)) continue;
+        ++culled;
+        ASSERT_TRUE(all_face_away(mesh, c, cl, tr, glm::dvec3(eye)))
+            << "transform " << t << " cluster at " << cl.first_index << " angle " << angle << " against " << edge;
+      }
+    }
+  }
+  std::printf("%zu of %zu eyes on the cones' edges found the cluster facing away\n", culled, tests);
+  EXPECT_GT(culled, 200u);  // eyes near enough to the cone's axis to be culled despite the margins
+}
+
+// Clusters 2^-40 to 2^-140 across, and eyes in front of a triangle: no underflow lets the test
+// cull (its margin and its squared bound carry an absolute 2^-100; without it, squared distances
+// of 2^-150 and less flush to 0, and 0 >= 0 culled).
+TEST(ClusterCones, TinyClustersAreNotCulledByUnderflow) {
+  for (int e = 40; e <= 140; e += 4) {
+    const float s = std::exp2(-float(e));
+    // A roof: two triangles at +-45 degrees about +y, its ridge at y = s.
+    TriangleMesh roof;
+    roof.positions = {{-s, 0, -s}, {s, 0, -s}, {0, s, -s}, {-s, 0, s}, {s, 0, s}, {0, s, s}};
+    roof.indices = {0, 3, 2, 3, 5, 2, 1, 2, 4, 2, 5, 4};  // facing up and out
+    const MeshClusters c = build_clusters(roof, {}, "roof");
+    ASSERT_EQ(c.clusters.size(), 1u);
+    ASSERT_TRUE(c.clusters[0].cone.usable());
+    ASSERT_GT(c.clusters[0].cone.axis.y, 0.99f);
+    const InverseFrame f = inverse_frame(Transform3x4{});
+    // In front of the +x face (its normal is (1, 1, 0) / sqrt 2), below the ridge, along +y (the
+    // cone's axis) beyond the apex, but far outside the cone.
+    const glm::vec3 eye = glm::vec3(3.0f, 0.0f, 0.0f) * s;
+    ASSERT_FALSE(all_face_away(roof, c, c.clusters[0], Transform3x4{}, glm::dvec3(eye)));
+    EXPECT_FALSE(facing_away(c.clusters[0].cone, f, eye)) << "size 2^-" << e;
+  }
+}
+
 // Every mesh primitive of the shared scenes, split with the default options.
 TEST(Clusters, SharedScenesSplitIntoValidClusters) {
   if (!fs::exists(kScenes)) GTEST_SKIP() << kScenes << " not present";

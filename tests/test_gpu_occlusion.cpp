@@ -537,6 +537,38 @@ TEST_F(GpuPyramid, ClusterPassEqualsTheReferencePairByPair) {
   }
   EXPECT_LT(all_draws, all_drawn * 3 / 4) << "runs of drawn clusters are not merged";
   for (std::size_t c : {0, 1, 3, 4, 5}) EXPECT_GT(seen[c], 100u) << "too few pairs of class " << c;
+
+  // Every object culled: nothing listed, no workgroups, no draws.
+  auto* classes = static_cast<std::uint32_t*>(object_classes.data());
+  for (std::size_t i = 0; i < instances.size(); ++i) classes[i] = gpu::CLASS_OUTSIDE;
+  gpu::ClusterFrame frame;
+  frame.frustum = Frustum::from_view_proj(test::test_view_proj());
+  frame.eye = glm::vec3(0.0f, 0.0f, 10.0f);
+  frame.object_classes = &object_classes;
+  const gpu::ClusterResult none = pass.cull(frame);
+  EXPECT_EQ(none.drawn, 0u);
+  EXPECT_EQ(none.draws, 0u);
+  EXPECT_EQ(none.counts[std::size_t(clusters::ClusterClass::ObjectCulled)], pass.pair_count());
+
+  // Instances with no clusters among others, and a culler with no pairs at all.
+  std::vector<gpu::ClusterInstance> sparse = {
+      instances[0], {Transform3x4{}, 0, 0, true}, instances[1], {Transform3x4{}, 3, 0, false}};
+  pass.upload(boxes, cones, sparse);
+  ASSERT_EQ(pass.pair_count(), std::size_t(count[0] + count[1]));
+  frame.object_classes = nullptr;
+  const gpu::ClusterResult sparse_result = pass.cull(frame);
+  clusters::ClusterView view{frame.frustum, frame.eye, true, nullptr, nullptr, {}};
+  std::size_t p = 0;
+  for (const gpu::ClusterInstance& in : sparse)
+    for (std::uint32_t k = 0; k < in.cluster_count; ++k, ++p)
+      EXPECT_EQ(sparse_result.classes[p], clusters::classify(boxes[in.first_cluster + k], cones[in.first_cluster + k],
+                                                             in.transform, inverse_frame(in.transform), true, view))
+          << "pair " << p;
+  pass.upload(boxes, cones, {});
+  EXPECT_EQ(pass.pair_count(), 0u);
+  const gpu::ClusterResult empty = pass.cull(frame);
+  EXPECT_EQ(empty.drawn, 0u);
+  EXPECT_EQ(empty.draws, 0u);
 }
 
 // Bad uploads and frames are refused by name before anything changes: the pass after them is
@@ -584,11 +616,16 @@ TEST_F(GpuPyramid, ClusterPassRefusesBadInputAndKeepsItsState) {
   bad.pyramid = &culler();
   bad.occlusion_view = {test::test_view_proj(), 7, 5, false};  // not the pyramid's size
   EXPECT_NE(message([&] { pass.cull(bad); }), "no error");
-  vulkan::Buffer small(context(), 4, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "small");
+  const VkDeviceSize align = context().properties().limits.minStorageBufferOffsetAlignment;
+  vulkan::Buffer small(context(), align + 2, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "small");
   bad = frame;
   bad.object_classes = &small;
-  bad.object_classes_offset = 4;
+  bad.object_classes_offset = align;
   EXPECT_NE(message([&] { pass.cull(bad); }).find("object class buffer"), std::string::npos);
+  if (align > 1) {
+    bad.object_classes_offset = 1;
+    EXPECT_NE(message([&] { pass.cull(bad); }).find("minStorageBufferOffsetAlignment"), std::string::npos);
+  }
 
   const gpu::ClusterResult after = pass.cull(frame);
   EXPECT_EQ(after.classes, before.classes);

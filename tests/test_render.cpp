@@ -7,7 +7,9 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <glm/ext/matrix_double3x3.hpp>
 #include <glm/ext/matrix_transform.hpp>
+#include <glm/matrix.hpp>
 #include <memory>
 #include <optional>
 
@@ -328,6 +330,7 @@ struct ClusterTotals {
   std::size_t frames = 0;
   std::array<std::size_t, 6> classes{};
   std::uint64_t cluster_triangles = 0, object_triangles = 0, visible_triangles = 0;
+  std::size_t mirrored_back_facing = 0;  // back-facing clusters of mirroring objects
 };
 
 // Cluster frames along `cameras`, by the frustum and then with occlusion in two phases: each
@@ -363,6 +366,13 @@ ClusterTotals expect_clusters_invisible(const Scene& scene, const std::vector<Ca
       EXPECT_EQ(sum, stats.clusters);
       totals.cluster_triangles += stats.primitives;
       totals.object_triangles += object_stats.primitives;
+      std::size_t p = 0;
+      for (const gpu::ClusterInstance& in : renderer.cluster_instances()) {
+        const glm::dmat3 linear(in.transform.to_mat4());
+        for (std::uint32_t k = 0; k < in.cluster_count; ++k, ++p)
+          totals.mirrored_back_facing += glm::determinant(linear) < 0.0 && p < stats.cluster_pair_classes.size() &&
+                                         stats.cluster_pair_classes[p] == clusters::ClusterClass::BackFacing;
+      }
       if (const std::optional<std::uint64_t> visible = renderer.visible_triangles(cameras[v])) {
         // Every triangle owning a pixel is among those submitted (the images are equal).
         if (stats.primitives_counted) {
@@ -405,6 +415,16 @@ TEST(Render, ClusterFramesEqualUnculled) {
   for (const clusters::ClusterClass c : {clusters::ClusterClass::Outside, clusters::ClusterClass::BackFacing,
                                          clusters::ClusterClass::Occluded, clusters::ClusterClass::Drawn})
     EXPECT_GT(all.classes[std::size_t(c)], 100u) << "too few clusters " << to_string(c) << " to test the images";
+}
+
+// Instances of one mesh, a quarter of them mirrored, their clusters culled as facing away too.
+TEST(Render, ClusterFramesOfMirroredMeshesEqualUnculled) {
+  const Scene meshes = generate_scene(SceneKind::Meshes, 300, 5);
+  std::vector<Camera> path = camera_path(meshes.camera, meshes.bounds(), 3);
+  path.insert(path.begin(), meshes.camera);
+  const ClusterTotals t = expect_clusters_invisible(meshes, path);
+  EXPECT_GT(t.mirrored_back_facing, 100u);
+  EXPECT_LT(t.cluster_triangles, t.object_triangles * 3 / 4);
 }
 
 TEST(Render, ClusterFramesOfBoxesEqualUnculled) {

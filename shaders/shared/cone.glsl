@@ -6,8 +6,9 @@
 #define CULLPIPE_SHADERS_SHARED_CONE_GLSL
 
 const float CONE_EYE_MARGIN = 1.0 / 131072.0;        // 2^-17
-const float CONE_COORDINATE_MARGIN = 1.0 / 1048576.0;  // 2^-20
+const float CONE_COORDINATE_MARGIN = 1.0 / 524288.0;   // 2^-19
 const float CONE_SQUARE_MARGIN = 1.0 + 1.0 / 65536.0;  // 1 + 2^-16
+const float CONE_TINY = 7.88860905221011805411728565283e-31;  // 2^-100 (exactly, as a float)
 
 bool cone_finite_bits(float x) { return (floatBitsToUint(x) & 0x7f800000u) != 0x7f800000u; }
 
@@ -28,10 +29,11 @@ bool cone_facing_away(vec3 apex, float cutoff, vec3 axis, vec4 inverse[3], vec3 
   precise float along = (d0 * axis.x + d1 * axis.y) + d2 * axis.z;
   precise float squared = (d0 * d0 + d1 * d1) + d2 * d2;
   precise float coordinates = ((abs(apex.x) + abs(apex.y)) + abs(apex.z)) + ((abs(local.x) + abs(local.y)) + abs(local.z));
-  precise float margin = ((magnitude.x + magnitude.y) + magnitude.z) * CONE_EYE_MARGIN + coordinates * CONE_COORDINATE_MARGIN;
+  precise float margin =
+      (((magnitude.x + magnitude.y) + magnitude.z) * CONE_EYE_MARGIN + coordinates * CONE_COORDINATE_MARGIN) + CONE_TINY;
   precise float x = along - margin;
   precise float x2 = x * x;
-  precise float bound = ((cutoff * cutoff) * squared) * CONE_SQUARE_MARGIN;
+  precise float bound = (((cutoff * cutoff) * squared) * CONE_SQUARE_MARGIN) + CONE_TINY;
   return x > 0.0 && cone_finite_bits(margin) && cone_finite_bits(squared) && cone_finite_bits(x2) && x2 >= bound;
 }
 

@@ -15,6 +15,7 @@ namespace {
 struct Face {
   glm::dvec3 normal;  // unit
   glm::dvec3 corner;
+  double altitude;  // the smallest: twice the area over the longest edge
 };
 
 // The smallest cosine between meshoptimizer's cone and its normals before it gives up on a
@@ -23,6 +24,14 @@ struct Face {
 constexpr double kMinCosine = 0.1;
 constexpr double kThinTriangle = 0x1p-30;  // |n| against |e1| |e2|: the normal's direction is sure
 constexpr double kAngleSlack = 0x1p-20;    // added to the sine of the widest angle
+// The viewer's margin: the cone is narrowed by an angle whose sine is 2^-5, so a viewer it passes
+// is behind every triangle's plane by 2^-5 of its distance to the apex, not merely behind it:
+// the renderer decides facing on float positions snapped to its sub-pixel grid, and a triangle
+// seen nearly edge-on could come out front-facing there (docs/numerics.md, Back-face cones).
+const double kViewMargin = std::asin(0x1p-5);
+// Triangles whose smallest altitude is below 2^-8 of the cluster's radius are slivers that even
+// that margin does not keep facing away after rounding: a cluster with one has no cone.
+constexpr double kSliver = 0x1p-8;
 // How far behind every plane the apex is put, of the cluster's radius, and how far behind it must
 // be found: a normal from double cross products of a triangle that is not thin points within
 // 2^-22 radians of the exact one, which moves a plane by 2^-22 of the apex's distance to it.
@@ -49,7 +58,8 @@ BackfaceCone backface_cone(std::span<const glm::vec3> positions, std::span<const
     const glm::dvec3 e1 = b - a, e2 = c - a, n = glm::cross(e1, e2);
     const double length = glm::length(n);
     if (!(length > kThinTriangle * glm::length(e1) * glm::length(e2))) return none;
-    faces.push_back({n / length, a});
+    const double longest = std::max({glm::length(e1), glm::length(e2), glm::length(c - b)});
+    faces.push_back({n / length, a, length / longest});
     mean += n / length;
   }
   if (faces.empty()) return none;  // nothing that can face anywhere: leave it to the other tests
@@ -64,7 +74,9 @@ BackfaceCone backface_cone(std::span<const glm::vec3> positions, std::span<const
   double min_cos = 1.0;
   for (const Face& f : faces) min_cos = std::min(min_cos, glm::dot(axis, f.normal));
   if (!(min_cos >= kMinCosine)) return none;
-  const double sine = std::sqrt(std::max(0.0, 1.0 - min_cos * min_cos)) + kAngleSlack;
+  const double beta = std::acos(std::min(1.0, min_cos)) + kViewMargin;
+  if (!(beta < 1.5)) return none;
+  const double sine = std::sin(beta) + kAngleSlack;
   if (!(sine < 1.0)) return none;
   cone.cutoff = round_up(sine);
   if (!(cone.cutoff < 1.0f)) return none;
@@ -74,6 +86,8 @@ BackfaceCone backface_cone(std::span<const glm::vec3> positions, std::span<const
   // (dot(n_i, axis) >= 0.1 > 0).
   const glm::dvec3 centre = (lo + hi) * 0.5;
   const double radius = glm::length(hi - lo) * 0.5;
+  for (const Face& f : faces)
+    if (!(f.altitude >= kSliver * radius)) return none;
   double t = -INFINITY;
   for (const Face& f : faces) t = std::max(t, glm::dot(f.normal, centre - f.corner) / glm::dot(f.normal, axis));
   double slack = kApexSlack * radius + 0x1p-100;

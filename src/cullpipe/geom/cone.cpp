@@ -12,13 +12,17 @@ namespace {
 
 bool finite_bits(float f) { return (std::bit_cast<std::uint32_t>(f) & 0x7f800000u) != 0x7f800000u; }
 
-// Margins of the float test (docs/numerics.md, Back-face cones): 2^-17 of the eye's magnitudes
-// (twice its error bound, 2^-18, itself 8x the 2^-21 the analysis needs), 2^-20 of the apex's and
-// the eye's coordinates (the rounding of d and of the dot product, 2^-21 needed), and 2^-16 on
-// the squared comparison (nine roundings of 2^-24 needed).
+// Margins of the float test (docs/numerics.md, Back-face cones), for roundings of at most 2^-23
+// (nearest or toward zero, as Vulkan allows): 2^-17 of the eye's magnitudes (twice its error
+// bound, 2^-18, itself 4x the 5 * 2^-23 the analysis needs), 2^-19 of the apex's and the eye's
+// coordinates (the rounding of d, of the dot product and of the axis's length: 7 * 2^-23
+// needed), 2^-16 on the squared comparison (nine roundings of 2^-23 needed), and 2^-100 added to
+// both the margin and the squared bound, which covers subnormal results and their flushing.
 constexpr float kEyeMargin = 0x1p-17f;
-constexpr float kCoordinateMargin = 0x1p-20f;
+constexpr float kCoordinateMargin = 0x1p-19f;
 constexpr float kSquareMargin = 1.0f + 0x1p-16f;
+constexpr float kTiny = 0x1p-100f;
+constexpr double kSmallestNormal = 0x1p-126;
 // Largest det conditioning (sum of |terms| over |det|) for which the double inverse's entries are
 // within 2^-30 of the exact ones, relative to each entry.
 constexpr double kMaxConditioning = 0x1p20;
@@ -55,7 +59,18 @@ InverseFrame inverse_frame(const Transform3x4& t) {
     f.inverse.rows[std::size_t(r)][3] = float(b);
     f.translation_magnitude[r] = round_up(magnitude * (1.0 + 0x1p-40));
   }
-  f.usable = invalid_reason(f.inverse).empty() && finite_bits(f.translation_magnitude.x) &&
+  // A value below the smallest normal float may be read as zero (a device that flushes
+  // subnormals): its error would be absolute, not relative, so such an inverse is not used.
+  bool normal = true;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 4; ++c) {
+      const double v = std::abs(double(f.inverse.rows[std::size_t(r)][c]));
+      normal = normal && (v == 0.0 || v >= kSmallestNormal);
+    }
+    const double tm = f.translation_magnitude[r];
+    normal = normal && (tm == 0.0 || tm >= kSmallestNormal);
+  }
+  f.usable = normal && invalid_reason(f.inverse).empty() && finite_bits(f.translation_magnitude.x) &&
              finite_bits(f.translation_magnitude.y) && finite_bits(f.translation_magnitude.z);
   return f;
 }
@@ -75,10 +90,11 @@ bool facing_away(const BackfaceCone& cone, const InverseFrame& frame, const glm:
   const float squared = (d0 * d0 + d1 * d1) + d2 * d2;
   const float coordinates = ((std::abs(cone.apex.x) + std::abs(cone.apex.y)) + std::abs(cone.apex.z)) +
                             ((std::abs(local[0]) + std::abs(local[1])) + std::abs(local[2]));
-  const float margin = ((magnitude[0] + magnitude[1]) + magnitude[2]) * kEyeMargin + coordinates * kCoordinateMargin;
+  const float margin =
+      (((magnitude[0] + magnitude[1]) + magnitude[2]) * kEyeMargin + coordinates * kCoordinateMargin) + kTiny;
   const float x = along - margin;
   const float x2 = x * x;
-  const float bound = ((cone.cutoff * cone.cutoff) * squared) * kSquareMargin;
+  const float bound = (((cone.cutoff * cone.cutoff) * squared) * kSquareMargin) + kTiny;
   return x > 0.0f && finite_bits(margin) && finite_bits(squared) && finite_bits(x2) && x2 >= bound;
 }
 

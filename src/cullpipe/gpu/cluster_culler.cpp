@@ -189,10 +189,10 @@ void ClusterCuller::upload(std::span<const Aabb> boxes, std::span<const Backface
   pair_count_ = std::size_t(pairs);
   instance_count_ = instances.size();
   std::memset(templates_.data(), 0, templates_.size());
-  bound_classes_ = nullptr;  // descriptors rewritten by the next pass
+  bound_classes_ = VK_NULL_HANDLE;  // descriptors rewritten by the next pass
 }
 
-void ClusterCuller::upload_draws(std::span<const DrawCommand> draws) {
+void ClusterCuller::upload_draws(std::span<const DrawCommand> draws, bool merge) {
   if (draws.size() != pair_count_)
     throw std::invalid_argument("ClusterCuller::upload_draws: " + std::to_string(draws.size()) + " draws for " +
                                 std::to_string(pair_count_) + " pairs");
@@ -202,7 +202,7 @@ void ClusterCuller::upload_draws(std::span<const DrawCommand> draws) {
   for (std::size_t p = 0; p < draws.size(); ++p) {
     const DrawCommand* a = p > 0 ? &draws[p - 1] : nullptr;
     const DrawCommand& b = draws[p];
-    pairs[p].w = a && pairs[p - 1].x == pairs[p].x && a->instance_count == b.instance_count &&
+    pairs[p].w = merge && a && pairs[p - 1].x == pairs[p].x && a->instance_count == b.instance_count &&
                          a->vertex_offset == b.vertex_offset && a->first_instance == b.first_instance &&
                          std::uint64_t(a->first_index) + a->index_count == b.first_index
                      ? 1u
@@ -224,6 +224,11 @@ void ClusterCuller::prepare(const ClusterFrame& frame) {
     occlusion.occlusion_options = frame.occlusion_options;
     detail::check_occlusion(ctx_, occlusion, 1);
   }
+  if (frame.object_classes &&
+      frame.object_classes_offset % ctx_.properties().limits.minStorageBufferOffsetAlignment != 0)
+    throw std::invalid_argument("ClusterCuller: object_classes_offset " + std::to_string(frame.object_classes_offset) +
+                                " is not a multiple of the device's minStorageBufferOffsetAlignment (" +
+                                std::to_string(ctx_.properties().limits.minStorageBufferOffsetAlignment) + ")");
   if (frame.object_classes && frame.object_classes->size() < frame.object_classes_offset + 4 * instance_count())
     throw std::invalid_argument("ClusterCuller: the object class buffer holds fewer than the " +
                                 std::to_string(instance_count()) + " instances' classes");
@@ -251,8 +256,11 @@ void ClusterCuller::prepare(const ClusterFrame& frame) {
   const vulkan::Buffer* classes = frame.object_classes ? frame.object_classes : &no_classes_;
   const vulkan::Buffer* pyramid = frame.pyramid ? &frame.pyramid->texels() : &no_pyramid_;
   const VkDeviceSize classes_offset = frame.object_classes ? frame.object_classes_offset : 0;
-  if (bound_classes_ != classes || bound_classes_offset_ != classes_offset || bound_pyramid_ != pyramid ||
-      bound_pyramid_generation_ != (frame.pyramid ? frame.pyramid->generation() : 0)) {
+  // (The handles, not the Buffer objects: an owner that grows a buffer moves a new one into the
+  // same object.)
+  const VkDeviceSize classes_size = frame.object_classes ? std::max<VkDeviceSize>(4 * instance_count_, 4) : 16;
+  if (bound_classes_ != classes->handle() || bound_classes_offset_ != classes_offset ||
+      bound_pyramid_ != pyramid->handle() || bound_pyramid_size_ != pyramid->size()) {
     using Range = detail::PassResources::Range;
     const Range ranges[kBindingCount] = {Range{&clusters_},
                                          Range{&classes_},
@@ -266,7 +274,7 @@ void ClusterCuller::prepare(const ClusterFrame& frame) {
                                          Range{pyramid},
                                          Range{&occlusion_views_},
                                          Range{&pairs_},
-                                         Range{classes, classes_offset},
+                                         Range{classes, classes_offset, classes_size},
                                          Range{&active_}};
     resources_->write(0, ranges);
     // The listing's set: its group counts, and the list's header as its counters.
@@ -275,15 +283,21 @@ void ClusterCuller::prepare(const ClusterFrame& frame) {
     listing[BINDING_COUNTERS] = Range{&active_, 0, sizeof(ViewCounters)};
     listing[BINDING_GROUP_COUNTS] = Range{&expand_counts_};
     resources_->write(1, listing);
-    bound_classes_ = classes;
+    bound_classes_ = classes->handle();
     bound_classes_offset_ = classes_offset;
-    bound_pyramid_ = pyramid;
-    bound_pyramid_generation_ = frame.pyramid ? frame.pyramid->generation() : 0;
+    bound_pyramid_ = pyramid->handle();
+    bound_pyramid_size_ = pyramid->size();
   }
 }
 
 void ClusterCuller::record_passes(VkCommandBuffer cmd) {
   detail::record_entry_barrier(ctx_, cmd);
+  // The object classes and the pyramid an earlier compute or transfer pass of the same command
+  // buffer wrote are visible to the passes below whoever wrote them.
+  const VkMemoryBarrier inputs{VK_STRUCTURE_TYPE_MEMORY_BARRIER, nullptr,
+                               VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_TRANSFER_WRITE_BIT, VK_ACCESS_SHADER_READ_BIT};
+  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT,
+                       VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &inputs, 0, nullptr, 0, nullptr);
   vkCmdFillBuffer(cmd, counters_.handle(), 0, sizeof(ViewCounters), 0);
   vkCmdFillBuffer(cmd, group_counts_.handle(), 0, VK_WHOLE_SIZE, 0);
   vkCmdFillBuffer(cmd, expand_counts_.handle(), 0, VK_WHOLE_SIZE, 0);

@@ -42,9 +42,10 @@ struct ClusterFrame {
   /// orthographic views.
   bool backface = true;
   glm::vec3 eye{0.0f};
-  /// The object pass's classes (CLASS_*, a uint per instance from `object_classes_offset` bytes),
-  /// written earlier in the same command buffer (GpuCuller::class_buffer()); null: every instance
-  /// kept.
+  /// The object pass's classes (CLASS_*, a uint per instance from `object_classes_offset` bytes,
+  /// a multiple of minStorageBufferOffsetAlignment), written earlier in the same command buffer
+  /// by a pass whose writes were made visible to compute shaders (GpuCuller::record's are:
+  /// GpuCuller::class_buffer()); null: every instance kept.
   const vulkan::Buffer* object_classes = nullptr;
   VkDeviceSize object_classes_offset = 0;
   /// Occlusion: the pyramid (built earlier in the same command buffer) and the view its depth was
@@ -83,13 +84,14 @@ class ClusterCuller {
   /// A draw per pair, in pair order (first_instance says which object a draw is of). Where a
   /// pair's draw continues the one before (same instance, instance count, vertex offset and
   /// first instance, its index range starting where that one's ends), a run of them that is
-  /// drawn becomes one draw. Throws std::invalid_argument for a count other than pair_count().
-  void upload_draws(std::span<const DrawCommand> draws);
+  /// drawn becomes one draw, unless `merge` is false (every drawn pair its own draw, as given).
+  /// Throws std::invalid_argument for a count other than pair_count().
+  void upload_draws(std::span<const DrawCommand> draws, bool merge = true);
   std::size_t pair_count() const { return pair_count_; }
   std::size_t instance_count() const { return instance_count_; }
 
-  /// Records the pass into `cmd`: barriers first (earlier reads of its outputs, and the object
-  /// pass's and pyramid's writes, complete), then the draws of the drawn pairs in
+  /// Records the pass into `cmd`: a barrier first (earlier reads of its outputs complete, and
+  /// earlier compute and transfer writes visible to its shaders), then the draws of the drawn pairs in
   /// draw_buffer() and their count in counter_buffer() (ViewCounters::visible_count), ready for
   /// vkCmdDrawIndexedIndirectCount with maxDrawCount = pair_count(). Throws
   /// std::invalid_argument for an occlusion view that does not match the pyramid, or a frame
@@ -122,10 +124,10 @@ class ClusterCuller {
   std::size_t instance_count_ = 0;
   ClusterCullParams params_{};
   // What the descriptor set names now (rewritten when a frame names other buffers).
-  const vulkan::Buffer* bound_classes_ = nullptr;
+  VkBuffer bound_classes_ = VK_NULL_HANDLE;
   VkDeviceSize bound_classes_offset_ = 0;
-  const vulkan::Buffer* bound_pyramid_ = nullptr;
-  std::uint64_t bound_pyramid_generation_ = 0;
+  VkBuffer bound_pyramid_ = VK_NULL_HANDLE;
+  VkDeviceSize bound_pyramid_size_ = 0;
   bool occlusion_ = false, object_classes_ = false;
   std::uint32_t texels_ = 4;
 };

@@ -247,7 +247,13 @@ Renderer::Renderer(const vulkan::Context& ctx, const Scene& scene, const Rendere
                                 ctx_.info().name);
       cluster_culler_ = std::make_unique<gpu::ClusterCuller>(ctx_);
       cluster_culler_->upload(cluster_boxes, cluster_cones, cluster_instances);
-      cluster_culler_->upload_draws(cluster_draws);
+      // Unmerged: a culled frame issues a subset of the unculled frame's draws, each as it is.
+      // (On lavapipe the pixels along a triangle's edge can come out differently when the same
+      // triangles are issued in other draws: the generated meshes scene lost one pixel of 64,000
+      // against per-object draws. So unculled frames draw cluster by cluster too.)
+      cluster_culler_->upload_draws(cluster_draws, false);
+      upload(all_cluster_draws_, cluster_draws.data(), cluster_draws.size() * sizeof(DrawCommand),
+             VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "unculled cluster draw buffer");
       cluster_boxes_ = std::move(cluster_boxes);
       cluster_cones_ = std::move(cluster_cones);
       cluster_instances_ = std::move(cluster_instances);
@@ -719,6 +725,11 @@ Image Renderer::render(const Camera& camera, CullMode mode, FrameStats* stats) {
     if (stats_pool_) vkCmdBeginQuery(cmd_, stats_pool_, 0, 0);
     if (cull) {
       culled_draws();
+    } else if (cluster_culler_) {
+      // Cluster by cluster, as the cluster frames draw them.
+      if (cluster_culler_->pair_count() > 0)
+        vkCmdDrawIndexedIndirect(cmd_, all_cluster_draws_.handle(), 0, std::uint32_t(cluster_culler_->pair_count()),
+                                 sizeof(DrawCommand));
     } else if (n > 0) {
       vkCmdDrawIndexedIndirect(cmd_, all_draws_.handle(), 0, std::uint32_t(n), sizeof(DrawCommand));
     }

@@ -37,8 +37,10 @@ struct RendererConfig {
   bool cull_back_faces = true;
   /// Cluster culling: every mesh (and the box objects' cube) split into clusters
   /// (build_clusters with `cluster_options`); culled frames run the cluster pass
-  /// (gpu::ClusterCuller) after the object pass and draw the image from the kept clusters. The
-  /// meshes' triangles are stored cluster by cluster, for every frame, culled or not.
+  /// (gpu::ClusterCuller) after the object pass and draw the image from the kept clusters, a
+  /// draw each. The meshes' triangles are stored cluster by cluster, and unculled frames draw
+  /// every cluster with a draw of its own too, so a culled frame's draws are some of the unculled
+  /// frame's, unchanged.
   bool clusters = false;
   ClusterOptions cluster_options;
 };
@@ -165,6 +167,7 @@ class Renderer {
   std::unique_ptr<gpu::DepthPyramidPass> pyramid_;
   bool has_visibility_ = false;  // the culler's draw buffer holds the last culled frame's draws
   vulkan::Buffer vertices_, indices_, objects_, id_objects_, all_draws_, readback_;
+  vulkan::Buffer all_cluster_draws_;  // clusters: every pair's draw, what unculled frames issue
   VkImage color_ = VK_NULL_HANDLE, depth_ = VK_NULL_HANDLE;
   VkDeviceMemory color_memory_ = VK_NULL_HANDLE, depth_memory_ = VK_NULL_HANDLE;
   VkImageView color_view_ = VK_NULL_HANDLE, depth_view_ = VK_NULL_HANDLE;
