@@ -761,7 +761,7 @@ Image Renderer::render(const Camera& camera, CullMode mode, FrameStats* stats) {
         stats->draws = std::min(c.draws, cluster_culler_->pair_count());
       }
     } else {
-      stats->draws = n;
+      stats->draws = cluster_culler_ ? cluster_culler_->pair_count() : n;  // a draw per cluster, or per object
       stats->classes.clear();
     }
     stats->primitives = 0;

@@ -53,7 +53,8 @@ enum class CullMode { None, Frustum, Occlusion };
 struct FrameStats {
   std::size_t objects = 0;
   /// Draws the GPU issued for the image: the draw count the culling pass wrote (culled frames),
-  /// else objects. With occlusion, the second phase's draws.
+  /// else objects (with RendererConfig::clusters, clusters). With occlusion, the second phase's
+  /// draws.
   std::size_t draws = 0;
   /// Occlusion frames: the first phase's draws (last frame's visible objects, depth for the
   /// pyramid) and the objects the frustum kept that the pyramid hid.
