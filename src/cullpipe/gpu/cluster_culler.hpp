@@ -78,14 +78,16 @@ class ClusterCuller {
   /// instances. The pairs are every instance's clusters in order, instances in order. Throws
   /// std::invalid_argument naming the instance for a cluster range past the clusters or a
   /// transform that is not finite, and for boxes and cones of different counts; std::length_error
-  /// past 2^32 pairs or the device's limits. On a throw the culler keeps what it had.
+  /// past 2^32 pairs or the device's limits. On a throw the culler keeps what it had. Call when
+  /// no pass of this culler is in flight (its buffers are replaced).
   void upload(std::span<const Aabb> boxes, std::span<const BackfaceCone> cones,
               std::span<const ClusterInstance> instances);
   /// A draw per pair, in pair order (first_instance says which object a draw is of). Where a
   /// pair's draw continues the one before (same instance, instance count, vertex offset and
   /// first instance, its index range starting where that one's ends), a run of them that is
   /// drawn becomes one draw, unless `merge` is false (every drawn pair its own draw, as given).
-  /// Throws std::invalid_argument for a count other than pair_count().
+  /// Throws std::invalid_argument for a count other than pair_count(). Call when no pass of this
+  /// culler is in flight.
   void upload_draws(std::span<const DrawCommand> draws, bool merge = true);
   std::size_t pair_count() const { return pair_count_; }
   std::size_t instance_count() const { return instance_count_; }
@@ -95,7 +97,9 @@ class ClusterCuller {
   /// draw_buffer() and their count in counter_buffer() (ViewCounters::visible_count), ready for
   /// vkCmdDrawIndexedIndirectCount with maxDrawCount = pair_count(). Throws
   /// std::invalid_argument for an occlusion view that does not match the pyramid, or a frame
-  /// that is not finite, before recording anything.
+  /// that is not finite, before recording anything. A frame naming another object class buffer
+  /// or pyramid buffer than the last one rewrites the descriptor set: the last pass must have
+  /// completed by then (one frame in flight per culler).
   void record(VkCommandBuffer cmd, const ClusterFrame& frame);
   /// The classes and counts of the last recorded pass, once it has completed.
   ClusterResult read_results() const;
