@@ -9,7 +9,9 @@
 #include <filesystem>
 #include <glm/ext/matrix_double3x3.hpp>
 #include <glm/ext/matrix_transform.hpp>
+#include <glm/geometric.hpp>
 #include <glm/matrix.hpp>
+#include <map>
 #include <memory>
 #include <optional>
 
@@ -501,6 +503,91 @@ TEST(Render, SoftwareDepthIsNeverNearerThanTheRender) {
   expect_software_depth_conservative(city, cameras, 320, 180);
   const Scene streets = generate_scene(SceneKind::Streets, 3000, 2);
   expect_software_depth_conservative(streets, scene_camera_path(streets, 5), 333, 187);
+}
+
+// Which debug colour a shaded pixel of a class image was drawn with: the class colour nearest in
+// direction (shading scales a colour by 0.35 to 1). Grey and dark grey share a direction: grey.
+std::uint32_t class_color_of(const render::Image& img, std::size_t p) {
+  const glm::vec3 c(img.rgba[p], img.rgba[p + 1], img.rgba[p + 2]);
+  std::uint32_t best = 0;
+  float best_cos = -1.0f;
+  for (const std::uint32_t k : {render::kColorInside, render::kColorIntersecting, render::kColorOutside,
+                                render::kColorOccluded, render::kColorBackFacing}) {
+    const glm::vec3 d(float(k >> 24), float(k >> 16 & 255u), float(k >> 8 & 255u));
+    const float cos = glm::dot(c, d) / (glm::length(c) * glm::length(d) + 1e-6f);
+    if (cos > best_cos) best_cos = cos, best = k;
+  }
+  return best;
+}
+
+// Pixels of `classes` (a class image) per debug colour, over the pixels an object covers: those
+// where `reference`, the unculled image from the same camera, differs (the two share only the
+// background, as no object's colour is a class colour).
+std::map<std::uint32_t, std::size_t> class_pixels(const render::Image& classes, const render::Image& reference) {
+  std::map<std::uint32_t, std::size_t> count;
+  for (std::size_t p = 0; p < classes.rgba.size(); p += 4)
+    if (!std::equal(classes.rgba.begin() + std::ptrdiff_t(p), classes.rgba.begin() + std::ptrdiff_t(p + 4),
+                    reference.rgba.begin() + std::ptrdiff_t(p)))
+      ++count[class_color_of(classes, p)];
+  return count;
+}
+
+// Class images: from the frame's own camera only drawn colours show (nothing culled owns a
+// pixel); from the far side of the target the clusters facing away from the camera show blue.
+TEST(Render, ClassImagesShowWhatEachTestCulled) {
+  const Scene meshes = generate_scene(SceneKind::Meshes, 300, 5);
+  render::RendererConfig config;
+  config.width = 320;
+  config.height = 200;
+  config.clusters = true;
+  render::Renderer clusters(*RenderEnvironment::context, meshes, config);
+  const Camera camera = meshes.camera;
+  render::FrameStats stats;
+  clusters.render(camera, render::CullMode::Occlusion, &stats);
+  clusters.render(camera, render::CullMode::Occlusion, &stats);  // with the first frame's visibility
+  ASSERT_GT(stats.cluster_classes[std::size_t(clusters::ClusterClass::BackFacing)], 0u);
+  const render::Image all = clusters.render(camera, render::CullMode::None);
+  std::map<std::uint32_t, std::size_t> seen = class_pixels(clusters.class_image(camera, stats), all);
+  EXPECT_GT(seen[render::kColorInside], 1000u);
+  for (const auto& [color, pixels] : seen)
+    EXPECT_TRUE(color == render::kColorInside || pixels == 0) << pixels << " pixels of colour " << std::hex << color;
+
+  Camera behind = camera;
+  behind.eye = 2.0f * camera.target - camera.eye;
+  behind.eye.y = camera.eye.y;
+  seen = class_pixels(clusters.class_image(behind, stats), clusters.render(behind, render::CullMode::None));
+  EXPECT_GT(seen[render::kColorBackFacing], 200u);  // (525 of 57,000 pixels; most show culled objects)
+  EXPECT_GT(seen[render::kColorOutside], 10000u);
+
+  // Objects: the city's, inside or intersecting from the camera; the front view shows the rest.
+  const Scene city = load_scene(std::string(CULLPIPE_SOURCE_DIR) + "/scenes/default.json");
+  config.clusters = false;
+  render::Renderer objects(*RenderEnvironment::context, city, config);
+  render::FrameStats object_stats;
+  objects.render(city.camera, render::CullMode::Occlusion, &object_stats);
+  objects.render(city.camera, render::CullMode::Occlusion, &object_stats);
+  ASSERT_GT(object_stats.occluded, 0u);
+  seen =
+      class_pixels(objects.class_image(city.camera, object_stats), objects.render(city.camera, render::CullMode::None));
+  EXPECT_GT(seen[render::kColorInside] + seen[render::kColorIntersecting], 1000u);
+  for (const auto& [color, pixels] : seen)
+    EXPECT_TRUE(color == render::kColorInside || color == render::kColorIntersecting || pixels == 0)
+        << pixels << " pixels of colour " << std::hex << color;
+  const Camera front = render::front_view_camera(city.bounds(), city.camera, 320.0f / 200.0f);
+  render::Image view = objects.class_image(front, object_stats);
+  seen = class_pixels(view, objects.render(front, render::CullMode::None));
+  EXPECT_GT(seen[render::kColorOutside], 100u);
+  EXPECT_GT(seen[render::kColorOccluded], 10u);
+  const render::Image plain = view;
+  render::draw_frustum(view, front, city.camera, 1e4f);
+  std::size_t white = 0;
+  for (std::size_t p = 0; p < view.rgba.size(); p += 4)
+    white += view.rgba[p] == 255 && view.rgba[p + 1] == 255 && view.rgba[p + 2] == 255;
+  EXPECT_GT(white, 100u);  // the frustum's edges
+  EXPECT_LT(render::count_different_pixels(view, plain), view.rgba.size() / 16);
+
+  EXPECT_THROW(objects.class_image(front, render::FrameStats{}), std::invalid_argument);
+  EXPECT_THROW(clusters.class_image(front, object_stats), std::invalid_argument);
 }
 
 TEST(Render, TopDownImageAndPng) {

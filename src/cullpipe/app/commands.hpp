@@ -85,6 +85,7 @@ struct RenderOptions : SceneOptions {
   std::uint32_t width = 960, height = 540;
   std::string out_path;       ///< PNG
   std::string top_down_path;  ///< optional top-down debug PNG
+  std::string front_path;     ///< optional front debug PNG (render::front_view_camera)
   DeviceOptions device;
 };
 

@@ -120,6 +120,9 @@ int main(int argc, char** argv) {
   render_cmd->add_option("--out", render.out_path, "Output PNG")->required();
   render_cmd->add_option("--top-down", render.top_down_path,
                          "Also write a top-down debug PNG: the frustum and every object by class");
+  render_cmd->add_option("--front", render.front_path,
+                         "Also write a front debug PNG (orthographic, looking along -z): every object, or with "
+                         "--clusters every cluster, filled by class, with the frustum");
   render_cmd->add_option("--bv", render.bv, "Bounding volume the culling pass tests: aabb | obb | sphere")
       ->capture_default_str()
       ->check(CLI::IsMember({"aabb", "obb", "sphere"}));

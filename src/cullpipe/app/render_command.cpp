@@ -1,4 +1,5 @@
 #include <cstdio>
+#include <glm/geometric.hpp>
 #include <optional>
 #include <ostream>
 
@@ -133,6 +134,21 @@ int render_command(const RenderOptions& o, std::ostream& out, std::ostream& err)
                         render::top_down_image(world_aabbs(scene, loaded.aabb_update), classes, camera, 900));
       out << "  wrote " << o.top_down_path
           << " (top-down: green inside, amber intersecting, violet occluded, grey outside, white frustum)\n";
+    }
+    if (!o.front_path.empty()) {
+      render::FrameStats culled = stats;
+      if (o.no_cull) renderer.render(camera, true, &culled);  // classify for the picture anyway
+      const Aabb bounds = scene.bounds();
+      const float extent = glm::length(bounds.max - bounds.min);
+      const Camera front = render::front_view_camera(bounds, camera, float(o.width) / float(o.height));
+      render::Image view = renderer.class_image(front, culled);
+      render::draw_frustum(view, front, camera, 2.0f * extent + glm::length(camera.target - camera.eye));
+      render::write_png(o.front_path, view);
+      out << "  wrote " << o.front_path
+          << (o.clusters
+                  ? " (front clusters: green drawn, violet occluded, blue back-facing, grey outside, dark grey of "
+                    "culled objects, white frustum)\n"
+                  : " (front: green inside, amber intersecting, violet occluded, grey outside, white frustum)\n");
     }
     gpu.check_validation();
     return code;

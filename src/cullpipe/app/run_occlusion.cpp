@@ -49,16 +49,10 @@ struct FrameReport {
   std::size_t cpu_missed = 0;       // own a pixel, but the CPU path hid them: must be 0
   // --clusters: the pairs per class (clusters::ClusterClass's values), the cluster pass's draws,
   // the triangles submitted, and pairs differing from the reference's.
-  std::array<std::size_t, 6> clusters{};
+  std::array<std::size_t, clusters::kClusterClassCount> clusters{};
   std::size_t cluster_draws = 0, cluster_mismatches = 0;
   std::uint64_t triangles = 0;
 };
-
-std::size_t stats_pairs(const render::Renderer& renderer) {
-  std::size_t pairs = 0;
-  for (const gpu::ClusterInstance& in : renderer.cluster_instances()) pairs += in.cluster_count;
-  return pairs;
-}
 
 /// The cluster pass's classes of one frame against clusters::classify's on the frame's pyramid,
 /// given the object pass's classes; a report per mismatch (the first few).
@@ -277,7 +271,7 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
   else
     out << "  agreement:     " << mismatches << " MISMATCHES with the reference\n";
   if (o.clusters) {
-    const std::size_t pairs = renderer.cluster_instances().empty() ? 0 : stats_pairs(renderer) * o.frames;
+    const std::size_t pairs = renderer.cluster_pair_count() * o.frames;
     if (cluster_mismatches == 0)
       out << "  clusters:      all " << pairs << " cluster-frame classes equal the reference's (clusters::classify)\n";
     else

@@ -4,6 +4,7 @@
 // instance's transform is outside the frustum, when all of its triangles face away from the eye
 // (its back-face cone), or when that box is hidden behind the depth pyramid; tested in that
 // order, the first test that culls naming its class.
+#include <cstddef>
 #include <cstdint>
 #include <string_view>
 
@@ -20,6 +21,9 @@ namespace cullpipe::clusters {
 /// CLUSTER_*): Outside and Drawn as the object classes OUTSIDE and INTERSECTING, so the object
 /// passes' compaction lists the drawn ones.
 enum class ClusterClass : std::uint8_t { Outside = 0, Drawn = 1, Occluded = 3, BackFacing = 4, ObjectCulled = 5 };
+/// Entries of an array indexed by a ClusterClass's value (2 is unused: the object classes'
+/// INSIDE, which clusters do not tell apart from INTERSECTING).
+inline constexpr std::size_t kClusterClassCount = 6;
 
 constexpr std::string_view to_string(ClusterClass c) {
   switch (c) {

@@ -57,9 +57,9 @@ struct ClusterFrame {
 
 /// What one pass found.
 struct ClusterResult {
-  std::vector<clusters::ClusterClass> classes;  ///< per pair, in pair order
-  std::array<std::size_t, 6> counts{};          ///< pairs per class, indexed by the class's value
-  std::size_t drawn = 0;                        ///< clusters drawn
+  std::vector<clusters::ClusterClass> classes;                     ///< per pair, in pair order
+  std::array<std::size_t, clusters::kClusterClassCount> counts{};  ///< pairs per class, indexed by the class's value
+  std::size_t drawn = 0;                                           ///< clusters drawn
   /// Draws written (the draw count): a run of drawn clusters whose index ranges follow on from
   /// each other is one draw.
   std::size_t draws = 0;

@@ -3,12 +3,15 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <glm/ext/vector_double2.hpp>
+#include <glm/ext/vector_double4.hpp>
 #include <glm/geometric.hpp>
 #include <glm/mat4x4.hpp>
 #include <glm/matrix.hpp>
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 #include "cullpipe/scene/scene.hpp"
 
@@ -51,6 +54,30 @@ std::uint32_t darker(std::uint32_t c) {
   const auto ch = [&](int shift) { return std::uint32_t(((c >> shift) & 0xff) * 3 / 5) << shift; };
   return ch(24) | ch(16) | ch(8) | (c & 0xff);
 }
+
+// The frustum's corners: the clip-space corners unprojected; a far plane that is infinite or
+// farther than `far_limit` from the eye is cut there so the drawing stays readable. Bit k of the
+// index set: +x (k = 0), +y (k = 1), far (k = 2).
+std::array<glm::vec3, 8> frustum_corners(const Camera& camera, float far_limit) {
+  Camera cut = camera;
+  if (!cut.orthographic) {
+    cut.infinite_far = false;
+    cut.far_plane = std::min(camera.infinite_far ? far_limit : camera.far_plane, far_limit);
+    cut.far_plane = std::max(cut.far_plane, cut.near_plane * 2.0f);
+  }
+  const glm::mat4 inv = glm::inverse(cut.view_proj());
+  std::array<glm::vec3, 8> corners;
+  for (int i = 0; i < 8; ++i) {
+    const glm::vec4 clip((i & 1) ? 1.0f : -1.0f, (i & 2) ? 1.0f : -1.0f, (i & 4) ? 1.0f : 0.0f, 1.0f);
+    const glm::vec4 w = inv * clip;
+    corners[std::size_t(i)] = glm::vec3(w) / w.w;
+  }
+  return corners;
+}
+
+// Frustum edges as corner pairs: near quad, far quad, and the four side edges.
+constexpr int kFrustumEdges[12][2] = {{0, 1}, {1, 3}, {3, 2}, {2, 0}, {4, 5}, {5, 7},
+                                      {7, 6}, {6, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
 
 }  // namespace
 
@@ -96,8 +123,6 @@ Image top_down_image(const std::vector<Aabb>& world_boxes, const std::vector<Cla
 
 Image top_down_image(const std::vector<Aabb>& world_boxes, const std::vector<std::uint32_t>& colors,
                      const Camera& camera, std::uint32_t size) {
-  // The frustum's corners: unproject the clip-space corners; an infinite or very far far
-  // plane is cut at `far_limit` from the eye so the drawing stays readable.
   float lo_x = camera.eye.x, hi_x = camera.eye.x, lo_z = camera.eye.z, hi_z = camera.eye.z;
   for (const Aabb& b : world_boxes) {
     lo_x = std::min(lo_x, b.min.x), hi_x = std::max(hi_x, b.max.x);
@@ -105,18 +130,8 @@ Image top_down_image(const std::vector<Aabb>& world_boxes, const std::vector<std
   }
   const float extent = std::max({hi_x - lo_x, hi_z - lo_z, 1e-3f});
   const float far_limit = 2.0f * extent + glm::length(camera.target - camera.eye);
-  Camera cut = camera;
-  if (!cut.orthographic) {
-    cut.infinite_far = false;
-    cut.far_plane = std::min(camera.infinite_far ? far_limit : camera.far_plane, far_limit);
-    cut.far_plane = std::max(cut.far_plane, cut.near_plane * 2.0f);
-  }
-  const glm::mat4 inv = glm::inverse(cut.view_proj());
-  std::array<glm::vec3, 8> corners;
+  const std::array<glm::vec3, 8> corners = frustum_corners(camera, far_limit);
   for (int i = 0; i < 8; ++i) {
-    const glm::vec4 clip((i & 1) ? 1.0f : -1.0f, (i & 2) ? 1.0f : -1.0f, (i & 4) ? 1.0f : 0.0f, 1.0f);
-    const glm::vec4 w = inv * clip;
-    corners[std::size_t(i)] = glm::vec3(w) / w.w;
     lo_x = std::min(lo_x, corners[std::size_t(i)].x), hi_x = std::max(hi_x, corners[std::size_t(i)].x);
     lo_z = std::min(lo_z, corners[std::size_t(i)].z), hi_z = std::max(hi_z, corners[std::size_t(i)].z);
   }
@@ -143,16 +158,88 @@ Image top_down_image(const std::vector<Aabb>& world_boxes, const std::vector<std
       c.line(x1, z1, x0, z1, darker(color)), c.line(x0, z1, x0, z0, darker(color));
     }
   }
-  // Frustum edges: near quad, far quad, and the four side edges.
-  static const int edges[12][2] = {{0, 1}, {1, 3}, {3, 2}, {2, 0}, {4, 5}, {5, 7},
-                                   {7, 6}, {6, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
-  for (const auto& e : edges) {
+  for (const auto& e : kFrustumEdges) {
     const glm::vec3& a = corners[std::size_t(e[0])];
     const glm::vec3& b = corners[std::size_t(e[1])];
     c.line(px(a.x), pz(a.z), px(b.x), pz(b.z), 0xffffffff);
   }
   c.fill(px(camera.eye.x) - 3, pz(camera.eye.z) - 3, px(camera.eye.x) + 3, pz(camera.eye.z) + 3, 0xff4040ff);
   return img;
+}
+
+Camera front_view_camera(const Aabb& bounds, const Camera& camera, float aspect) {
+  float lo_x = camera.eye.x, hi_x = camera.eye.x, lo_y = camera.eye.y, hi_y = camera.eye.y;
+  float lo_z = camera.eye.z, hi_z = camera.eye.z;
+  if (bounds.min.x <= bounds.max.x) {
+    lo_x = std::min(lo_x, bounds.min.x), hi_x = std::max(hi_x, bounds.max.x);
+    lo_y = std::min(lo_y, bounds.min.y), hi_y = std::max(hi_y, bounds.max.y);
+    lo_z = std::min(lo_z, bounds.min.z), hi_z = std::max(hi_z, bounds.max.z);
+  }
+  const float a = aspect > 0.0f && std::isfinite(aspect) ? aspect : 1.0f;
+  const float half_height = std::max({0.5f * (hi_y - lo_y), 0.5f * (hi_x - lo_x) / a, 1e-3f}) * 1.06f;
+  const float depth = std::max(hi_z - lo_z, 1e-3f);
+  Camera front;
+  front.orthographic = true;
+  front.ortho_half_height = half_height;
+  front.aspect = a;
+  // From in front of everything, at a distance of a twentieth of the depth shown.
+  const float margin = 0.05f * depth + 1e-3f;
+  front.eye = {0.5f * (lo_x + hi_x), 0.5f * (lo_y + hi_y), hi_z + margin};
+  front.target = front.eye - glm::vec3(0.0f, 0.0f, 1.0f);
+  front.up = {0.0f, 1.0f, 0.0f};
+  front.near_plane = 0.5f * margin;
+  front.far_plane = depth + 2.0f * margin;
+  return front;
+}
+
+void draw_frustum(Image& image, const Camera& observer, const Camera& camera, float far_limit) {
+  const glm::mat4 view_proj = observer.view_proj();
+  const double w_min = observer.orthographic ? -std::numeric_limits<double>::infinity() : observer.near_plane;
+  const double width = image.width, height = image.height;
+  Canvas canvas{image};
+  // A world point in the observer's clip space, in double.
+  const auto clip = [&](const glm::vec3& p) { return glm::dvec4(view_proj * glm::vec4(p, 1.0f)); };
+  const auto pixel = [&](const glm::dvec4& c) {
+    return glm::dvec2((c.x / c.w * 0.5 + 0.5) * width, (c.y / c.w * 0.5 + 0.5) * height);
+  };
+  const std::array<glm::vec3, 8> corners = frustum_corners(camera, far_limit);
+  for (const auto& e : kFrustumEdges) {
+    glm::dvec4 a = clip(corners[std::size_t(e[0])]), b = clip(corners[std::size_t(e[1])]);
+    // In front of the observer's near plane only (w is the distance along its view).
+    if (a.w < w_min && b.w < w_min) continue;
+    if (a.w < w_min) a += (b - a) * ((w_min - a.w) / (b.w - a.w));
+    if (b.w < w_min) b += (a - b) * ((w_min - b.w) / (a.w - b.w));
+    glm::dvec2 p = pixel(a), q = pixel(b);
+    // Liang-Barsky against the image widened by a pixel, so the line stays in int range.
+    double t0 = 0.0, t1 = 1.0;
+    const glm::dvec2 d = q - p;
+    const double lo[2] = {-1.0, -1.0}, hi[2] = {width + 1.0, height + 1.0};
+    bool visible = true;
+    for (int axis = 0; axis < 2 && visible; ++axis) {
+      for (const auto& [num, den] : {std::pair{p[axis] - lo[axis], -d[axis]}, std::pair{hi[axis] - p[axis], d[axis]}}) {
+        if (den == 0.0) {
+          if (num < 0.0) visible = false;
+        } else {
+          const double t = num / den;
+          if (den < 0.0)
+            t0 = std::max(t0, t);
+          else
+            t1 = std::min(t1, t);
+        }
+      }
+    }
+    if (!visible || t0 > t1 || !std::isfinite(t0) || !std::isfinite(t1)) continue;
+    const glm::dvec2 from = p + d * t0, to = p + d * t1;
+    canvas.line(int(std::floor(from.x)), int(std::floor(from.y)), int(std::floor(to.x)), int(std::floor(to.y)),
+                0xffffffff);
+  }
+  const glm::dvec4 eye = clip(camera.eye);
+  if (eye.w >= w_min && eye.w > 0.0) {
+    const glm::dvec2 e = pixel(eye);
+    if (e.x > -8.0 && e.y > -8.0 && e.x < width + 8.0 && e.y < height + 8.0)
+      canvas.fill(int(std::floor(e.x)) - 3, int(std::floor(e.y)) - 3, int(std::floor(e.x)) + 3,
+                  int(std::floor(e.y)) + 3, 0xff4040ff);
+  }
 }
 
 }  // namespace cullpipe::render

@@ -44,4 +44,14 @@ Image top_down_image(const std::vector<Aabb>& world_boxes, const std::vector<Cla
 Image top_down_image(const std::vector<Aabb>& world_boxes, const std::vector<std::uint32_t>& colors,
                      const Camera& camera, std::uint32_t size);
 
+/// An orthographic camera looking along -z at `bounds` (a scene's) and `camera`'s eye, from in
+/// front of both (the +z side), y up; the view holds their x-y extent with a margin, at
+/// `aspect` (width / height). The front debug view of Renderer::class_image.
+Camera front_view_camera(const Aabb& bounds, const Camera& camera, float aspect);
+
+/// Draws `camera`'s frustum edges in white and its eye in red over `image`, an image seen by
+/// `observer`: each edge clipped to the observer's near plane and to the image. A far plane
+/// that is infinite or farther than `far_limit` from the eye is drawn at `far_limit`.
+void draw_frustum(Image& image, const Camera& observer, const Camera& camera, float far_limit);
+
 }  // namespace cullpipe::render

@@ -257,6 +257,7 @@ Renderer::Renderer(const vulkan::Context& ctx, const Scene& scene, const Rendere
       cluster_boxes_ = std::move(cluster_boxes);
       cluster_cones_ = std::move(cluster_cones);
       cluster_instances_ = std::move(cluster_instances);
+      cluster_pairs_ = cluster_draws.size();
     }
 
     create_targets();
@@ -392,9 +393,9 @@ void Renderer::create_pipelines() {
   layout_info.pPushConstantRanges = &push;
   CULLPIPE_VK_CHECK(vkCreatePipelineLayout(dev, &layout_info, nullptr, &pipeline_layout_));
 
-  VkDescriptorPoolSize pool_size{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 2};
+  VkDescriptorPoolSize pool_size{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 3};
   VkDescriptorPoolCreateInfo pool_info{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
-  pool_info.maxSets = 2;
+  pool_info.maxSets = 3;
   pool_info.poolSizeCount = 1;
   pool_info.pPoolSizes = &pool_size;
   CULLPIPE_VK_CHECK(vkCreateDescriptorPool(dev, &pool_info, nullptr, &descriptor_pool_));
@@ -415,6 +416,7 @@ void Renderer::create_pipelines() {
   buffer_info.buffer = id_objects_.handle();
   write.dstSet = id_descriptor_set_;
   vkUpdateDescriptorSets(dev, 1, &write, 0, nullptr);
+  CULLPIPE_VK_CHECK(vkAllocateDescriptorSets(dev, &alloc, &class_descriptor_set_));  // written by class_image
 
   VkShaderModule vert = shader_module(dev, cullpipe_render_mesh_vert_spv, sizeof(cullpipe_render_mesh_vert_spv));
   VkShaderModule frag = VK_NULL_HANDLE, id_frag = VK_NULL_HANDLE, primitive_frag = VK_NULL_HANDLE;
@@ -582,7 +584,9 @@ void Renderer::record_scene_pass(const Camera& camera, ScenePass pass, const std
                               : pass == ScenePass::Depth ? depth_pipeline_[reversed]
                                                          : pipeline_[reversed];
   vkCmdBindPipeline(cmd_, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline);
-  const VkDescriptorSet set = ids ? id_descriptor_set_ : descriptor_set_;
+  const VkDescriptorSet set = ids                          ? id_descriptor_set_
+                              : pass == ScenePass::Classes ? class_descriptor_set_
+                                                           : descriptor_set_;
   vkCmdBindDescriptorSets(cmd_, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline_layout_, 0, 1, &set, 0, nullptr);
   const VkDeviceSize zero = 0;
   VkBuffer vb = vertices_.handle();
@@ -649,6 +653,73 @@ std::vector<bool> Renderer::pixel_owners(const Camera& camera) {
     if (id != 0 && id <= n) owners[id - 1] = true;
   }
   return owners;
+}
+
+Image Renderer::class_image(const Camera& observer, const FrameStats& stats) {
+  const std::size_t n = templates_.size();
+  const bool by_cluster = cluster_culler_ != nullptr;
+  const std::size_t records = by_cluster ? cluster_pairs_ : n;
+  const std::size_t have = by_cluster ? stats.cluster_pair_classes.size() : stats.classes.size();
+  if (have != records)
+    throw std::invalid_argument("class_image: the frame stats hold " + std::to_string(have) + " classes, the " +
+                                (by_cluster ? "renderer's cluster pairs are " : "renderer's objects are ") +
+                                std::to_string(records) + " (give the stats of a culled frame of this renderer)");
+  const auto rgba = [](std::uint32_t c) {
+    return glm::vec4(float(c >> 24) / 255.0f, float(c >> 16 & 255u) / 255.0f, float(c >> 8 & 255u) / 255.0f, 1.0f);
+  };
+  // A record per object or pair (its object's model matrix, the class's colour) and a draw per
+  // record whose firstInstance is that record: the same triangles as the unculled frame's draws.
+  const std::span<const RenderObject> models = objects_.as<const RenderObject>();
+  std::vector<RenderObject> painted(records);
+  std::vector<DrawCommand> draws(records);
+  if (by_cluster) {
+    using clusters::ClusterClass;
+    const std::span<const DrawCommand> pair_draws = all_cluster_draws_.as<const DrawCommand>();
+    for (std::size_t p = 0; p < records; ++p) {
+      const ClusterClass c = stats.cluster_pair_classes[p];
+      const std::uint32_t color = c == ClusterClass::Drawn        ? kColorInside
+                                  : c == ClusterClass::Occluded   ? kColorOccluded
+                                  : c == ClusterClass::BackFacing ? kColorBackFacing
+                                  : c == ClusterClass::Outside    ? kColorOutside
+                                                                  : kColorObjectCulled;
+      draws[p] = pair_draws[p];
+      painted[p] = {models[draws[p].first_instance].model, rgba(color)};
+      draws[p].first_instance = std::uint32_t(p);
+    }
+  } else {
+    for (std::size_t i = 0; i < n; ++i) {
+      const Classification c = stats.classes[i];
+      const std::uint32_t color = c == Classification::Inside         ? kColorInside
+                                  : c == Classification::Intersecting ? kColorIntersecting
+                                  : c == Classification::Occluded     ? kColorOccluded
+                                                                      : kColorOutside;
+      painted[i] = {models[i].model, rgba(color)};
+      draws[i] = templates_[i];
+    }
+  }
+  // Every pass before has completed (each waits), so the last call's buffers can be replaced.
+  class_objects_ = vulkan::Buffer(ctx_, std::max<std::size_t>(records * sizeof(RenderObject), 16),
+                                  VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "class image object buffer");
+  class_draws_ = vulkan::Buffer(ctx_, std::max<std::size_t>(records * sizeof(DrawCommand), 16),
+                                VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "class image draw buffer");
+  if (records) {
+    std::memcpy(class_objects_.data(), painted.data(), records * sizeof(RenderObject));
+    std::memcpy(class_draws_.data(), draws.data(), records * sizeof(DrawCommand));
+  }
+  VkDescriptorBufferInfo buffer_info{class_objects_.handle(), 0, VK_WHOLE_SIZE};
+  VkWriteDescriptorSet write{VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
+  write.dstSet = class_descriptor_set_;
+  write.dstBinding = 0;
+  write.descriptorCount = 1;
+  write.descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+  write.pBufferInfo = &buffer_info;
+  vkUpdateDescriptorSets(ctx_.device(), 1, &write, 0, nullptr);
+  begin_frame();
+  record_scene_pass(observer, ScenePass::Classes, [&] {
+    if (records > 0)
+      vkCmdDrawIndexedIndirect(cmd_, class_draws_.handle(), 0, std::uint32_t(records), sizeof(DrawCommand));
+  });
+  return submit_and_read();
 }
 
 Image Renderer::render(const Camera& camera, CullMode mode, FrameStats* stats) {

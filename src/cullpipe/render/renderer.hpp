@@ -69,7 +69,7 @@ struct FrameStats {
   /// drawn; `draws` then counts the cluster pass's draws (a run of an object's drawn clusters
   /// is one), and so do the first phase's.
   std::size_t clusters = 0;
-  std::array<std::size_t, 6> cluster_classes{};
+  std::array<std::size_t, clusters::kClusterClassCount> cluster_classes{};
   std::size_t clusters_drawn = 0;
   /// Every pair's class, in pair order (object by object, each object's clusters in order; see
   /// Renderer::cluster_instances()).
@@ -141,12 +141,25 @@ class Renderer {
   const std::vector<Aabb>& cluster_boxes() const { return cluster_boxes_; }
   const std::vector<BackfaceCone>& cluster_cones() const { return cluster_cones_; }
   const std::vector<gpu::ClusterInstance>& cluster_instances() const { return cluster_instances_; }
+  /// The (object, cluster) pairs: every object's cluster_count summed; 0 without clusters.
+  std::size_t cluster_pair_count() const { return cluster_pairs_; }
+
+  /// A debug view of a culled frame (`stats` from render() with culling, by this renderer) seen
+  /// by `observer`: every object drawn as the unculled frame draws it, its triangles filled by
+  /// the class the frame gave it and shaded flat (green inside, amber intersecting, violet
+  /// occluded, grey outside); with clusters, every (object, cluster) pair by its cluster class
+  /// (green drawn, violet occluded, blue back-facing, grey outside, dark grey of a culled
+  /// object). From the frame's own camera only drawn colours can show, since nothing culled owns
+  /// a pixel; from elsewhere (front_view_camera) the culled parts show. The image is the
+  /// renderer's size. Throws std::invalid_argument when `stats` does not hold a class for every
+  /// object (or pair).
+  Image class_image(const Camera& observer, const FrameStats& stats);
 
  private:
   void begin_frame();
   /// One pass of the scene into the colour and depth targets, cleared: the image, the objects'
   /// ids (the id pass's pipeline and objects), or depth alone; `draw` records the draws.
-  enum class ScenePass { Image, Ids, Primitives, Depth };
+  enum class ScenePass { Image, Ids, Primitives, Depth, Classes };
   /// Every object drawn, as the unculled frame draws them, in one pass; the image read back.
   Image draw_everything(const Camera& camera, ScenePass pass);
   void record_scene_pass(const Camera& camera, ScenePass pass, const std::function<void()>& draw);
@@ -165,10 +178,12 @@ class Renderer {
   std::vector<Aabb> cluster_boxes_;
   std::vector<BackfaceCone> cluster_cones_;
   std::vector<gpu::ClusterInstance> cluster_instances_;
+  std::size_t cluster_pairs_ = 0;
   std::unique_ptr<gpu::DepthPyramidPass> pyramid_;
   bool has_visibility_ = false;  // the culler's draw buffer holds the last culled frame's draws
   vulkan::Buffer vertices_, indices_, objects_, id_objects_, all_draws_, readback_;
-  vulkan::Buffer all_cluster_draws_;  // clusters: every pair's draw, what unculled frames issue
+  vulkan::Buffer all_cluster_draws_;            // clusters: every pair's draw, what unculled frames issue
+  vulkan::Buffer class_objects_, class_draws_;  // class_image: a coloured record and a draw per object or pair
   VkImage color_ = VK_NULL_HANDLE, depth_ = VK_NULL_HANDLE;
   VkDeviceMemory color_memory_ = VK_NULL_HANDLE, depth_memory_ = VK_NULL_HANDLE;
   VkImageView color_view_ = VK_NULL_HANDLE, depth_view_ = VK_NULL_HANDLE;
@@ -181,6 +196,7 @@ class Renderer {
   VkPipeline primitive_pipeline_[2] = {VK_NULL_HANDLE, VK_NULL_HANDLE};  // triangle ids (primitive_ids())
   VkPipeline depth_pipeline_[2] = {VK_NULL_HANDLE, VK_NULL_HANDLE};      // depth only, likewise
   VkDescriptorSet id_descriptor_set_ = VK_NULL_HANDLE;                   // its objects: id_objects_
+  VkDescriptorSet class_descriptor_set_ = VK_NULL_HANDLE;                // class_image's: class_objects_
   VkDescriptorPool descriptor_pool_ = VK_NULL_HANDLE;
   VkDescriptorSet descriptor_set_ = VK_NULL_HANDLE;
   VkCommandBuffer cmd_ = VK_NULL_HANDLE;
