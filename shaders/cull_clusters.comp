@@ -2,9 +2,10 @@
 // Cluster culling: one invocation per listed (instance, cluster) pair, the pairs of the
 // instances the object pass kept (cluster_expand.comp; the others' classes are filled with
 // CLUSTER_OBJECT_CULLED before). A listed pair is culled when the cluster's box placed by the
-// instance's transform is outside the frustum, when every triangle of the cluster faces away
-// from the eye (its back-face cone, shared/cone.glsl), or when the placed box is hidden behind
-// the depth pyramid (OCCLUSION): the first test that culls names its class (CLUSTER_*), as
+// instance's transform (or its placed OBB, where it has one) is outside the frustum, when every
+// triangle of the cluster faces away from the eye (its back-face cone, shared/cone.glsl), or
+// when the placed box (or OBB) is hidden behind the depth pyramid (OCCLUSION): the first test
+// that culls names its class (CLUSTER_*), as
 // clusters::classify in src/cullpipe/cull/clusters.cpp decides it, bit for bit. Each pair's
 // class and its workgroup's count of draws are written as the ordered flat pass writes its
 // classes and counts; compact_scan.comp turns the counts into offsets and cluster_scatter.comp
@@ -32,6 +33,7 @@ layout(std430, set = 0, binding = BINDING_PYRAMID) readonly buffer Pyramid { flo
 layout(set = 0, binding = BINDING_OCCLUSION_VIEWS) uniform usamplerBuffer occlusion_views;
 layout(set = 0, binding = CLUSTER_BINDING_PAIRS) uniform usamplerBuffer pairs;
 layout(std430, set = 0, binding = CLUSTER_BINDING_ACTIVE) readonly buffer Listed { uint listed_pairs[]; };
+layout(set = 0, binding = CLUSTER_BINDING_OBBS) uniform usamplerBuffer pair_obbs;  // GpuObb each
 
 layout(push_constant, std430) uniform Push { ClusterCullParams params; };
 
@@ -54,8 +56,9 @@ void load_view() {
   if (OCCLUSION != 0u) occ_load_view(0u);
 }
 
-// A listed pair's class (its instance was kept: the list holds no other).
-uint classify_pair(uint instance, uint cluster) {
+// A listed pair's class (its instance was kept: the list holds no other); `obb` is 1 + the
+// index of its placed OBB, 0 for none.
+uint classify_pair(uint instance, uint cluster, uint obb) {
   int ib = int(CLUSTER_INSTANCE_TEXELS * instance), cb = int(CLUSTER_TEXELS * cluster);
   vec4 rows[3] = vec4[3](word(instances, ib), word(instances, ib + 1), word(instances, ib + 2));
   vec4 box_min = word(clusters, cb), box_max = word(clusters, cb + 1);
@@ -63,6 +66,12 @@ uint classify_pair(uint instance, uint cluster) {
   instance_aabb(rows, box_min.xyz, box_max.xyz, lo, hi);
   uint straddled;
   if (classify_aabb(lo, hi, ALL_PLANES, straddled) == CLASS_OUTSIDE) return CLUSTER_OUTSIDE;
+  vec4 o[4] = vec4[4](vec4(0.0), vec4(0.0), vec4(0.0), vec4(0.0));
+  if (obb != 0u) {
+    int ob = int(OBB_VEC4S * (obb - 1u));
+    o = vec4[4](word(pair_obbs, ob), word(pair_obbs, ob + 1), word(pair_obbs, ob + 2), word(pair_obbs, ob + 3));
+    if (classify_obb(o[0].xyz, o[1], o[2], o[3], ALL_PLANES) == CLASS_OUTSIDE) return CLUSTER_OUTSIDE;
+  }
   if (params.backface != 0u) {
     vec4 frame = word(instances, ib + 6);
     if ((floatBitsToUint(frame.w) & 1u) != 0u) {
@@ -77,6 +86,10 @@ uint classify_pair(uint instance, uint cluster) {
     vec3 magnitude;
     occ_box_corners(lo, hi, p, magnitude);
     if (occ_occluded(p, magnitude, 1.0, OCC_TEXELS)) return CLUSTER_OCCLUDED;
+    if (obb != 0u) {
+      occ_obb_corners(o[0].xyz, o[1], o[2], o[3], p, magnitude);
+      if (occ_occluded(p, magnitude, 1.0, OCC_TEXELS)) return CLUSTER_OCCLUDED;
+    }
   }
   return CLUSTER_DRAWN;
 }
@@ -98,7 +111,7 @@ void main() {
   if (k < listed) {
     uint p = listed_pairs[CLUSTER_ACTIVE_HEADER + k];
     uvec4 pair = texelFetch(pairs, int(p));
-    uint c = classify_pair(pair.x, pair.y);
+    uint c = classify_pair(pair.x, pair.y, pair.z);
     classes[p] = c;
     drawn = c == CLUSTER_DRAWN;
     continues = pair.w != 0u;

@@ -3,6 +3,7 @@
 // bad meshes refused with the mesh named. The shared glTF scenes' meshes when present.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -14,6 +15,7 @@
 #include <map>
 #include <stdexcept>
 
+#include "cullpipe/bounds/obb_fit.hpp"
 #include "cullpipe/geom/cone.hpp"
 #include "cullpipe/scene/clusters.hpp"
 #include "cullpipe/scene/gltf_scene.hpp"
@@ -40,10 +42,21 @@ TEST(Clusters, ASphereSplitsIntoValidClusters) {
     const std::size_t fewest = (mesh.indices.size() / 3 + per - 1) / per;
     EXPECT_GE(c.clusters.size(), fewest);
     EXPECT_LE(c.clusters.size(), 2 * fewest + 2);
+    std::size_t with_obb = 0;
     for (const Cluster& cl : c.clusters) {
       EXPECT_TRUE(cl.cone.cutoff <= 1.0f) << cl.cone.cutoff;
       for (int a = 0; a < 3; ++a) EXPECT_LE(cl.box.max[a] - cl.box.min[a], 2.0f * cl.sphere.radius * 1.0001f);
+      if (!cl.obb) continue;
+      ++with_obb;  // kept only where it is under 3/4 of the box's volume
+      const glm::dvec3 size = glm::dvec3(cl.box.max) - glm::dvec3(cl.box.min);
+      EXPECT_LT(bounds::volume(*cl.obb), 0.75 * size.x * size.y * size.z);
     }
+    // A sphere's patches are tilted against the axes: most clusters away from the axes get one.
+    EXPECT_GT(with_obb, c.clusters.size() / 4);
+    ClusterOptions boxes_only = options;
+    boxes_only.obbs = false;
+    const MeshClusters plain = build_clusters(mesh, boxes_only, "sphere");
+    EXPECT_TRUE(std::none_of(plain.clusters.begin(), plain.clusters.end(), [](const Cluster& cl) { return cl.obb; }));
   }
 }
 
@@ -60,6 +73,16 @@ TEST(Clusters, ChecksFindBrokenClusters) {
   MeshClusters shifted = good;
   shifted.clusters[0].box.max.x = shifted.clusters[0].box.min.x;
   EXPECT_NE(check_clusters(shifted, mesh), "");
+  // An OBB: the cluster's box as one encloses its vertices; shrunk by a tenth it does not.
+  MeshClusters with_obb = good;
+  const Aabb box = good.clusters[0].box;
+  Obb obb;
+  obb.center = (box.min + box.max) * 0.5f;
+  obb.half_extents = (box.max - box.min) * 0.5f * 1.001f;
+  with_obb.clusters[0].obb = obb;
+  EXPECT_EQ(check_clusters(with_obb, mesh), "");
+  with_obb.clusters[0].obb->half_extents *= 0.9f;
+  EXPECT_NE(check_clusters(with_obb, mesh).find("OBB does not enclose"), std::string::npos);
 }
 
 TEST(Clusters, BadMeshesAreRefusedByName) {

@@ -425,13 +425,14 @@ TEST_F(GpuPyramid, HierarchicalOcclusionOfLargeSubtreesEqualsTheReference) {
 
 // The cluster pass against clusters::classify, pair by pair: instances of two meshes under
 // rotated, non-uniformly scaled and mirrored transforms, with and without the object pass's
-// classes, the back-face test and the pyramid, from every kind of camera; and its draws, the
-// drawn pairs' in pair order.
+// classes, the back-face test and the pyramid, from every kind of camera, the clusters with
+// OBBs (where they are tighter) and some without; and its draws, the drawn pairs' in pair order.
 TEST_F(GpuPyramid, ClusterPassEqualsTheReferencePairByPair) {
   gpu::ClusterCuller pass(context());
   const TriangleMesh meshes[2] = {test::uv_sphere(24, 32, 2.0f), test::uv_sphere(6, 10, 1.0f)};
   std::vector<Aabb> boxes;
   std::vector<BackfaceCone> cones;
+  std::vector<std::optional<Obb>> obbs;
   std::uint32_t first[2], count[2];
   for (int m = 0; m < 2; ++m) {
     const MeshClusters c = build_clusters(meshes[m]);
@@ -440,8 +441,10 @@ TEST_F(GpuPyramid, ClusterPassEqualsTheReferencePairByPair) {
     for (const Cluster& cl : c.clusters) {
       boxes.push_back(cl.box);
       cones.push_back(cl.cone);
+      obbs.push_back(boxes.size() % 5 == 0 ? std::nullopt : cl.obb);
     }
   }
+  ASSERT_GT(std::count_if(obbs.begin(), obbs.end(), [](const auto& o) { return o.has_value(); }), 8);
   test::Rng rng(31);
   std::vector<gpu::ClusterInstance> instances(300);
   std::vector<std::uint32_t> instance_of, cluster_of;  // per pair
@@ -453,8 +456,11 @@ TEST_F(GpuPyramid, ClusterPassEqualsTheReferencePairByPair) {
       cluster_of.push_back(first[m] + c);
     }
   }
-  pass.upload(boxes, cones, instances);
+  pass.upload(boxes, cones, instances, obbs);
   ASSERT_EQ(pass.pair_count(), instance_of.size());
+  std::vector<std::optional<Obb>> placed(instance_of.size());  // each pair's OBB, placed
+  for (std::size_t p = 0; p < placed.size(); ++p)
+    if (obbs[cluster_of[p]]) placed[p] = instance_volume(*obbs[cluster_of[p]], instances[instance_of[p]].transform);
   // Even instances' clusters follow on from each other in the index buffer (a run of drawn ones
   // is one draw); odd instances' leave gaps (a draw each).
   std::vector<gpu::DrawCommand> templates(pass.pair_count());
@@ -476,7 +482,8 @@ TEST_F(GpuPyramid, ClusterPassEqualsTheReferencePairByPair) {
   std::size_t all_drawn = 0, all_draws = 0;
   vulkan::Buffer object_classes(context(), instances.size() * 4, VK_BUFFER_USAGE_STORAGE_BUFFER_BIT, "object classes");
 
-  std::array<std::size_t, 6> seen{};
+  std::array<std::size_t, clusters::kClusterClassCount> seen{};
+  std::size_t obb_culled = 0;  // pairs only their OBB culls
   for (int s = 0; s < 16; ++s) {
     const Camera cam = test::random_camera(rng, s % 8);
     const std::uint32_t w = 32 + std::uint32_t(rng.next() % 200), h = 32 + std::uint32_t(rng.next() % 120);
@@ -516,9 +523,12 @@ TEST_F(GpuPyramid, ClusterPassEqualsTheReferencePairByPair) {
           !frame.object_classes || classes[i] == gpu::CLASS_INSIDE || classes[i] == gpu::CLASS_INTERSECTING;
       clusters::ClusterView v = view;
       v.backface = view.backface && in.backface;
-      const clusters::ClusterClass want =
-          clusters::classify(boxes[c], cones[c], in.transform, inverse_frame(in.transform), kept, v);
+      const clusters::ClusterClass want = clusters::classify(
+          boxes[c], cones[c], in.transform, inverse_frame(in.transform), kept, v, placed[p] ? &*placed[p] : nullptr);
       ++seen[std::size_t(want)];
+      obb_culled += placed[p] && want != clusters::ClusterClass::Drawn &&
+                    clusters::classify(boxes[c], cones[c], in.transform, inverse_frame(in.transform), kept, v) ==
+                        clusters::ClusterClass::Drawn;
       if (want == clusters::ClusterClass::Drawn) expected.push_back(templates[p]);
       if (r.classes[p] != want && ++mismatches <= 3)
         ADD_FAILURE() << "frame " << s << " (camera variant " << s % 8 << ", " << w << "x" << h << "): pair " << p
@@ -537,6 +547,7 @@ TEST_F(GpuPyramid, ClusterPassEqualsTheReferencePairByPair) {
   }
   EXPECT_LT(all_draws, all_drawn * 3 / 4) << "runs of drawn clusters are not merged";
   for (std::size_t c : {0, 1, 3, 4, 5}) EXPECT_GT(seen[c], 100u) << "too few pairs of class " << c;
+  EXPECT_GT(obb_culled, 20u) << "too few pairs culled by their OBB alone";
 
   // Every object culled: nothing listed, no workgroups, no draws.
   auto* classes = static_cast<std::uint32_t*>(object_classes.data());
@@ -606,6 +617,9 @@ TEST_F(GpuPyramid, ClusterPassRefusesBadInputAndKeepsItsState) {
   EXPECT_NE(message([&] { pass.upload(boxes, cones, nan); }).find("instance 0: transform row 1 column 1 is NaN"),
             std::string::npos);
   EXPECT_NE(message([&] { pass.upload(boxes, std::span(cones).first(1), instances); }).find("boxes and 1 cones"),
+            std::string::npos);
+  const std::vector<std::optional<Obb>> one_obb(1);
+  EXPECT_NE(message([&] { pass.upload(boxes, cones, instances, one_obb); }).find("boxes and 1 OBBs"),
             std::string::npos);
   EXPECT_NE(message([&] { pass.upload_draws(std::vector<gpu::DrawCommand>(1)); }).find("1 draws for"),
             std::string::npos);

@@ -165,6 +165,24 @@ bool occ_node_occluded(vec3 lo, vec3 hi) {
   return occ_occluded(p, magnitude, OCC_NODE_MARGIN_SCALE, OCC_NODE_TEXELS);
 }
 
+// The corners c +- a0 +- a1 +- a2, summed in the order occlusion.cpp's box_corners sums them,
+// and their magnitude bound.
+void occ_corners(vec3 c, vec3 a0, vec3 a1, vec3 a2, out vec3 p[8], out vec3 magnitude) {
+  [[unroll]] for (uint k = 0; k < 8; ++k) {
+    precise vec3 q = ((c + ((k & 1u) != 0u ? a0 : -a0)) + ((k & 2u) != 0u ? a1 : -a1)) + ((k & 4u) != 0u ? a2 : -a2);
+    p[k] = q;
+  }
+  precise vec3 m = ((abs(c) + abs(a0)) + abs(a1)) + abs(a2);
+  magnitude = m;
+}
+
+// The corners of an OBB given as its GpuObb words (centre, then each unit axis with its half
+// extent in w), from its half axes u_i * h_i.
+void occ_obb_corners(vec3 c, vec4 u0, vec4 u1, vec4 u2, out vec3 p[8], out vec3 magnitude) {
+  precise vec3 s0 = u0.xyz * u0.w, s1 = u1.xyz * u1.w, s2 = u2.xyz * u2.w;
+  occ_corners(c, s0, s1, s2, p, magnitude);
+}
+
 // Whether the volume whose words start at occ_volume_word(first) is hidden: its corners as
 // occlusion::footprint takes them (a sphere's by its box).
 bool occ_volume_occluded(uint first) {
@@ -172,25 +190,13 @@ bool occ_volume_occluded(uint first) {
   vec3 magnitude;
   if (BV_KIND == BV_KIND_AABB) {
     occ_box_corners(occ_volume_word(first).xyz, occ_volume_word(first + 1u).xyz, p, magnitude);
+  } else if (BV_KIND == BV_KIND_OBB) {
+    occ_obb_corners(occ_volume_word(first).xyz, occ_volume_word(first + 1u), occ_volume_word(first + 2u),
+                    occ_volume_word(first + 3u), p, magnitude);
   } else {
-    vec3 c, a0, a1, a2;
-    if (BV_KIND == BV_KIND_OBB) {
-      vec4 u0 = occ_volume_word(first + 1u), u1 = occ_volume_word(first + 2u), u2 = occ_volume_word(first + 3u);
-      c = occ_volume_word(first).xyz;
-      precise vec3 s0 = u0.xyz * u0.w, s1 = u1.xyz * u1.w, s2 = u2.xyz * u2.w;
-      a0 = s0, a1 = s1, a2 = s2;
-    } else {
-      vec4 s = occ_volume_word(first);
-      float r = abs(s.w);
-      c = s.xyz;
-      a0 = vec3(r, 0.0, 0.0), a1 = vec3(0.0, r, 0.0), a2 = vec3(0.0, 0.0, r);
-    }
-    [[unroll]] for (uint k = 0; k < 8; ++k) {
-      precise vec3 q = ((c + ((k & 1u) != 0u ? a0 : -a0)) + ((k & 2u) != 0u ? a1 : -a1)) + ((k & 4u) != 0u ? a2 : -a2);
-      p[k] = q;
-    }
-    precise vec3 m = ((abs(c) + abs(a0)) + abs(a1)) + abs(a2);
-    magnitude = m;
+    vec4 s = occ_volume_word(first);
+    float r = abs(s.w);
+    occ_corners(s.xyz, vec3(r, 0.0, 0.0), vec3(0.0, r, 0.0), vec3(0.0, 0.0, r), p, magnitude);
   }
   return occ_occluded(p, magnitude, 1.0, OCC_TEXELS);
 }

@@ -57,10 +57,11 @@ struct FrameReport {
 /// The cluster pass's classes of one frame against clusters::classify's on the frame's pyramid,
 /// given the object pass's classes; a report per mismatch (the first few).
 std::size_t check_clusters_frame(const render::Renderer& renderer, const render::FrameStats& stats,
-                                 const std::vector<InverseFrame>& frames, const Camera& camera, const Frustum& frustum,
-                                 const occlusion::OcclusionView& view, const occlusion::DepthPyramid& pyramid,
-                                 const occlusion::OcclusionOptions& options, std::size_t frame,
-                                 std::vector<std::string>& reports) {
+                                 const std::vector<InverseFrame>& frames,
+                                 const std::vector<std::optional<Obb>>& placed_obbs, const Camera& camera,
+                                 const Frustum& frustum, const occlusion::OcclusionView& view,
+                                 const occlusion::DepthPyramid& pyramid, const occlusion::OcclusionOptions& options,
+                                 std::size_t frame, std::vector<std::string>& reports) {
   const auto& boxes = renderer.cluster_boxes();
   const auto& cones = renderer.cluster_cones();
   const auto& instances = renderer.cluster_instances();
@@ -72,8 +73,9 @@ std::size_t check_clusters_frame(const render::Renderer& renderer, const render:
     v.backface = cv.backface && in.backface;
     for (std::uint32_t k = 0; k < in.cluster_count; ++k, ++p) {
       const std::uint32_t c = in.first_cluster + k;
-      const clusters::ClusterClass want =
-          clusters::classify(boxes[c], cones[c], in.transform, frames[i], is_visible(stats.classes[i]), v);
+      const std::optional<Obb>& placed = placed_obbs[p];
+      const clusters::ClusterClass want = clusters::classify(
+          boxes[c], cones[c], in.transform, frames[i], is_visible(stats.classes[i]), v, placed ? &*placed : nullptr);
       const clusters::ClusterClass got =
           p < stats.cluster_pair_classes.size() ? stats.cluster_pair_classes[p] : clusters::ClusterClass::Drawn;
       if (got == want) continue;
@@ -144,6 +146,12 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
   std::vector<InverseFrame> inverse_frames;  // --clusters: each object's, for the reference
   for (const gpu::ClusterInstance& in : renderer.cluster_instances())
     inverse_frames.push_back(inverse_frame(in.transform));
+  std::vector<std::optional<Obb>> placed_obbs;  // and each pair's OBB placed, where its cluster has one
+  for (const gpu::ClusterInstance& in : renderer.cluster_instances())
+    for (std::uint32_t k = 0; k < in.cluster_count; ++k) {
+      const std::optional<Obb>& obb = renderer.cluster_obbs()[in.first_cluster + k];
+      placed_obbs.push_back(obb ? std::optional<Obb>(instance_volume(*obb, in.transform)) : std::nullopt);
+    }
 
   // The volumes the renderer culls, and with --cull bvh a tree over them.
   const std::vector<Aabb> aabbs = world_aabbs(scene, loaded.aabb_update);
@@ -219,8 +227,8 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
       r.clusters = stats.cluster_classes;
       r.cluster_draws = stats.draws;
       r.triangles = stats.primitives;
-      r.cluster_mismatches = check_clusters_frame(renderer, stats, inverse_frames, camera, frustum, view, pass.read(),
-                                                  config.occlusion, f, reports);
+      r.cluster_mismatches = check_clusters_frame(renderer, stats, inverse_frames, placed_obbs, camera, frustum, view,
+                                                  pass.read(), config.occlusion, f, reports);
       cluster_mismatches += r.cluster_mismatches;
     }
     const std::vector<bool> owners = renderer.pixel_owners(camera);

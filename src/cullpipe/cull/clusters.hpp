@@ -14,6 +14,7 @@
 #include "cullpipe/geom/cone.hpp"
 #include "cullpipe/geom/frustum.hpp"
 #include "cullpipe/geom/instance.hpp"
+#include "cullpipe/geom/obb.hpp"
 
 namespace cullpipe::clusters {
 
@@ -58,8 +59,10 @@ struct ClusterView {
 /// (whose inverse frame is `frame`), whose object the object pass kept (`object_kept`) or not.
 /// The box is placed as instance_volume places it; the frustum test is reference::classify's;
 /// the back-face test is facing_away's (for a cone and frame that are usable); the occlusion
-/// test is occlusion::occluded on the placed box's footprint.
+/// test is occlusion::occluded on the placed box's footprint. With `obb`, the cluster's OBB
+/// placed by the transform (instance_volume(Obb, transform)), the frustum and occlusion tests
+/// cull what either volume's test culls (the box's first).
 ClusterClass classify(const Aabb& box, const BackfaceCone& cone, const Transform3x4& transform,
-                      const InverseFrame& frame, bool object_kept, const ClusterView& view);
+                      const InverseFrame& frame, bool object_kept, const ClusterView& view, const Obb* obb = nullptr);
 
 }  // namespace cullpipe::clusters

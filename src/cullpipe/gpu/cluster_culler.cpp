@@ -24,7 +24,8 @@ namespace {
 
 constexpr std::uint32_t kBindingCount = CLUSTER_BINDING_COUNT;
 constexpr std::uint32_t kTexelBindings = 1u << BINDING_BOUNDS | 1u << BINDING_VIEWS | 1u << BINDING_CENTRES |
-                                         1u << BINDING_OCCLUSION_VIEWS | 1u << CLUSTER_BINDING_PAIRS;
+                                         1u << BINDING_OCCLUSION_VIEWS | 1u << CLUSTER_BINDING_PAIRS |
+                                         1u << CLUSTER_BINDING_OBBS;
 constexpr VkBufferUsageFlags kTexel = VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT;
 constexpr VkBufferUsageFlags kStorage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
 enum Shader { Cull = 0, Scan = 1, Scatter = 2, Expand = 3, ExpandWrite = 4 };
@@ -100,11 +101,14 @@ const vulkan::ComputePipeline& ClusterCuller::pipeline(int which, bool occlusion
 }
 
 void ClusterCuller::upload(std::span<const Aabb> boxes, std::span<const BackfaceCone> cones,
-                           std::span<const ClusterInstance> instances) {
+                           std::span<const ClusterInstance> instances, std::span<const std::optional<Obb>> obbs) {
   if (boxes.size() != cones.size())
     throw std::invalid_argument("ClusterCuller::upload: " + std::to_string(boxes.size()) + " boxes and " +
                                 std::to_string(cones.size()) + " cones");
-  std::uint64_t pairs = 0;
+  if (!obbs.empty() && obbs.size() != boxes.size())
+    throw std::invalid_argument("ClusterCuller::upload: " + std::to_string(boxes.size()) + " boxes and " +
+                                std::to_string(obbs.size()) + " OBBs");
+  std::uint64_t pairs = 0, obb_pairs = 0;
   for (std::size_t i = 0; i < instances.size(); ++i) {
     const ClusterInstance& in = instances[i];
     const std::string at = "ClusterCuller::upload: instance " + std::to_string(i) + ": ";
@@ -115,6 +119,8 @@ void ClusterCuller::upload(std::span<const Aabb> boxes, std::span<const Backface
     if (const std::string why = invalid_reason(in.transform); !why.empty())
       throw std::invalid_argument(at + "transform " + why);
     pairs += in.cluster_count;
+    if (!obbs.empty())
+      for (std::uint32_t c = 0; c < in.cluster_count; ++c) obb_pairs += obbs[in.first_cluster + c].has_value();
   }
   if (pairs > std::numeric_limits<std::uint32_t>::max() || instances.size() > std::numeric_limits<std::uint32_t>::max())
     throw std::length_error("ClusterCuller::upload: " + std::to_string(pairs) + " pairs, more than 2^32 - 1");
@@ -129,6 +135,8 @@ void ClusterCuller::upload(std::span<const Aabb> boxes, std::span<const Backface
   detail::check_texel_range(ctx_, std::max<VkDeviceSize>(instances.size() * CLUSTER_INSTANCE_TEXELS * 16, 16),
                             "the cluster instances");
   detail::check_storage_range(ctx_, std::max<VkDeviceSize>(pairs * sizeof(DrawCommand), 16), "the cluster draws");
+  const VkDeviceSize obb_bytes = std::max<VkDeviceSize>(obb_pairs * sizeof(GpuObb), 16);
+  detail::check_texel_range(ctx_, obb_bytes, "the clusters' placed OBBs");
 
   // New buffers first: a failed allocation leaves the culler as it was.
   vulkan::Buffer clusters(ctx_, std::max<VkDeviceSize>(boxes.size() * CLUSTER_TEXELS * 16, 16), kTexel,
@@ -136,6 +144,7 @@ void ClusterCuller::upload(std::span<const Aabb> boxes, std::span<const Backface
   vulkan::Buffer inst(ctx_, std::max<VkDeviceSize>(instances.size() * CLUSTER_INSTANCE_TEXELS * 16, 16), kTexel,
                       "cluster instance buffer");
   vulkan::Buffer pair_buffer(ctx_, pair_bytes, kTexel, "cluster pair buffer");
+  vulkan::Buffer pair_obbs(ctx_, obb_bytes, kTexel, "cluster OBB buffer");
   vulkan::Buffer templates(ctx_, std::max<VkDeviceSize>(pairs * sizeof(DrawCommand), 16), kStorage,
                            "cluster draw template buffer");
   vulkan::Buffer classes(ctx_, std::max<VkDeviceSize>(pairs * 4, 16), kStorage | VK_BUFFER_USAGE_TRANSFER_DST_BIT,
@@ -150,7 +159,7 @@ void ClusterCuller::upload(std::span<const Aabb> boxes, std::span<const Backface
                                kStorage | VK_BUFFER_USAGE_TRANSFER_DST_BIT, "cluster listing count buffer");
   vulkan::Buffer active(ctx_, (CLUSTER_ACTIVE_HEADER + pairs) * 4, kStorage | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT,
                         "listed cluster buffer");
-  for (vulkan::Buffer* b : {&clusters, &inst, &pair_buffer, &templates})
+  for (vulkan::Buffer* b : {&clusters, &inst, &pair_buffer, &pair_obbs, &templates})
     if (!b->mapped()) throw vulkan::Error("the cluster pass needs host-visible memory for its inputs");
 
   auto* cw = static_cast<vec4*>(clusters.data());
@@ -162,6 +171,8 @@ void ClusterCuller::upload(std::span<const Aabb> boxes, std::span<const Backface
   }
   auto* iw = static_cast<vec4*>(inst.data());
   auto* pw = static_cast<uvec4*>(pair_buffer.data());
+  auto* ow = static_cast<GpuObb*>(pair_obbs.data());
+  std::uint32_t placed = 0;
   std::size_t p = 0;
   for (std::size_t i = 0; i < instances.size(); ++i) {
     const ClusterInstance& in = instances[i];
@@ -173,12 +184,18 @@ void ClusterCuller::upload(std::span<const Aabb> boxes, std::span<const Backface
     }
     w[6] = vec4(frame.translation_magnitude, std::bit_cast<float>(frame.usable && in.backface ? 1u : 0u));
     reinterpret_cast<uvec4*>(w)[7] = uvec4(std::uint32_t(p), in.cluster_count, 0u, 0u);
-    for (std::uint32_t c = 0; c < in.cluster_count; ++c)
-      pw[p++] = uvec4(std::uint32_t(i), in.first_cluster + c, 0u, 0u);
+    for (std::uint32_t c = 0; c < in.cluster_count; ++c) {
+      const std::optional<Obb>* obb = obbs.empty() ? nullptr : &obbs[in.first_cluster + c];
+      // The OBB placed on the host, in double (placing an OBB takes square roots and divisions,
+      // which GPUs do not round as the CPU does): what clusters::classify is given.
+      if (obb && *obb) ow[placed++] = pack(instance_volume(**obb, in.transform));
+      pw[p++] = uvec4(std::uint32_t(i), in.first_cluster + c, obb && *obb ? placed : 0u, 0u);
+    }
   }
   clusters_ = std::move(clusters);
   instances_ = std::move(inst);
   pairs_ = std::move(pair_buffer);
+  pair_obbs_ = std::move(pair_obbs);
   templates_ = std::move(templates);
   classes_ = std::move(classes);
   visible_ = std::move(visible);
@@ -275,7 +292,8 @@ void ClusterCuller::prepare(const ClusterFrame& frame) {
                                          Range{&occlusion_views_},
                                          Range{&pairs_},
                                          Range{classes, classes_offset, classes_size},
-                                         Range{&active_}};
+                                         Range{&active_},
+                                         Range{&pair_obbs_}};
     resources_->write(0, ranges);
     // The listing's set: its group counts, and the list's header as its counters.
     Range listing[kBindingCount];

@@ -9,10 +9,12 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <span>
 #include <vector>
 
 #include "cullpipe/cull/clusters.hpp"
+#include "cullpipe/geom/obb.hpp"
 #include "cullpipe/gpu/cull_types.h"
 #include "cullpipe/gpu/depth_pyramid_pass.hpp"
 #include "cullpipe/vulkan/buffer.hpp"
@@ -74,14 +76,17 @@ class ClusterCuller {
   ClusterCuller(const ClusterCuller&) = delete;
   ClusterCuller& operator=(const ClusterCuller&) = delete;
 
-  /// The clusters (local boxes and back-face cones, one each per cluster of every mesh) and the
-  /// instances. The pairs are every instance's clusters in order, instances in order. Throws
+  /// The clusters (local boxes and back-face cones, one each per cluster of every mesh, and
+  /// optionally an OBB per cluster, Cluster::obb) and the instances. The pairs are every
+  /// instance's clusters in order, instances in order. A pair whose cluster has an OBB gets it
+  /// placed by the instance's transform on the host (instance_volume(Obb, transform), 64 bytes
+  /// a pair), and its frustum and occlusion tests cull what either volume's test culls. Throws
   /// std::invalid_argument naming the instance for a cluster range past the clusters or a
-  /// transform that is not finite, and for boxes and cones of different counts; std::length_error
-  /// past 2^32 pairs or the device's limits. On a throw the culler keeps what it had. Call when
-  /// no pass of this culler is in flight (its buffers are replaced).
+  /// transform that is not finite, and for boxes, cones and OBBs (when given) of different
+  /// counts; std::length_error past 2^32 pairs or the device's limits. On a throw the culler
+  /// keeps what it had. Call when no pass of this culler is in flight (its buffers are replaced).
   void upload(std::span<const Aabb> boxes, std::span<const BackfaceCone> cones,
-              std::span<const ClusterInstance> instances);
+              std::span<const ClusterInstance> instances, std::span<const std::optional<Obb>> obbs = {});
   /// A draw per pair, in pair order (first_instance says which object a draw is of). Where a
   /// pair's draw continues the one before (same instance, instance count, vertex offset and
   /// first instance, its index range starting where that one's ends), a run of them that is
@@ -121,7 +126,7 @@ class ClusterCuller {
   std::vector<std::unique_ptr<vulkan::ComputePipeline>> pipelines_;  // by key index
   std::unique_ptr<detail::PassResources> resources_;
   std::size_t pair_count_ = 0;
-  vulkan::Buffer clusters_, instances_, pairs_, templates_;
+  vulkan::Buffer clusters_, instances_, pairs_, pair_obbs_, templates_;
   vulkan::Buffer classes_, visible_, counters_, views_, draws_, group_counts_, occlusion_views_, no_pyramid_,
       no_classes_;
   vulkan::Buffer expand_counts_, active_;  // the listing of the kept instances' pairs

@@ -267,14 +267,19 @@ CP_CONST BVH_BINDING_COUNT = 14u;
 // cost nothing but a fill of their classes. Bindings 0..10 mean what they mean for the flat pass,
 // with these inputs: BINDING_BOUNDS holds CLUSTER_TEXELS per cluster, BINDING_CENTRES
 // CLUSTER_INSTANCE_TEXELS per instance.
-CP_CONST CLUSTER_BINDING_PAIRS = 11u;           // uniform texel buffer: per pair x = instance, y = cluster
+// Per pair x = instance, y = cluster, z = 1 + its placed OBB's index in CLUSTER_BINDING_OBBS
+// (0: none), w = 1 when its draw continues the pair before's (ClusterCuller::upload_draws).
+CP_CONST CLUSTER_BINDING_PAIRS = 11u;           // uniform texel buffer
 CP_CONST CLUSTER_BINDING_OBJECT_CLASSES = 12u;  // uint per instance: the object pass's class (CLASS_*)
 // The pairs of the instances the object pass kept, in pair order (cluster_expand.comp): a
 // ViewCounters first (its visible_count the number of them; the workgroups of the passes over
 // them from CLUSTER_ACTIVE_DISPATCH), then their pair indices from uint CLUSTER_ACTIVE_HEADER on.
 // The cluster pass and its draws run over this list only, dispatched indirectly.
 CP_CONST CLUSTER_BINDING_ACTIVE = 13u;
-CP_CONST CLUSTER_BINDING_COUNT = 14u;
+// The pairs' OBBs placed by their instances' transforms (GpuObb, OBB_VEC4S texels each; the
+// centre's w unused), for the pairs whose cluster has one: a uniform texel buffer.
+CP_CONST CLUSTER_BINDING_OBBS = 14u;
+CP_CONST CLUSTER_BINDING_COUNT = 15u;
 CP_CONST CLUSTER_ACTIVE_HEADER = 8u;
 // In the header, from this uint: the VkDispatchIndirectCommand of the passes over the list.
 CP_CONST CLUSTER_ACTIVE_DISPATCH = 4u;

@@ -84,6 +84,7 @@ Renderer::Renderer(const vulkan::Context& ctx, const Scene& scene, const Rendere
     std::vector<std::uint32_t> indices;
     std::vector<Aabb> cluster_boxes;
     std::vector<BackfaceCone> cluster_cones;
+    std::vector<std::optional<Obb>> cluster_obbs;
     // A mesh's vertices in the vertex buffer, and its triangles' order: ranges of its own index
     // list (its clusters' with RendererConfig::clusters, else one range of every triangle).
     struct Source {
@@ -112,6 +113,7 @@ Renderer::Renderer(const vulkan::Context& ctx, const Scene& scene, const Rendere
             src.ranges.emplace_back(cl.first_index, cl.index_count);
             cluster_boxes.push_back(cl.box);
             cluster_cones.push_back(config_.cull_back_faces && !mesh.double_sided ? cl.cone : BackfaceCone{});
+            cluster_obbs.push_back(cl.obb);
           }
           split = true;
         } catch (const std::invalid_argument& e) {
@@ -124,6 +126,7 @@ Renderer::Renderer(const vulkan::Context& ctx, const Scene& scene, const Rendere
         if (config_.clusters) {
           cluster_boxes.push_back(mesh.positions.empty() ? Aabb{} : bounds::aabb_of_points(mesh.positions));
           cluster_cones.push_back(BackfaceCone{});
+          cluster_obbs.emplace_back();
         }
       }
       return sources.emplace(&mesh, std::move(src)).first->second;
@@ -246,7 +249,7 @@ Renderer::Renderer(const vulkan::Context& ctx, const Scene& scene, const Rendere
                                 " clusters are more draws than one indirect draw call may issue on " +
                                 ctx_.info().name);
       cluster_culler_ = std::make_unique<gpu::ClusterCuller>(ctx_);
-      cluster_culler_->upload(cluster_boxes, cluster_cones, cluster_instances);
+      cluster_culler_->upload(cluster_boxes, cluster_cones, cluster_instances, cluster_obbs);
       // Unmerged: a culled frame issues a subset of the unculled frame's draws, each as it is.
       // (On lavapipe the pixels along a triangle's edge can come out differently when the same
       // triangles are issued in other draws: the generated meshes scene lost one pixel of 64,000
@@ -256,6 +259,7 @@ Renderer::Renderer(const vulkan::Context& ctx, const Scene& scene, const Rendere
              VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT, "unculled cluster draw buffer");
       cluster_boxes_ = std::move(cluster_boxes);
       cluster_cones_ = std::move(cluster_cones);
+      cluster_obbs_ = std::move(cluster_obbs);
       cluster_instances_ = std::move(cluster_instances);
       cluster_pairs_ = cluster_draws.size();
     }

@@ -136,10 +136,12 @@ class Renderer {
   /// back-face cone (named in the messages, as "mesh <i>: why").
   const std::vector<std::string>& cluster_fallbacks() const { return cluster_fallbacks_; }
   /// What the cluster pass culls, for checking it against clusters::classify: the clusters'
-  /// local boxes and cones (every distinct mesh's, the cube's for box objects), and per object
-  /// its transform (its draw's model matrix) and range of them; empty without clusters.
+  /// local boxes, cones and OBBs (every distinct mesh's, the cube's for box objects, which has
+  /// no OBB), and per object its transform (its draw's model matrix) and range of them; empty
+  /// without clusters.
   const std::vector<Aabb>& cluster_boxes() const { return cluster_boxes_; }
   const std::vector<BackfaceCone>& cluster_cones() const { return cluster_cones_; }
+  const std::vector<std::optional<Obb>>& cluster_obbs() const { return cluster_obbs_; }
   const std::vector<gpu::ClusterInstance>& cluster_instances() const { return cluster_instances_; }
   /// The (object, cluster) pairs: every object's cluster_count summed; 0 without clusters.
   std::size_t cluster_pair_count() const { return cluster_pairs_; }
@@ -177,6 +179,7 @@ class Renderer {
   std::vector<std::string> cluster_fallbacks_;
   std::vector<Aabb> cluster_boxes_;
   std::vector<BackfaceCone> cluster_cones_;
+  std::vector<std::optional<Obb>> cluster_obbs_;
   std::vector<gpu::ClusterInstance> cluster_instances_;
   std::size_t cluster_pairs_ = 0;
   std::unique_ptr<gpu::DepthPyramidPass> pyramid_;

@@ -12,6 +12,7 @@
 #include <string>
 
 #include "cullpipe/bounds/cone_fit.hpp"
+#include "cullpipe/bounds/obb_fit.hpp"
 #include "cullpipe/bounds/sphere_fit.hpp"
 
 namespace cullpipe {
@@ -83,6 +84,13 @@ MeshClusters build_clusters(const TriangleMesh& mesh, const ClusterOptions& opti
     // meshoptimizer's axis, with an apex and a cutoff that are proven (its float ones are not).
     c.cone = bounds::backface_cone(mesh.positions, std::span(out.indices).subspan(c.first_index, c.index_count),
                                    glm::vec3(b.cone_axis[0], b.cone_axis[1], b.cone_axis[2]));
+    if (options.obbs) {
+      // Both volumes are tested and either may cull, so an OBB is worth its test only where it
+      // is clearly tighter (a strict test: flat clusters in an axis plane have two empty boxes).
+      const Obb obb = bounds::hull_face_obb(points);
+      const glm::dvec3 size = glm::dvec3(c.box.max) - glm::dvec3(c.box.min);
+      if (bounds::volume(obb) < 0.75 * size.x * size.y * size.z) c.obb = obb;
+    }
     out.clusters.push_back(c);
   }
   return out;
@@ -135,6 +143,12 @@ std::string check_clusters(const MeshClusters& clusters, const TriangleMesh& mes
                    dz = double(p.z) - cl.sphere.center.z;
       if (!(std::sqrt(dx * dx + dy * dy + dz * dz) <= double(cl.sphere.radius)))
         return at + "sphere does not enclose vertex " + std::to_string(v);
+      if (cl.obb) {
+        const glm::dvec3 d = glm::dvec3(p) - glm::dvec3(cl.obb->center);
+        for (int a = 0; a < 3; ++a)
+          if (!(std::abs(glm::dot(d, glm::dvec3(cl.obb->basis[a]))) <= double(cl.obb->half_extents[a])))
+            return at + "OBB does not enclose vertex " + std::to_string(v);
+      }
     }
     if (cl.cone.usable()) {
       // Every triangle with an area within the cone's angle, and behind the apex (in double).

@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <glm/vec3.hpp>
+#include <optional>
 #include <span>
 #include <string>
 #include <string_view>
@@ -14,6 +15,7 @@
 
 #include "cullpipe/geom/aabb.hpp"
 #include "cullpipe/geom/cone.hpp"
+#include "cullpipe/geom/obb.hpp"
 #include "cullpipe/geom/sphere.hpp"
 #include "cullpipe/scene/scene.hpp"
 
@@ -26,6 +28,9 @@ struct ClusterOptions {
   /// 0 builds clusters for size alone; towards 1 meshoptimizer trades size for narrower normal
   /// cones (more clusters culled as facing away).
   float cone_weight = 0.25f;
+  /// An OBB per cluster too (bounds::hull_face_obb of its vertices), kept where its volume is
+  /// under 3/4 of the box's: the cluster tests then cull what either volume proves culled.
+  bool obbs = true;
   bool operator==(const ClusterOptions&) const = default;
 };
 
@@ -43,6 +48,10 @@ struct Cluster {
   /// double (bounds::backface_cone): the cluster faces away from every viewer the cone test
   /// (facing_away) passes. Unusable (cutoff 1) when the normals spread too far.
   BackfaceCone cone;
+  /// With ClusterOptions::obbs, where it is under 3/4 of the box's volume: an OBB enclosing
+  /// every vertex (each vertex's offset from the centre, projected on each axis in double, within
+  /// the half extent), else none.
+  std::optional<Obb> obb;
 };
 
 /// A mesh's clusters. `indices` hold every triangle of the mesh once (a permutation of its
