@@ -517,12 +517,13 @@ TEST(Cli, RenderWithClustersChecksTheImage) {
   EXPECT_EQ(cullpipe("render --clusters --cone-weight 2 --out '" + png.string() + "'").code, 2);
 }
 
-// run --occlusion --clusters checks every (object, cluster) pair against the reference on each
-// frame; --clusters alone is refused.
+// run --clusters (two occlusion phases, as with --occlusion) checks every (object, cluster) pair
+// against the reference on each frame, and reports the triangles submitted, those of the kept
+// objects drawn whole and those owning a pixel.
 TEST(Cli, RunWithClustersChecksEveryPairAgainstTheReference) {
   const fs::path json = temp_dir() / "clusters.json";
   const Result r = cullpipe(
-      "run --occlusion --clusters --generate meshes:300 --views 40 --frames 3 --validate "
+      "run --clusters --generate meshes:300 --views 40 --frames 3 --validate "
       "--width 240 --height 135 --json '" +
       json.string() + "'");
   ASSERT_EQ(r.code, 0) << r.out << r.err;
@@ -533,9 +534,13 @@ TEST(Cli, RunWithClustersChecksEveryPairAgainstTheReference) {
   ASSERT_EQ(j["per_frame"].size(), 3u);
   EXPECT_GT(j["per_frame"][1]["clusters_back_facing"].get<std::size_t>(), 0u);
   EXPECT_GT(j["per_frame"][1]["clusters_drawn"].get<std::size_t>(), 0u);
-  const Result alone = cullpipe("run --clusters --generate meshes:10");
-  EXPECT_EQ(alone.code, 2);
-  EXPECT_NE(alone.err.find("--clusters runs with --occlusion"), std::string::npos) << alone.err;
+  const nlohmann::json& f1 = j["per_frame"][1];
+  EXPECT_LT(f1["triangles"].get<std::uint64_t>(), f1["object_triangles"].get<std::uint64_t>());
+  if (!f1["visible_triangles"].is_null()) {  // every triangle owning a pixel is submitted
+    EXPECT_GT(f1["visible_triangles"].get<std::uint64_t>(), 0u);
+    EXPECT_LE(f1["visible_triangles"].get<std::uint64_t>(), f1["triangles"].get<std::uint64_t>());
+  }
+  EXPECT_NE(r.out.find(" by the kept objects whole ("), std::string::npos) << r.out;
 }
 
 // run --occlusion walks the streets' path with both passes checked against the reference on

@@ -429,6 +429,30 @@ TEST(Render, ClusterFramesOfMirroredMeshesEqualUnculled) {
   EXPECT_LT(t.cluster_triangles, t.object_triangles * 3 / 4);
 }
 
+// The same instances with a double-sided mesh: each cluster is drawn twice, the second time
+// reversed, and each copy is culled by its own cone (the first where the eye is behind the
+// mesh's triangles, the second where it is in front), mirrored instances too.
+TEST(Render, ClusterFramesOfDoubleSidedMeshesEqualUnculled) {
+  Scene meshes = generate_scene(SceneKind::Meshes, 300, 5);
+  std::map<const TriangleMesh*, std::shared_ptr<const TriangleMesh>> double_sided;
+  for (SceneObject& o : meshes.objects) {
+    if (!o.triangles) continue;
+    auto& copy = double_sided[o.triangles.get()];
+    if (!copy) {
+      auto mesh = std::make_shared<TriangleMesh>(*o.triangles);
+      mesh->double_sided = true;
+      copy = std::move(mesh);
+    }
+    o.triangles = copy;
+  }
+  std::vector<Camera> path = camera_path(meshes.camera, meshes.bounds(), 3);
+  path.insert(path.begin(), meshes.camera);
+  const ClusterTotals t = expect_clusters_invisible(meshes, path);
+  EXPECT_GT(t.classes[std::size_t(clusters::ClusterClass::BackFacing)], 1000u);
+  EXPECT_GT(t.mirrored_back_facing, 100u);
+  EXPECT_LT(t.cluster_triangles, t.object_triangles * 3 / 4);
+}
+
 TEST(Render, ClusterFramesOfBoxesEqualUnculled) {
   const Scene city = load_scene(std::string(CULLPIPE_SOURCE_DIR) + "/scenes/default.json");
   std::vector<Camera> path = camera_path(city.camera, city.bounds(), 3);

@@ -90,8 +90,8 @@ int main(int argc, char** argv) {
                     "Two-phase occlusion frames through the renderer, each checked against the reference on its "
                     "depth pyramid and against the objects owning a pixel");
   run_cmd->add_flag("--clusters", run.clusters,
-                    "--occlusion: also cull the kept objects' clusters, each (object, cluster) pair checked against "
-                    "the reference on every frame");
+                    "Also cull the kept objects' clusters (with --occlusion, which it implies), each (object, cluster) "
+                    "pair checked against the reference on every frame");
   run_cmd->add_option("--frames", run.frames, "--occlusion: frames along the path of --views cameras")
       ->capture_default_str()
       ->check(CLI::Range(std::size_t(1), std::size_t(100000)));

@@ -91,8 +91,7 @@ int run_command(const RunOptions& o, std::ostream& out, std::ostream& err) {
     const bool hierarchical = o.cull == "bvh";
 
     LoadedScene loaded = load_scene_source(o);
-    if (o.clusters && !o.occlusion) throw InputError("--clusters runs with --occlusion (give both)");
-    if (o.occlusion) return run_occlusion(o, loaded, *bv, out, err);
+    if (o.occlusion || o.clusters) return run_occlusion(o, loaded, *bv, out, err);  // (--clusters: two phases)
     const Scene& scene = loaded.scene;
     const std::string& source = loaded.source;
     const bool from_gltf = loaded.from_gltf;

@@ -52,6 +52,8 @@ struct FrameReport {
   std::array<std::size_t, clusters::kClusterClassCount> clusters{};
   std::size_t cluster_draws = 0, cluster_mismatches = 0;
   std::uint64_t triangles = 0;
+  std::uint64_t object_triangles = 0;              // the kept objects' triangles, drawn whole
+  std::optional<std::uint64_t> visible_triangles;  // owning a pixel (devices with primitive ids)
 };
 
 /// The cluster pass's classes of one frame against clusters::classify's on the frame's pyramid,
@@ -227,6 +229,9 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
       r.clusters = stats.cluster_classes;
       r.cluster_draws = stats.draws;
       r.triangles = stats.primitives;
+      for (std::size_t i = 0; i < stats.classes.size(); ++i)
+        if (is_visible(stats.classes[i])) r.object_triangles += renderer.triangles(i);
+      r.visible_triangles = renderer.visible_triangles(camera);
       r.cluster_mismatches = check_clusters_frame(renderer, stats, inverse_frames, placed_obbs, camera, frustum, view,
                                                   pass.read(), config.occlusion, f, reports);
       cluster_mismatches += r.cluster_mismatches;
@@ -263,8 +268,12 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
       const auto count = [&](ClusterClass c) { return std::to_string(r.clusters[std::size_t(c)]); };
       out << "         clusters: " << count(ClusterClass::Drawn) << " drawn in " << r.cluster_draws << " draws, "
           << count(ClusterClass::ObjectCulled) << " of culled objects, " << count(ClusterClass::Outside) << " outside, "
-          << count(ClusterClass::BackFacing) << " back-facing, " << count(ClusterClass::Occluded) << " occluded; "
-          << r.triangles << " triangles\n";
+          << count(ClusterClass::BackFacing) << " back-facing, " << count(ClusterClass::Occluded) << " occluded\n"
+          << "         triangles: " << r.triangles << " submitted, " << r.object_triangles
+          << " by the kept objects whole ("
+          << (r.object_triangles ? format_ratio(double(r.triangles) / double(r.object_triangles)) : "-") << "x)";
+      if (r.visible_triangles) out << ", " << *r.visible_triangles << " own a pixel";
+      out << "\n";
     }
     frames.push_back(r);
     if (!o.dump_path.empty()) {
@@ -310,24 +319,27 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
     j["agree"] = mismatches == 0;
     nlohmann::json per_frame = nlohmann::json::array();
     for (const FrameReport& r : frames)
-      per_frame.push_back({{"frustum", r.frustum},
-                           {"first_phase", r.first_phase},
-                           {"drawn", r.drawn},
-                           {"occluded", r.occluded},
-                           {"owning", r.owning},
-                           {"false_positives", r.false_positives},
-                           {"missed", r.missed},
-                           {"mismatches", r.mismatches},
-                           {"cpu_occluded", r.cpu_occluded},
-                           {"cpu_missed", r.cpu_missed},
-                           {"clusters_drawn", r.clusters[std::size_t(clusters::ClusterClass::Drawn)]},
-                           {"clusters_object_culled", r.clusters[std::size_t(clusters::ClusterClass::ObjectCulled)]},
-                           {"clusters_outside", r.clusters[std::size_t(clusters::ClusterClass::Outside)]},
-                           {"clusters_back_facing", r.clusters[std::size_t(clusters::ClusterClass::BackFacing)]},
-                           {"clusters_occluded", r.clusters[std::size_t(clusters::ClusterClass::Occluded)]},
-                           {"cluster_draws", r.cluster_draws},
-                           {"triangles", r.triangles},
-                           {"cluster_mismatches", r.cluster_mismatches}});
+      per_frame.push_back(
+          {{"frustum", r.frustum},
+           {"first_phase", r.first_phase},
+           {"drawn", r.drawn},
+           {"occluded", r.occluded},
+           {"owning", r.owning},
+           {"false_positives", r.false_positives},
+           {"missed", r.missed},
+           {"mismatches", r.mismatches},
+           {"cpu_occluded", r.cpu_occluded},
+           {"cpu_missed", r.cpu_missed},
+           {"clusters_drawn", r.clusters[std::size_t(clusters::ClusterClass::Drawn)]},
+           {"clusters_object_culled", r.clusters[std::size_t(clusters::ClusterClass::ObjectCulled)]},
+           {"clusters_outside", r.clusters[std::size_t(clusters::ClusterClass::Outside)]},
+           {"clusters_back_facing", r.clusters[std::size_t(clusters::ClusterClass::BackFacing)]},
+           {"clusters_occluded", r.clusters[std::size_t(clusters::ClusterClass::Occluded)]},
+           {"cluster_draws", r.cluster_draws},
+           {"triangles", r.triangles},
+           {"object_triangles", r.object_triangles},
+           {"visible_triangles", r.visible_triangles ? nlohmann::json(*r.visible_triangles) : nlohmann::json(nullptr)},
+           {"cluster_mismatches", r.cluster_mismatches}});
     j["per_frame"] = per_frame;
     json_util::write_file_atomic(o.json_path, j.dump(2) + "\n");
   }

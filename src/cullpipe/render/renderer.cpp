@@ -14,6 +14,7 @@
 #include <unordered_map>
 #include <utility>
 
+#include "cullpipe/bounds/cone_fit.hpp"
 #include "cullpipe/bounds/sphere_fit.hpp"
 #include "cullpipe/geom/instance.hpp"
 #include "cullpipe/vulkan/check.hpp"
@@ -109,10 +110,21 @@ Renderer::Renderer(const vulkan::Context& ctx, const Scene& scene, const Rendere
         try {
           const MeshClusters c = build_clusters(mesh, config_.cluster_options, name);
           src.order = c.indices;
+          const bool both = config_.cull_back_faces && mesh.double_sided;
+          std::vector<std::uint32_t> reversed;
           for (const Cluster& cl : c.clusters) {
             src.ranges.emplace_back(cl.first_index, cl.index_count);
             cluster_boxes.push_back(cl.box);
-            cluster_cones.push_back(config_.cull_back_faces && !mesh.double_sided ? cl.cone : BackfaceCone{});
+            cluster_cones.push_back(config_.cull_back_faces ? cl.cone : BackfaceCone{});
+            cluster_obbs.push_back(cl.obb);
+            if (!both) continue;
+            // A double-sided mesh's cluster is drawn twice, its triangles reversed the second
+            // time (layout_of): that copy is a cluster of its own, whose cone is the reversed
+            // triangles' (it faces away where the first copy faces the eye).
+            reversed.assign(c.indices.begin() + cl.first_index, c.indices.begin() + cl.first_index + cl.index_count);
+            for (std::size_t k = 0; k < reversed.size(); k += 3) std::swap(reversed[k + 1], reversed[k + 2]);
+            cluster_boxes.push_back(cl.box);
+            cluster_cones.push_back(bounds::backface_cone(mesh.positions, reversed, -cl.cone.axis));
             cluster_obbs.push_back(cl.obb);
           }
           split = true;
@@ -123,20 +135,23 @@ Renderer::Renderer(const vulkan::Context& ctx, const Scene& scene, const Rendere
       if (!split) {
         src.order = mesh.indices;
         src.ranges.emplace_back(0u, std::uint32_t(mesh.indices.size()));
-        if (config_.clusters) {
-          cluster_boxes.push_back(mesh.positions.empty() ? Aabb{} : bounds::aabb_of_points(mesh.positions));
-          cluster_cones.push_back(BackfaceCone{});
-          cluster_obbs.emplace_back();
-        }
+        if (config_.clusters)
+          for (int side = 0; side < (config_.cull_back_faces && mesh.double_sided ? 2 : 1); ++side) {
+            cluster_boxes.push_back(mesh.positions.empty() ? Aabb{} : bounds::aabb_of_points(mesh.positions));
+            cluster_cones.push_back(BackfaceCone{});
+            cluster_obbs.emplace_back();
+          }
       }
       return sources.emplace(&mesh, std::move(src)).first->second;
     };
     // Where a mesh's triangles are in the index buffer for one winding: each range (cluster)
     // in order, its triangles flipped for a mirroring instance, and for a double-sided mesh
-    // followed by the same triangles reversed, so that back-face culling keeps one side of each.
+    // followed by the same triangles reversed (a range of its own), so that back-face culling
+    // keeps one side of each. Either way the first copy is drawn where the eye is in front of
+    // the mesh's own triangles, the second where it is behind them.
     struct Layout {
       std::uint32_t first = 0, count = 0;
-      std::vector<std::pair<std::uint32_t, std::uint32_t>> ranges;  // per cluster, in the index buffer
+      std::vector<std::pair<std::uint32_t, std::uint32_t>> ranges;  // per cluster (and side), in the index buffer
     };
     std::map<std::pair<const TriangleMesh*, bool>, Layout> layouts;
     auto layout_of = [&](const TriangleMesh& mesh, const Source& src, bool flipped) -> const Layout& {
@@ -147,16 +162,16 @@ Renderer::Renderer(const vulkan::Context& ctx, const Scene& scene, const Rendere
         throw std::length_error("the scene's distinct meshes have more indices than one draw can address");
       Layout l;
       l.first = std::uint32_t(indices.size());
-      for (const auto& [first, count] : src.ranges) {
-        const std::uint32_t start = std::uint32_t(indices.size());
-        for (int side = 0; side < (both ? 2 : 1); ++side)
+      for (const auto& [first, count] : src.ranges)
+        for (int side = 0; side < (both ? 2 : 1); ++side) {
+          const std::uint32_t start = std::uint32_t(indices.size());
           for (std::uint32_t k = first; k < first + count; k += 3) {
             const bool reverse = flipped != (side == 1);
             indices.insert(indices.end(),
                            {src.order[k], src.order[k + (reverse ? 2 : 1)], src.order[k + (reverse ? 1 : 2)]});
           }
-        l.ranges.emplace_back(start, std::uint32_t(indices.size()) - start);
-      }
+          l.ranges.emplace_back(start, std::uint32_t(indices.size()) - start);
+        }
       l.count = std::uint32_t(indices.size()) - l.first;
       return layouts.emplace(std::pair{&mesh, flipped}, std::move(l)).first->second;
     };
@@ -177,13 +192,13 @@ Renderer::Renderer(const vulkan::Context& ctx, const Scene& scene, const Rendere
       objects[i].color = object_color(i);
       // glTF: a transform with a negative determinant mirrors, and turns the winding around.
       const glm::dmat3 linear(objects[i].model);
-      const bool flipped = config_.cull_back_faces && !mesh.double_sided && glm::determinant(linear) < 0.0;
+      const bool flipped = config_.cull_back_faces && glm::determinant(linear) < 0.0;
       const Source& src = source_of(mesh, i);
       const Layout& l = layout_of(mesh, src, flipped);
       templates_[i] = {l.count, 1, l.first, src.vertex_offset, std::uint32_t(i), 0};
       if (config_.clusters) {
         cluster_instances.push_back({Transform3x4::from_mat4(objects[i].model), src.first_cluster,
-                                     std::uint32_t(l.ranges.size()), config_.cull_back_faces && !mesh.double_sided});
+                                     std::uint32_t(l.ranges.size()), config_.cull_back_faces});
         for (const auto& [first, count] : l.ranges)
           cluster_draws.push_back({count, 1, first, src.vertex_offset, std::uint32_t(i), 0});
       }
