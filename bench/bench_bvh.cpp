@@ -122,11 +122,10 @@ nlohmann::json bench_builders(const std::vector<std::size_t>& sizes, std::vector
 
 // The binned SAH build on one thread against the same build on `threads`, interleaved (so
 // drift in the machine's memory state hits both), fresh and through a kept BinnedSahBuilder,
-// with leaves of at most 4 and of 1; then PLOC likewise. The trees must be equal, node for node.
-// What `pool`'s threads can do together on this machine: the throughput of a loop of dependent
-// arithmetic (no memory traffic) on every thread at once, relative to one thread. On a virtual
-// machine whose cores share physical ones with other work, this is well below the thread
-// count, and no build can scale past it; median of repeats.
+// with leaves of at most 4, of 1 and where the SAH says (at most 16); then PLOC likewise. The trees must be equal, node
+// for node. What `pool`'s threads can do together on this machine: the throughput of a loop of dependent arithmetic (no
+// memory traffic) on every thread at once, relative to one thread. On a virtual machine whose cores share physical ones
+// with other work, this is well below the thread count, and no build can scale past it; median of repeats.
 double machine_scaling(ThreadPool& pool) {
   auto spin = [](std::size_t) {
     volatile double x = 1.0;
@@ -159,9 +158,13 @@ nlohmann::json bench_threaded(const std::vector<std::size_t>& sizes, unsigned th
     const int reps = repeats_override > 0
                          ? repeats_override
                          : int(std::clamp<std::size_t>(2'000'000 / std::max<std::size_t>(n, 1), 5, 25));
-    for (std::uint32_t leaf : {4u, 1u})
+    // Leaves of at most 4, of 1, and where the SAH says (at most 16; built with leaves of 1,
+    // then collapsed on one thread).
+    for (const bvh::TopDownOptions options :
+         {bvh::TopDownOptions{4, 16}, bvh::TopDownOptions{1, 16}, bvh::TopDownOptions{16, 16, true, 1.0f}})
       for (const bool reused : {false, true}) {
-        const bvh::TopDownOptions options{leaf, 16};
+        const std::uint32_t leaf = options.max_leaf_size;
+        const std::string leaf_name = (options.sah_leaves ? "sah" : "") + std::to_string(leaf);
         bvh::BinnedSahBuilder one_builder, many_builder;
         bvh::Tree one, many;
         const auto build_one = [&] {
@@ -189,13 +192,14 @@ nlohmann::json bench_threaded(const std::vector<std::size_t>& sizes, unsigned th
         }
         const bool same = one == many;
         const double a = median(t1), b = median(tn), cost = bvh::metrics(one).sah_cost;
-        std::printf("%9zu %5u %9s %12.2f %12.2f %7.2fx %10.2f %s\n", n, leaf, reused ? "reused" : "fresh", a / 1e6,
-                    b / 1e6, a / b, cost, same ? "yes" : "NO");
+        std::printf("%9zu %5s %9s %12.2f %12.2f %7.2fx %10.2f %s\n", n, leaf_name.c_str(), reused ? "reused" : "fresh",
+                    a / 1e6, b / 1e6, a / b, cost, same ? "yes" : "NO");
         std::fflush(stdout);
         if (!same) throw std::runtime_error("the threaded build gave another tree at n = " + std::to_string(n));
         cells.push_back({{"n", n},
                          {"builder", "binned-sah"},
                          {"max_leaf_size", leaf},
+                         {"sah_leaves", options.sah_leaves},
                          {"reused_builder", reused},
                          {"threads", pool.size()},
                          {"machine_scaling", ceiling},
@@ -221,7 +225,7 @@ nlohmann::json bench_threaded(const std::vector<std::size_t>& sizes, unsigned th
       tn.push_back(since(t0));
     }
     const double a = median(t1), b = median(tn);
-    std::printf("%9zu %5u %9s %12.2f %12.2f %7.2fx %10s %s\n", n, 4u, "ploc", a / 1e6, b / 1e6, a / b, "",
+    std::printf("%9zu %5s %9s %12.2f %12.2f %7.2fx %10s %s\n", n, "4", "ploc", a / 1e6, b / 1e6, a / b, "",
                 same ? "yes" : "NO");
     std::fflush(stdout);
     if (!same) throw std::runtime_error("threaded PLOC gave another tree at n = " + std::to_string(n));

@@ -13,6 +13,7 @@
 
 #include "bvh_test_util.hpp"
 #include "cullpipe/bvh/binned_sah.hpp"
+#include "cullpipe/bvh/builders.hpp"
 #include "cullpipe/bvh/bvh.hpp"
 #include "cullpipe/core/thread_pool.hpp"
 #include "cullpipe/cull/reference.hpp"
@@ -372,6 +373,56 @@ TEST(Bvh, BinnedSahBuilderReusesItsMemory) {
   ASSERT_LE(sets[6].size(), 100u);
   bvh::detail::baseline::build(sets[6], {}, scratch, tree);
   EXPECT_EQ(tree, bvh::build_binned_sah(sets[6]));
+}
+
+// Leaves where the SAH says: the leaves-of-one tree collapsed (collapse_leaves) with the cap and
+// the object cost given; on any number of threads and through a kept builder the same tree;
+// a lower object cost grows the leaves; bad costs refused.
+TEST(Bvh, SahLeavesAreTheOneObjectTreeCollapsed) {
+  ThreadPool pool(2);
+  const std::vector<std::vector<Aabb>> sets = threaded_sets();
+  bvh::BinnedSahBuilder builder;
+  bvh::Tree kept;
+  for (std::size_t k = 0; k < sets.size(); ++k) {
+    const std::vector<Aabb>& set = sets[k];
+    if (set.size() > 100000) continue;
+    const bvh::Tree ones = bvh::build_binned_sah(set, {1, 16});
+    for (const float cost : {1.0f, 0.5f, 0.125f}) {
+      SCOPED_TRACE("set " + std::to_string(k) + " (" + std::to_string(set.size()) + " objects), object cost " +
+                   std::to_string(cost));
+      const bvh::TopDownOptions options{16, 16, true, cost};
+      const bvh::Tree tree = bvh::build_binned_sah(set, options);
+      ASSERT_EQ(bvh::check_tree(tree, set), "");
+      ASSERT_EQ(tree, bvh::collapse_leaves(ones, 16, cost));
+      ASSERT_TRUE(same_bits(bvh::build_binned_sah(set, options, &pool), tree)) << "2 threads";
+      builder.build(set, options, kept, &pool);
+      ASSERT_EQ(kept, tree) << "kept builder";
+      const bvh::Metrics m = bvh::metrics(tree);
+      EXPECT_LE(m.max_leaf_size, 16u);
+      if (cost == 1.0f && std::isfinite(m.sah_cost)) {                     // (NaN with boxes reaching to infinity)
+        EXPECT_LE(m.sah_cost, bvh::metrics(ones).sah_cost * (1 + 1e-12));  // never worse
+      }
+    }
+    // Through the registry and build_top_down too, also for a top-down builder of another kind.
+    bvh::BuildOptions options;
+    options.max_leaf_size = 8;
+    options.sah_leaves = true;
+    options.object_cost = 0.25f;
+    EXPECT_EQ(bvh::build("binned-sah", set, options), bvh::build_binned_sah(set, {8, 16, true, 0.25f}));
+    options.max_leaf_size = 1;
+    const bvh::Tree median_ones = bvh::build("median", set, options);
+    options.max_leaf_size = 8;
+    EXPECT_EQ(bvh::build("median", set, options), bvh::collapse_leaves(median_ones, 8, 0.25f));
+  }
+  // Random boxes: an object cost of 1 leaves most objects alone, 1/8 makes leaves of several.
+  const std::vector<Aabb>& uniform = sets[0];
+  const bvh::Metrics fine = bvh::metrics(bvh::build_binned_sah(uniform, {16, 16, true, 1.0f}));
+  const bvh::Metrics coarse = bvh::metrics(bvh::build_binned_sah(uniform, {16, 16, true, 0.125f}));
+  EXPECT_GT(fine.leaves, uniform.size() * 3 / 4);
+  EXPECT_LT(coarse.leaves, uniform.size() / 4);
+  for (const float bad : {0.0f, -1.0f, std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity()})
+    EXPECT_THROW(bvh::build_binned_sah(uniform, {4, 16, true, bad}), std::invalid_argument) << bad;
+  EXPECT_THROW(bvh::collapse_leaves(bvh::build_binned_sah(uniform, {1, 16}), 4, 0.0f), std::invalid_argument);
 }
 
 TEST(Bvh, MetricsAndDeterminism) {

@@ -265,6 +265,17 @@ TEST(Cli, BvhCommandReportsEveryBuilder) {
       "bvh --generate uniform:3000 --builder top-down:axis=pca,split=median,cost=sah insertion-greedy+rotations");
   ASSERT_EQ(one.code, 0) << one.err;
   EXPECT_NE(one.out.find("insertion-greedy+rotations"), std::string::npos) << one.out;
+  // Leaves where the SAH says, capped at 16: with objects at a quarter of a node test, larger
+  // leaves than the default's at most 4.
+  const fs::path sah = temp_dir() / "bvh_sah_leaves.json";
+  const Result leaves = cullpipe("bvh --generate uniform:5000 --sah-leaves --object-cost 0.25 --leaf-size 16 --json '" +
+                                 sah.string() + "'");
+  ASSERT_EQ(leaves.code, 0) << leaves.err;
+  const auto js = nlohmann::json::parse(slurp(sah));
+  EXPECT_EQ(js["sah_leaves"], true);
+  EXPECT_GT(js["builders"][0]["max_leaf_size"].get<int>(), 4);
+  EXPECT_LE(js["builders"][0]["max_leaf_size"].get<int>(), 16);
+  EXPECT_EQ(cullpipe("bvh --generate uniform:100 --sah-leaves --object-cost 0").code, 2);
 }
 
 TEST(Cli, BadBvhOptionsAreClearErrors) {

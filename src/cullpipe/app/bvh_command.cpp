@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <nlohmann/json.hpp>
 #include <ostream>
+#include <sstream>
+#include <string>
 
 #include "cullpipe/app/backends.hpp"
 #include "cullpipe/app/commands.hpp"
@@ -15,7 +17,14 @@
 #include "cullpipe/scene/json_util.hpp"
 
 namespace cullpipe::app {
+
 namespace {
+
+std::string format_cost(float c) {
+  std::ostringstream s;
+  s << c;
+  return s.str();
+}
 
 std::string fixed(double value, int digits) {
   char buf[48];
@@ -66,8 +75,11 @@ int bvh_command(const BvhOptions& o, std::ostream& out, std::ostream& err) {
                          std::to_string(builder_size_limit(name)) + " objects; this scene has " + std::to_string(n));
     ThreadPool pool(o.threads);
     out << "cullpipe bvh: " << (loaded.scene.name.empty() ? loaded.source : loaded.scene.name) << " (" << loaded.source
-        << "), " << n << " objects, leaves of <= " << o.leaf_size << ", median of " << o.repeats
-        << (o.repeats == 1 ? " build" : " builds") << "; binned-sah and agglomerative-local on " << pool.size()
+        << "), " << n << " objects, leaves of <= " << o.leaf_size
+        << (o.sah_leaves ? " where the SAH says (top-down builders, object cost " + format_cost(o.object_cost) + ")"
+                         : std::string())
+        << ", median of " << o.repeats << (o.repeats == 1 ? " build" : " builds")
+        << "; binned-sah and agglomerative-local on " << pool.size()
         << (pool.size() == 1 ? " thread\n\n" : " threads\n\n");
     out << "  " << left("builder", 26)
         << "  build ms  Mobj/s   SAH cost     nodes    leaves  depth  leaf depth  balance  volume  overlap\n";
@@ -75,6 +87,8 @@ int bvh_command(const BvhOptions& o, std::ostream& out, std::ostream& err) {
     nlohmann::json report = nlohmann::json::array();
     bvh::BuildOptions options;
     options.max_leaf_size = o.leaf_size;
+    options.sah_leaves = o.sah_leaves;
+    options.object_cost = o.object_cost;
     options.pool = &pool;
     for (const auto& [name, from_all] : names) {
       if (n > builder_size_limit(name)) {  // only from "all": named ones were checked above
@@ -130,6 +144,8 @@ int bvh_command(const BvhOptions& o, std::ostream& out, std::ostream& err) {
       j["source"] = loaded.source;
       j["objects"] = n;
       j["leaf_size"] = o.leaf_size;
+      j["sah_leaves"] = o.sah_leaves;
+      j["object_cost"] = o.object_cost;
       j["repeats"] = o.repeats;
       j["builders"] = report;
       json_util::write_file_atomic(o.json_path, j.dump(2) + "\n");

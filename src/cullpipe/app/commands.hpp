@@ -92,8 +92,10 @@ struct RenderOptions : SceneOptions {
 struct BvhOptions : SceneOptions {
   std::vector<std::string> builders{"binned-sah"};  ///< names (bvh::builders()), or "all"
   std::uint32_t leaf_size = 4;
-  std::size_t repeats = 1;  ///< builds per builder; the median time is reported
-  unsigned threads = 1;     ///< threads of the builders that run on several; 0: every core
+  bool sah_leaves = false;   ///< top-down builders: leaves where the SAH says, leaf_size a cap
+  float object_cost = 1.0f;  ///< with sah_leaves: an object in a leaf against a node test
+  std::size_t repeats = 1;   ///< builds per builder; the median time is reported
+  unsigned threads = 1;      ///< threads of the builders that run on several; 0: every core
   std::string json_path;
 };
 

@@ -168,6 +168,14 @@ int main(int argc, char** argv) {
   bvh_cmd->add_option("--leaf-size", bvh.leaf_size, "Most objects per leaf")
       ->capture_default_str()
       ->check(CLI::Range(1u, 1024u));
+  bvh_cmd->add_flag("--sah-leaves", bvh.sah_leaves,
+                    "Top-down builders: leaves where the SAH says, --leaf-size a cap (built with leaves of one, "
+                    "then collapsed)");
+  bvh_cmd
+      ->add_option("--object-cost", bvh.object_cost,
+                   "--sah-leaves: the cost of an object in a leaf against a node test's 1 (below 1: larger leaves)")
+      ->capture_default_str()
+      ->check(CLI::Range(1e-6f, 1e6f));
   bvh_cmd->add_option("--repeats", bvh.repeats, "Builds per builder; the median time is reported")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);

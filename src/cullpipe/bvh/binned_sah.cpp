@@ -3,7 +3,10 @@
 // memory, and the choice between the variants.
 #include "cullpipe/bvh/binned_sah.hpp"
 
+#include <cmath>
 #include <cstdlib>
+#include <stdexcept>
+#include <string>
 #include <string_view>
 
 #define CULLPIPE_BINNED_NS baseline
@@ -99,11 +102,26 @@ BinnedSahBuilder& BinnedSahBuilder::operator=(BinnedSahBuilder&&) noexcept = def
 
 void BinnedSahBuilder::build(std::span<const Aabb> boxes, const TopDownOptions& options, Tree& tree, ThreadPool* pool) {
   if (!scratch_) scratch_ = std::make_unique<detail::BinnedScratch>();  // a moved-from builder
-  if (detail::use_avx2()) {
-    detail::avx2::build(boxes, options, *scratch_, tree, pool);
-  } else {
-    detail::baseline::build(boxes, options, *scratch_, tree, pool);
+  const auto variant = [&](const TopDownOptions& o, Tree& out) {
+    if (detail::use_avx2()) {
+      detail::avx2::build(boxes, o, *scratch_, out, pool);
+    } else {
+      detail::baseline::build(boxes, o, *scratch_, out, pool);
+    }
+  };
+  if (options.sah_leaves && !(options.object_cost > 0.0f && std::isfinite(options.object_cost)))
+    throw std::invalid_argument("build_binned_sah: object_cost " + std::to_string(options.object_cost) +
+                                " (a positive finite number)");
+  if (!options.sah_leaves || options.max_leaf_size <= 1) {
+    variant(options, tree);
+    return;
   }
+  // Leaves of one object (the threaded build's fastest path), then collapsed by the SAH.
+  TopDownOptions ones = options;
+  ones.max_leaf_size = 1;
+  ones.sah_leaves = false;
+  variant(ones, scratch_->ones);
+  detail::collapse_leaves(scratch_->ones, options.max_leaf_size, options.object_cost, tree, scratch_->collapse);
 }
 
 void BinnedSahBuilder::release() { scratch_ = std::make_unique<detail::BinnedScratch>(); }

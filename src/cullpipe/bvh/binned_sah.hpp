@@ -6,6 +6,8 @@
 #include <cstdint>
 #include <memory>
 #include <span>
+#include <utility>
+#include <vector>
 
 #include "cullpipe/bvh/bvh.hpp"
 
@@ -27,6 +29,18 @@ struct alignas(32) Box8 {
   Aabb box() const { return {{v[0], v[1], v[2]}, {-v[4], -v[5], -v[6]}}; }
 };
 
+/// collapse_leaves' working memory, kept by a builder between builds.
+struct CollapseScratch {
+  std::vector<std::uint32_t> order, stack, count;
+  std::vector<char> seen, as_leaf;
+  std::vector<double> cost;
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> tasks;  // (node in the input, node in the output)
+};
+/// collapse_leaves(tree, max_leaf_size, object_cost) into `out` (its storage kept), with
+/// `scratch`'s memory.
+void collapse_leaves(const Tree& tree, std::uint32_t max_leaf_size, float object_cost, Tree& out,
+                     CollapseScratch& scratch);
+
 /// The builder's per-object working memory: two buffers of records (a split moves a node's
 /// records from one to the other) and each record's three bin indices; for a build on several
 /// threads, room for its subtrees' nodes (2 per object).
@@ -39,6 +53,10 @@ struct BinnedScratch {
     void operator()(Node* p) const { ::operator delete[](p); }
   };
   std::unique_ptr<Node[], RawDelete> nodes;  ///< raw memory (operator new[]): see reserve_nodes
+  /// SAH leaves (TopDownOptions::sah_leaves): the tree with leaves of one object, and the
+  /// collapse's memory.
+  Tree ones;
+  CollapseScratch collapse;
   /// Room for n objects (kept when there already is; left uninitialised).
   void reserve(std::size_t n);
   /// Room for the nodes of n objects' subtrees (kept when there already is).

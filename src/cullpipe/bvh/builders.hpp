@@ -80,6 +80,11 @@ struct BuildOptions {
   /// Threads for the builders that run on several (binned-sah and agglomerative-local, each the
   /// same tree on any number of threads); null: the calling thread alone. Not owned.
   ThreadPool* pool = nullptr;
+  /// Top-down builders: leaves where the SAH says, max_leaf_size a cap, an object in a leaf
+  /// costing `object_cost` node tests (TopDownOptions::sah_leaves). The bottom-up and insertion
+  /// builders always collapse their leaves by the SAH (with an object_cost of 1).
+  bool sah_leaves = false;
+  float object_cost = 1.0f;
 };
 
 /// The generic top-down builder (explicit stack, any depth), nodes emitted root first as
@@ -89,7 +94,8 @@ struct BuildOptions {
 /// project flat on gives the candidates of `position`; candidates leaving a side empty are
 /// dropped; `cost` picks one (earliest on ties) and the objects are partitioned stably. With
 /// no candidate left (e.g. all centroids equal) the node is sorted by id and halved. With
-/// Best/Binned/Sah it returns build_binned_sah(boxes, {max_leaf_size, bins}) (the same tree).
+/// Best/Binned/Sah it returns build_binned_sah(boxes, {max_leaf_size, bins, sah_leaves}) (the
+/// same tree). With sah_leaves, built with leaves of one object, then collapse_leaves.
 /// Deterministic; O(n log n) for balanced splits, O(n) extra memory.
 Tree build_top_down(std::span<const Aabb> boxes, const BuildOptions& options = {});
 
@@ -149,14 +155,15 @@ void refit(Tree& tree, std::span<const Aabb> boxes);
 void refit(FlatTree& tree, std::span<const Aabb> boxes);
 
 /// Merge subtrees into leaves of at most max_leaf_size objects wherever that does not raise
-/// the SAH cost (traversal 1, intersection 1 per object): bottom up, a subtree of at most
-/// max_leaf_size objects becomes one leaf when area x objects <= area + its children's best
-/// costs. Boxes are kept. The result is laid out as build_binned_sah lays out its trees (root
+/// the SAH cost (traversal 1, intersection `object_cost` per object): bottom up, a subtree of
+/// at most max_leaf_size objects becomes one leaf when area x objects x object_cost <= area +
+/// its children's best costs. An object_cost that is not positive and finite throws
+/// std::invalid_argument. Boxes are kept. The result is laid out as build_binned_sah lays out its trees (root
 /// at 0, the two children of a node adjacent, left subtree first, leaf object ranges in leaf
 /// order), so with max_leaf_size 1 (or a tree already collapsed) only the layout can change.
 /// Any node order is accepted; throws std::invalid_argument like refit on a malformed tree.
 /// Used by the bottom-up and insertion builders.
-Tree collapse_leaves(const Tree& tree, std::uint32_t max_leaf_size);
+Tree collapse_leaves(const Tree& tree, std::uint32_t max_leaf_size, float object_cost = 1.0f);
 
 /// The object order along the 63-bit Morton (Z-order) curve of box centres, quantised in
 /// cubic cells over the box of the centres, ties by id: a permutation of 0..n-1 that puts

@@ -46,11 +46,20 @@ struct Tree {
 struct TopDownOptions {
   std::uint32_t max_leaf_size = 4;  ///< a node with at most this many objects becomes a leaf
   std::uint32_t bins = 16;          ///< SAH candidates per axis (centroid bins)
+  /// Leaves where the SAH says, max_leaf_size a cap: the tree is built with leaves of one
+  /// object, then every subtree of at most max_leaf_size objects that is no cheaper than one
+  /// leaf (a node test costing 1, each object in a leaf `object_cost`) becomes one
+  /// (collapse_leaves, bottom up, so each leaf decision is the best for its subtree). With
+  /// object_cost 1 (the SAH metric's) few leaves grow past one object; below 1 leaves grow, as
+  /// for a pass that tests a leaf's objects together (the GPU hierarchy tests 16 at once).
+  bool sah_leaves = false;
+  float object_cost = 1.0f;
 };
 
 /// Top-down build: split along each axis at the best of `bins` evenly spaced centroid bins by
 /// the surface area heuristic (cost = traversal 1 + sum over children of area ratio x objects);
-/// a node becomes a leaf exactly when it holds <= max_leaf_size objects. Objects with equal
+/// a node becomes a leaf exactly when it holds <= max_leaf_size objects (with sah_leaves, see
+/// there). Objects with equal
 /// centroids are split by median. O(n log n). Boxes must be valid (min <= max).
 ///
 /// With a `pool` of several threads, the build runs on all of them and gives the same tree,

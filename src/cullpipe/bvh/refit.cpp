@@ -5,6 +5,7 @@
 #include <string>
 #include <vector>
 
+#include "cullpipe/bvh/binned_sah.hpp"
 #include "cullpipe/bvh/box_ops.hpp"
 #include "cullpipe/bvh/builders.hpp"
 
@@ -16,16 +17,17 @@ using detail::half_area;
 
 namespace {
 
-// The nodes reachable from the root in pre-order (a parent before its children), so the
-// reverse visits children before parents whatever the index order. Throws on a child index
-// out of range or a node reached twice (a cycle or a shared subtree), which would otherwise
-// make the callers loop or double-count.
-std::vector<std::uint32_t> preorder(const Tree& tree) {
-  std::vector<std::uint32_t> order;
-  if (tree.nodes.empty()) return order;
+// The nodes reachable from the root in pre-order (a parent before its children), into `order`,
+// so the reverse visits children before parents whatever the index order. Throws on a child
+// index out of range or a node reached twice (a cycle or a shared subtree), which would
+// otherwise make the callers loop or double-count. `seen` and `stack` are working memory.
+void preorder(const Tree& tree, std::vector<std::uint32_t>& order, std::vector<char>& seen,
+              std::vector<std::uint32_t>& stack) {
+  order.clear();
+  if (tree.nodes.empty()) return;
   order.reserve(tree.nodes.size());
-  std::vector<char> seen(tree.nodes.size(), 0);
-  std::vector<std::uint32_t> stack{0};
+  seen.assign(tree.nodes.size(), 0);
+  stack.assign(1, 0);
   while (!stack.empty()) {
     const std::uint32_t i = stack.back();
     stack.pop_back();
@@ -38,6 +40,12 @@ std::vector<std::uint32_t> preorder(const Tree& tree) {
       stack.push_back(n.left);
     }
   }
+}
+
+std::vector<std::uint32_t> preorder(const Tree& tree) {
+  std::vector<std::uint32_t> order, stack;
+  std::vector<char> seen;
+  preorder(tree, order, seen, stack);
   return order;
 }
 
@@ -74,35 +82,49 @@ void refit(FlatTree& tree, std::span<const Aabb> boxes) {
   }
 }
 
-Tree collapse_leaves(const Tree& tree, std::uint32_t max_leaf_size) {
+Tree collapse_leaves(const Tree& tree, std::uint32_t max_leaf_size, float object_cost) {
   Tree out;
-  if (tree.nodes.empty()) return out;
+  detail::CollapseScratch scratch;
+  detail::collapse_leaves(tree, max_leaf_size, object_cost, out, scratch);
+  return out;
+}
+
+namespace detail {
+
+void collapse_leaves(const Tree& tree, std::uint32_t max_leaf_size, float object_cost, Tree& out, CollapseScratch& s) {
+  if (!(object_cost > 0.0f && std::isfinite(object_cost)))
+    throw std::invalid_argument("collapse_leaves: object_cost " + std::to_string(object_cost) +
+                                " (a positive finite number)");
+  out.nodes.clear();
+  out.objects.clear();
+  if (tree.nodes.empty()) return;
   const std::uint32_t max_leaf = std::max<std::uint32_t>(max_leaf_size, 1);
-  const std::vector<std::uint32_t> order = preorder(tree);
+  preorder(tree, s.order, s.seen, s.stack);
 
   // Bottom-up: the cheapest cost of each subtree (in half-area units) and whether it is cheapest
-  // as one leaf. A leaf costs area x objects, an inner node area + its children's costs.
-  std::vector<double> cost(tree.nodes.size(), 0.0);
-  std::vector<std::uint32_t> count(tree.nodes.size(), 0);
-  std::vector<char> as_leaf(tree.nodes.size(), 0);
-  for (std::size_t k = order.size(); k-- > 0;) {
-    const std::uint32_t i = order[k];
+  // as one leaf. A leaf costs area x objects x object_cost, an inner node area + its children's
+  // costs.
+  s.cost.assign(tree.nodes.size(), 0.0);
+  s.count.assign(tree.nodes.size(), 0);
+  s.as_leaf.assign(tree.nodes.size(), 0);
+  for (std::size_t k = s.order.size(); k-- > 0;) {
+    const std::uint32_t i = s.order[k];
     const Node& n = tree.nodes[i];
     const double area = half_area(n.box);
     if (n.leaf()) {
-      count[i] = n.count;
-      cost[i] = area * n.count;
-      as_leaf[i] = 1;
+      s.count[i] = n.count;
+      s.cost[i] = area * n.count * double(object_cost);
+      s.as_leaf[i] = 1;
       continue;
     }
-    count[i] = count[n.left] + count[n.right];
-    const double inner = area + cost[n.left] + cost[n.right];
-    const double leaf = area * count[i];
-    if (count[i] <= max_leaf && leaf <= inner) {
-      cost[i] = leaf;
-      as_leaf[i] = 1;
+    s.count[i] = s.count[n.left] + s.count[n.right];
+    const double inner = area + s.cost[n.left] + s.cost[n.right];
+    const double leaf = area * s.count[i] * double(object_cost);
+    if (s.count[i] <= max_leaf && leaf <= inner) {
+      s.cost[i] = leaf;
+      s.as_leaf[i] = 1;
     } else {
-      cost[i] = inner;
+      s.cost[i] = inner;
     }
   }
 
@@ -111,30 +133,26 @@ Tree collapse_leaves(const Tree& tree, std::uint32_t max_leaf_size) {
   // follow the left-to-right leaf order.
   out.nodes.reserve(tree.nodes.size());
   out.objects.reserve(tree.objects.size());
-  struct Task {
-    std::uint32_t old_node, new_node;
-  };
-  std::vector<Task> stack{{0, 0}};
-  std::vector<std::uint32_t> gather;
+  s.tasks.assign(1, {0, 0});
   out.nodes.emplace_back();
-  while (!stack.empty()) {
-    const Task task = stack.back();
-    stack.pop_back();
-    const Node& n = tree.nodes[task.old_node];
-    out.nodes[task.new_node].box = n.box;
-    if (as_leaf[task.old_node]) {
-      out.nodes[task.new_node].first = std::uint32_t(out.objects.size());
-      out.nodes[task.new_node].count = count[task.old_node];
-      gather.assign(1, task.old_node);  // the subtree's objects, leftmost leaf first
-      while (!gather.empty()) {
-        const Node& g = tree.nodes[gather.back()];
-        gather.pop_back();
+  while (!s.tasks.empty()) {
+    const auto [old_node, new_node] = s.tasks.back();
+    s.tasks.pop_back();
+    const Node& n = tree.nodes[old_node];
+    out.nodes[new_node].box = n.box;
+    if (s.as_leaf[old_node]) {
+      out.nodes[new_node].first = std::uint32_t(out.objects.size());
+      out.nodes[new_node].count = s.count[old_node];
+      s.stack.assign(1, old_node);  // the subtree's objects, leftmost leaf first
+      while (!s.stack.empty()) {
+        const Node& g = tree.nodes[s.stack.back()];
+        s.stack.pop_back();
         if (g.leaf()) {
           out.objects.insert(out.objects.end(), tree.objects.begin() + g.first,
                              tree.objects.begin() + g.first + g.count);
         } else {
-          gather.push_back(g.right);
-          gather.push_back(g.left);
+          s.stack.push_back(g.right);
+          s.stack.push_back(g.left);
         }
       }
       continue;
@@ -142,12 +160,13 @@ Tree collapse_leaves(const Tree& tree, std::uint32_t max_leaf_size) {
     const std::uint32_t left = std::uint32_t(out.nodes.size());
     out.nodes.emplace_back();
     out.nodes.emplace_back();
-    out.nodes[task.new_node].left = left;
-    out.nodes[task.new_node].right = left + 1;
-    stack.push_back({n.right, left + 1});
-    stack.push_back({n.left, left});
+    out.nodes[new_node].left = left;
+    out.nodes[new_node].right = left + 1;
+    s.tasks.push_back({n.right, left + 1});
+    s.tasks.push_back({n.left, left});
   }
-  return out;
 }
+
+}  // namespace detail
 
 }  // namespace cullpipe::bvh

@@ -386,7 +386,13 @@ Tree build_generic(std::span<const Aabb> boxes, const BuildOptions& options) {
 
 Tree build_top_down(std::span<const Aabb> boxes, const BuildOptions& options) {
   if (options.axis == SplitAxis::Best && options.position == SplitPosition::Binned && options.cost == SplitCost::Sah)
-    return build_binned_sah(boxes, {options.max_leaf_size, options.bins}, options.pool);
+    return build_binned_sah(boxes, {options.max_leaf_size, options.bins, options.sah_leaves, options.object_cost},
+                            options.pool);
+  if (options.sah_leaves && options.max_leaf_size > 1) {
+    BuildOptions ones = options;
+    ones.max_leaf_size = 1;
+    return collapse_leaves(build_generic(boxes, ones), options.max_leaf_size, options.object_cost);
+  }
   return build_generic(boxes, options);
 }
 
