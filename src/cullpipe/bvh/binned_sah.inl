@@ -805,6 +805,29 @@ struct RawNodes {
   Node& operator[](std::uint32_t i) { return data[i]; }
 };
 
+// A split node's two children, at left and left + 1: their boxes, a leaf at once for a child of
+// at most max_leaf objects (its ids written as make_leaf writes them, within `limit`), the
+// others pushed onto `stack`, the left one on top.
+template <class Nodes>
+void add_children(Nodes& nodes, const Task& task, const Split& s, std::uint32_t left, Box8* const buffer[2],
+                  const Params& p, std::uint32_t* objects, std::uint32_t limit, bool fixed_leaf_write,
+                  std::vector<Task>& stack) {
+  nodes[task.node].left = left;
+  nodes[task.node].right = left + 1;
+  nodes[left].box = s.left_box.box();
+  nodes[left + 1].box = s.right_box.box();
+  const std::uint32_t right_count = task.count - s.mid;
+  if (s.mid <= p.max_leaf)
+    make_leaf(nodes[left], task.first, s.mid, buffer[s.child_buffer], objects, limit, fixed_leaf_write);
+  if (right_count <= p.max_leaf) {
+    make_leaf(nodes[left + 1], task.first + s.mid, right_count, buffer[s.child_buffer], objects, limit,
+              fixed_leaf_write);
+  } else {
+    stack.push_back({left + 1, task.first + s.mid, right_count, s.child_buffer, s.right_centroids});
+  }
+  if (s.mid > p.max_leaf) stack.push_back({left, task.first, s.mid, s.child_buffer, s.left_centroids});
+}
+
 // Splits `root` and everything below it on the calling thread, depth first, the left child
 // first: a node's two children are appended when it is split, so a subtree's nodes follow its
 // children in one block. Objects [root.first, root.first + root.count) are this call's alone.
@@ -821,21 +844,7 @@ void build_subtree(const Task& root, Nodes& nodes, Box8* const buffer[2], std::u
     const Split s = split_node(task, buffer, bin_of, ws, p);
     const std::uint32_t left = nodes.size();
     nodes.add_two();
-    nodes[task.node].left = left;
-    nodes[task.node].right = left + 1;
-    nodes[left].box = s.left_box.box();
-    nodes[left + 1].box = s.right_box.box();
-    // The leaves, then the inner children onto the stack, the left one on top.
-    const std::uint32_t right_count = task.count - s.mid;
-    if (s.mid <= p.max_leaf)
-      make_leaf(nodes[left], task.first, s.mid, buffer[s.child_buffer], objects, limit, fixed_leaf_write);
-    if (right_count <= p.max_leaf) {
-      make_leaf(nodes[left + 1], task.first + s.mid, right_count, buffer[s.child_buffer], objects, limit,
-                fixed_leaf_write);
-    } else {
-      stack.push_back({left + 1, task.first + s.mid, right_count, s.child_buffer, s.right_centroids});
-    }
-    if (s.mid > p.max_leaf) stack.push_back({left, task.first, s.mid, s.child_buffer, s.left_centroids});
+    add_children(nodes, task, s, left, buffer, p, objects, limit, fixed_leaf_write, stack);
   }
 }
 
@@ -900,20 +909,8 @@ void build_threaded(std::uint32_t n, const Task& root, Box8* const buffer[2], Bi
       top.emplace_back();
       top.emplace_back();
     }
-    upper[task.node].left = left;
-    upper[task.node].right = left + 1;
-    upper[left].box = s.left_box.box();
-    upper[left + 1].box = s.right_box.box();
-    const std::uint32_t right_count = task.count - s.mid;
-    if (s.mid <= p.max_leaf)
-      make_leaf(upper[left], task.first, s.mid, buffer[s.child_buffer], tree.objects.data(), n, false);
-    if (right_count <= p.max_leaf) {
-      make_leaf(upper[left + 1], task.first + s.mid, right_count, buffer[s.child_buffer], tree.objects.data(), n,
-                false);
-    } else {
-      stack.push_back({left + 1, task.first + s.mid, right_count, s.child_buffer, s.right_centroids});
-    }
-    if (s.mid > p.max_leaf) stack.push_back({left, task.first, s.mid, s.child_buffer, s.left_centroids});
+    VectorNodes nodes{upper};
+    add_children(nodes, task, s, left, buffer, p, tree.objects.data(), n, false, stack);
   }
   if (direct && next != tree.nodes.size()) throw std::logic_error("build_binned_sah: subtree sizes disagree");
   // The subtrees, largest first (they balance better).
