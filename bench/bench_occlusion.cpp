@@ -11,7 +11,7 @@
 //           and occlusion::cull_hierarchical); the pyramid's build time
 // Ratios are within one run: occlusion over frustum-only, hierarchical over flat.
 //
-// usage: bench_occlusion [--sizes 1e3,1e4,..] [--frames F] [--width W] [--height H] [--texels T]
+// usage: bench_occlusion [--sizes 1e3,1e4,..] [--frames F] [--width W] [--height H] [--texels T] [--refine-texels R]
 //                        [--repeats R] [--device NAME] [--validation] [--json FILE]
 #include <cstdio>
 #include <functional>
@@ -39,7 +39,7 @@ namespace {
 struct Config {
   std::vector<std::size_t> sizes = {1000, 10000, 100000};
   std::size_t frames = 240;
-  std::uint32_t width = 960, height = 540, texels = 4;
+  std::uint32_t width = 960, height = 540, texels = 4, refine_texels = 16;
   int repeats = 15;
   std::string device, json;
   bool validation = false;
@@ -73,7 +73,7 @@ double median_wall_ns(int repeats, const std::function<gpu::CullResult()>& pass)
 void measure_passes(const vulkan::Context& ctx, std::span<const Aabb> boxes, const Camera& camera,
                     const render::Renderer& renderer, const Config& config, Row& row) {
   const std::size_t n = boxes.size();
-  const occlusion::OcclusionOptions occlusion_options{config.texels};
+  const occlusion::OcclusionOptions occlusion_options{config.texels, config.refine_texels};
   const Frustum frustum = Frustum::from_view_proj(camera.view_proj());
   const gpu::DepthPyramidPass& pass = *renderer.pyramid();
   const occlusion::DepthPyramid pyramid = pass.read();
@@ -127,6 +127,7 @@ Row measure(const vulkan::Context& ctx, std::size_t n, const Config& config) {
   rc.width = config.width;
   rc.height = config.height;
   rc.occlusion.texels_per_axis = config.texels;
+  rc.occlusion.refine_texels_per_axis = config.refine_texels;
   render::Renderer frustum_renderer(ctx, scene, rc), occlusion_renderer(ctx, scene, rc);
   // The CPU path: every building a box occluder, a buffer of a quarter of the viewport's sides.
   const std::vector<occlusion::OccluderBox> occluders = render::box_occluders(scene);
@@ -192,6 +193,10 @@ int main(int argc, char** argv) {
   app.add_option("--texels", config.texels, "Texels per axis the occlusion test reads: 2 | 4 | 8 | 16")
       ->capture_default_str()
       ->check(CLI::IsMember({2u, 4u, 8u, 16u}));
+  app.add_option("--refine-texels", config.refine_texels,
+                 "Objects the --texels test keeps are tested again at this many texels per axis (0: not)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({0u, 4u, 8u, 16u}));
   app.add_option("--repeats", config.repeats, "Timed repeats of each pass (the median is reported)")
       ->capture_default_str()
       ->check(CLI::Range(1, 10000));
@@ -204,8 +209,9 @@ int main(int argc, char** argv) {
   options.validation = config.validation;
   options.device_filter = config.device;
   const vulkan::Context ctx(options);
-  std::printf("bench_occlusion: streets along their path, %ux%u, %u texels per axis, %s; %s\n", config.width,
-              config.height, config.texels, ctx.info().name.c_str(), cpu_model().c_str());
+  std::printf("bench_occlusion: streets along their path, %ux%u, %u texels per axis (refined at %u), %s; %s\n",
+              config.width, config.height, config.texels, config.refine_texels, ctx.info().name.c_str(),
+              cpu_model().c_str());
   std::printf("\n%9s %6s | %10s %10s %6s | %8s %8s %7s %7s %6s | %9s %9s %6s %9s %9s %6s %8s %9s | %7s %8s | %s\n",
               "objects", "frames", "frustum ms", "occl. ms", "speed", "drawn f", "drawn o", "owning", "d/own", "missed",
               "flat ms", "flat+o ms", "ratio", "bvh ms", "bvh+o ms", "ratio", "bvh/flat", "pyramid", "cpu ms",
@@ -252,6 +258,7 @@ int main(int argc, char** argv) {
     j["width"] = config.width;
     j["height"] = config.height;
     j["texels_per_axis"] = config.texels;
+    j["refine_texels_per_axis"] = config.refine_texels;
     j["rows"] = rows;
     std::ofstream(config.json) << j.dump(2) << "\n";
   }

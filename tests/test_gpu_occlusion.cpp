@@ -267,9 +267,11 @@ void expect_occlusion_agreement(gpu::DepthPyramidPass& pass, std::uint64_t seed)
     const Frustum frustum = Frustum::from_view_proj(vp);
     const occlusion::OcclusionView view{vp, w, h, cam.reversed_z};
     const std::uint32_t texels = 2u << (s % 4);
+    // Half the scenes test the volumes the first test keeps again, at 16 texels per axis.
+    const occlusion::OcclusionOptions occlusion_options{texels, texels < 16 && (s / 4) % 2 == 1 ? 16u : 0u};
     std::vector<Classification> cpu(volumes.size());
     const reference::CullCounts cpu_counts =
-        occlusion::classify_all(std::span<const Volume>(volumes), frustum, view, pyramid, {texels}, cpu);
+        occlusion::classify_all(std::span<const Volume>(volumes), frustum, view, pyramid, occlusion_options, cpu);
     occluded += cpu_counts.occluded;
     culler.upload(std::span<const Volume>(volumes));
     for (const bool ordered : {false, true}) {
@@ -277,12 +279,13 @@ void expect_occlusion_agreement(gpu::DepthPyramidPass& pass, std::uint64_t seed)
       options.ordered = ordered;
       options.pyramid = &pass;
       options.occlusion_views = {view};
-      options.occlusion_options.texels_per_axis = texels;
+      options.occlusion_options = occlusion_options;
       const gpu::CullResult result = culler.cull(std::span(&frustum, 1), options);
       const Agreement a = check_agreement<Volume>(volumes, frustum, cpu, cpu_counts, result.views[0].classes,
                                                   result.views[0].counts, result.views[0].visible_ids, volumes.size());
       ASSERT_EQ(a.mismatches, 0u) << "scene " << s << " (camera variant " << s % 8 << ", " << w << "x" << h << ", "
-                                  << texels << " texels per axis" << (ordered ? ", ordered" : "")
+                                  << texels << " texels per axis, refined at "
+                                  << occlusion_options.refine_texels_per_axis << (ordered ? ", ordered" : "")
                                   << "): " << (a.reports.empty() ? std::string() : a.reports.front());
     }
   }
@@ -319,8 +322,9 @@ void expect_hierarchical_occlusion_agreement(gpu::DepthPyramidPass& pass, std::u
     const Frustum frustum = Frustum::from_view_proj(vp);
     const occlusion::OcclusionView view{vp, w, h, cam.reversed_z};
     const std::uint32_t texels = 2u << (s % 4);
+    const occlusion::OcclusionOptions occlusion_options{texels, texels < 16 && (s / 4) % 2 == 1 ? 16u : 0u};
     const bvh::HierarchicalResult cpu =
-        occlusion::cull_hierarchical(tree, std::span<const Volume>(volumes), frustum, view, pyramid, {texels});
+        occlusion::cull_hierarchical(tree, std::span<const Volume>(volumes), frustum, view, pyramid, occlusion_options);
     occluded += cpu.occluded;
     for (const bool in_records : {false, true})
       for (const std::uint32_t subtree : {64u, gpu::BvhCuller::kCpuSubtreeObjects}) {
@@ -330,13 +334,14 @@ void expect_hierarchical_occlusion_agreement(gpu::DepthPyramidPass& pass, std::u
         gpu::CullOptions options;
         options.pyramid = &pass;
         options.occlusion_views = {view};
-        options.occlusion_options.texels_per_axis = texels;
+        options.occlusion_options = occlusion_options;
         const gpu::CullResult result = culler.cull(std::span(&frustum, 1), options);
         const gpu::ViewResult& g = result.views[0];
         const std::string where = "scene " + std::to_string(s) + " (camera variant " + std::to_string(s % 8) + ", " +
                                   std::to_string(w) + "x" + std::to_string(h) + ", " + std::to_string(texels) +
-                                  " texels per axis, subtrees of " + std::to_string(subtree) +
-                                  (in_records ? ", stacks in records" : "") + ")";
+                                  " texels per axis, refined at " +
+                                  std::to_string(occlusion_options.refine_texels_per_axis) + ", subtrees of " +
+                                  std::to_string(subtree) + (in_records ? ", stacks in records" : "") + ")";
         for (std::size_t i = 0; i < volumes.size(); ++i)
           ASSERT_EQ(g.classes[i], cpu.classes[i])
               << where << ": " << describe_mismatch(i, volumes[i], frustum, cpu.classes[i], g.classes[i]);
@@ -506,6 +511,7 @@ TEST_F(GpuPyramid, ClusterPassEqualsTheReferencePairByPair) {
       frame.pyramid = &culler();
       frame.occlusion_view = {vp, w, h, cam.reversed_z};
       frame.occlusion_options.texels_per_axis = 2u << (s % 4);
+      frame.occlusion_options.refine_texels_per_axis = s % 4 != 3 && s % 5 == 1 ? 16u : 0u;
     }
     const gpu::ClusterResult r = pass.cull(frame);
     clusters::ClusterView view{frame.frustum,

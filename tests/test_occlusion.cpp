@@ -118,7 +118,7 @@ void pixels_of(const Caster& k, const std::vector<float>& depth, const Volume& v
 
 template <class Volume>
 void expect_conservative(std::uint64_t seed, int scenes) {
-  std::size_t tested = 0, hidden = 0, culled = 0;
+  std::size_t tested = 0, hidden = 0, culled = 0, refined_more = 0;
   test::Rng rng(seed);
   for (int s = 0; s < scenes; ++s) {
     const Camera cam = random_camera(rng, s % 8);
@@ -135,15 +135,25 @@ void expect_conservative(std::uint64_t seed, int scenes) {
       const Volume v = random_volume<Volume>(rng, 12.0f, 2.0f);
       bool owns, covers;
       pixels_of(k, depth, v, owns, covers);
-      for (const std::uint32_t texels : {2u, 4u, 8u, 16u}) {
-        const Classification c = occlusion::classify(v, frustum, view, pyramid, OcclusionOptions{texels});
+      // Refined: hidden exactly where either test alone hides it.
+      const auto hides = [&](const OcclusionOptions& o) {
+        return occlusion::classify(v, frustum, view, pyramid, o) == Classification::Occluded;
+      };
+      const bool coarse = hides({4}), fine = hides({16}), refined = hides({4, 16});
+      EXPECT_EQ(refined, coarse || fine) << "scene " << s << ", volume " << i;
+      refined_more += refined && !coarse;
+      for (const OcclusionOptions options : {OcclusionOptions{2}, OcclusionOptions{4}, OcclusionOptions{8},
+                                             OcclusionOptions{16}, OcclusionOptions{2, 16}, OcclusionOptions{4, 8}}) {
+        const std::uint32_t texels = options.texels_per_axis;
+        const Classification c = occlusion::classify(v, frustum, view, pyramid, options);
         ++tested;
         hidden += covers && !owns;  // seen by some pixel centre, behind the depth at every one
         culled += c == Classification::Occluded;
         if (owns) {
           ASSERT_NE(c, Classification::Occluded)
               << "scene " << s << " (camera variant " << s % 8 << ", " << w << "x" << h << "), volume " << i << ", "
-              << texels << " texels per axis: owns a pixel but was found occluded";
+              << texels << " texels per axis (refined at " << options.refine_texels_per_axis
+              << "): owns a pixel but was found occluded";
         }
       }
     }
@@ -151,6 +161,7 @@ void expect_conservative(std::uint64_t seed, int scenes) {
   // (It also culls most of the volumes that some pixel centre sees and every one sees hidden: a
   // test that never culls would pass the check above.)
   EXPECT_GT(culled, hidden / 2) << culled << " of " << hidden << " hidden";
+  EXPECT_GT(refined_more, 0u) << "no volume that only the refining test hides";
   std::printf("%zu volume tests, %zu seen and hidden, %zu occluded\n", tested, hidden, culled);
 }
 
@@ -389,6 +400,12 @@ TEST(Occlusion, BadViewsAreRefusedByName) {
   nan_matrix[2][1] = std::numeric_limits<float>::quiet_NaN();
   EXPECT_NE(message({nan_matrix, 4, 3, false}).find("non-finite"), std::string::npos);
   EXPECT_NE(message({test::test_view_proj(), 4, 3, false}, {3}).find("texels_per_axis"), std::string::npos);
+  for (const std::uint32_t refine : {1u, 6u, 32u})
+    EXPECT_NE(message({test::test_view_proj(), 4, 3, false}, {4, refine}).find("refine_texels_per_axis"),
+              std::string::npos)
+        << refine;
+  EXPECT_EQ(message({test::test_view_proj(), 4, 3, false}, {4, 16}), "");
+  EXPECT_EQ(message({test::test_view_proj(), 4, 3, false}, {16, 4}), "");  // (no second test)
   EXPECT_EQ(message({test::test_view_proj(), 4, 3, false}), "");
 }
 

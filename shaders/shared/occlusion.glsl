@@ -28,6 +28,9 @@ const float OCC_NODE_MARGIN_SCALE = 4.0;           // occlusion::kNodeMarginScal
 layout(constant_id = 7) const uint OCC_TEXELS = 4;
 // Hierarchy nodes read at most occlusion::kNodeTexelsPerAxis texels per axis.
 const uint OCC_NODE_TEXELS = OCC_TEXELS < 4u ? OCC_TEXELS : 4u;
+// OcclusionOptions::refine_texels_per_axis (0: none): a volume the OCC_TEXELS test keeps is
+// read again at the finest level where it spans at most this many texels per axis.
+layout(constant_id = 10) const uint OCC_REFINE_TEXELS = 0;
 
 // The view's GpuOcclusionView, loaded by occ_load_view.
 mat4 occ_view_proj;
@@ -78,6 +81,35 @@ void occ_pixel_range(float lo, float hi, uint size, float scale, out uint first,
   last = uint(top < b ? top : b);
 }
 
+// Whether the pixel rectangle [px0, px1] x [py0, py1] is hidden behind the pyramid at the finest
+// level where it spans at most `texels` texels per axis: every texel there strictly nearer than
+// `nearest` (occlusion.cpp's hidden_at). Nothing is read unless `test`.
+bool occ_hidden_at(bool test, uint px0, uint px1, uint py0, uint py1, float nearest, uint texels) {
+  uint k = 0;
+  [[unroll]] for (uint i = 0; i + 1u < PYRAMID_MAX_LEVELS; ++i)
+    k += test && k == i && k + 1u < occ_level_count &&
+                 ((px1 >> k) - (px0 >> k) >= texels || (py1 >> k) - (py0 >> k) >= texels)
+             ? 1u
+             : 0u;
+  uvec4 level = texelFetch(occlusion_views, occ_view_first + 6 + int(k));  // x = offset, y = width, z = height
+  uint tx0 = min(px0 >> k, level.y - 1u), tx1 = min(px1 >> k, level.y - 1u);
+  uint ty0 = min(py0 >> k, level.z - 1u), ty1 = min(py1 >> k, level.z - 1u);
+  // At most `texels` texels per axis from (tx0, ty0): hidden when every one is strictly nearer.
+  bool hidden = test;
+  ty1 = test ? ty1 : 0u;
+  ty0 = test ? ty0 : 1u;  // (no rows)
+  for (uint y = ty0; y <= ty1 && hidden; ++y) {  // (a row found nearer settles it)
+    [[unroll]] for (uint dx = 0; dx < texels; ++dx) {
+      uint x = tx0 + dx;
+      bool read = x <= tx1;
+      float farthest = 0.0;
+      if (read) farthest = pyramid[level.x + y * level.y + x];
+      hidden = hidden && (!read || (occ_reversed != 0u ? nearest < farthest : nearest > farthest));
+    }
+  }
+  return hidden;
+}
+
 // Whether the volume with corners p[8], every point's coordinates bounded by `magnitude`, is
 // hidden: every pyramid texel over its footprint strictly nearer than its nearest fragment.
 // `scale`: 1 for an object, OCC_NODE_MARGIN_SCALE for a hierarchy node; `texels` its texels per
@@ -124,29 +156,9 @@ bool occ_occluded(vec3 p[8], vec3 magnitude, float scale, uint texels) {
   float depth_margin = OCC_DEPTH_MARGIN * scale;
   precise float nearest = occ_reversed != 0u ? z_hi + (depth_margin + abs(z_hi) * depth_margin)
                                              : z_lo - (depth_margin + abs(z_lo) * depth_margin);
-  // The finest level at which the rectangle spans at most `texels` texels per axis.
-  uint k = 0;
-  [[unroll]] for (uint i = 0; i + 1u < PYRAMID_MAX_LEVELS; ++i)
-    k += projected && k == i && k + 1u < occ_level_count &&
-                 ((px1 >> k) - (px0 >> k) >= texels || (py1 >> k) - (py0 >> k) >= texels)
-             ? 1u
-             : 0u;
-  uvec4 level = texelFetch(occlusion_views, occ_view_first + 6 + int(k));  // x = offset, y = width, z = height
-  uint tx0 = min(px0 >> k, level.y - 1u), tx1 = min(px1 >> k, level.y - 1u);
-  uint ty0 = min(py0 >> k, level.z - 1u), ty1 = min(py1 >> k, level.z - 1u);
-  // At most `texels` texels per axis from (tx0, ty0): hidden when every one is strictly nearer.
-  bool hidden = projected;
-  ty1 = projected ? ty1 : 0u;
-  ty0 = projected ? ty0 : 1u;  // (no rows)
-  for (uint y = ty0; y <= ty1 && hidden; ++y) {  // (a row found nearer settles it)
-    [[unroll]] for (uint dx = 0; dx < texels; ++dx) {
-      uint x = tx0 + dx;
-      bool read = x <= tx1;
-      float farthest = 0.0;
-      if (read) farthest = pyramid[level.x + y * level.y + x];
-      hidden = hidden && (!read || (occ_reversed != 0u ? nearest < farthest : nearest > farthest));
-    }
-  }
+  bool hidden = occ_hidden_at(projected, px0, px1, py0, py1, nearest, texels);
+  if (OCC_REFINE_TEXELS > texels && scale == 1.0)  // (a volume, not a node: occlusion::occluded)
+    hidden = hidden || occ_hidden_at(projected && !hidden, px0, px1, py0, py1, nearest, OCC_REFINE_TEXELS);
   return hidden;
 }
 

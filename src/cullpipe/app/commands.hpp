@@ -66,6 +66,7 @@ struct RunOptions : SceneOptions {
   bool clusters = false;
   std::size_t frames = 1;
   std::uint32_t texels = 4;
+  std::uint32_t refine_texels = 16;  ///< occlusion: the second test's texels per axis (0: none)
   std::uint32_t width = 960, height = 540;
   std::uint32_t software_divisor = 4;  ///< the CPU path's depth buffer: each side of the viewport over this
 };
@@ -74,14 +75,15 @@ struct RenderOptions : SceneOptions {
   std::string bv = "aabb";
   std::size_t view = 0;  ///< which view of a `views`-camera path around the scene (0: the scene's camera)
   std::size_t views = 1;
-  bool no_cull = false;       ///< draw every object instead of the culling pass's draws
-  bool check = false;         ///< render both ways and require identical images
-  bool occlusion = false;     ///< two-phase occlusion frames (render::CullMode::Occlusion)
-  std::size_t frames = 1;     ///< frames along the camera path from `view`, visibility carried
-  std::uint32_t texels = 4;   ///< occlusion: texels per axis the test reads (2, 4, 8, 16)
-  bool clusters = false;      ///< cluster culling after the object pass (RendererConfig::clusters)
-  float cone_weight = 0.25f;  ///< --clusters: meshoptimizer's cone weight (ClusterOptions)
-  bool all_faces = false;     ///< draw back faces too (RendererConfig::cull_back_faces = false)
+  bool no_cull = false;              ///< draw every object instead of the culling pass's draws
+  bool check = false;                ///< render both ways and require identical images
+  bool occlusion = false;            ///< two-phase occlusion frames (render::CullMode::Occlusion)
+  std::size_t frames = 1;            ///< frames along the camera path from `view`, visibility carried
+  std::uint32_t texels = 4;          ///< occlusion: texels per axis the test reads (2, 4, 8, 16)
+  std::uint32_t refine_texels = 16;  ///< occlusion: the second test's texels per axis (0: none)
+  bool clusters = false;             ///< cluster culling after the object pass (RendererConfig::clusters)
+  float cone_weight = 0.25f;         ///< --clusters: meshoptimizer's cone weight (ClusterOptions)
+  bool all_faces = false;            ///< draw back faces too (RendererConfig::cull_back_faces = false)
   std::uint32_t width = 960, height = 540;
   std::string out_path;       ///< PNG
   std::string top_down_path;  ///< optional top-down debug PNG

@@ -98,6 +98,12 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--texels", run.texels, "--occlusion: texels per axis the test reads: 2 | 4 | 8 | 16")
       ->capture_default_str()
       ->check(CLI::IsMember({2u, 4u, 8u, 16u}));
+  run_cmd
+      ->add_option("--refine-texels", run.refine_texels,
+                   "--occlusion: objects the --texels test keeps are tested again at this many texels per axis "
+                   "(0: not; 4 | 8 | 16; none at or below --texels)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({0u, 4u, 8u, 16u}));
   run_cmd->add_option("--width", run.width, "--occlusion: depth image width")
       ->capture_default_str()
       ->check(CLI::Range(1u, 16384u));
@@ -137,6 +143,12 @@ int main(int argc, char** argv) {
   render_cmd->add_option("--texels", render.texels, "--occlusion: texels per axis the test reads: 2 | 4 | 8 | 16")
       ->capture_default_str()
       ->check(CLI::IsMember({2u, 4u, 8u, 16u}));
+  render_cmd
+      ->add_option("--refine-texels", render.refine_texels,
+                   "--occlusion: objects the --texels test keeps are tested again at this many texels per axis "
+                   "(0: not; 4 | 8 | 16; none at or below --texels)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({0u, 4u, 8u, 16u}));
   render_cmd->add_flag("--clusters", render.clusters,
                        "Also cull clusters of the kept objects' meshes (frustum, back-face cone, occlusion with "
                        "--occlusion) and draw the kept clusters");

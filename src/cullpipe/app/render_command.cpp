@@ -34,6 +34,7 @@ int render_command(const RenderOptions& o, std::ostream& out, std::ostream& err)
     config.bv = *bv;
     config.aabb_update = loaded.aabb_update;
     config.occlusion.texels_per_axis = o.texels;
+    config.occlusion.refine_texels_per_axis = o.refine_texels;
     config.clusters = o.clusters;
     config.cluster_options.cone_weight = o.cone_weight;
     config.cull_back_faces = !o.all_faces;

@@ -142,6 +142,7 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
   config.bv = bv;
   config.aabb_update = loaded.aabb_update;
   config.occlusion.texels_per_axis = o.texels;
+  config.occlusion.refine_texels_per_axis = o.refine_texels;
   config.clusters = o.clusters;
   occlusion::check_view({glm::mat4(1.0f), o.width, o.height, false}, o.width, o.height, false, config.occlusion);
   render::Renderer renderer(ctx, scene, config);
@@ -184,7 +185,9 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
   const std::size_t n = scene.objects.size();
   out << "cullpipe run --occlusion: " << (scene.name.empty() ? loaded.source : scene.name) << " (" << loaded.source
       << "), " << n << " objects, bv " << o.bv << ", " << o.width << "x" << o.height << ", " << o.texels
-      << " texels per axis, device " << ctx.info().name << "\n";
+      << " texels per axis"
+      << (o.refine_texels ? " (then " + std::to_string(o.refine_texels) + " where that keeps an object)" : "")
+      << ", device " << ctx.info().name << "\n";
   if (hierarchical)
     out << "  bvh: " << o.builder << ", leaves of <= " << o.leaf_size << ", " << built.metrics.nodes
         << " nodes; its pass is checked against the flat pass and the reference on each frame's pyramid\n";
@@ -310,6 +313,7 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
     j["width"] = o.width;
     j["height"] = o.height;
     j["texels_per_axis"] = o.texels;
+    j["refine_texels_per_axis"] = o.refine_texels;
     j["device"] = ctx.info().name;
     j["driver"] = ctx.info().driver;
     j["mismatches"] = mismatches;

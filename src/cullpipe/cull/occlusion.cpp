@@ -236,7 +236,7 @@ Footprint footprint(const Sphere& s, const OcclusionView& view) {
 
 bool node_occluded(const Aabb& node, const OcclusionView& view, const DepthPyramid& pyramid,
                    const OcclusionOptions& options) {
-  return occluded(node_footprint(node, view), pyramid, {std::min(options.texels_per_axis, kNodeTexelsPerAxis)});
+  return occluded(node_footprint(node, view), pyramid, {std::min(options.texels_per_axis, kNodeTexelsPerAxis), 0});
 }
 
 unsigned test_level(const Footprint& f, const DepthPyramid& pyramid, std::uint32_t texels_per_axis) {
@@ -247,9 +247,12 @@ unsigned test_level(const Footprint& f, const DepthPyramid& pyramid, std::uint32
   return k;
 }
 
-bool occluded(const Footprint& f, const DepthPyramid& pyramid, const OcclusionOptions& options) {
-  if (!f.projected) return false;
-  const unsigned k = test_level(f, pyramid, options.texels_per_axis);
+namespace {
+
+// Whether every texel over the footprint, at the finest level where it spans at most `texels`
+// texels per axis, is strictly nearer than the volume's nearest fragment.
+bool hidden_at(const Footprint& f, const DepthPyramid& pyramid, std::uint32_t texels) {
+  const unsigned k = test_level(f, pyramid, texels);
   const PyramidLevel& level = pyramid.levels[k];
   const std::uint32_t tx0 = texel_of(f.x0, k, level.width), tx1 = texel_of(f.x1, k, level.width);
   const std::uint32_t ty0 = texel_of(f.y0, k, level.height), ty1 = texel_of(f.y1, k, level.height);
@@ -260,6 +263,15 @@ bool occluded(const Footprint& f, const DepthPyramid& pyramid, const OcclusionOp
       if (!(pyramid.reversed_z ? f.nearest < farthest : f.nearest > farthest)) return false;
     }
   return true;
+}
+
+}  // namespace
+
+bool occluded(const Footprint& f, const DepthPyramid& pyramid, const OcclusionOptions& options) {
+  if (!f.projected) return false;
+  if (hidden_at(f, pyramid, options.texels_per_axis)) return true;
+  return options.refine_texels_per_axis > options.texels_per_axis &&
+         hidden_at(f, pyramid, options.refine_texels_per_axis);
 }
 
 void check_view(const OcclusionView& view, const DepthPyramid& pyramid, const OcclusionOptions& options) {
@@ -282,9 +294,11 @@ void check_view(const OcclusionView& view, std::uint32_t width, std::uint32_t he
     for (int r = 0; r < 4; ++r)
       if (!std::isfinite(view.view_proj[c][r]))
         throw std::invalid_argument("occlusion: the view-projection matrix has a non-finite entry");
-  const std::uint32_t t = options.texels_per_axis;
+  const std::uint32_t t = options.texels_per_axis, r = options.refine_texels_per_axis;
   if (t != 2 && t != 4 && t != 8 && t != 16)
     throw std::invalid_argument("occlusion: texels_per_axis " + std::to_string(t) + " (2, 4, 8 or 16)");
+  if (r != 0 && r != 2 && r != 4 && r != 8 && r != 16)
+    throw std::invalid_argument("occlusion: refine_texels_per_axis " + std::to_string(r) + " (0, 2, 4, 8 or 16)");
 }
 
 Classification classify(const Aabb& box, const Frustum& frustum, const OcclusionView& view, const DepthPyramid& pyramid,

@@ -34,6 +34,12 @@ struct OcclusionOptions {
   /// The test reads the finest level at which the footprint spans at most this many texels per
   /// axis (2, 4, 8 or 16): 2 is the classic 2x2 test; more texels read, tighter answers.
   std::uint32_t texels_per_axis = 4;
+  /// 0, 2, 4, 8 or 16; when above texels_per_axis, a volume that test keeps is tested again at
+  /// the finest level where its footprint spans at most this many texels per axis, so only the
+  /// volumes the cheap test keeps pay for the fine one (at or below it: no second test). Each level's test is
+  /// conservative on its own, so hidden by either is hidden. Volumes only: hierarchy nodes keep their one test
+  /// (node_occluded).
+  std::uint32_t refine_texels_per_axis = 0;
 };
 
 /// A volume's screen footprint: every pixel any of its fragments can cover lies in
@@ -74,11 +80,13 @@ unsigned test_level(const Footprint& f, const DepthPyramid& pyramid, std::uint32
 
 /// True when every pixel of the footprint holds a depth strictly nearer than any fragment of
 /// the volume can have: then none of its fragments passes the depth test and it owns no pixel.
+/// Read at texels_per_axis, then, where that keeps the volume, at refine_texels_per_axis.
 bool occluded(const Footprint& f, const DepthPyramid& pyramid, const OcclusionOptions& options = {});
 
 /// Throws std::invalid_argument naming what is wrong when `view` cannot be tested against
 /// `pyramid`: a viewport of another size or side past kMaxViewportSide, another depth
-/// direction, a non-finite matrix, or texels_per_axis not 2, 4, 8 or 16.
+/// direction, a non-finite matrix, texels_per_axis not 2, 4, 8 or 16, or
+/// refine_texels_per_axis not 0, 2, 4, 8 or 16.
 void check_view(const OcclusionView& view, const DepthPyramid& pyramid, const OcclusionOptions& options = {});
 /// The same checks against a pyramid of a width x height image and that depth direction.
 void check_view(const OcclusionView& view, std::uint32_t width, std::uint32_t height, bool reversed_z,

@@ -60,15 +60,18 @@ ClusterCuller::~ClusterCuller() {
 }
 
 const vulkan::ComputePipeline& ClusterCuller::pipeline(int which, bool occlusion, bool object_classes,
-                                                       std::uint32_t texels) {
-  if (which != Cull) occlusion = false, texels = 4;
+                                                       std::uint32_t texels, std::uint32_t refine) {
+  if (which != Cull) occlusion = false, texels = 4, refine = 0;
   if (which != Expand && which != ExpandWrite) object_classes = false;
-  const std::size_t key = std::size_t(which) * 64 + (occlusion ? 32 : 0) + (object_classes ? 16 : 0) + texels;
-  if (pipelines_.size() <= key) pipelines_.resize(key + 1);
-  if (!pipelines_[key]) {
+  // (texels and refine are at most 16: five bits each.)
+  const std::uint32_t key =
+      std::uint32_t(which) | (occlusion ? 1u : 0u) << 3 | (object_classes ? 1u : 0u) << 4 | texels << 5 | refine << 10;
+  std::unique_ptr<vulkan::ComputePipeline>& slot = pipelines_[key];
+  if (!slot) {
     // Specialization constants: 1 group size, 3 draws (scatter), 4 pairs per invocation (1),
-    // 6 occlusion, 7 its texels per axis, 8 the object pass's classes, 9 the listing's stage.
-    const std::uint32_t spec[10] = {0u,
+    // 6 occlusion, 7 its texels per axis, 8 the object pass's classes, 9 the listing's stage,
+    // 10 the occlusion test's refining texels.
+    const std::uint32_t spec[11] = {0u,
                                     group_size_,
                                     1u,
                                     1u,
@@ -77,7 +80,8 @@ const vulkan::ComputePipeline& ClusterCuller::pipeline(int which, bool occlusion
                                     occlusion ? 1u : 0u,
                                     texels,
                                     object_classes ? 1u : 0u,
-                                    which == ExpandWrite ? 1u : 0u};
+                                    which == ExpandWrite ? 1u : 0u,
+                                    refine};
     std::span<const std::uint32_t> spirv;
     std::string name;
     switch (which) {
@@ -93,11 +97,11 @@ const vulkan::ComputePipeline& ClusterCuller::pipeline(int which, bool occlusion
       default:
         spirv = cullpipe_cluster_expand_spv, name = "cluster listing";
     }
-    pipelines_[key] = std::make_unique<vulkan::ComputePipeline>(
+    slot = std::make_unique<vulkan::ComputePipeline>(
         ctx_, vulkan::ComputePipelineDesc{spirv, kBindingCount, sizeof(ClusterCullParams), spec, name.c_str(),
                                           kTexelBindings});
   }
-  return *pipelines_[key];
+  return *slot;
 }
 
 void ClusterCuller::upload(std::span<const Aabb> boxes, std::span<const BackfaceCone> cones,
@@ -252,10 +256,13 @@ void ClusterCuller::prepare(const ClusterFrame& frame) {
   occlusion_ = frame.pyramid != nullptr;
   object_classes_ = frame.object_classes != nullptr;
   texels_ = occlusion_ ? frame.occlusion_options.texels_per_axis : 4u;
+  refine_ = occlusion_ && frame.occlusion_options.refine_texels_per_axis > texels_
+                ? frame.occlusion_options.refine_texels_per_axis
+                : 0u;
   // Every pipeline now, not while recording.
   pipeline(Expand, false, object_classes_);
   pipeline(ExpandWrite, false, object_classes_);
-  pipeline(Cull, occlusion_, false, texels_);
+  pipeline(Cull, occlusion_, false, texels_, refine_);
   pipeline(Scan);
   pipeline(Scatter);
 
@@ -368,7 +375,7 @@ void ClusterCuller::record_passes(VkCommandBuffer cmd) {
       vkCmdPushConstants(cmd, pipe.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(params), &params);
       vkCmdDispatchIndirect(cmd, active_.handle(), CLUSTER_ACTIVE_DISPATCH * sizeof(std::uint32_t));
     };
-    listed_pass(pipeline(Cull, occlusion_, false, texels_));
+    listed_pass(pipeline(Cull, occlusion_, false, texels_, refine_));
     detail::record_compute_to_compute(cmd);
     scan(0, pair_count_);
     detail::record_compute_to_compute(cmd);

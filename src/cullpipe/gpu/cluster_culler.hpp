@@ -8,6 +8,7 @@
 
 #include <array>
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <optional>
 #include <span>
@@ -118,12 +119,12 @@ class ClusterCuller {
   void prepare(const ClusterFrame& frame);
   void record_passes(VkCommandBuffer cmd);
   const vulkan::ComputePipeline& pipeline(int which, bool occlusion = false, bool object_classes = false,
-                                          std::uint32_t texels = 4);
+                                          std::uint32_t texels = 4, std::uint32_t refine = 0);
 
   const vulkan::Context& ctx_;
   std::uint32_t group_size_ = FLAT_CULL_GROUP_SIZE;
   std::uint32_t max_groups_ = 0;
-  std::vector<std::unique_ptr<vulkan::ComputePipeline>> pipelines_;  // by key index
+  std::map<std::uint32_t, std::unique_ptr<vulkan::ComputePipeline>> pipelines_;  // by key (pipeline())
   std::unique_ptr<detail::PassResources> resources_;
   std::size_t pair_count_ = 0;
   vulkan::Buffer clusters_, instances_, pairs_, pair_obbs_, templates_;
@@ -138,7 +139,7 @@ class ClusterCuller {
   VkBuffer bound_pyramid_ = VK_NULL_HANDLE;
   VkDeviceSize bound_pyramid_size_ = 0;
   bool occlusion_ = false, object_classes_ = false;
-  std::uint32_t texels_ = 4;
+  std::uint32_t texels_ = 4, refine_ = 0;
 };
 
 }  // namespace cullpipe::gpu

@@ -111,11 +111,16 @@ struct CullOptions {
 };
 
 namespace detail {
-/// The texels per axis the occlusion test of a pass with `options` reads (a specialization
-/// constant of the cull shaders), 0 without a pyramid.
+/// The texels per axis the occlusion test of a pass with `options` reads, in the low byte, and
+/// its refine_texels_per_axis above it (specialization constants 7 and 10 of the cull shaders:
+/// occlusion_texels_constant, refine_texels_constant); 0 without a pyramid.
 inline std::uint32_t occlusion_texels(const CullOptions& options) {
-  return options.pyramid ? options.occlusion_options.texels_per_axis : 0u;
+  const occlusion::OcclusionOptions& o = options.occlusion_options;
+  const std::uint32_t refine = o.refine_texels_per_axis > o.texels_per_axis ? o.refine_texels_per_axis : 0u;
+  return options.pyramid ? o.texels_per_axis | refine << 8 : 0u;
 }
+inline std::uint32_t occlusion_texels_constant(std::uint32_t key) { return key ? key & 0xffu : 4u; }
+inline std::uint32_t refine_texels_constant(std::uint32_t key) { return key >> 8; }
 }  // namespace detail
 
 /// Buffers an engine owns for a pass's outputs (GpuCuller::use_engine_outputs): the pass writes

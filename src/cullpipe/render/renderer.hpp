@@ -27,8 +27,10 @@ namespace cullpipe::render {
 struct RendererConfig {
   std::uint32_t width = 960;
   std::uint32_t height = 540;
-  /// How the occlusion test of CullMode::Occlusion frames reads the depth pyramid.
-  occlusion::OcclusionOptions occlusion;
+  /// How the occlusion test of CullMode::Occlusion frames reads the depth pyramid: 4 texels per
+  /// axis, and the objects that keeps again at 16 (fewer draws for a dearer test: from the
+  /// default city camera 45 objects drawn instead of 68, against 33 owning a pixel).
+  occlusion::OcclusionOptions occlusion{4, 16};
   BvKind bv = BvKind::Aabb;                                            ///< volume the culling pass tests
   bounds::AabbUpdate aabb_update = bounds::AabbUpdate::HullRecompute;  ///< world AABBs of mesh objects
   /// Back faces culled as glTF draws them: triangles wound clockwise on screen are not drawn,
