@@ -22,6 +22,18 @@ void add_device_options(CLI::App* cmd, DeviceOptions& d) {
 }
 
 // Options choosing and building the scene, shared by `run` and `render`.
+// The occlusion test's reads: --texels and --refine-texels.
+void add_texel_options(CLI::App* cmd, std::uint32_t& texels, std::uint32_t& refine) {
+  cmd->add_option("--texels", texels, "--occlusion: texels per axis the test reads: 2 | 4 | 8 | 16")
+      ->capture_default_str()
+      ->check(CLI::IsMember({2u, 4u, 8u, 16u}));
+  cmd->add_option("--refine-texels", refine,
+                  "--occlusion: objects the --texels test keeps are tested again at this many texels per axis "
+                  "(0: not; 4 | 8 | 16; none at or below --texels)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({0u, 4u, 8u, 16u}));
+}
+
 void add_scene_options(CLI::App* cmd, SceneOptions& s) {
   auto* scene_opt = cmd->add_option(
       "--scene", s.scene_path, "Scene file: cullpipe-scene JSON, or glTF (.gltf, .glb); default: scenes/default.json");
@@ -95,15 +107,7 @@ int main(int argc, char** argv) {
   run_cmd->add_option("--frames", run.frames, "--occlusion: frames along the path of --views cameras")
       ->capture_default_str()
       ->check(CLI::Range(std::size_t(1), std::size_t(100000)));
-  run_cmd->add_option("--texels", run.texels, "--occlusion: texels per axis the test reads: 2 | 4 | 8 | 16")
-      ->capture_default_str()
-      ->check(CLI::IsMember({2u, 4u, 8u, 16u}));
-  run_cmd
-      ->add_option("--refine-texels", run.refine_texels,
-                   "--occlusion: objects the --texels test keeps are tested again at this many texels per axis "
-                   "(0: not; 4 | 8 | 16; none at or below --texels)")
-      ->capture_default_str()
-      ->check(CLI::IsMember({0u, 4u, 8u, 16u}));
+  add_texel_options(run_cmd, run.texels, run.refine_texels);
   run_cmd->add_option("--width", run.width, "--occlusion: depth image width")
       ->capture_default_str()
       ->check(CLI::Range(1u, 16384u));
@@ -140,15 +144,7 @@ int main(int argc, char** argv) {
                    "Frames along the camera path from --view (visibility carries from frame to frame)")
       ->capture_default_str()
       ->check(CLI::Range(std::size_t(1), std::size_t(100000)));
-  render_cmd->add_option("--texels", render.texels, "--occlusion: texels per axis the test reads: 2 | 4 | 8 | 16")
-      ->capture_default_str()
-      ->check(CLI::IsMember({2u, 4u, 8u, 16u}));
-  render_cmd
-      ->add_option("--refine-texels", render.refine_texels,
-                   "--occlusion: objects the --texels test keeps are tested again at this many texels per axis "
-                   "(0: not; 4 | 8 | 16; none at or below --texels)")
-      ->capture_default_str()
-      ->check(CLI::IsMember({0u, 4u, 8u, 16u}));
+  add_texel_options(render_cmd, render.texels, render.refine_texels);
   render_cmd->add_flag("--clusters", render.clusters,
                        "Also cull clusters of the kept objects' meshes (frustum, back-face cone, occlusion with "
                        "--occlusion) and draw the kept clusters");

@@ -96,17 +96,13 @@ const vulkan::ComputePipeline& BvhCuller::pipeline(const CullOptions& options) {
     // records, 6 occlusion, 7 texels per axis of the occlusion test, 10 its refining texels (8,
     // 9 unused).
     static_assert(BV_KIND_AABB == 0 && BV_KIND_OBB == 1 && BV_KIND_SPHERE == 2, "BvKind order must match the shader");
-    const std::uint32_t spec[11] = {0u,
-                                    group_size_,
-                                    std::uint32_t(key.kind),
-                                    key.draws ? 1u : 0u,
-                                    key.classes ? 1u : 0u,
-                                    key.stack_in_records ? 1u : 0u,
-                                    key.occlusion_texels ? 1u : 0u,
-                                    detail::occlusion_texels_constant(key.occlusion_texels),
-                                    0u,
-                                    0u,
-                                    detail::refine_texels_constant(key.occlusion_texels)};
+    std::uint32_t spec[11] = {0u,
+                              group_size_,
+                              std::uint32_t(key.kind),
+                              key.draws ? 1u : 0u,
+                              key.classes ? 1u : 0u,
+                              key.stack_in_records ? 1u : 0u};
+    detail::set_occlusion_constants(spec, key.occlusion_texels);
     return std::make_unique<vulkan::ComputePipeline>(
         ctx_, vulkan::ComputePipelineDesc{std::span<const std::uint32_t>(cullpipe_cull_bvh_spv), BVH_BINDING_COUNT,
                                           sizeof(BvhCullParams), spec, name.c_str(), kTexelBindings, kRecordBindings});

@@ -90,17 +90,9 @@ const vulkan::ComputePipeline& GpuCuller::pipeline(PipelineKey key) {
     // Specialization constants: 0 kind, 1 group size, 2 ordered, 3 draws, 4 objects per
     // invocation (every pass: the ordered passes' unit is a workgroup's run of objects), 5 classes,
     // 6 occlusion, 7 texels per axis of the occlusion test, 10 its refining texels (8, 9 unused).
-    const std::uint32_t spec[11] = {kind_index(key.kind),
-                                    group_size_,
-                                    key.ordered ? 1u : 0u,
-                                    key.draws ? 1u : 0u,
-                                    objects_per_invocation_,
-                                    key.classes ? 1u : 0u,
-                                    key.occlusion_texels ? 1u : 0u,
-                                    detail::occlusion_texels_constant(key.occlusion_texels),
-                                    0u,
-                                    0u,
-                                    detail::refine_texels_constant(key.occlusion_texels)};
+    std::uint32_t spec[11] = {kind_index(key.kind),    group_size_,          key.ordered ? 1u : 0u, key.draws ? 1u : 0u,
+                              objects_per_invocation_, key.classes ? 1u : 0u};
+    detail::set_occlusion_constants(spec, key.occlusion_texels);
     return std::make_unique<vulkan::ComputePipeline>(
         ctx_,
         vulkan::ComputePipelineDesc{spirv, kBindingCount, sizeof(FlatCullParams), spec, name.c_str(), kTexelBindings});

@@ -119,8 +119,13 @@ inline std::uint32_t occlusion_texels(const CullOptions& options) {
   const std::uint32_t refine = o.refine_texels_per_axis > o.texels_per_axis ? o.refine_texels_per_axis : 0u;
   return options.pyramid ? o.texels_per_axis | refine << 8 : 0u;
 }
-inline std::uint32_t occlusion_texels_constant(std::uint32_t key) { return key ? key & 0xffu : 4u; }
-inline std::uint32_t refine_texels_constant(std::uint32_t key) { return key >> 8; }
+/// Specialization constants 6 (occlusion on), 7 (texels per axis) and 10 (refining texels) of
+/// a cull shader's constants `spec` (8 and 9 left as they are), for an occlusion_texels key.
+inline void set_occlusion_constants(std::span<std::uint32_t, 11> spec, std::uint32_t key) {
+  spec[6] = key ? 1u : 0u;
+  spec[7] = key ? key & 0xffu : 4u;
+  spec[10] = key >> 8;
+}
 }  // namespace detail
 
 /// Buffers an engine owns for a pass's outputs (GpuCuller::use_engine_outputs): the pass writes

@@ -51,6 +51,18 @@ const glm::vec3 kCubeVertices[8] = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 1, 0},
 const std::uint32_t kCubeIndices[36] = {0, 2, 1, 1, 2, 3, 4, 5, 6, 5, 7, 6, 0, 1, 4, 1, 5, 4,
                                         2, 6, 3, 3, 6, 7, 0, 4, 2, 2, 4, 6, 1, 3, 5, 3, 7, 5};
 
+// Points binding 0 (the pipelines' object records) of `set` at the whole of `objects`.
+void write_objects(VkDevice dev, VkDescriptorSet set, const vulkan::Buffer& objects) {
+  VkDescriptorBufferInfo buffer_info{objects.handle(), 0, VK_WHOLE_SIZE};
+  VkWriteDescriptorSet write{VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
+  write.dstSet = set;
+  write.dstBinding = 0;
+  write.descriptorCount = 1;
+  write.descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+  write.pBufferInfo = &buffer_info;
+  vkUpdateDescriptorSets(dev, 1, &write, 0, nullptr);
+}
+
 VkShaderModule shader_module(VkDevice dev, const std::uint32_t* code, std::size_t bytes) {
   VkShaderModuleCreateInfo info{VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO};
   info.codeSize = bytes;
@@ -423,18 +435,9 @@ void Renderer::create_pipelines() {
   alloc.descriptorSetCount = 1;
   alloc.pSetLayouts = &set_layout_;
   CULLPIPE_VK_CHECK(vkAllocateDescriptorSets(dev, &alloc, &descriptor_set_));
-  VkDescriptorBufferInfo buffer_info{objects_.handle(), 0, VK_WHOLE_SIZE};
-  VkWriteDescriptorSet write{VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
-  write.dstSet = descriptor_set_;
-  write.dstBinding = 0;
-  write.descriptorCount = 1;
-  write.descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
-  write.pBufferInfo = &buffer_info;
-  vkUpdateDescriptorSets(dev, 1, &write, 0, nullptr);
+  write_objects(dev, descriptor_set_, objects_);
   CULLPIPE_VK_CHECK(vkAllocateDescriptorSets(dev, &alloc, &id_descriptor_set_));
-  buffer_info.buffer = id_objects_.handle();
-  write.dstSet = id_descriptor_set_;
-  vkUpdateDescriptorSets(dev, 1, &write, 0, nullptr);
+  write_objects(dev, id_descriptor_set_, id_objects_);
   CULLPIPE_VK_CHECK(vkAllocateDescriptorSets(dev, &alloc, &class_descriptor_set_));  // written by class_image
 
   VkShaderModule vert = shader_module(dev, cullpipe_render_mesh_vert_spv, sizeof(cullpipe_render_mesh_vert_spv));
@@ -725,14 +728,7 @@ Image Renderer::class_image(const Camera& observer, const FrameStats& stats) {
     std::memcpy(class_objects_.data(), painted.data(), records * sizeof(RenderObject));
     std::memcpy(class_draws_.data(), draws.data(), records * sizeof(DrawCommand));
   }
-  VkDescriptorBufferInfo buffer_info{class_objects_.handle(), 0, VK_WHOLE_SIZE};
-  VkWriteDescriptorSet write{VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
-  write.dstSet = class_descriptor_set_;
-  write.dstBinding = 0;
-  write.descriptorCount = 1;
-  write.descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
-  write.pBufferInfo = &buffer_info;
-  vkUpdateDescriptorSets(ctx_.device(), 1, &write, 0, nullptr);
+  write_objects(ctx_.device(), class_descriptor_set_, class_objects_);
   begin_frame();
   record_scene_pass(observer, ScenePass::Classes, [&] {
     if (records > 0)
