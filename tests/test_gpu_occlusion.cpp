@@ -406,16 +406,20 @@ TEST_F(GpuPyramid, HierarchicalOcclusionOfLargeSubtreesEqualsTheReference) {
     for (const std::uint32_t leaf : {1u, 2u}) {
       const bvh::FlatTree tree = bvh::flatten(bvh::build_binned_sah(boxes, {leaf, 16}));
       culler.upload(tree, std::span<const Aabb>(boxes));
-      for (const std::uint32_t texels : {4u, 16u}) {
+      for (const occlusion::OcclusionOptions occlusion_options :
+           {occlusion::OcclusionOptions{4}, occlusion::OcclusionOptions{16}, occlusion::OcclusionOptions{8, 16}}) {
+        const std::uint32_t texels = occlusion_options.texels_per_axis;
         const bvh::HierarchicalResult cpu =
-            occlusion::cull_hierarchical(tree, std::span<const Aabb>(boxes), frustum, view, pyramid, {texels});
+            occlusion::cull_hierarchical(tree, std::span<const Aabb>(boxes), frustum, view, pyramid, occlusion_options);
         gpu::CullOptions options;
         options.pyramid = &pass;
         options.occlusion_views = {view};
-        options.occlusion_options.texels_per_axis = texels;
+        options.occlusion_options = occlusion_options;
         const gpu::ViewResult g = culler.cull(std::span(&frustum, 1), options).views[0];
         const std::string where = std::string(pattern ? "near depth with far pixels" : "far depth") + ", leaves of " +
-                                  std::to_string(leaf) + ", " + std::to_string(texels) + " texels per axis";
+                                  std::to_string(leaf) + ", " + std::to_string(texels) +
+                                  " texels per axis, refined at " +
+                                  std::to_string(occlusion_options.refine_texels_per_axis);
         std::size_t mismatches = 0;
         for (std::size_t i = 0; i < boxes.size(); ++i) mismatches += g.classes[i] != cpu.classes[i];
         EXPECT_EQ(mismatches, 0u) << where;

@@ -15,6 +15,8 @@
 #include <memory>
 #include <optional>
 
+#include "cullpipe/bounds/mesh_bounds.hpp"
+#include "cullpipe/bounds/sphere_fit.hpp"
 #include "cullpipe/core/thread_pool.hpp"
 #include "cullpipe/cull/occlusion.hpp"
 #include "cullpipe/cull/reference.hpp"
@@ -451,6 +453,49 @@ TEST(Render, ClusterFramesOfDoubleSidedMeshesEqualUnculled) {
   EXPECT_GT(t.classes[std::size_t(clusters::ClusterClass::BackFacing)], 1000u);
   EXPECT_GT(t.mirrored_back_facing, 100u);
   EXPECT_LT(t.cluster_triangles, t.object_triangles * 3 / 4);
+}
+
+// Open double-sided sheets (a wavy grid, nothing behind it), tilted, some mirrored, seen from
+// above and from below: each winding's clusters are culled by their own cone, and a cone that
+// culled a winding the eye sees would show in the image.
+TEST(Render, ClusterFramesOfOpenDoubleSidedSheetsEqualUnculled) {
+  auto sheet = std::make_shared<TriangleMesh>();
+  const int n = 40;
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i <= n; ++i) {
+      const float x = -5.0f + 10.0f * float(i) / n, z = -5.0f + 10.0f * float(j) / n;
+      sheet->positions.emplace_back(x, 0.3f * std::sin(x) * std::cos(z), z);
+    }
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const std::uint32_t a = std::uint32_t(j * (n + 1) + i), b = a + 1, c = a + std::uint32_t(n + 1), d = c + 1;
+      sheet->indices.insert(sheet->indices.end(), {a, c, b, b, c, d});
+    }
+  sheet->double_sided = true;
+  auto bounds = std::make_shared<const bounds::MeshBounds>(sheet->positions);
+  Scene scene;
+  for (int k = 0; k < 6; ++k) {
+    SceneObject o;
+    o.local_bounds = bounds::aabb_of_points(sheet->positions);
+    o.world = glm::rotate(
+        glm::translate(glm::mat4(1.0f), glm::vec3(12.0f * float(k % 3) - 12.0f, 0.0f, 12.0f * float(k / 3) - 6.0f)),
+        0.3f * float(k), glm::vec3(1, 0, 0));
+    if (k % 3 == 1) o.world = glm::scale(o.world, glm::vec3(-1.0f, 1.0f, 1.0f));  // mirrored
+    o.mesh = bounds;
+    o.triangles = sheet;
+    scene.objects.push_back(o);
+  }
+  Camera above;
+  above.eye = glm::vec3(4.0f, 22.0f, 18.0f);
+  above.target = glm::vec3(0.0f);
+  above.near_plane = 0.5f;
+  above.far_plane = 200.0f;
+  Camera below = above;
+  below.eye = glm::vec3(-4.0f, -22.0f, -18.0f);
+  Camera grazing = above;
+  grazing.eye = glm::vec3(30.0f, 2.0f, 3.0f);
+  const ClusterTotals t = expect_clusters_invisible(scene, {above, below, grazing, above});
+  EXPECT_GT(t.classes[std::size_t(clusters::ClusterClass::BackFacing)], 100u);
 }
 
 TEST(Render, ClusterFramesOfBoxesEqualUnculled) {

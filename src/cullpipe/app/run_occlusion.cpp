@@ -186,7 +186,8 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
   out << "cullpipe run --occlusion: " << (scene.name.empty() ? loaded.source : scene.name) << " (" << loaded.source
       << "), " << n << " objects, bv " << o.bv << ", " << o.width << "x" << o.height << ", " << o.texels
       << " texels per axis"
-      << (o.refine_texels ? " (then " + std::to_string(o.refine_texels) + " where that keeps an object)" : "")
+      << (o.refine_texels > o.texels ? " (then " + std::to_string(o.refine_texels) + " where that keeps an object)"
+                                     : std::string())
       << ", device " << ctx.info().name << "\n";
   if (hierarchical)
     out << "  bvh: " << o.builder << ", leaves of <= " << o.leaf_size << ", " << built.metrics.nodes
@@ -313,7 +314,7 @@ int run_occlusion(const RunOptions& o, const LoadedScene& loaded, BvKind bv, std
     j["width"] = o.width;
     j["height"] = o.height;
     j["texels_per_axis"] = o.texels;
-    j["refine_texels_per_axis"] = o.refine_texels;
+    j["refine_texels_per_axis"] = o.refine_texels > o.texels ? o.refine_texels : 0u;  // (0: one read)
     j["device"] = ctx.info().name;
     j["driver"] = ctx.info().driver;
     j["mismatches"] = mismatches;

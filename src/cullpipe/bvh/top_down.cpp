@@ -385,6 +385,9 @@ Tree build_generic(std::span<const Aabb> boxes, const BuildOptions& options) {
 }  // namespace
 
 Tree build_top_down(std::span<const Aabb> boxes, const BuildOptions& options) {
+  if (options.sah_leaves && !(options.object_cost > 0.0f && std::isfinite(options.object_cost)))
+    throw std::invalid_argument("build_top_down: object_cost " + std::to_string(options.object_cost) +
+                                " (a positive finite number)");
   if (options.axis == SplitAxis::Best && options.position == SplitPosition::Binned && options.cost == SplitCost::Sah)
     return build_binned_sah(boxes, {options.max_leaf_size, options.bins, options.sah_leaves, options.object_cost},
                             options.pool);

@@ -95,8 +95,9 @@ class BvhCuller {
   /// Passes with occlusion take their own cut, of subtrees of at most this many objects (and
   /// subtree_objects()): lavapipe ends every loop of an invocation once its loops together have
   /// run 65535 iterations, and each object tested for occlusion costs up to 1 + texels_per_axis
-  /// of them, so a workgroup's objects are kept to a few thousand (bench/NOTES.md, The GPU passes
-  /// on lavapipe).
+  /// of them, and as many again plus refine_texels_per_axis when it is read a second time
+  /// (at most 34), so a workgroup's objects are kept to a few thousand (bench/NOTES.md, The GPU
+  /// passes on lavapipe).
   static constexpr std::uint32_t kOcclusionSubtreeObjects = 512;
   void set_subtree_objects(std::uint32_t objects);
   std::uint32_t subtree_objects() const { return subtree_objects_; }
@@ -145,8 +146,8 @@ class BvhCuller {
     bool draws = false;             // write indirect draws
     bool classes = false;           // write the per-object classes
     bool stack_in_records = false;  // the walk's stack in the records image, not shared memory
-    // Test the kept nodes and objects against the depth pyramid, reading at most this many texels
-    // per axis (0: no occlusion test).
+    // Test the kept nodes and objects against the depth pyramid: detail::occlusion_texels's
+    // packed texels and refining texels (0: no occlusion test).
     std::uint32_t occlusion_texels = 0;
     auto operator<=>(const PipelineKey&) const = default;
   };

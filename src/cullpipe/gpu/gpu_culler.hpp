@@ -112,8 +112,9 @@ struct CullOptions {
 
 namespace detail {
 /// The texels per axis the occlusion test of a pass with `options` reads, in the low byte, and
-/// its refine_texels_per_axis above it (specialization constants 7 and 10 of the cull shaders:
-/// occlusion_texels_constant, refine_texels_constant); 0 without a pyramid.
+/// its refine_texels_per_axis above it where that refines (0 otherwise): a pipeline key, turned
+/// into the cull shaders' specialization constants 7 and 10 by set_occlusion_constants; 0
+/// without a pyramid.
 inline std::uint32_t occlusion_texels(const CullOptions& options) {
   const occlusion::OcclusionOptions& o = options.occlusion_options;
   const std::uint32_t refine = o.refine_texels_per_axis > o.texels_per_axis ? o.refine_texels_per_axis : 0u;
@@ -334,8 +335,8 @@ class GpuCuller {
     bool ordered = false;        // Cull: count per workgroup for the ordered passes
     bool draws = false;          // Cull, CompactScatter: write indirect draws
     bool classes = false;        // Cull: write the per-object classes
-    // Cull: test the kept objects against the depth pyramid, reading at most this many texels per
-    // axis (0: no occlusion test).
+    // Cull: test the kept objects against the depth pyramid: detail::occlusion_texels's packed
+    // texels and refining texels (0: no occlusion test).
     std::uint32_t occlusion_texels = 0;
     auto operator<=>(const PipelineKey&) const = default;
   };

@@ -210,6 +210,7 @@ void draw_frustum(Image& image, const Camera& observer, const Camera& camera, fl
     if (a.w < w_min) a += (b - a) * ((w_min - a.w) / (b.w - a.w));
     if (b.w < w_min) b += (a - b) * ((w_min - b.w) / (a.w - b.w));
     glm::dvec2 p = pixel(a), q = pixel(b);
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(q.x) || !std::isfinite(q.y)) continue;
     // Liang-Barsky against the image widened by a pixel, so the line stays in int range.
     double t0 = 0.0, t1 = 1.0;
     const glm::dvec2 d = q - p;
@@ -236,7 +237,7 @@ void draw_frustum(Image& image, const Camera& observer, const Camera& camera, fl
   const glm::dvec4 eye = clip(camera.eye);
   if (eye.w >= w_min && eye.w > 0.0) {
     const glm::dvec2 e = pixel(eye);
-    if (e.x > -8.0 && e.y > -8.0 && e.x < width + 8.0 && e.y < height + 8.0)
+    if (std::isfinite(e.x) && std::isfinite(e.y) && e.x > -8.0 && e.y > -8.0 && e.x < width + 8.0 && e.y < height + 8.0)
       canvas.fill(int(std::floor(e.x)) - 3, int(std::floor(e.y)) - 3, int(std::floor(e.x)) + 3,
                   int(std::floor(e.y)) + 3, 0xff4040ff);
   }

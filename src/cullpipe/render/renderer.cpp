@@ -141,7 +141,13 @@ Renderer::Renderer(const vulkan::Context& ctx, const Scene& scene, const Rendere
           }
           split = true;
         } catch (const std::invalid_argument& e) {
-          cluster_fallbacks_.push_back(e.what());  // drawn whole: one cluster, no cone
+          // Drawn whole: one cluster, no cone; nothing this mesh added is kept.
+          cluster_fallbacks_.push_back(e.what());
+          src.order.clear();
+          src.ranges.clear();
+          cluster_boxes.resize(src.first_cluster);
+          cluster_cones.resize(src.first_cluster);
+          cluster_obbs.resize(src.first_cluster);
         }
       }
       if (!split) {
