@@ -294,7 +294,6 @@ Renderer::Renderer(const vulkan::Context& ctx, const Scene& scene, const Rendere
       cluster_cones_ = std::move(cluster_cones);
       cluster_obbs_ = std::move(cluster_obbs);
       cluster_instances_ = std::move(cluster_instances);
-      cluster_pairs_ = cluster_draws.size();
     }
 
     create_targets();
@@ -686,7 +685,7 @@ std::vector<bool> Renderer::pixel_owners(const Camera& camera) {
 Image Renderer::class_image(const Camera& observer, const FrameStats& stats) {
   const std::size_t n = templates_.size();
   const bool by_cluster = cluster_culler_ != nullptr;
-  const std::size_t records = by_cluster ? cluster_pairs_ : n;
+  const std::size_t records = by_cluster ? cluster_culler_->pair_count() : n;
   const std::size_t have = by_cluster ? stats.cluster_pair_classes.size() : stats.classes.size();
   if (have != records)
     throw std::invalid_argument("class_image: the frame stats hold " + std::to_string(have) + " classes, the " +

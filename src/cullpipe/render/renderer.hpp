@@ -146,7 +146,7 @@ class Renderer {
   const std::vector<std::optional<Obb>>& cluster_obbs() const { return cluster_obbs_; }
   const std::vector<gpu::ClusterInstance>& cluster_instances() const { return cluster_instances_; }
   /// The (object, cluster) pairs: every object's cluster_count summed; 0 without clusters.
-  std::size_t cluster_pair_count() const { return cluster_pairs_; }
+  std::size_t cluster_pair_count() const { return cluster_culler_ ? cluster_culler_->pair_count() : 0; }
 
   /// A debug view of a culled frame (`stats` from render() with culling, by this renderer) seen
   /// by `observer`: every object drawn as the unculled frame draws it, its triangles filled by
@@ -183,7 +183,6 @@ class Renderer {
   std::vector<BackfaceCone> cluster_cones_;
   std::vector<std::optional<Obb>> cluster_obbs_;
   std::vector<gpu::ClusterInstance> cluster_instances_;
-  std::size_t cluster_pairs_ = 0;
   std::unique_ptr<gpu::DepthPyramidPass> pyramid_;
   bool has_visibility_ = false;  // the culler's draw buffer holds the last culled frame's draws
   vulkan::Buffer vertices_, indices_, objects_, id_objects_, all_draws_, readback_;
